@@ -1,0 +1,4 @@
+"""drumtwin application: the live loop, run logs, dashboard and CLI.
+
+Imports flow one way: ``twin -> sim, vision, control``.
+"""

@@ -1,0 +1,36 @@
+"""The typer application objects shared by every command module."""
+
+from __future__ import annotations
+
+import typer
+from rich.console import Console
+
+from control.errors import ControlError
+from sim.errors import SimError
+from vision.errors import VisionError
+
+app = typer.Typer(
+    name="drumtwin",
+    help="Watch and steer a rotary drum particle mixer: vision MI, physics twin, supervisor.",
+    no_args_is_help=False,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+bench_app = typer.Typer(help="Benchmarks that print numbers (frames/s, real-time factor, trend RMSE).")
+app.add_typer(bench_app, name="bench")
+
+console = Console()
+console_err = Console(stderr=True)
+
+# Errors that mean "bad input or environment", reported as one line, exit 2.
+USER_ERRORS: tuple[type[BaseException], ...] = (
+    VisionError,
+    SimError,
+    ControlError,
+    FileNotFoundError,
+    PermissionError,
+    IsADirectoryError,
+    NotADirectoryError,
+    ConnectionError,
+    TimeoutError,
+)
