@@ -1,0 +1,654 @@
+"""Supervisory rpm controller: segregation detection, AUTO rpm choice, limits, safe state.
+
+The :class:`Supervisor` is a pure state machine driven by ``step(now_s, inputs)``; it
+never does I/O and never blocks unless it is given a *synchronous* predictor. It returns
+a :class:`Decision` (an event with time, inputs, action and reason) when it wants
+something done, else ``None``; every decision is also kept in ``events``.
+
+Modes
+    ``OFF``: hands off, no commands. ``MANUAL``: follows the operator's rpm
+    (``set_manual_rpm``) inside the limits; watches only the mill link. ``AUTO``: picks
+    the rpm itself when the mix segregates; watches mill link, vision and twin.
+
+Segregation detection (on the Kalman trend and the radial factor)
+    *bad* when ``level < seg_level`` or ``rate < seg_rate_per_s`` (falling faster) or
+    ``radial_factor < radial_min`` (``radial_factor`` = the std-weighting factor of eq. 4,
+    i.e. MI(eq. 4) / MI(eq. 3)); *good* when ``level > clear_level`` and
+    ``rate > seg_rate_per_s / 2`` and the radial factor is above ``radial_clear``
+    (hysteresis). The state turns *segregated* after ``detect_dwell_s`` of continuous
+    bad, and *mixed* again after ``clear_dwell_s`` of continuous good.
+
+AUTO rpm choice
+    With predictions (``Mapping[rpm, predicted MI at now + horizon]``, no older than
+    ``prediction_max_age_s``): ``score(r) = MI(r) - move_penalty_per_rpm * |r - current|``
+    over the candidates inside the limits; move to the best when it beats staying by
+    ``min_gain``, else log a *hold* decision. Without predictions (none given, or an
+    asynchronous predictor did not answer within ``prediction_wait_s``), the
+    **fallback rule**: step the rpm up by ``fallback_step_rpm`` (size segregation in
+    the rolling regime is broken up by a faster, more energetic cascade), clipped to the
+    upper limit; at the upper limit, step down by ``fallback_step_rpm`` instead.
+    Evaluations are at least ``min_change_interval_s`` apart (also the minimum dwell
+    between rpm changes).
+
+Limits
+    Every commanded rpm is inside ``[min_rpm, min(max_rpm, max_critical_frac * n_c)]``
+    with ``n_c = 42.3 / sqrt(drum_diameter_m)`` rpm (critical speed). The setpoint moves
+    at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
+    ``ramp`` decision).
+
+Safe state
+    Mill link lost (``inputs.mill_connected`` False), no valid MI for ``vision_timeout_s``
+    or the twin not updated for ``twin_timeout_s`` (AUTO) -> ``safe_action``: ``HOLD``
+    (keep the setpoint, the device watchdog covers a dead link), ``RAMP`` (ramp to
+    ``safe_rpm``) or ``STOP``. HOLD/RAMP recover by themselves after ``recover_s`` without
+    faults; STOP is latched until the operator sets a mode again.
+
+Predictions, synchronous or not
+    ``Predictor = Callable[[Sequence[float] rpms, float horizon_s], Mapping[float, float]]``.
+    Pass a plain callable to have it called inside ``step`` (blocking), or wrap a slow one
+    in :class:`AsyncPredictor` (runs it in a worker thread; ``step`` submits and polls, never
+    waits). Alternatively drive it yourself: ``prediction_request(now_s)`` tells what is
+    wanted and ``offer_predictions(PredictionResult(...))`` hands results in.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from enum import Enum
+
+from control.errors import ControlError
+from control.trend import TrendEstimate
+
+Predictor = Callable[[Sequence[float], float], Mapping[float, float]]
+"""``predictor(rpms, horizon_s) -> {rpm: predicted MI after horizon_s}``."""
+
+
+class Mode(str, Enum):
+    OFF = "off"
+    MANUAL = "manual"
+    AUTO = "auto"
+
+
+class SafeAction(str, Enum):
+    HOLD = "hold"
+    RAMP = "ramp"
+    STOP = "stop"
+
+
+class Action(str, Enum):
+    """What the application should do with a decision."""
+
+    NONE = "none"  #: nothing to send (mode change, hold, recovery): log it
+    SET_RPM = "set_rpm"  #: send ``Decision.rpm`` as the new setpoint
+    STOP = "stop"  #: stop the motor
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """Limits, detection thresholds, AUTO tuning and safe-state policy (units in names)."""
+
+    # limits
+    min_rpm: float = 2.0
+    max_rpm: float = 45.0
+    drum_diameter_m: float = 0.3
+    max_critical_frac: float = 0.6
+    max_rate_rpm_per_s: float = 2.0
+    ramp_interval_s: float = 1.0
+    min_change_interval_s: float = 30.0
+    # segregation detection (MI units; rate in MI/s)
+    seg_level: float = 0.5
+    clear_level: float = 0.6
+    seg_rate_per_s: float = -0.01
+    radial_min: float = 0.5
+    radial_clear: float = 0.6
+    detect_dwell_s: float = 5.0
+    clear_dwell_s: float = 5.0
+    # AUTO
+    n_candidates: int = 7
+    horizon_s: float = 60.0
+    move_penalty_per_rpm: float = 0.002
+    min_gain: float = 0.02
+    prediction_max_age_s: float = 30.0
+    prediction_wait_s: float = 20.0
+    fallback_step_rpm: float = 5.0
+    # safe state
+    safe_action: SafeAction = SafeAction.HOLD
+    safe_rpm: float = 5.0
+    vision_timeout_s: float = 5.0
+    twin_timeout_s: float | None = 60.0
+    require_twin: bool = False
+    recover_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.min_rpm < self.max_rpm:
+            raise ControlError(f"rpm limits must satisfy 0 <= min < max (got {self.min_rpm}, {self.max_rpm})")
+        if not 0 < self.max_critical_frac <= 1:
+            raise ControlError("max_critical_frac must be in (0, 1]")
+        if self.drum_diameter_m <= 0:
+            raise ControlError("drum_diameter_m must be positive")
+        if self.clear_level < self.seg_level:
+            raise ControlError("clear_level must be >= seg_level (hysteresis)")
+        if self.rpm_limits[1] <= self.min_rpm:
+            raise ControlError("the critical-speed limit leaves no rpm above min_rpm")
+
+    @property
+    def critical_rpm(self) -> float:
+        """Critical speed ``n_c = 42.3 / sqrt(D_m)`` rpm."""
+        return 42.3 / math.sqrt(self.drum_diameter_m)
+
+    @property
+    def rpm_limits(self) -> tuple[float, float]:
+        """(lowest, highest) rpm the supervisor will ever command."""
+        return self.min_rpm, min(self.max_rpm, self.max_critical_frac * self.critical_rpm)
+
+    def clamp(self, rpm: float) -> float:
+        lo, hi = self.rpm_limits
+        return min(hi, max(lo, float(rpm)))
+
+    def candidates(self, current: float | None = None) -> tuple[float, ...]:
+        """Evenly spaced candidate rpms over the limits (plus ``current``), rounded to 0.1."""
+        lo, hi = self.rpm_limits
+        n = max(2, self.n_candidates)
+        c = {round(lo + (hi - lo) * i / (n - 1), 1) for i in range(n)}
+        if current is not None:
+            c.add(round(self.clamp(current), 1))
+        return tuple(sorted(c))
+
+
+@dataclass(frozen=True)
+class SupervisorInputs:
+    """What the supervisor sees each step.
+
+    ``trend``: the latest Kalman estimate; ``actual_rpm``/``setpoint_rpm``: from the mill
+    status; ``mill_connected``: the driver's flag; ``radial_factor``: MI(eq. 4)/MI(eq. 3)
+    of the latest valid reading (None: not used); ``last_valid_mi_s``: time of the last
+    valid MI; ``twin_updated_s``: time the twin last synced (None: no twin).
+    """
+
+    trend: TrendEstimate | None = None
+    actual_rpm: float | None = None
+    setpoint_rpm: float | None = None
+    mill_connected: bool = True
+    radial_factor: float | None = None
+    last_valid_mi_s: float | None = None
+    twin_updated_s: float | None = None
+
+
+@dataclass(frozen=True)
+class PredictionRequest:
+    """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``."""
+
+    t_s: float
+    rpms: tuple[float, ...]
+    horizon_s: float
+
+
+@dataclass(frozen=True)
+class PredictionResult:
+    """Predicted MI after ``horizon_s`` per rpm, for the request made at ``t_s``."""
+
+    t_s: float
+    horizon_s: float
+    predictions: Mapping[float, float]
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One supervisor event: when, in which mode, what to do, why, and on what inputs.
+
+    ``kind``: ``mode`` | ``manual`` | ``move`` | ``ramp`` | ``hold`` | ``safe`` |
+    ``recover``; ``rpm``: the setpoint to send now (``SET_RPM``); ``target_rpm``: where a
+    ramp is heading; ``scores``: candidate rpm -> score when predictions were used.
+    """
+
+    t_s: float
+    mode: Mode
+    action: Action
+    kind: str
+    reason: str
+    rpm: float | None = None
+    target_rpm: float | None = None
+    safe: bool = False
+    inputs: SupervisorInputs | None = None
+    predictions: Mapping[float, float] | None = None
+    scores: Mapping[float, float] | None = None
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready record (for run logs): the decision and the inputs it was made on."""
+        inp = self.inputs
+        tr = inp.trend if inp is not None else None
+        return {
+            "t_s": self.t_s,
+            "mode": self.mode.value,
+            "action": self.action.value,
+            "kind": self.kind,
+            "reason": self.reason,
+            "rpm": self.rpm,
+            "target_rpm": self.target_rpm,
+            "safe": self.safe,
+            "level": None if tr is None else tr.level,
+            "rate": None if tr is None else tr.rate,
+            "predictions": None if self.predictions is None else {str(k): v for k, v in self.predictions.items()},
+            "inputs": None
+            if inp is None
+            else {
+                "level": None if tr is None else tr.level,
+                "rate": None if tr is None else tr.rate,
+                "level_sd": None if tr is None else tr.level_sd,
+                "actual_rpm": inp.actual_rpm,
+                "setpoint_rpm": inp.setpoint_rpm,
+                "mill_connected": inp.mill_connected,
+                "radial_factor": inp.radial_factor,
+                "last_valid_mi_s": inp.last_valid_mi_s,
+                "twin_updated_s": inp.twin_updated_s,
+            },
+        }
+
+
+class AsyncPredictor:
+    """Runs a slow :data:`Predictor` in a worker thread, one request at a time.
+
+    ``submit(request)`` starts it (returns False when busy), ``poll()`` hands back a
+    finished :class:`PredictionResult` once. Errors are kept in ``last_error``.
+    """
+
+    def __init__(self, predictor: Predictor) -> None:
+        self.predictor = predictor
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._result: PredictionResult | None = None
+        self.last_error: str | None = None
+        self.pending: PredictionRequest | None = None
+
+    @property
+    def busy(self) -> bool:
+        t = self._thread
+        return t is not None and t.is_alive()
+
+    def submit(self, request: PredictionRequest) -> bool:
+        if self.busy:
+            return False
+        self.pending = request
+        self._thread = threading.Thread(target=self._work, args=(request,), name="predictor", daemon=True)
+        self._thread.start()
+        return True
+
+    def _work(self, req: PredictionRequest) -> None:
+        try:
+            preds = dict(self.predictor(list(req.rpms), req.horizon_s))
+            res = PredictionResult(req.t_s, req.horizon_s, {float(k): float(v) for k, v in preds.items()})
+            with self._lock:
+                self._result = res
+            self.last_error = None
+        except Exception as exc:  # noqa: BLE001 - a failed prediction means "no prediction"
+            self.last_error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self.pending = None
+
+    def poll(self) -> PredictionResult | None:
+        with self._lock:
+            res, self._result = self._result, None
+        return res
+
+    def join(self, timeout_s: float | None = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+
+
+class SegregationDetector:
+    """Bad/good conditions with hysteresis and dwell (see module docstring)."""
+
+    def __init__(self, config: SupervisorConfig) -> None:
+        self.config = config
+        self.segregated = False
+        self._since: float | None = None  # start of the current opposite-condition stretch
+        self.why = ""
+
+    def reset(self) -> None:
+        self.segregated = False
+        self._since = None
+        self.why = ""
+
+    def bad_reasons(self, trend: TrendEstimate, radial: float | None) -> list[str]:
+        c, r = self.config, []
+        if trend.level < c.seg_level:
+            r.append(f"MI {trend.level:.3f} < {c.seg_level}")
+        if trend.rate < c.seg_rate_per_s:
+            r.append(f"MI falling {trend.rate:+.4f}/s < {c.seg_rate_per_s}/s")
+        if radial is not None and math.isfinite(radial) and radial < c.radial_min:
+            r.append(f"radial factor {radial:.3f} < {c.radial_min}")
+        return r
+
+    def is_good(self, trend: TrendEstimate, radial: float | None) -> bool:
+        c = self.config
+        ok = trend.level > c.clear_level and trend.rate > c.seg_rate_per_s / 2
+        if radial is not None and math.isfinite(radial):
+            ok = ok and radial > c.radial_clear
+        return ok
+
+    def update(self, now_s: float, trend: TrendEstimate | None, radial: float | None) -> bool:
+        """Advance; returns True when the state changed this step."""
+        if trend is None or not trend.valid:
+            self._since = None
+            return False
+        if not self.segregated:
+            bad = self.bad_reasons(trend, radial)
+            if not bad:
+                self._since = None
+                return False
+            self._since = now_s if self._since is None else self._since
+            if now_s - self._since >= self.config.detect_dwell_s:
+                self.segregated, self._since, self.why = True, None, "; ".join(bad)
+                return True
+            return False
+        if not self.is_good(trend, radial):
+            self._since = None
+            return False
+        self._since = now_s if self._since is None else self._since
+        if now_s - self._since >= self.config.clear_dwell_s:
+            self.segregated, self._since, self.why = False, None, ""
+            return True
+        return False
+
+    @property
+    def suspect(self) -> bool:
+        """Bad conditions seen but the dwell not over yet."""
+        return not self.segregated and self._since is not None
+
+
+class Supervisor:
+    """The supervisory controller (see the module docstring for the rules)."""
+
+    def __init__(
+        self,
+        config: SupervisorConfig | None = None,
+        predictor: Predictor | AsyncPredictor | None = None,
+        mode: Mode = Mode.OFF,
+        max_events: int = 10000,
+    ) -> None:
+        self.config = config or SupervisorConfig()
+        self.predictor = predictor
+        self._mode = Mode(mode)
+        self.detector = SegregationDetector(self.config)
+        self.events: deque[Decision] = deque(maxlen=max_events)
+        self.commanded_rpm: float | None = None  # last setpoint sent (or read from the mill)
+        self.target_rpm: float | None = None  # where the ramp is heading
+        self.manual_rpm: float | None = None
+        self.safe = False
+        self.safe_reason = ""
+        self._latched_stop = False
+        self._t0: float | None = None
+        self._last_cmd_s = -math.inf
+        self._last_eval_s = -math.inf
+        self._due_since: float | None = None  # AUTO decision due but waiting for predictions
+        self._clear_since: float | None = None
+        self._predictions: PredictionResult | None = None
+        self._last_inputs: SupervisorInputs | None = None
+        self._pred_error: str | None = None
+
+    # -- operator ----------------------------------------------------------------------------
+    @property
+    def mode(self) -> Mode:
+        return self._mode
+
+    def set_mode(self, mode: Mode | str, now_s: float, reason: str = "operator") -> Decision:
+        """Change mode (also re-arms after a latched safe stop); returns the mode event."""
+        try:
+            new = Mode(mode)
+        except ValueError:
+            raise ControlError(f"unknown mode {mode!r} (use off, manual, auto)") from None
+        old, self._mode = self._mode, new
+        self.detector.reset()
+        self.safe, self.safe_reason, self._latched_stop = False, "", False
+        self._clear_since = self._due_since = None
+        self.target_rpm = self.commanded_rpm
+        if new is Mode.MANUAL and self.manual_rpm is None:
+            self.manual_rpm = self.commanded_rpm
+        return self._emit(now_s, Action.NONE, "mode", f"mode {old.value} -> {new.value} ({reason})")
+
+    def set_manual_rpm(self, rpm: float) -> float:
+        """Operator rpm for MANUAL, clamped into the limits; returns the clamped value."""
+        rpm = float(rpm)
+        if not math.isfinite(rpm):
+            raise ControlError(f"manual rpm must be a number, got {rpm}")
+        self.manual_rpm = self.config.clamp(rpm)
+        return self.manual_rpm
+
+    # -- predictions -------------------------------------------------------------------------
+    def offer_predictions(self, result: PredictionResult) -> None:
+        """Hand in predictions computed elsewhere (e.g. in a background thread)."""
+        if self._predictions is None or result.t_s >= self._predictions.t_s:
+            self._predictions = result
+
+    def fresh_predictions(self, now_s: float) -> PredictionResult | None:
+        p = self._predictions
+        if p is None or now_s - p.t_s > self.config.prediction_max_age_s:
+            return None
+        return p
+
+    def prediction_request(self, now_s: float) -> PredictionRequest | None:
+        """Predictions wanted now (AUTO, mix suspect or segregated, none fresh), else None."""
+        if self._mode is not Mode.AUTO or self.safe:
+            return None
+        if not (self.detector.segregated or self.detector.suspect):
+            return None
+        if self.fresh_predictions(now_s) is not None:
+            return None
+        return PredictionRequest(now_s, self.config.candidates(self.commanded_rpm), self.config.horizon_s)
+
+    # -- the step ----------------------------------------------------------------------------
+    def step(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
+        """Advance to ``now_s`` with ``inputs``; a :class:`Decision` when there is one."""
+        if self._t0 is None:
+            self._t0 = now_s
+        self._last_inputs = inputs
+        if self.commanded_rpm is None:
+            known = inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm
+            if known is not None and math.isfinite(known):
+                self.commanded_rpm = float(known)
+                self.target_rpm = self.commanded_rpm
+                if self.manual_rpm is None and self._mode is Mode.MANUAL:
+                    self.manual_rpm = self.commanded_rpm
+        if self._mode is Mode.OFF:
+            return None
+        if isinstance(self.predictor, AsyncPredictor):
+            res = self.predictor.poll()
+            if res is not None:
+                self.offer_predictions(res)
+        self.detector.update(now_s, inputs.trend, inputs.radial_factor)
+
+        faults = self.faults(now_s, inputs)
+        if faults:
+            self._clear_since = None
+            if not self.safe:
+                return self._enter_safe(now_s, "; ".join(faults))
+            return self._ramp_step(now_s, "safe")
+        if self.safe:
+            if self._latched_stop:
+                return None
+            self._clear_since = now_s if self._clear_since is None else self._clear_since
+            if now_s - self._clear_since >= self.config.recover_s:
+                self.safe, self._clear_since = False, None
+                self.target_rpm = self.commanded_rpm
+                why, self.safe_reason = self.safe_reason, ""
+                self.detector.reset()
+                return self._emit(now_s, Action.NONE, "recover", f"faults cleared for {self.config.recover_s:g} s (was: {why})")
+            return self._ramp_step(now_s, "safe")
+
+        if self._mode is Mode.MANUAL:
+            return self._manual(now_s)
+        ramp = self._ramp_step(now_s, "ramp")
+        if ramp is not None or self._ramping:
+            return ramp
+        return self._auto(now_s, inputs)
+
+    # -- internals ---------------------------------------------------------------------------
+    def faults(self, now_s: float, inputs: SupervisorInputs) -> list[str]:
+        """Reasons for the safe state now (empty: none)."""
+        c, out = self.config, []
+        if not inputs.mill_connected:
+            out.append("mill link lost")
+        if self._mode is Mode.AUTO:
+            t0 = self._t0 if self._t0 is not None else now_s
+            seen = inputs.last_valid_mi_s if inputs.last_valid_mi_s is not None else t0
+            if now_s - seen > c.vision_timeout_s:
+                out.append(f"no valid MI for {now_s - seen:.1f} s")
+            if c.twin_timeout_s is not None and (inputs.twin_updated_s is not None or c.require_twin):
+                tw = inputs.twin_updated_s if inputs.twin_updated_s is not None else t0
+                if now_s - tw > c.twin_timeout_s:
+                    out.append(f"twin stale for {now_s - tw:.1f} s")
+        return out
+
+    @property
+    def _ramping(self) -> bool:
+        return (
+            self.target_rpm is not None
+            and self.commanded_rpm is not None
+            and abs(self.target_rpm - self.commanded_rpm) > 1e-6
+        )
+
+    def _emit(self, now_s: float, action: Action, kind: str, reason: str, **kw: object) -> Decision:
+        d = Decision(now_s, self._mode, action, kind, reason, safe=self.safe, inputs=self._last_inputs, **kw)  # type: ignore[arg-type]
+        self.events.append(d)
+        return d
+
+    def _enter_safe(self, now_s: float, why: str) -> Decision:
+        c = self.config
+        self.safe, self.safe_reason = True, why
+        self._due_since = None
+        if c.safe_action is SafeAction.STOP:
+            self._latched_stop = True
+            self.target_rpm = self.commanded_rpm
+            return self._emit(now_s, Action.STOP, "safe", f"safe stop: {why}")
+        if c.safe_action is SafeAction.RAMP and self.commanded_rpm is not None:
+            self.target_rpm = c.clamp(c.safe_rpm)
+            first = self._next_setpoint(now_s)
+            return self._emit(
+                now_s,
+                Action.SET_RPM if first is not None else Action.NONE,
+                "safe",
+                f"safe ramp to {self.target_rpm:g} rpm: {why}",
+                rpm=first,
+                target_rpm=self.target_rpm,
+            )
+        self.target_rpm = self.commanded_rpm
+        return self._emit(now_s, Action.NONE, "safe", f"safe hold at {self.commanded_rpm} rpm: {why}", rpm=None)
+
+    def _next_setpoint(self, now_s: float) -> float | None:
+        """Advance the rate-limited setpoint toward ``target_rpm`` when a step is due."""
+        if not self._ramping or (self.safe and self._latched_stop):
+            return None
+        c = self.config
+        if now_s - self._last_cmd_s < c.ramp_interval_s - 1e-9:
+            return None
+        assert self.target_rpm is not None and self.commanded_rpm is not None
+        diff = self.target_rpm - self.commanded_rpm
+        max_d = c.max_rate_rpm_per_s * c.ramp_interval_s if c.max_rate_rpm_per_s > 0 else abs(diff)
+        nxt = round(self.commanded_rpm + max(-max_d, min(max_d, diff)), 2)
+        if abs(self.target_rpm - nxt) < 0.01:
+            nxt = self.target_rpm
+        self.commanded_rpm, self._last_cmd_s = nxt, now_s
+        return nxt
+
+    def _ramp_step(self, now_s: float, kind: str) -> Decision | None:
+        """The next ramp step as a decision of ``kind``, when one is due."""
+        nxt = self._next_setpoint(now_s)
+        if nxt is None:
+            return None
+        c = self.config
+        return self._emit(
+            now_s, Action.SET_RPM, kind, f"ramp {nxt:g} rpm toward {self.target_rpm:g} (<= {c.max_rate_rpm_per_s:g} rpm/s)",
+            rpm=nxt, target_rpm=self.target_rpm,
+        )
+
+    def _start_move(self, now_s: float, target: float, kind: str, reason: str, **kw: object) -> Decision:
+        self.target_rpm = target
+        self._last_eval_s = now_s
+        if self.commanded_rpm is None:  # nothing known about the mill: jump
+            self.commanded_rpm, self._last_cmd_s = target, now_s
+            return self._emit(now_s, Action.SET_RPM, kind, reason, rpm=target, target_rpm=target, **kw)
+        nxt = self._next_setpoint(now_s)  # None: a ramp step was sent < ramp_interval_s ago
+        action = Action.SET_RPM if nxt is not None else Action.NONE
+        return self._emit(now_s, action, kind, reason, rpm=nxt, target_rpm=target, **kw)
+
+    def _manual(self, now_s: float) -> Decision | None:
+        """Follow the operator's rpm; a new one re-targets a ramp in progress at once."""
+        m = self.manual_rpm
+        if m is None:
+            return None
+        if self.target_rpm is None or abs(m - self.target_rpm) > 1e-6:
+            return self._start_move(now_s, m, "manual", f"operator rpm {m:g}")
+        return self._ramp_step(now_s, "ramp")
+
+    def _auto(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
+        c = self.config
+        if not self.detector.segregated:
+            self._due_since = None
+            return None
+        if now_s - self._last_eval_s < c.min_change_interval_s:
+            return None
+        current = self.commanded_rpm if self.commanded_rpm is not None else c.clamp(inputs.actual_rpm or c.safe_rpm)
+        preds = self.fresh_predictions(now_s)
+        if preds is None and self.predictor is not None:
+            req = PredictionRequest(now_s, c.candidates(current), c.horizon_s)
+            if isinstance(self.predictor, AsyncPredictor):
+                self._due_since = now_s if self._due_since is None else self._due_since
+                if not self.predictor.busy:
+                    self.predictor.submit(req)
+                if now_s - self._due_since < c.prediction_wait_s:
+                    return None  # wait for the worker (bounded)
+            else:
+                try:
+                    res = self.predictor(list(req.rpms), req.horizon_s)
+                    preds = PredictionResult(now_s, req.horizon_s, {float(k): float(v) for k, v in res.items()})
+                    self.offer_predictions(preds)
+                except Exception as exc:  # noqa: BLE001 - a failing twin means "no prediction"
+                    preds = None
+                    self._pred_error = f"{type(exc).__name__}: {exc}"
+        self._due_since = None
+        why = self.detector.why or "segregation"
+        if preds is not None:
+            return self._choose(now_s, current, preds, why, inputs)
+        lo, hi = c.rpm_limits
+        target = c.clamp(current + c.fallback_step_rpm)
+        if abs(target - current) < 1e-6:
+            target = c.clamp(current - c.fallback_step_rpm)
+        return self._start_move(
+            now_s, target, "move", f"segregation ({why}); no predictions -> fallback rule {current:g} -> {target:g} rpm"
+        )
+
+    def _choose(self, now_s: float, current: float, preds: PredictionResult, why: str, inputs: SupervisorInputs) -> Decision:
+        c = self.config
+        lo, hi = c.rpm_limits
+        scores: dict[float, float] = {}
+        for r, mi in preds.predictions.items():
+            r, mi = float(r), float(mi)
+            if lo - 1e-9 <= r <= hi + 1e-9 and math.isfinite(mi):
+                scores[r] = mi - c.move_penalty_per_rpm * abs(r - current)
+        near = [r for r in scores if abs(r - current) <= 0.5]
+        if near:
+            stay = scores[min(near, key=lambda r: abs(r - current))]
+        elif inputs.trend is not None and inputs.trend.valid:
+            stay = inputs.trend.level
+        else:
+            stay = -math.inf
+        self._last_eval_s = now_s
+        if not scores:
+            return self._emit(now_s, Action.NONE, "hold", f"segregation ({why}); predictions empty or out of limits", predictions=preds.predictions)
+        best = max(scores, key=lambda r: (scores[r], -abs(r - current)))
+        if abs(best - current) < 1e-6 or scores[best] - stay < c.min_gain:
+            return self._emit(
+                now_s, Action.NONE, "hold",
+                f"segregation ({why}); best {best:g} rpm gains {scores[best] - stay:+.3f} < {c.min_gain} -> stay at {current:g}",
+                predictions=preds.predictions, scores=scores,
+            )
+        return self._start_move(
+            now_s, best, "move",
+            f"segregation ({why}); twin predicts MI {preds.predictions[best]:.3f} at {best:g} rpm "
+            f"(score {scores[best]:.3f} vs {stay:.3f} staying at {current:g})",
+            predictions=preds.predictions, scores=scores,
+        )

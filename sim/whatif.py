@@ -1,0 +1,288 @@
+"""What-if studies: run the twin for a list of rpm values (seeds, cases, fill levels).
+
+Each ``WhatIfJob`` is a pure description (picklable, so it travels to a process pool
+or a Dask worker); ``run_job`` runs one and returns a ``WhatIfResult`` with the MI
+curve, the plateau MI and the regime. ``run_study`` runs many: in this process
+(``workers=1``), on a local process pool (default: all cores), or on an existing Dask
+cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within seconds).
+
+Regime by Froude number ``Fr = omega^2 R / g`` (Mellmann 2001): slumping < 1e-4 <=
+rolling < 1e-2 <= cascading < 0.1 <= cataracting < 1 <= centrifuging.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+import multiprocessing as mp
+
+import numpy as np
+
+from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
+from sim.errors import SimError
+from sim.measure import particle_mi, particle_slope_deg
+from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
+
+__all__ = [
+    "WhatIfJob", "WhatIfResult", "froude", "regime", "run_job", "run_study", "summarize", "plateau",
+    "DEFAULT_CONNECT_TIMEOUT_S", "make_pool",
+]
+
+DEFAULT_CONNECT_TIMEOUT_S = 5.0
+_REGIMES = ((1e-4, "slumping"), (1e-2, "rolling"), (1e-1, "cascading"), (1.0, "cataracting"))
+
+
+def froude(rpm: float, drum: DrumSpec = PAPER_DRUM) -> float:
+    """Froude number ``omega^2 R / g`` of the drum at ``rpm``."""
+    w = rpm_to_rad_s(rpm)
+    return w * w * drum.radius_m / G_M_S2
+
+
+def regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
+    """Bed regime by Froude number: slumping, rolling, cascading, cataracting or centrifuging."""
+    fr = froude(rpm, drum)
+    for limit, name in _REGIMES:
+        if fr < limit:
+            return name
+    return "centrifuging"
+
+
+@dataclass(frozen=True)
+class WhatIfJob:
+    """One twin run: rpm (setpoint from t=0), duration (s), start state or a fresh bed."""
+
+    rpm: float
+    duration_s: float
+    case: str = "C"
+    seed: int = 0
+    fill: float | None = None  # None: the recipe's fill
+    start: SimState | None = None  # branch from this state instead of a fresh bed
+    sample_s: float = 0.5
+    sim_kwargs: dict = field(default_factory=dict)  # friction, rolling, restitution, ...
+    drum: DrumSpec = PAPER_DRUM
+    recipe: Recipe = PAPER_RECIPE
+    tag: str = ""
+
+
+@dataclass(frozen=True)
+class WhatIfResult:
+    """MI curve (particle level, eq. 4 and eq. 3) and its summary for one job."""
+
+    job: WhatIfJob
+    t_s: np.ndarray
+    mi: np.ndarray
+    mi_sigmoid: np.ndarray
+    slope_deg: np.ndarray
+    rpm_actual: np.ndarray
+    plateau_mi: float
+    plateau_mi_sd: float
+    t_plateau_s: float
+    regime: str
+    froude: float
+    wall_s: float
+
+    def summary(self) -> dict:
+        j = self.job
+        return {
+            "rpm": j.rpm, "case": j.case, "seed": j.seed, "fill": j.fill, "tag": j.tag,
+            "plateau_mi": self.plateau_mi, "plateau_mi_sd": self.plateau_mi_sd, "t_plateau_s": self.t_plateau_s,
+            "regime": self.regime, "froude": self.froude, "mi_start": float(self.mi[0]) if self.mi.size else math.nan,
+            "wall_s": self.wall_s,
+        }
+
+
+def plateau(t_s: np.ndarray, mi: np.ndarray, tail: float = 1.0 / 3.0) -> tuple[float, float, float]:
+    """(plateau MI, its sd, time to plateau s) of an MI curve.
+
+    Plateau = mean over the last ``tail`` of the run; time to plateau = first time the
+    curve's running mean (window = 10 % of the run) comes within max(0.02, sd) of it.
+    """
+    t = np.asarray(t_s, float)
+    y = np.asarray(mi, float)
+    ok = np.isfinite(y)
+    t, y = t[ok], y[ok]
+    if y.size == 0:
+        return math.nan, math.nan, math.nan
+    n_tail = max(1, int(round(tail * y.size)))
+    p = float(np.mean(y[-n_tail:]))
+    sd = float(np.std(y[-n_tail:]))
+    w = max(1, int(round(0.1 * y.size)))
+    sm = np.convolve(y, np.ones(w) / w, mode="valid")
+    ts = t[w - 1:]
+    near = np.nonzero(np.abs(sm - p) <= max(0.02, sd))[0]
+    tp = float(ts[near[0]] - t[0]) if near.size else float(t[-1] - t[0])
+    return p, sd, tp
+
+
+def run_job(job: WhatIfJob) -> WhatIfResult:
+    """Run one what-if job in this process (pure: same job, same result)."""
+    t0 = time.perf_counter()
+    if job.duration_s <= 0 or not math.isfinite(job.duration_s):
+        raise SimError(f"what-if duration must be > 0 s (got {job.duration_s})")
+    if job.start is not None:
+        sim = DrumSim.from_state(job.start)
+        sim.set_rpm(job.rpm)
+        drum = sim.drum
+    else:
+        recipe = job.recipe if job.fill is None else with_fill(job.recipe, job.fill)
+        sim = DrumSim(job.drum, recipe, case=job.case, seed=job.seed, rpm=job.rpm, **job.sim_kwargs)
+        drum = job.drum
+    t_start = sim.t_s
+    n = max(1, int(round(job.duration_s / job.sample_s)))
+    ts, mis, sigs, slopes, rpms = [], [], [], [], []
+
+    def sample() -> None:
+        p = sim.particles()
+        m = particle_mi(p, drum)
+        ts.append(sim.t_s - t_start)
+        mis.append(m.mi)
+        sigs.append(m.mi_sigmoid)
+        slopes.append(particle_slope_deg(p, drum))
+        rpms.append(sim.rpm_actual)
+
+    sample()
+    for _ in range(n):
+        sim.advance(job.duration_s / n)
+        sample()
+    t_arr, mi_arr = np.array(ts), np.array(mis)
+    p, sd, tp = plateau(t_arr, mi_arr)
+    return WhatIfResult(
+        job=job, t_s=t_arr, mi=mi_arr, mi_sigmoid=np.array(sigs), slope_deg=np.array(slopes),
+        rpm_actual=np.array(rpms), plateau_mi=p, plateau_mi_sd=sd, t_plateau_s=tp,
+        regime=regime(job.rpm, drum), froude=froude(job.rpm, drum), wall_s=time.perf_counter() - t0,
+    )
+
+
+def _check_jobs(jobs: Sequence[WhatIfJob]) -> list[WhatIfJob]:
+    jobs = list(jobs)
+    if not jobs:
+        raise SimError("a what-if study needs at least one job")
+    for j in jobs:
+        if not isinstance(j, WhatIfJob):
+            raise SimError(f"what-if jobs must be WhatIfJob (got {type(j).__name__})")
+        check_rpm(j.rpm, j.start.drum if j.start is not None else j.drum)
+        if not (j.duration_s > 0) or not math.isfinite(j.duration_s):
+            raise SimError(f"what-if duration must be > 0 s (got {j.duration_s})")
+        if not (0 < j.sample_s <= j.duration_s):
+            raise SimError(f"sample interval must be in (0, duration] (got {j.sample_s} s)")
+    return jobs
+
+
+def _connect(scheduler: str, timeout_s: float):
+    try:
+        from distributed import Client
+    except ImportError:  # pragma: no cover - dask is a declared dependency of the cluster extra
+        raise SimError("running on a Dask cluster needs dask[distributed] installed") from None
+    addr = str(scheduler).strip()
+    if "://" not in addr:
+        addr = "tcp://" + addr
+    proto, _, rest = addr.partition("://")
+    host, _, port = rest.rpartition(":")
+    if proto not in ("tcp", "tls", "inproc", "ws", "wss") or not host or not port.isdigit():
+        raise SimError(f"scheduler address must look like tcp://HOST:PORT (got {scheduler!r})")
+    try:
+        return Client(addr, timeout=f"{timeout_s}s", set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise SimError(f"no Dask scheduler answers at {addr} within {timeout_s:g} s ({type(exc).__name__})") from None
+
+
+def run_study(
+    jobs: Sequence[WhatIfJob],
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
+    pool: Executor | None = None,
+) -> list[WhatIfResult]:
+    """Run ``jobs``; results in job order.
+
+    ``scheduler``: address of a running Dask scheduler (``dask scheduler`` + ``dask worker``).
+    Otherwise ``workers`` local processes (default: all cores; 1 = in this process), or
+    the caller's own ``pool`` (``make_pool()``; kept open for the next study).
+    ``progress(done, total)`` is called as jobs finish.
+    """
+    jobs = _check_jobs(jobs)
+    total = len(jobs)
+    results: list[WhatIfResult | None] = [None] * total
+    done = 0
+    if scheduler:
+        client = _connect(scheduler, connect_timeout_s)
+        try:
+            from distributed import as_completed as dask_completed
+
+            futs = client.map(run_job, jobs, pure=False)
+            index = {f.key: i for i, f in enumerate(futs)}
+            for fut in dask_completed(futs, loop=client.loop):
+                results[index[fut.key]] = fut.result()
+                done += 1
+                if progress:
+                    progress(done, total)
+        finally:
+            client.close()
+        return results  # type: ignore[return-value]
+    n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n_workers < 1:
+        raise SimError(f"workers must be >= 1 (got {workers})")
+    n_workers = min(n_workers, total)
+    if n_workers == 1 and pool is None:
+        for i, j in enumerate(jobs):
+            results[i] = run_job(j)
+            done += 1
+            if progress:
+                progress(done, total)
+        return results  # type: ignore[return-value]
+    own = pool is None
+    if pool is None:
+        pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=_mp_context())
+    try:
+        futs = {pool.submit(run_job, j): i for i, j in enumerate(jobs)}
+        for fut in as_completed(futs):
+            results[futs[fut]] = fut.result()
+            done += 1
+            if progress:
+                progress(done, total)
+    finally:
+        if own:
+            pool.shutdown(wait=True, cancel_futures=True)
+    return results  # type: ignore[return-value]
+
+
+def _mp_context():
+    """Fork-server workers with ``sim`` preloaded: thread-safe like spawn, cheap like fork."""
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["sim.whatif"])
+        return ctx
+    return mp.get_context("spawn")
+
+
+def make_pool(workers: int | None = None) -> Executor:
+    """A reusable local process pool for repeated studies (pass it as ``run_study(..., pool=)``)."""
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise SimError(f"workers must be >= 1 (got {workers})")
+    return ProcessPoolExecutor(max_workers=n, mp_context=_mp_context())
+
+
+def summarize(results: Sequence[WhatIfResult]) -> list[dict]:
+    """One entry per rpm (seeds and cases pooled): plateau MI mean, sd across runs and within, regime."""
+    by_rpm: dict[float, list[WhatIfResult]] = {}
+    for r in results:
+        by_rpm.setdefault(float(r.job.rpm), []).append(r)
+    out = []
+    for rpm in sorted(by_rpm):
+        rs = by_rpm[rpm]
+        p = np.array([r.plateau_mi for r in rs])
+        within = np.array([r.plateau_mi_sd for r in rs])
+        sd = float(np.sqrt(np.nanmean(within**2) + (np.nanvar(p) if p.size > 1 else 0.0)))
+        out.append({
+            "rpm": rpm, "plateau_mi": float(np.nanmean(p)), "plateau_mi_sd": sd,
+            "t_plateau_s": float(np.nanmean([r.t_plateau_s for r in rs])), "regime": rs[0].regime,
+            "froude": rs[0].froude, "runs": len(rs),
+        })
+    return out

@@ -1,0 +1,111 @@
+"""The control commands through the real CLI entry point."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from control.device import DeviceConfig
+from control.driver import MillClient
+from control.emulator import MillEmulator
+from twin.cli import main
+
+DRUMTWIN = Path(sys.executable).with_name("drumtwin")
+
+
+def cli(capsys, *args: str) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(list(args))
+    out = capsys.readouterr()
+    return int(exc.value.code or 0), out.out, out.err
+
+
+@pytest.mark.timeout(60)
+def test_bench_trend_json(capsys):
+    code, out, err = cli(capsys, "bench", "trend", "--json", "--sequences", "2")
+    assert code == 0
+    d = json.loads(out)
+    assert set(d) == {"kalman_rmse", "ma_rmse", "kalman_lag_s", "ma_lag_s"}
+    assert d["kalman_rmse"] < d["ma_rmse"] and d["kalman_lag_s"] < d["ma_lag_s"]
+
+
+@pytest.mark.timeout(60)
+def test_bench_trend_table(capsys):
+    code, out, _ = cli(capsys, "bench", "trend", "--sequences", "1")
+    assert code == 0 and "Kalman" in out and "moving average (150)" in out
+
+
+@pytest.mark.timeout(30)
+def test_mill_commands_against_emulator(capsys):
+    with MillEmulator(DeviceConfig(watchdog_s=0.0)) as emu:
+        emu.open_tcp(0)
+        code, out, _ = cli(capsys, "mill", emu.url, "status", "--json")
+        assert code == 0 and json.loads(out) == {"setpoint_rpm": 0.0, "actual_rpm": 0.0, "running": False, "fault": None}
+        code, out, _ = cli(capsys, "mill", emu.url, "set-rpm", "14.5", "--json")
+        assert code == 0 and json.loads(out)["setpoint_rpm"] == 14.5 and emu.motor.setpoint_rpm == 14.5
+        code, out, _ = cli(capsys, "mill", emu.url, "start")
+        assert code == 0 and "running" in out and emu.motor.running
+        code, out, _ = cli(capsys, "mill", emu.url, "stop", "--json")
+        assert code == 0 and json.loads(out)["running"] is False
+        code, out, err = cli(capsys, "mill", emu.url, "set-rpm", "500")
+        assert code == 2 and "RANGE" in err and emu.motor.setpoint_rpm == 14.5
+
+
+def test_bad_url_and_bad_faults_are_one_line_errors(capsys):
+    code, out, err = cli(capsys, "mill", "/nonexistent/ttyUSB7", "status")
+    assert code == 2 and err.startswith("error:") and "Traceback" not in err and out == ""
+    code, _, err = cli(capsys, "mill-emulator", "--faults", "bogus=1", "--duration", "0.1")
+    assert code == 2 and "unknown fault" in err
+    code, _, err = cli(capsys, "mill-emulator", "--pty", "--tcp", "0", "--duration", "0.1")
+    assert code == 2 and "one of" in err
+
+
+@pytest.mark.timeout(60)
+def test_mill_emulator_process_on_a_pty():
+    proc = subprocess.Popen(
+        [str(DRUMTWIN), "mill-emulator", "--pty", "--duration", "30", "--watchdog", "0.5"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.endswith("/mill")
+        with MillClient(url, timeout_s=0.2, heartbeat_s=0.1) as c:
+            c.set_rpm(8.0)
+            c.start()
+            st = c.status()
+            assert st.setpoint_rpm == 8.0 and st.running
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    assert proc.returncode == 0
+    assert not Path(url).exists()  # the pty link is cleaned up
+
+
+def test_bench_trend_pluggable_source(capsys, monkeypatch):
+    import numpy as np
+
+    from control.trendbench import TrendSequence
+    from twin.cli import control_cmds
+
+    calls = []
+
+    def step_source(seed: int) -> TrendSequence:
+        calls.append(seed)
+        t = np.arange(0, 40, 1 / 30)
+        truth = np.where(t >= 20, 0.8, 0.3)
+        rng = np.random.default_rng(seed)
+        return TrendSequence(t, truth, truth + rng.normal(0, 0.03, t.size), np.full(t.size, 10.0), 20.0)
+
+    monkeypatch.setitem(control_cmds.TREND_SOURCES, "step", step_source)
+    code, out, _ = cli(capsys, "bench", "trend", "--source", "step", "--sequences", "3", "--json")
+    assert code == 0 and calls == [0, 1, 2]
+    d = json.loads(out)
+    assert d["kalman_lag_s"] < d["ma_lag_s"]
+    code, _, err = cli(capsys, "bench", "trend", "--source", "nope")
+    assert code == 2 and "unknown trend source" in err

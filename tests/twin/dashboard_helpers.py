@@ -1,0 +1,83 @@
+"""Reading the viser dashboard from a Playwright page (selectors found by inspecting
+viser 1.1's React/Mantine DOM in chromium)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+IMG = 'img[src^="blob:"]'  # camera and twin frames (GUI image elements, in panel order)
+
+
+def image_srcs(page) -> list[str]:
+    """The blob URLs of the GUI images (they change on every pushed frame)."""
+    return page.eval_on_selector_all(IMG, "els => els.map(e => e.src)")
+
+
+def plot_pixels(page) -> dict[str, str]:
+    """A fingerprint of every uPlot chart's canvas (length and hash of its PNG), by title."""
+    return dict(
+        page.eval_on_selector_all(
+            ".uplot",
+            """els => els.map(e => { const t = e.querySelector('.u-title');
+                const c = e.querySelector('canvas'); const s = c ? c.toDataURL() : '';
+                let h = 0; for (let i = 0; i < s.length; i++) { h = (h * 31 + s.charCodeAt(i)) | 0; }
+                return [t ? t.innerText : '', s.length + ':' + h]; })""",
+        )
+    )
+
+
+def wait_until(pred: Callable[[], bool], timeout_s: float, what: str, poll_s: float = 0.1) -> None:
+    """Poll ``pred`` until it is true; AssertionError naming ``what`` after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(poll_s)
+    raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+def slider(page):
+    return page.locator('[role="slider"]').first
+
+
+def slider_value(page) -> float:
+    return float(slider(page).get_attribute("aria-valuenow"))
+
+
+def slider_enabled(page) -> bool:
+    return slider(page).get_attribute("aria-disabled") != "true"
+
+
+def drag_slider_to(page, fraction: float) -> None:
+    """Press the rpm slider's track at ``fraction`` of its width (0..1) and release."""
+    track = page.locator(".mantine-Slider-track").first
+    box = track.bounding_box()
+    assert box is not None, "rpm slider not visible"
+    x = box["x"] + fraction * box["width"]
+    y = box["y"] + box["height"] / 2
+    thumb = slider(page).bounding_box()
+    page.mouse.move(thumb["x"] + thumb["width"] / 2, thumb["y"] + thumb["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(x, y, steps=8)
+    page.mouse.up()
+
+
+def button(page, name: str):
+    return page.get_by_role("button", name=name, exact=True)
+
+
+def input_by_label(page, label: str):
+    """The text/number input on the GUI row labelled ``label`` (viser's <label for> does
+    not point at the Mantine input, so get_by_label cannot find it)."""
+    return page.locator(".mantine-Flex-root", has_text=label).locator("input").first
+
+
+def choose_mode(page, mode: str) -> None:
+    """Pick ``mode`` (OFF/MANUAL/AUTO) in the Mode selector."""
+    input_by_label(page, "Mode").click()
+    page.get_by_role("option", name=mode, exact=True).click()
+
+
+def mode_selector(page):
+    return input_by_label(page, "Mode")

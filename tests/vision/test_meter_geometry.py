@@ -1,0 +1,136 @@
+import math
+
+import numpy as np
+import pytest
+
+from tests.vision import helpers as H
+from vision.colours import DEFAULT_CLASSES, ColourClass, classify
+from vision.errors import VisionError
+from vision.meter import Meter
+from vision.roi import DrumROI, detect_drum, roi_mask
+from vision.slope import bed_slope_deg
+
+
+def test_two_half_disks_mi_near_zero():
+    r = Meter(roi=H.roi_for()).measure(H.half_disks())
+    assert r.valid
+    assert r.mi_sigmoid < 0.02 and r.mi < 0.02
+    # the centroid gap of two half disks is d_c = 8R/(3 pi)
+    assert r.d_px == pytest.approx(8 * H.roi_for().r_px / (3 * math.pi), rel=0.02)
+    red, blue = r.cls("red"), r.cls("blue")
+    assert red.cx_px < 320 < blue.cx_px
+    assert red.frac == pytest.approx(0.5, abs=0.01)
+
+
+def test_fine_random_mix_mi_high():
+    r = Meter(roi=H.roi_for()).measure(H.fine_mix())
+    assert r.mi > 0.9 and r.mi_sigmoid > 0.9
+    assert r.concentration == pytest.approx(0.5, abs=0.02)
+
+
+def test_core_ring_radial_segregation():
+    r = Meter(roi=H.roi_for()).measure(H.core_ring())
+    assert r.mi_sigmoid > 0.9  # eq. 3 is fooled: both centroids at the centre
+    assert r.mi < 0.5 * r.mi_sigmoid  # eq. 4 sees the spread difference
+    # spreads: uniform disc radius a has sigma = a / sqrt(2)
+    R = H.roi_for().r_px
+    assert r.cls("blue").sigma_px == pytest.approx(0.7071 * R / math.sqrt(2), rel=0.03)
+
+
+def test_empty_class_gives_nan_and_flag():
+    img = H.blank()
+    import cv2
+
+    cv2.circle(img, (320, 240), 100, H.RED, -1)
+    r = Meter(roi=H.roi_for()).measure(img)
+    assert not r.valid and math.isnan(r.mi) and math.isnan(r.cls("blue").cx_px)
+    assert "few_pixels:blue" in r.flags
+    assert r.cls("red").n_px > 1000
+
+
+def test_bad_frames_are_flagged_not_raised():
+    m = Meter(roi=H.roi_for())
+    assert m.measure(np.zeros((480, 640), np.uint8)).flags[0].startswith("bad_frame")
+    assert m.measure(H.half_disks()).valid
+    r = m.measure(H.half_disks(800, 600))
+    assert not r.valid and r.flags[0].startswith("size_changed")
+    assert m.measure(H.half_disks()).valid  # the stream goes on
+
+
+def test_mi_linear_relative_to_first_valid_frame():
+    m = Meter(roi=H.roi_for())
+    r0 = m.measure(H.half_disks())
+    r1 = m.measure(H.fine_mix())
+    assert r0.mi_linear == pytest.approx(0.0)
+    assert r1.mi_linear > 0.9
+
+
+@pytest.mark.parametrize("stride", [2, 3])
+def test_stride_decimation_accuracy(stride):
+    from vision.synthetic import drum_frame
+
+    for mix in (0.0, 0.5, 1.0):
+        img = drum_frame(mix=mix, seed=3)
+        roi = Meter().measure(img).roi
+        full = Meter(roi=roi).measure(img)
+        dec = Meter(roi=roi, stride=stride).measure(img)
+        for a, b in zip(full.classes, dec.classes):
+            assert abs(a.cx_px - b.cx_px) < 0.005 * roi.r_px and abs(a.cy_px - b.cy_px) < 0.005 * roi.r_px
+            assert b.sigma_px == pytest.approx(a.sigma_px, rel=0.01)
+        assert dec.mi == pytest.approx(full.mi, abs=0.02)
+
+
+@pytest.mark.parametrize("angle", [-35.0, -10.0, 0.0, 20.0, 40.0])
+@pytest.mark.parametrize("fill", [0.3, 0.5, 0.7])
+def test_slope_on_tilted_beds(angle, fill):
+    img, roi = H.tilted_bed(angle, fill)
+    r = Meter(roi=roi).measure(img)
+    assert r.slope_deg == pytest.approx(angle, abs=1.0)
+    bed = classify(img, DEFAULT_CLASSES, roi_mask(roi, img.shape[:2])) > 0
+    assert bed_slope_deg(bed, roi) == pytest.approx(angle, abs=0.5)
+
+
+def test_slope_dark_bed():
+    img, roi = H.tilted_bed(25.0, 0.4, dark=True)
+    # a light drum with a dark bed has no colour classes: slope still measured
+    r = Meter(roi=roi, bed="dark").measure(img)
+    assert r.slope_deg == pytest.approx(25.0, abs=1.0)
+    assert not r.valid
+
+
+def test_red_wraps_hue_zero_and_defaults_catch_real_world_colours():
+    import cv2
+
+    swatch = np.array([[[0, 0, 220], [30, 20, 200], [60, 0, 190], [220, 60, 0], [200, 110, 40], [160, 40, 30], [128, 128, 128]]], np.uint8)
+    lab = classify(swatch, DEFAULT_CLASSES)
+    assert lab.tolist() == [[1, 1, 1, 2, 2, 2, 0]]
+    hsv = cv2.cvtColor(swatch, cv2.COLOR_BGR2HSV)
+    assert hsv[0, 2, 0] > 165  # the magenta-ish red sits on the other side of hue 0
+
+
+def test_colour_class_validation():
+    with pytest.raises(VisionError, match="inverted"):
+        ColourClass("x", (((20, 0, 0), (10, 255, 255)),))
+    with pytest.raises(VisionError):
+        ColourClass("x", (((0, 0, 0), (200, 255, 255)),))
+    with pytest.raises(VisionError):
+        ColourClass("", (((0, 0, 0), (10, 255, 255)),))
+
+
+def test_detect_drum_on_synthetic_frame():
+    img = H.half_disks()
+    roi = detect_drum(img)
+    true = H.roi_for()
+    assert abs(roi.cx_px - true.cx_px) < 4 and abs(roi.cy_px - true.cy_px) < 4
+    assert abs(roi.r_px - (true.r_px + 4)) < 0.05 * true.r_px
+
+
+def test_detect_drum_fails_clearly():
+    with pytest.raises(VisionError, match="--roi"):
+        detect_drum(np.zeros((200, 300, 3), np.uint8))
+
+
+def test_rect_roi_mask():
+    roi = DrumROI(50, 40, 20, kind="rect", half_w_px=30, half_h_px=10)
+    m = roi_mask(roi, (100, 120))
+    assert m.sum() == 61 * 21

@@ -1,0 +1,165 @@
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.vision import helpers as H
+from vision.config import config_to_toml, load_config, parse_config
+from vision.errors import VisionError
+from vision.sources import open_source, source_kind
+
+GOOD = """
+[meter]
+bed = "color"
+min_pixels = 10
+roi = [320, 240, 200]
+
+[[classes]]
+name = "teal"
+hsv = [[[80, 80, 50], [95, 255, 255]]]
+
+[[classes]]
+name = "white"
+hsv = [[[0, 0, 160], [179, 50, 255]]]
+display_bgr = [255, 255, 255]
+"""
+
+
+def test_config_roundtrip_and_meter():
+    cfg = parse_config(GOOD)
+    assert [c.name for c in cfg.classes] == ["teal", "white"]
+    assert cfg.roi.r_px == 200 and cfg.min_pixels == 10
+    again = parse_config(config_to_toml(cfg))
+    assert again.classes == cfg.classes and again.roi == cfg.roi
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (GOOD.replace("bed =", "colour = 1\nbed ="), "unknown key"),
+        (GOOD.replace('name = "teal"', 'name = "teal"\nhue = 3'), "unknown key"),
+        (GOOD.replace("[[80, 80, 50], [95, 255, 255]]", "[[95, 80, 50], [80, 255, 255]]"), "inverted H"),
+        (GOOD.replace("[[0, 0, 160], [179, 50, 255]]", "[[0, 0, 160], [179, 50, 100]]"), "inverted V"),
+        (GOOD.replace('bed = "color"', 'bed = "glow"'), "bed"),
+        (GOOD.replace("min_pixels = 10", "min_pixels = 'ten'"), "integer"),
+        ("[meter\n", "TOML"),
+        ("[meter]\nbed='color'\n[[classes]]\nname='a'\nhsv=[[[0,0,0],[10,255,255]]]\n", "two"),
+    ],
+)
+def test_bad_configs(text, match):
+    with pytest.raises(VisionError, match=match):
+        parse_config(text)
+
+
+def test_load_missing_config(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        load_config(tmp_path / "nope.toml")
+    assert load_config(None).classes[0].name == "red"
+
+
+def test_folder_and_list_in_name_order(tmp_path):
+    for name in ("b.png", "a.png", "c.jpg"):
+        cv2.imwrite(str(tmp_path / name), H.half_disks(64, 48))
+    (tmp_path / "notes.txt").write_text("x")
+    frames = list(open_source(tmp_path, fps=10))
+    assert [f.name for f in frames] == ["a.png", "b.png", "c.jpg"]
+    assert [f.t_s for f in frames] == pytest.approx([0, 0.1, 0.2])
+    frames = list(open_source([str(tmp_path / "c.jpg"), str(tmp_path / "a.png")]))
+    assert [f.name for f in frames] == ["a.png", "c.jpg"]
+    assert source_kind("0") == "camera" and source_kind("rtsp://x/y") == "url"
+
+
+def test_corrupt_and_grayscale_images_are_frames_with_errors(tmp_path):
+    (tmp_path / "1.jpg").write_bytes(b"\xff\xd8 not really a jpeg")
+    cv2.imwrite(str(tmp_path / "2.png"), np.zeros((10, 10), np.uint8))
+    f1, f2 = list(open_source(tmp_path))
+    assert f1.error and "decode" in f1.error and f1.image.size == 0
+    assert f2.error is None and f2.image.ndim == 2
+
+
+def test_missing_and_unreadable_files(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        open_source(tmp_path / "missing.mp4")
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(b"garbage" * 10)
+    with pytest.raises(VisionError, match="cannot open video"):
+        open_source(bad)  # fails on opening, before any frame is asked for
+
+
+def test_video_file_frames_and_loop(tmp_path):
+    p = tmp_path / "v.mp4"
+    vw = cv2.VideoWriter(str(p), cv2.VideoWriter_fourcc(*"mp4v"), 20, (64, 48))
+    for _ in range(5):
+        vw.write(H.half_disks(64, 48))
+    vw.release()
+    frames = list(open_source(p))
+    assert len(frames) == 5 and frames[1].t_s == pytest.approx(0.05)
+    it = open_source(p, loop=True)
+    looped = [next(it) for _ in range(12)]
+    assert looped[-1].index == 11 and looped[-1].t_s == pytest.approx(11 / 20)
+
+
+class FlakyCamera:
+    """A camera that delivers 3 frames, drops, refuses 2 reopenings, then works again."""
+
+    opens = 0
+
+    def __init__(self, target):
+        FlakyCamera.opens += 1
+        self.n = 0
+        self.ok = FlakyCamera.opens not in (2, 3)
+
+    def isOpened(self):
+        return self.ok
+
+    def read(self):
+        self.n += 1
+        if FlakyCamera.opens == 1 and self.n > 3:
+            return False, None
+        return True, np.zeros((4, 4, 3), np.uint8)
+
+    def release(self):
+        pass
+
+
+@pytest.mark.timeout(20)
+def test_camera_reconnects_with_backoff():
+    FlakyCamera.opens = 0
+    sleeps = []
+    it = open_source(0, capture_factory=FlakyCamera, sleep=sleeps.append, backoff_s=(0.5, 8.0))
+    frames = [next(it) for _ in range(6)]
+    assert [f.index for f in frames] == list(range(6))
+    assert FlakyCamera.opens == 4
+    assert sleeps == [0.5, 1.0, 2.0]
+
+
+@pytest.mark.timeout(20)
+def test_camera_gives_up_after_tries():
+    class Dead(FlakyCamera):
+        def __init__(self, target):
+            Dead.opens += 1
+
+        def isOpened(self):
+            return Dead.opens == 1
+
+        def read(self):
+            return False, None
+
+    Dead.opens = 0
+    it = open_source("0", capture_factory=Dead, sleep=lambda s: None, reconnect_tries=3)
+    with pytest.raises(ConnectionError, match="3 tries"):
+        next(it)
+    Dead.opens = 5
+    with pytest.raises(ConnectionError, match="cannot open camera"):
+        open_source(1, capture_factory=Dead, sleep=lambda s: None)
+
+
+def test_shipped_configs_load():
+    from vision.colours import DEFAULT_CLASSES
+
+    repo = Path(__file__).resolve().parents[2]
+    assert load_config(repo / "configs" / "example.toml").classes == DEFAULT_CLASSES
+    cfg = load_config(repo / "configs" / "pmma-blue-white.toml")
+    assert [c.name for c in cfg.classes] == ["blue", "white"]

@@ -1,0 +1,220 @@
+"""Commands of the control package: ``mill``, ``mill-emulator``, ``bench trend``."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+from typing import TYPE_CHECKING, Optional
+
+import typer
+from rich.progress import Progress
+from rich.table import Table
+
+from control.device import DeviceConfig
+from control.driver import MillClient
+from control.emulator import Faults, MillEmulator
+from control.errors import ControlError
+from control.motor import MotorConfig
+from control.protocol import MillStatus
+from twin.cli.app import app, bench_app, console, console_err
+
+if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
+    from control.trendbench import SequenceSource, TrendBenchResult
+
+mill_app = typer.Typer(
+    help="Talk to the mill's motor board (commissioning): status, set-rpm, start, stop.",
+    no_args_is_help=True,
+)
+app.add_typer(mill_app, name="mill")
+
+JSON_OPT = typer.Option(False, "--json", help="Print one JSON object on stdout.")
+
+
+@mill_app.callback()
+def _mill(
+    ctx: typer.Context,
+    url: str = typer.Argument(..., help="Port or URL: /dev/ttyUSB0, a pty path, socket://host:port, rfc2217://host:port."),
+    timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
+    retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
+) -> None:
+    ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries}
+
+
+def _client(ctx: typer.Context) -> MillClient:
+    o = ctx.obj
+    return MillClient(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], heartbeat_s=None)
+
+
+HOLD_OPT = typer.Option(
+    0.0, "--hold", help="Keep the link alive (heartbeat) this many seconds, printing the status; "
+    "afterwards the board's watchdog stops the motor."
+)
+
+
+def _hold(c: MillClient, hold_s: float, as_json: bool) -> None:
+    if hold_s <= 0:
+        return
+    t_end = time.monotonic() + hold_s
+    while time.monotonic() < t_end:
+        st = c.heartbeat()
+        if not as_json:
+            console_err.print(f"actual {st.actual_rpm:6.2f} rpm (setpoint {st.setpoint_rpm:.2f})", highlight=False)
+        time.sleep(min(0.25, max(0.0, t_end - time.monotonic())))
+
+
+def _report(status: MillStatus, as_json: bool, what: str = "") -> None:
+    if as_json:
+        d = status.as_dict()
+        if what:
+            d["ok"] = what
+        print(json.dumps(d))
+        return
+    if what:
+        console.print(f"[green]ok[/] {what}")
+    console.print(
+        f"setpoint {status.setpoint_rpm:.2f} rpm  actual {status.actual_rpm:.2f} rpm  "
+        f"{'running' if status.running else 'stopped'}  fault {status.fault or 'none'}",
+        highlight=False,
+    )
+
+
+@mill_app.command("status")
+def mill_status(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
+    """Read setpoint, actual rpm, running, fault."""
+    with _client(ctx) as c:
+        _report(c.status(), as_json)
+
+
+@mill_app.command("set-rpm")
+def mill_set_rpm(
+    ctx: typer.Context,
+    rpm: float = typer.Argument(..., help="Absolute setpoint (rpm)."),
+    as_json: bool = JSON_OPT,
+    hold_s: float = HOLD_OPT,
+) -> None:
+    """Set the speed setpoint (rpm)."""
+    with _client(ctx) as c:
+        c.set_rpm(rpm)
+        _hold(c, hold_s, as_json)
+        _report(c.status(), as_json, f"set-rpm {rpm:g}")
+
+
+@mill_app.command("start")
+def mill_start(ctx: typer.Context, as_json: bool = JSON_OPT, hold_s: float = HOLD_OPT) -> None:
+    """Start the motor (clears a watchdog fault). Without --hold the board's watchdog
+    stops it again once the host is silent (see docs/mill-protocol.md)."""
+    with _client(ctx) as c:
+        c.start()
+        _hold(c, hold_s, as_json)
+        _report(c.status(), as_json, "start")
+
+
+@mill_app.command("stop")
+def mill_stop(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
+    """Stop the motor."""
+    with _client(ctx) as c:
+        c.stop()
+        _report(c.status(), as_json, "stop")
+
+
+@app.command("mill-emulator")
+def mill_emulator(
+    pty: bool = typer.Option(False, "--pty", help="Serve on a pseudo-terminal (default)."),
+    tcp: Optional[int] = typer.Option(None, "--tcp", help="Serve on this TCP port instead (0: any free port)."),
+    host: str = typer.Option("127.0.0.1", "--host", help="TCP address to listen on."),
+    link: Optional[str] = typer.Option(None, "--link", help="Path of the stable symlink to the pty slave."),
+    faults: str = typer.Option("", "--faults", help="e.g. 'corrupt=0.05,drop=0.01,delay=0.02,disconnect=10:1'."),
+    watchdog_s: float = typer.Option(1.0, "--watchdog", help="Stop the motor after this long without a valid frame (s; 0 disables it)."),
+    max_rpm: float = typer.Option(60.0, "--max-rpm", help="Top speed of the drive (rpm)."),
+    accel: float = typer.Option(10.0, "--accel", help="Acceleration limit (rpm/s)."),
+    tau_s: float = typer.Option(0.5, "--tau", help="Speed-loop time constant (s)."),
+    duration_s: Optional[float] = typer.Option(None, "--duration", help="Exit after this many seconds (default: Ctrl-C)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the fault injection."),
+) -> None:
+    """Run the motor-board emulator on a pty (prints its path) or a TCP port."""
+    if pty and tcp is not None:
+        raise ControlError("choose one of --pty and --tcp")
+    if watchdog_s < 0 or max_rpm <= 0 or accel <= 0 or tau_s < 0:
+        raise ControlError("--max-rpm and --accel must be positive, --watchdog and --tau >= 0")
+    cfg = DeviceConfig(watchdog_s=watchdog_s, motor=MotorConfig(max_rpm=max_rpm, accel_rpm_per_s=accel, tau_s=tau_s))
+    emu = MillEmulator(cfg, Faults.parse(faults), seed=seed)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())  # before the path is printed: clean exit
+    try:
+        if tcp is not None:
+            emu.open_tcp(tcp, host)
+        else:
+            emu.open_pty(link)
+        print(emu.url, flush=True)
+        console_err.print(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop", highlight=False)
+        t_end = None if duration_s is None else time.monotonic() + duration_s
+        last = None
+        try:
+            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
+                st = emu.status()
+                line = (round(st.setpoint_rpm, 1), round(st.actual_rpm, 1), st.running, st.fault)
+                if line != last:
+                    console_err.print(
+                        f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
+                        f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}",
+                        highlight=False,
+                    )
+                    last = line
+                done.wait(0.5)
+        except KeyboardInterrupt:
+            pass
+    finally:
+        emu.close()
+
+
+TREND_SOURCES: dict[str, "SequenceSource"] = {}
+"""Extra MI sequence sources for ``bench trend --source NAME`` (seed -> TrendSequence), e.g. a
+twin-generated one (truth = particle MI, measured = vision MI of rendered frames).
+``synthetic`` is built in (truth + noise + rotation ripple + outliers + dropouts)."""
+
+
+@bench_app.command("trend")
+def bench_trend(
+    as_json: bool = JSON_OPT,
+    source: str = typer.Option("synthetic", "--source", help="Sequence source: synthetic, or one registered in TREND_SOURCES."),
+    sequences: int = typer.Option(8, "--sequences", help="Number of synthetic sequences (seeds 0..N-1)."),
+    fps: float = typer.Option(30.0, "--fps", help="Frame rate of the MI stream."),
+    noise_sd: float = typer.Option(0.04, "--noise", help="Measurement noise sd (MI)."),
+    ripple: float = typer.Option(0.05, "--ripple", help="Rotation ripple amplitude (MI)."),
+    window: int = typer.Option(150, "--window", help="Moving-average window (samples; the paper uses 150)."),
+) -> None:
+    """Kalman MI trend vs the paper's 150-sample moving average: RMSE and step lag."""
+    from control.trendbench import run_trend_bench, synthetic_sequence
+
+    if sequences < 1 or fps <= 0 or window < 1:
+        raise ControlError("--sequences, --fps and --window must be positive")
+    if source == "synthetic":
+        make: "SequenceSource" = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
+    elif source in TREND_SOURCES:
+        make = TREND_SOURCES[source]
+    else:
+        raise ControlError(f"unknown trend source {source!r} (known: {', '.join(['synthetic', *TREND_SOURCES])})")
+    with Progress(console=console_err, transient=True) as prog:
+        task = prog.add_task(f"trend sequences ({source})", total=sequences)
+        res = run_trend_bench(
+            (make(i) for i in range(sequences)),
+            ma_window=window,
+            progress=lambda i: prog.update(task, completed=i),
+        )
+    print_trend_result(res, as_json)
+
+
+def print_trend_result(res: "TrendBenchResult", as_json: bool) -> None:
+    """Print a trend benchmark result as a table or one JSON object (reused by twin)."""
+    if as_json:
+        print(json.dumps(res.as_dict()))
+        return
+    t = Table(title=f"MI trend: Kalman vs {res.ma_window}-sample moving average ({len(res.per_sequence)} sequences)")
+    t.add_column("filter")
+    t.add_column("RMSE vs truth (MI)", justify="right")
+    t.add_column("lag after step, 63 % (s)", justify="right")
+    t.add_row("Kalman", f"{res.kalman_rmse:.4f}", f"{res.kalman_lag_s:.2f}")
+    t.add_row(f"moving average ({res.ma_window})", f"{res.ma_rmse:.4f}", f"{res.ma_lag_s:.2f}")
+    console.print(t)

@@ -1,0 +1,201 @@
+"""``drumtwin run``: the live loop (embedded demo by default) with its dashboard."""
+
+from __future__ import annotations
+
+import json
+import platform
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from twin.cli.app import app, console_err
+from twin.errors import TwinError
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "filterpy", "pyserial", "viser"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
+    """Replay a recording at its own speed (``frame.t_s`` on the run clock)."""
+    t0 = None
+    for f in frames:
+        t0 = f.t_s if t0 is None else t0
+        if not clock.sleep_until(f.t_s - t0):
+            return
+        yield f
+
+
+def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, ANN201
+    """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
+
+    ``on_started(loop, plant, dashboard)`` is called once everything runs (tests use it
+    to inject faults). Ctrl-C / SIGTERM end the run cleanly.
+    """
+    from twin.clock import RunClock
+    from twin.demo import DemoPlant, PlantConfig
+    from twin.loop import LiveLoop
+    from twin.runlog import RunLog
+    from twin.state import LiveState
+
+    clock = RunClock(cfg.speed)
+    runlog = RunLog(cfg.log_dir)
+    runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    plant = None
+    classes = None
+    roi = None
+    if cfg.meter_config is not None:
+        from vision.config import load_config
+
+        mc = load_config(cfg.meter_config)
+        classes, roi = mc.classes, mc.roi
+    if cfg.demo:
+        plant = DemoPlant(
+            PlantConfig(case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px),
+            clock,
+        )
+        frames, mill_url, roi = plant.frames(), plant.url, plant.roi
+        runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
+    else:
+        from vision.sources import open_source
+
+        if cfg.video is not None:
+            frames = _paced(open_source(str(cfg.video)), clock)
+        else:
+            frames = open_source(cfg.camera)
+        mill_url = cfg.mill
+    state = LiveState()
+    loop = None
+    dash = None
+    t_wall = time.monotonic()
+    try:
+        loop = LiveLoop(cfg, frames, mill_url, runlog, state, clock=clock, roi=roi, classes=classes)
+        if cfg.dashboard:
+            from twin.dashboard import Dashboard
+
+            dash = Dashboard(
+                state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token, update_hz=cfg.dashboard_hz
+            ).start()
+            console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
+            runlog.set_metadata(dashboard_url=dash.url)
+        loop.start()
+        if on_started is not None:
+            on_started(loop, plant, dash)
+        _wait(loop, cfg, progress)
+    finally:
+        if loop is not None:
+            loop.stop()
+        if dash is not None:
+            dash.stop()
+        if plant is not None:
+            plant.close()
+        summary = loop.summary(time.monotonic() - t_wall) if loop is not None else None
+        if summary is not None:
+            runlog.set_metadata(summary=asdict(summary))
+        runlog.close()
+    return summary
+
+
+def _wait(loop, cfg, progress: bool) -> None:  # noqa: ANN001
+    """Block until the duration is over, Ctrl-C or SIGTERM."""
+    stop = loop.stop_event
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        if cfg.duration_s is None or not progress:
+            loop.wait(cfg.duration_s)
+            return
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        with Progress(
+            TextColumn("run"), BarColumn(), TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
+            TextColumn("MI {task.fields[mi]}  rpm {task.fields[rpm]}"), TimeRemainingColumn(),
+            console=console_err, transient=True,
+        ) as bar:
+            task = bar.add_task("run", total=cfg.duration_s, mi="–", rpm="–")
+            while not stop.is_set() and loop.now_s() < cfg.duration_s:
+                est = loop.last_estimate
+                mi = f"{est.level:.3f}" if est is not None and est.valid else "–"
+                bar.update(task, completed=min(loop.now_s(), cfg.duration_s), mi=mi, rpm=f"{loop.mill_view.actual_rpm:.1f}")
+                stop.wait(0.2)
+    except KeyboardInterrupt:
+        console_err.print("stopping…")
+
+
+@app.command("run")
+def run(
+    camera: str = typer.Option(None, "--camera", help="Camera index or stream URL (real hardware)."),
+    video: Path = typer.Option(None, "--video", help="Replay a recorded video instead of a camera."),
+    mill: str = typer.Option(None, "--mill", help="Mill serial URL: /dev/ttyUSB0, socket://host:port, rfc2217://..."),
+    config: Path = typer.Option(None, "--config", help="Meter TOML (colour classes, ROI)."),
+    no_dashboard: bool = typer.Option(False, "--no-dashboard", help="Run without the browser dashboard."),
+    duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of run time."),
+    log: Path = typer.Option(None, "--log", help="Run log directory (default runs/<timestamp>)."),
+    mode: str = typer.Option("auto", "--mode", help="Supervisor mode: off, manual or auto."),
+    case: str = typer.Option("C", "--case", help="Demo plant's initial state: A, B or C."),
+    speed: float = typer.Option(1.0, "--speed", help="Demo clock speed-up (run seconds per wall second)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the demo plant and twin."),
+    port: int = typer.Option(8080, "--port", help="Dashboard port."),
+    host: str = typer.Option("127.0.0.1", "--host", help="Dashboard address (beyond loopback needs a control token)."),
+    control_token: str = typer.Option(None, "--control-token", help="Token that unlocks the controls (or $DRUMTWIN_CONTROL_TOKEN)."),
+    scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address for what-if studies."),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON summary at the end (stdout)."),
+) -> None:
+    """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
+
+    With no arguments: the embedded demo (hidden plant, emulated mill on a pty, AUTO) and
+    the dashboard on http://127.0.0.1:8080.
+    """
+    from twin.config import RunConfig
+
+    try:
+        cfg = RunConfig(
+            camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
+            duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
+            host=host, control_token=control_token, scheduler=scheduler,
+        ).resolved()
+        summary = run_live(cfg, progress=not json_out)
+    except TwinError as exc:
+        console_err.print(f"[bold red]error:[/] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    except OSError as exc:
+        if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
+            raise
+        console_err.print(f"[bold red]error:[/] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    out = {
+        "final_trend_mi": summary.final_trend_mi,
+        "final_rpm": summary.final_rpm,
+        "decisions": summary.decisions,
+        "faults": summary.faults,
+        "log_dir": summary.log_dir,
+        "frames": summary.frames,
+        "run_time_s": round(summary.run_time_s, 2),
+        "wall_time_s": round(summary.wall_time_s, 2),
+        "camera_fps": round(summary.camera_fps, 1),
+        "twin_fps": round(summary.twin_fps, 1),
+    }
+    if json_out:
+        from twin.runlog import to_jsonable
+
+        print(json.dumps(to_jsonable(out)))
+    else:
+        console_err.print(
+            f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
+            f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}",
+            highlight=False,
+        )

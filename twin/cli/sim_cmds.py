@@ -1,0 +1,339 @@
+"""``drumtwin sim``, ``drumtwin calibrate``, ``drumtwin whatif`` and ``drumtwin bench twin``."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from sim.errors import SimError
+from twin.cli.app import app, bench_app, console, console_err
+
+SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "mi_sigmoid_particles", "slope_deg", "slope_deg_particles", "valid")
+
+
+def _progress(label: str):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=console_err, transient=True)
+
+
+def _nan_to_none(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, np.integer)):
+        return _nan_to_none(obj.item())
+    return _nan_to_none(obj)
+
+
+def _parse_list(text: str, what: str) -> list[float]:
+    try:
+        vals = [float(v) for v in str(text).replace(" ", "").split(",") if v]
+    except ValueError:
+        raise SimError(f"{what} must be a comma-separated list of numbers (got {text!r})") from None
+    if not vals:
+        raise SimError(f"{what} is empty")
+    return vals
+
+
+@app.command("sim")
+def sim_cmd(
+    case: str = typer.Option("C", "--case", help="initial state: A (left/right), B (top/bottom), C (random)"),
+    rpm: float = typer.Option(5.0, "--rpm", help="drum speed, rpm"),
+    duration: float = typer.Option(60.0, "--duration", help="simulated seconds"),
+    seed: int = typer.Option(0, "--seed"),
+    fps: float = typer.Option(10.0, "--fps", help="frames rendered and measured per simulated second"),
+    size: int = typer.Option(480, "--size", help="rendered frame size, px"),
+    csv_out: Optional[Path] = typer.Option(None, "--csv", help="write the MI curve here"),
+    video: Optional[Path] = typer.Option(None, "--video", help="write the rendered frames as MP4"),
+    realism: bool = typer.Option(False, "--realism", help="camera noise, blur, glare, drift, JPEG, drops"),
+    friction: Optional[float] = typer.Option(None, "--friction", help="sliding friction (twin default if unset)"),
+    rolling: Optional[float] = typer.Option(None, "--rolling", help="rolling resistance (twin default if unset)"),
+    as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
+) -> None:
+    """Run the twin and measure MI over time (vision meter on rendered frames + particle level)."""
+    import cv2
+
+    from sim.drum import DrumSim
+    from sim.measure import particle_mi, particle_slope_deg, twin_meter
+    from sim.render import Realism, Renderer
+
+    if not (duration > 0) or not math.isfinite(duration):
+        raise SimError(f"--duration must be > 0 s (got {duration})")
+    if not (0 < fps <= 240):
+        raise SimError(f"--fps must be in (0, 240] (got {fps})")
+    kw = {}
+    if friction is not None:
+        kw["friction"] = friction
+    if rolling is not None:
+        kw["rolling"] = rolling
+    sim = DrumSim(case=case, seed=seed, rpm=rpm, **kw)
+    renderer = Renderer(sim, size, realism=Realism(seed=seed) if realism else None)
+    meter = twin_meter(renderer)
+    writer = None
+    if video is not None:
+        video.parent.mkdir(parents=True, exist_ok=True)
+        writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), float(min(fps, 60.0)),
+                                 (renderer.width_px, renderer.height_px))
+        if not writer.isOpened():
+            raise SimError(f"cannot write video {video}")
+    n = max(1, int(round(duration * fps)))
+    rows = []
+    last = None
+    try:
+        with _progress("sim") as prog:
+            task = prog.add_task("sim", total=n + 1)
+            for i in range(n + 1):
+                if i > 0:
+                    sim.advance(duration / n)
+                p = sim.particles()
+                frame = renderer.render(p, sim.t_s)
+                pm = particle_mi(p, sim.drum)
+                if frame is not None:
+                    rd = meter.measure(frame)
+                    mi, mi_s, sl, valid = rd.mi, rd.mi_sigmoid, rd.slope_deg, rd.valid
+                    last = frame
+                else:  # dropped frame
+                    mi = mi_s = sl = float("nan")
+                    valid = False
+                if writer is not None and last is not None:
+                    writer.write(last)
+                rows.append({
+                    "t_s": round(sim.t_s, 6), "rpm": sim.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
+                    "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
+                    "slope_deg_particles": particle_slope_deg(p, sim.drum), "valid": int(bool(valid)),
+                })
+                prog.advance(task)
+    finally:
+        if writer is not None:
+            writer.release()
+    if csv_out is not None:
+        csv_out.parent.mkdir(parents=True, exist_ok=True)
+        with open(csv_out, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=SIM_COLUMNS)
+            w.writeheader()
+            w.writerows(rows)
+    mi_arr = np.array([r["mi"] for r in rows], float)
+    mip = np.array([r["mi_particles"] for r in rows], float)
+    mis = np.array([r["mi_sigmoid"] for r in rows], float)
+    sl = np.array([r["slope_deg"] for r in rows], float)
+    tail = max(1, int(round(0.1 * len(rows))))
+
+    def first_valid(a):
+        f = a[np.isfinite(a)]
+        return float(f[0]) if f.size else float("nan")
+
+    summary = {
+        "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
+        "mi_start": first_valid(mi_arr), "mi_end": float(np.nanmean(mi_arr[-tail:])),
+        "mi_sigmoid_end": float(np.nanmean(mis[-tail:])),
+        "mi_particles_start": float(mip[0]), "mi_particles_end": float(np.nanmean(mip[-tail:])),
+        "slope_deg": float(np.nanmean(sl[len(sl) // 2:])) if np.isfinite(sl).any() else float("nan"),
+        "n_particles": len(sim.particles()), "csv": str(csv_out) if csv_out else None,
+        "video": str(video) if video else None,
+    }
+    if as_json:
+        print(json.dumps(_jsonable(summary)))
+    else:
+        console.print(
+            f"case {sim.case} at {rpm:g} rpm for {duration:g} s: MI {summary['mi_start']:.3f} -> "
+            f"{summary['mi_end']:.3f} (particles {summary['mi_particles_start']:.3f} -> "
+            f"{summary['mi_particles_end']:.3f}), slope {summary['slope_deg']:.1f} deg"
+        )
+
+
+def _measure_source_slope(source: str, max_frames: int, bed: str | None = None,
+                          config: Path | None = None) -> tuple[float, int]:
+    """Median slope (deg) of the bed in up to ``max_frames`` frames of ``source`` (vision meter)."""
+    from vision.config import load_config
+    from vision.sources import open_source
+
+    meter = load_config(config).make_meter(bed=bed)
+    vals = []
+    n = 0
+    for frame in open_source(source, loop=False, reconnect=False):
+        n += 1
+        rd = meter.measure(frame.image)
+        if math.isfinite(rd.slope_deg):
+            vals.append(rd.slope_deg)
+        if n >= max_frames:
+            break
+    if not vals:
+        raise SimError(f"no bed slope could be measured in {n} frame(s) of {source}")
+    return float(np.median(vals)), len(vals)
+
+
+@app.command("calibrate")
+def calibrate_cmd(
+    source: Optional[str] = typer.Argument(None, help="frames to measure the slope in (video, folder, image, camera)"),
+    rpm: float = typer.Option(..., "--rpm", help="drum speed of the source, rpm"),
+    slope_deg: Optional[float] = typer.Option(None, "--slope-deg", help="target slope instead of a source, deg"),
+    max_frames: int = typer.Option(300, "--max-frames", help="frames of SOURCE to measure"),
+    bed: Optional[str] = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
+    config: Optional[Path] = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
+    seed: int = typer.Option(0, "--seed"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
+) -> None:
+    """Fit the twin's friction (and rolling resistance) to a measured bed slope angle."""
+    from sim.calibrate import calibrate
+
+    if (source is None) == (slope_deg is None):
+        raise SimError("give either SOURCE or --slope-deg (exactly one)")
+    n_frames = 0
+    if source is not None:
+        if max_frames < 1:
+            raise SimError(f"--max-frames must be >= 1 (got {max_frames})")
+        target, n_frames = _measure_source_slope(source, max_frames, bed, config)
+        console_err.print(f"measured slope {target:.1f} deg in {n_frames} frame(s)")
+    else:
+        target = float(slope_deg)  # type: ignore[arg-type]
+    with _progress("calibrate") as prog:
+        task = prog.add_task("calibrate", total=None)
+        cal = calibrate(target, rpm, seed=seed, progress=lambda d, t: prog.update(task, completed=d))
+    out = {"slope_deg": target, "twin_slope_deg": cal.twin_slope_deg, "friction": cal.friction,
+           "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
+           "evaluations": cal.evaluations, "frames": n_frames, "source": source}
+    if as_json:
+        print(json.dumps(_jsonable(out)))
+    else:
+        console.print(
+            f"target slope {target:.1f} deg -> twin {cal.twin_slope_deg:.1f} deg "
+            f"(residual {cal.residual_deg:+.2f}) with friction {cal.friction:.3f}, rolling {cal.rolling:.3f}"
+        )
+
+
+@app.command("whatif")
+def whatif_cmd(
+    rpm: str = typer.Option("5,10,20,40", "--rpm", help="comma-separated rpm values"),
+    duration: float = typer.Option(60.0, "--duration", help="simulated seconds per run"),
+    case: str = typer.Option("C", "--case"),
+    seeds: int = typer.Option(1, "--seeds", help="seeds per rpm (0..K-1)"),
+    fill: Optional[float] = typer.Option(None, "--fill", help="filling degree (default: the recipe's 0.5)"),
+    workers: Optional[int] = typer.Option(None, "--workers", help="local processes (default: all cores)"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler, tcp://HOST:PORT"),
+    sample_s: float = typer.Option(0.5, "--sample-s", help="MI sample interval, s"),
+    csv_out: Optional[Path] = typer.Option(None, "--csv", help="write all MI curves here"),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="PNG of MI against time per rpm"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
+) -> None:
+    """Run the twin for several rpm values and report the plateau MI and regime of each."""
+    from sim.whatif import WhatIfJob, run_study, summarize
+
+    rpms = _parse_list(rpm, "--rpm")
+    if seeds < 1:
+        raise SimError(f"--seeds must be >= 1 (got {seeds})")
+    if workers is not None and scheduler:
+        raise SimError("give --workers or --scheduler, not both")
+    jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s)
+            for r in rpms for s in range(seeds)]
+    t0 = time.perf_counter()
+    with _progress("whatif") as prog:
+        task = prog.add_task("whatif", total=len(jobs))
+        results = run_study(jobs, workers=workers, scheduler=scheduler,
+                            progress=lambda d, t: prog.update(task, completed=d))
+    wall = time.perf_counter() - t0
+    if csv_out is not None:
+        csv_out.parent.mkdir(parents=True, exist_ok=True)
+        with open(csv_out, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["rpm", "case", "seed", "t_s", "mi", "mi_sigmoid", "slope_deg", "rpm_actual"])
+            for r in results:
+                for i in range(r.t_s.size):
+                    w.writerow([r.job.rpm, r.job.case, r.job.seed, f"{r.t_s[i]:.4f}", f"{r.mi[i]:.5f}",
+                                f"{r.mi_sigmoid[i]:.5f}", f"{r.slope_deg[i]:.3f}", f"{r.rpm_actual[i]:.3f}"])
+    if plot is not None:
+        _plot_whatif(results, plot)
+    summary = summarize(results)
+    out = {"rpm": summary, "duration_s": duration, "case": case.upper(), "seeds": seeds, "wall_s": wall,
+           "scheduler": scheduler, "workers": workers}
+    if as_json:
+        print(json.dumps(_jsonable(out)))
+    else:
+        from rich.table import Table
+
+        t = Table("rpm", "regime", "plateau MI", "sd", "t plateau (s)")
+        for e in summary:
+            t.add_row(f"{e['rpm']:g}", e["regime"], f"{e['plateau_mi']:.3f}", f"{e['plateau_mi_sd']:.3f}",
+                      f"{e['t_plateau_s']:.0f}")
+        console.print(t)
+
+
+def _plot_whatif(results, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    rpms = sorted({r.job.rpm for r in results})
+    cmap = plt.get_cmap("viridis")
+    for i, rpm in enumerate(rpms):
+        rs = [r for r in results if r.job.rpm == rpm]
+        for j, r in enumerate(rs):
+            ax.plot(r.t_s, r.mi, color=cmap(i / max(1, len(rpms) - 1)), lw=1.0, alpha=0.8,
+                    label=f"{rpm:g} rpm ({r.regime})" if j == 0 else None)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("MI (eq. 4, particles)")
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+@bench_app.command("twin")
+def bench_twin(
+    duration: float = typer.Option(10.0, "--duration", help="simulated seconds per measurement"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
+) -> None:
+    """Real-time factor of the twin on one core: paper bed at 5 and 30 rpm, 4x and 16x particles at 5 rpm.
+
+    The 4x/16x beds keep the particles and fill level and grow the drum (D x2, x4), so the
+    particle count grows at the same time step and contact physics.
+    """
+    from sim.drum import DrumSim
+    from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec
+
+    if not (duration > 0):
+        raise SimError(f"--duration must be > 0 s (got {duration})")
+    cases = [
+        ("rtf_paper_5rpm", PAPER_DRUM, 5.0),
+        ("rtf_paper_30rpm", PAPER_DRUM, 30.0),
+        ("rtf_4x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 2), 5.0),
+        ("rtf_16x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 4), 5.0),
+    ]
+    out: dict = {}
+    counts: dict = {}
+    with _progress("bench twin") as prog:
+        task = prog.add_task("bench", total=len(cases))
+        for name, drum, rpm in cases:
+            sim = DrumSim(drum, PAPER_RECIPE, case="C", seed=0, rpm=rpm)
+            sim.advance(min(1.0, duration))  # warm up past the start transient
+            t0 = time.perf_counter()
+            sim.advance(duration)
+            out[name] = duration / (time.perf_counter() - t0)
+            counts[name.replace("rtf_", "n_")] = len(sim.particles())
+            prog.advance(task)
+    out.update(counts)
+    if as_json:
+        print(json.dumps(_jsonable(out)))
+    else:
+        for k, v in out.items():
+            console.print(f"{k:18s} {v:10.1f}" if k.startswith("rtf") else f"{k:18s} {v:10d}")

@@ -1,0 +1,247 @@
+"""``drumtwin mi``, ``drumtwin classes suggest`` and ``drumtwin bench vision``."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import sys
+import time
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from twin.cli.app import app, bench_app, console, console_err
+from vision.errors import VisionError
+
+classes_app = typer.Typer(help="Colour classes: suggest a TOML config from a frame.")
+app.add_typer(classes_app, name="classes")
+
+
+class Method(str, Enum):
+    centroid = "centroid"
+    lacey = "lacey"
+    glcm = "glcm"
+
+
+class Bed(str, Enum):
+    color = "color"
+    dark = "dark"
+
+
+BASE_COLUMNS = ("frame", "t_s", "mi", "mi_sigmoid", "mi_linear", "d_px", "dsigma_px", "slope_deg", "valid")
+CLASS_COLUMNS = ("cx", "cy", "sigma", "frac")
+EXTRA_COLUMNS = ("concentration", "mi_avg", "flags", "source")
+
+
+def csv_columns(class_names: list[str]) -> list[str]:
+    """CSV header of ``drumtwin mi``: base columns, per-class columns, extras."""
+    cols = list(BASE_COLUMNS)
+    for n in class_names:
+        cols += [f"{c}_{n}" for c in CLASS_COLUMNS]
+    return cols + list(EXTRA_COLUMNS)
+
+
+def _num(x: float, digits: int = 6) -> str:
+    return "" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+@app.command("mi")
+def mi_cmd(
+    source: list[str] = typer.Argument(..., help="Camera index (0), video file, stream URL, image folder or images."),
+    config: Optional[Path] = typer.Option(None, "--config", help="TOML config (colour classes, ROI, bed)."),
+    method: Method = typer.Option(Method.centroid, "--method", help="Mixing index: centroid (paper eq. 4), lacey, glcm."),
+    csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write one row per frame here (default: stdout)."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="PNG of MI and its moving average against time."),
+    overlay_video: Optional[Path] = typer.Option(None, "--overlay-video", help="MP4 with the monitoring overlay."),
+    roi: Optional[str] = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
+    bed: Optional[Bed] = typer.Option(None, "--bed", help="Bed for the slope angle: color (classes) or dark (backlit)."),
+    fps: float = typer.Option(30.0, "--fps", help="Frame rate assumed for image sequences (timestamps)."),
+    max_frames: int = typer.Option(0, "--max-frames", help="Stop after this many frames (0 = all)."),
+    window: int = typer.Option(150, "--window", help="Moving-average window (samples)."),
+) -> None:
+    """Mixing index per frame: CSV row per frame, optional plot and overlay video."""
+    import cv2
+    import numpy as np
+
+    from vision.config import load_config
+    from vision.overlay import draw_overlay
+    from vision.roi import parse_roi
+    from vision.smoothing import MovingAverage
+    from vision.sources import open_source, source_kind
+
+    cfg = load_config(config)
+    manual_roi = parse_roi(roi) if roi else None
+    meter = cfg.make_meter(roi=manual_roi, bed=bed.value if bed else None)
+    baseline = None
+    if method is Method.lacey:
+        from vision.lacey import LaceyMeter
+
+        baseline = LaceyMeter(cfg.classes, manual_roi or cfg.roi)
+    elif method is Method.glcm:
+        from vision.glcm import GLCMMeter
+
+        baseline = GLCMMeter(manual_roi or cfg.roi)
+    for out in (csv_out, plot, overlay_video):
+        if out is not None and not out.parent.exists():
+            raise VisionError(f"output folder does not exist: {out.parent}")
+    spec = source if len(source) > 1 else source[0]
+    kind = source_kind(spec)
+    frames = open_source(spec, fps=fps)
+    total = None
+    if kind in ("folder", "images"):
+        from vision.sources import _image_paths
+
+        total = len(_image_paths(spec))
+    elif kind == "image":
+        total = 1
+    if max_frames > 0 and (total is None or total > max_frames):
+        total = max_frames
+
+    names = [c.name for c in cfg.classes]
+    cols = csv_columns(names)
+    fh = open(csv_out, "w", newline="") if csv_out else sys.stdout
+    writer = csv.writer(fh)
+    writer.writerow(cols)
+    ma = MovingAverage(window)
+    ts: list[float] = []
+    mis: list[float] = []
+    avgs: list[float] = []
+    vw = None
+    vw_size = None
+    n_valid = 0
+    n = 0
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    progress = Progress(TextColumn("mi"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                        console=console_err, transient=True)
+    try:
+        with progress:
+            task = progress.add_task("frames", total=total)
+            for fr in frames:
+                if fr.error:
+                    reading = meter._invalid(f"bad_frame:{fr.error}")
+                else:
+                    reading = meter.measure(fr.image)
+                mi_val = reading.mi
+                mi_sig, mi_lin, d, ds = reading.mi_sigmoid, reading.mi_linear, reading.d_px, reading.dsigma_px
+                flags = list(reading.flags)
+                if baseline is not None:
+                    mi_sig = mi_lin = d = ds = float("nan")
+                    ok_frame = not fr.error and not any(f.startswith(("bad_frame", "size_changed")) for f in flags)
+                    mi_val = baseline.measure(fr.image).m if ok_frame else float("nan")
+                valid = math.isfinite(mi_val)
+                avg = ma.update(mi_val)
+                row = [fr.index, f"{fr.t_s:.4f}", _num(mi_val), _num(mi_sig), _num(mi_lin), _num(d), _num(ds),
+                       _num(reading.slope_deg, 5), int(valid)]
+                for st in reading.classes:
+                    row += [_num(st.cx_px), _num(st.cy_px), _num(st.sigma_px), _num(st.frac)]
+                row += [_num(reading.concentration), _num(avg), ";".join(flags), fr.name]
+                writer.writerow(row)
+                ts.append(fr.t_s)
+                mis.append(mi_val)
+                avgs.append(avg)
+                n += 1
+                n_valid += int(valid)
+                if overlay_video is not None:
+                    img = fr.image if fr.image.size else None
+                    ov = draw_overlay(img if img is not None else np.zeros((480, 640, 3), np.uint8), reading,
+                                      cfg.classes, mi_avg=avg)
+                    if vw is None:
+                        vw_size = (ov.shape[1] // 2 * 2, ov.shape[0] // 2 * 2)
+                        vw = cv2.VideoWriter(str(overlay_video), cv2.VideoWriter_fourcc(*"mp4v"), fps, vw_size)
+                        if not vw.isOpened():
+                            raise VisionError(f"cannot write video {overlay_video}")
+                    if (ov.shape[1], ov.shape[0]) != vw_size:
+                        ov = cv2.resize(ov, vw_size)
+                    vw.write(ov)
+                progress.advance(task)
+                if max_frames and n >= max_frames:
+                    break
+    finally:
+        if vw is not None:
+            vw.release()
+        if csv_out:
+            fh.close()
+        else:
+            fh.flush()
+    if n == 0:
+        raise VisionError("the source gave no frames")
+    if plot is not None:
+        _plot(plot, ts, mis, avgs, method.value, window)
+    console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
+
+
+def _plot(path: Path, ts: list[float], mis: list[float], avgs: list[float], method: str, window: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4), dpi=100)
+    ax.plot(ts, mis, ".", ms=3, alpha=0.6, label=f"MI ({method}) per frame")
+    ax.plot(ts, avgs, "-", lw=2, label=f"moving average ({window})")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("mixing index")
+    ax.set_ylim(-0.05, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+@classes_app.command("suggest")
+def suggest_cmd(
+    image: Path = typer.Argument(..., help="A frame with both particle kinds visible."),
+    k: int = typer.Option(2, "--k", help="Number of particle classes."),
+    roi: Optional[str] = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
+) -> None:
+    """Cluster the particle pixels inside the drum and print a ready TOML config."""
+    from vision.config import config_to_toml
+    from vision.roi import detect_drum, parse_roi
+    from vision.sources import read_image
+    from vision.suggest import suggest_classes
+
+    img, err = read_image(image)
+    if err:
+        raise VisionError(err)
+    if img.ndim != 3:
+        raise VisionError(f"{image.name} is a grayscale image; colour classes need a colour frame")
+    r = parse_roi(roi) if roi else detect_drum(img)
+    cfg = suggest_classes(img, r, k=k)
+    comment = (f"suggested by `drumtwin classes suggest {image.name}`; drum found at "
+               f"cx={r.cx_px:.1f} cy={r.cy_px:.1f} r={r.r_px:.1f} px.\n"
+               "Check the names and ranges; the first two classes give the MI.")
+    sys.stdout.write(config_to_toml(cfg, comment))
+
+
+@bench_app.command("vision")
+def bench_vision(
+    json_out: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
+    seconds: float = typer.Option(1.5, "--seconds", help="Time per measurement (s)."),
+) -> None:
+    """Frames/s of the centroid, GLCM and Lacey pipelines on the same frames (one thread)."""
+    from vision.bench import run_vision_bench
+
+    res = run_vision_bench(seconds=seconds, log=lambda s: console_err.print(s, highlight=False))
+    if json_out:
+        sys.stdout.write(json.dumps(res) + "\n")
+        return
+    from rich.table import Table
+
+    t = Table(title="vision pipelines, one thread, pre-decoded frames")
+    t.add_column("pipeline")
+    t.add_column("frames/s", justify="right")
+    t.add_column("vs centroid", justify="right")
+    c = res["centroid_fps"]
+    t.add_row("centroid 640x480 (every pixel)", f"{c:,.0f}", "1x")
+    t.add_row("centroid 640x480, stride 2 (opt-in decimation)", f"{res['centroid_fps_stride2']:,.0f}", "")
+    t.add_row("GLCM 640x480", f"{res['glcm_fps']:,.1f}", f"{c / res['glcm_fps']:.1f}x slower")
+    t.add_row("Lacey 640x480", f"{res['lacey_fps']:,.1f}", f"{c / res['lacey_fps']:.1f}x slower")
+    t.add_row("centroid 1920x1080 (every pixel)", f"{res['centroid_fps_1080p']:,.0f}", "")
+    t.add_row("centroid 1920x1080, stride 2", f"{res['centroid_fps_1080p_stride2']:,.0f}", "")
+    console.print(t)
+    console.print("paper (Raspberry Pi 5): 68 fps centroid, 2.8x GLCM, 21.6x Lacey", highlight=False)

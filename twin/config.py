@@ -1,0 +1,103 @@
+"""Run configuration of the live loop: one dataclass filled from the CLI (and the
+meter's TOML config through vision's loader)."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from twin.errors import TwinError
+
+MODES = ("off", "manual", "auto")
+CASES = ("A", "B", "C")
+TOKEN_ENV = "DRUMTWIN_CONTROL_TOKEN"
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything ``drumtwin run`` needs. Times are run time (the demo clock, which
+    runs ``speed`` times faster than the wall clock); rates are per second of run time.
+
+    ``camera``/``video``/``mill`` all None means the embedded demo (hidden plant +
+    emulated mill on a pty).
+    """
+
+    camera: str | None = None  # camera index or stream URL
+    video: Path | None = None  # recorded video to replay
+    mill: str | None = None  # pyserial URL of the mill (/dev/ttyUSB0, socket://, rfc2217://)
+    meter_config: Path | None = None  # vision TOML (colour classes, ROI)
+    dashboard: bool = True
+    duration_s: float | None = None  # None: until Ctrl-C
+    log_dir: Path | None = None  # None: runs/<timestamp>
+    mode: str = "auto"
+    case: str = "C"  # demo plant's initial state
+    speed: float = 1.0  # run clock / wall clock (demo only)
+    seed: int = 0
+    host: str = "127.0.0.1"
+    port: int = 8080
+    control_token: str | None = None
+    scheduler: str | None = None  # Dask scheduler address for what-if studies
+    start_rpm: float = 5.0
+    camera_fps: float = 10.0  # demo camera frame rate (run time)
+    frame_px: int = 240  # demo camera / twin render size (square)
+    supervisor_period_s: float = 1.0
+    whatif_horizon_s: float = 40.0  # AUTO's prediction horizon
+    whatif_workers: int = 1
+    dashboard_hz: float = 12.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def demo(self) -> bool:
+        """True when neither a camera, a video nor a mill was given."""
+        return self.camera is None and self.video is None and self.mill is None
+
+    @property
+    def remote(self) -> bool:
+        """True when the dashboard binds beyond loopback."""
+        return self.host not in LOCAL_HOSTS
+
+    def resolved(self) -> RunConfig:
+        """Validated copy with defaults filled (log dir, token from the environment)."""
+        mode = self.mode.lower()
+        if mode not in MODES:
+            raise TwinError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        case = self.case.upper()
+        if case not in CASES:
+            raise TwinError(f"--case must be one of A, B, C, got {self.case!r}")
+        if not (self.speed > 0):
+            raise TwinError(f"--speed must be > 0, got {self.speed}")
+        if self.duration_s is not None and not (self.duration_s > 0):
+            raise TwinError(f"--duration must be > 0 s, got {self.duration_s}")
+        if not (0 < self.port < 65536):
+            raise TwinError(f"--port must be 1..65535, got {self.port}")
+        if self.camera is not None and self.video is not None:
+            raise TwinError("give either --camera or --video, not both")
+        if (self.camera is not None or self.video is not None) and self.mill is None:
+            raise TwinError("a real camera or video needs --mill URL (the demo emulates both)")
+        if self.mill is not None and self.camera is None and self.video is None:
+            raise TwinError("--mill needs --camera or --video (the demo emulates both)")
+        if self.video is not None and not Path(self.video).is_file():
+            raise FileNotFoundError(f"video not found: {self.video}")
+        if self.meter_config is not None and not Path(self.meter_config).is_file():
+            raise FileNotFoundError(f"config not found: {self.meter_config}")
+        if not self.demo and self.speed != 1.0:
+            raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
+        token = self.control_token or os.environ.get(TOKEN_ENV) or None
+        if self.dashboard and self.host not in LOCAL_HOSTS and not token:
+            raise TwinError(
+                f"binding the dashboard to {self.host} needs a control token "
+                f"(--control-token or ${TOKEN_ENV})"
+            )
+        log_dir = self.log_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+        return replace(self, mode=mode, case=case, control_token=token, log_dir=Path(log_dir))
+
+    def to_metadata(self) -> dict:
+        """The config as JSON data for metadata.json (the token is never written)."""
+        from twin.runlog import to_jsonable
+
+        d = to_jsonable(self)
+        d["control_token"] = "***" if self.control_token else None
+        return d

@@ -1,0 +1,408 @@
+"""The viser dashboard: camera against twin, plots, numbers, controls, what-if.
+
+Display elements (images, plots, numbers) are shared by all viewers and pushed by
+one update thread at ``update_hz`` from ``LiveState.snapshot()``; it never touches
+the loop's threads. Controls are built per viewer (per viser client): when the
+server binds beyond loopback a viewer must enter the control token before its
+controls are enabled, so remote viewers without it are read-only. Every control
+callback re-checks that its viewer is authorised.
+"""
+
+from __future__ import annotations
+
+import hmac
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import viser
+
+from twin.state import Controls, LiveState, Snapshot, forward_fill
+
+MODE_LABELS = ("OFF", "MANUAL", "AUTO")
+RPM_MAX = 70.0
+_BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
+_WHATIF_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+DISPLAY_PX = 400  # frames are scaled to this width for the panel
+
+
+def _rgb(image_bgr: np.ndarray) -> np.ndarray:
+    """RGB copy for viser, scaled to ``DISPLAY_PX`` wide (small demo frames are enlarged)."""
+    h, w = image_bgr.shape[:2]
+    if w != DISPLAY_PX and w > 0:
+        image_bgr = cv2.resize(image_bgr, (DISPLAY_PX, max(1, round(h * DISPLAY_PX / w))), interpolation=cv2.INTER_LINEAR)
+    return np.ascontiguousarray(image_bgr[..., ::-1])
+
+
+def _fmt(value: Any, spec: str = ".3f") -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        return "–" if not math.isfinite(value) else format(value, spec)
+    return str(value)
+
+
+def parse_rpm_list(text: str) -> list[float]:
+    """``"5, 20,40"`` -> ``[5.0, 20.0, 40.0]``; raises ValueError on junk or values outside 0..RPM_MAX."""
+    rpms = [float(p) for p in text.replace(";", ",").split(",") if p.strip()]
+    if not rpms:
+        raise ValueError("give at least one rpm")
+    for r in rpms:
+        if not (0 < r <= RPM_MAX):
+            raise ValueError(f"rpm {r:g} outside 0..{RPM_MAX:g}")
+    return rpms
+
+
+def numbers_markdown(numbers: dict[str, Any]) -> str:
+    """The numbers panel as a markdown table."""
+    n = numbers
+    rows = [
+        ("MI (eq. 4)", _fmt(n.get("mi")), "trend", _fmt(n.get("trend_mi"))),
+        ("d px", _fmt(n.get("d_px"), ".1f"), "dσ px", _fmt(n.get("dsigma_px"), ".1f")),
+        ("concentration", _fmt(n.get("concentration")), "twin MI", _fmt(n.get("twin_mi"))),
+        ("slope °", _fmt(n.get("slope_deg"), ".1f"), "twin slope °", _fmt(n.get("twin_slope_deg"), ".1f")),
+        ("rpm set", _fmt(n.get("rpm_setpoint"), ".1f"), "rpm actual", _fmt(n.get("rpm_actual"), ".1f")),
+        ("camera fps", _fmt(n.get("camera_fps"), ".1f"), "twin fps", _fmt(n.get("twin_fps"), ".1f")),
+        ("mill", _fmt(n.get("mill_state")), "mode", _fmt(n.get("mode"))),
+        ("run time s", _fmt(n.get("t_s"), ".1f"), "friction", _fmt(n.get("friction"))),
+    ]
+    lines = ["| | | | |", "|---|---:|---|---:|"]
+    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    decision = n.get("last_decision")
+    reason = n.get("last_reason")
+    lines.append("")
+    lines.append(f"**Last decision:** {decision or '–'}  \n{reason or ''}")
+    return "\n".join(lines)
+
+
+def alarms_html(alarms: Sequence[str]) -> str:
+    """A red banner per alarm, or a quiet OK line."""
+    if not alarms:
+        return '<div id="drumtwin-alarms" style="color:#2e7d32;font-weight:600">✔ no alarms</div>'
+    items = "".join(f"<div>⚠ {a}</div>" for a in alarms)
+    return (
+        '<div id="drumtwin-alarms" style="background:#c62828;color:white;padding:6px 8px;'
+        f'border-radius:4px;font-weight:600">ALARM{items}</div>'
+    )
+
+
+@dataclass
+class _ClientControls:
+    """One viewer's control handles."""
+
+    authorised: bool
+    handles: list[Any] = field(default_factory=list)
+    mode: Any = None
+    rpm: Any = None
+    status: Any = None
+
+
+class Dashboard:
+    """viser server showing ``state`` and forwarding operator actions to ``controls``."""
+
+    def __init__(
+        self,
+        state: LiveState,
+        controls: Controls,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        control_token: str | None = None,
+        update_hz: float = 12.0,
+        title: str = "drumtwin",
+    ) -> None:
+        local = host in ("127.0.0.1", "localhost", "::1")
+        if not local and not control_token:
+            raise ValueError(f"binding the dashboard to {host} needs a control token")
+        self.state = state
+        self.controls = controls
+        self.host = host
+        self.update_hz = float(update_hz)
+        self._token = control_token
+        self._token_required = bool(control_token) and not local
+        self._clients: dict[int, _ClientControls] = {}
+        self._clients_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.pushes = 0  # display updates pushed (images or plots), for the fps readout
+        self._server = viser.ViserServer(host=host, port=port, label=title, verbose=False)
+        self.port = int(self._server.get_port())
+        self._build_shared(title)
+        self._server.on_client_connect(self._on_connect)
+        self._server.on_client_disconnect(self._on_disconnect)
+
+    # -- layout ------------------------------------------------------------------------
+    def _build_shared(self, title: str) -> None:
+        gui = self._server.gui
+        gui.configure_theme(show_share_button=False, brand_color=(33, 90, 160))
+        self._live_panel = gui.add_panel()
+        with self._live_panel.add_tab("Camera vs twin"):
+            self._alarm = gui.add_html(alarms_html(()))
+            self._camera_img = gui.add_image(_BLANK, label="camera (live, with overlay)", jpeg_quality=80)
+            self._twin_img = gui.add_image(_BLANK, label="twin (rendered)", jpeg_quality=80)
+        self._live_panel.dock_left()
+        self._live_panel.set_width(420)
+
+        self._plots_panel = gui.add_panel()
+        with self._plots_panel.add_tab("Plots"):
+            self._numbers = gui.add_markdown(numbers_markdown({}))
+            z = np.zeros(1)
+            self._mi_plot = gui.add_uplot(
+                (z,) * 7,
+                (
+                    {"label": "t s"},
+                    {"label": "MI raw", "stroke": "#9e9e9e", "width": 1},
+                    {"label": "trend", "stroke": "#1565c0", "width": 2},
+                    {"label": "lo95", "stroke": "rgba(21,101,192,0.3)", "width": 1},
+                    {"label": "hi95", "stroke": "rgba(21,101,192,0.3)", "width": 1},
+                    {"label": "MA150", "stroke": "#ef6c00", "width": 1.5},
+                    {"label": "twin MI", "stroke": "#2e7d32", "width": 2},
+                ),
+                title="Mixing index",
+                bands=({"series": (4, 3), "fill": "rgba(21,101,192,0.15)"},),
+                scales={"x": {"time": False}, "y": {"auto": False, "range": (0.0, 1.0)}},
+                aspect=1.8,
+            )
+            self._rpm_plot = gui.add_uplot(
+                (z,) * 3,
+                (
+                    {"label": "t s"},
+                    {"label": "setpoint rpm", "stroke": "#6a1b9a", "width": 2},
+                    {"label": "actual rpm", "stroke": "#00897b", "width": 2},
+                ),
+                title="Mill rpm",
+                scales={"x": {"time": False}},
+                aspect=2.6,
+            )
+            self._slope_plot = gui.add_uplot(
+                (z,) * 3,
+                (
+                    {"label": "t s"},
+                    {"label": "slope °", "stroke": "#5d4037", "width": 1.5},
+                    {"label": "twin slope °", "stroke": "#2e7d32", "width": 1.5},
+                ),
+                title="Bed slope angle",
+                scales={"x": {"time": False}},
+                aspect=2.6,
+            )
+        self._plots_panel.dock_right()
+        self._plots_panel.set_width(520)
+
+        self._server.gui.main_panel.dock_right()
+        self._server.gui.main_panel.set_width(340)
+        self._controls_folder = gui.add_folder("Controls")
+        self._whatif_folder = gui.add_folder("What-if")
+        with self._whatif_folder:
+            self._whatif_status = gui.add_markdown("No study yet.")
+            self._whatif_plot = gui.add_uplot(
+                (np.zeros(1), np.zeros(1)),
+                ({"label": "t s"}, {"label": "–"}),
+                title="What-if MI",
+                scales={"x": {"time": False}, "y": {"auto": False, "range": (0.0, 1.0)}},
+                aspect=1.5,
+            )
+            self._whatif_table = gui.add_markdown("")
+        self._whatif_seq = -1
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        cc = _ClientControls(authorised=not self._token_required)
+        with self._clients_lock:
+            self._clients[client.client_id] = cc
+        gui = client.gui
+        numbers = self.state.numbers
+        mode_now = str(numbers.get("mode", "off")).upper()
+        with self._controls_folder:
+            if self._token_required:
+                token = gui.add_text("Control token", "", hint="controls stay read-only without it")
+                unlock = gui.add_button("Unlock controls", icon=viser.Icon.LOCK_OPEN)
+
+                @unlock.on_click
+                def _(event: viser.GuiEvent) -> None:
+                    ok = bool(self._token) and hmac.compare_digest(str(token.value), str(self._token))
+                    cc.authorised = ok
+                    for h in cc.handles:
+                        h.disabled = not ok
+                    self._sync_rpm_enabled(cc, str(self.state.numbers.get("mode", "off")))
+                    cc.status.content = "controls unlocked" if ok else "**wrong token: read-only**"
+
+            cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
+            cc.mode = gui.add_dropdown(
+                "Mode", MODE_LABELS, initial_value=mode_now if mode_now in MODE_LABELS else "OFF",
+                disabled=not cc.authorised,
+            )
+            cc.rpm = gui.add_slider(
+                "rpm (MANUAL)",
+                min=1.0,
+                max=RPM_MAX,
+                step=0.5,
+                initial_value=float(numbers.get("rpm_setpoint") or 5.0),
+                disabled=not cc.authorised or mode_now != "MANUAL",
+            )
+            start = gui.add_button("Start mill", icon=viser.Icon.PLAYER_PLAY, disabled=not cc.authorised)
+            stop = gui.add_button("Stop mill", icon=viser.Icon.PLAYER_STOP, disabled=not cc.authorised)
+            estop = gui.add_button(
+                "EMERGENCY STOP", color="red", icon=viser.Icon.ALERT_OCTAGON, disabled=not cc.authorised
+            )
+            recal = gui.add_button("Recalibrate twin", icon=viser.Icon.ADJUSTMENTS, disabled=not cc.authorised)
+            reseed = gui.add_button("Re-seed twin from camera", icon=viser.Icon.CAMERA, disabled=not cc.authorised)
+        with self._whatif_folder:
+            rpms = gui.add_text("What-if rpm list", "5, 20, 40, 60", disabled=not cc.authorised, order=-2)
+            dur = gui.add_number(
+                "What-if duration s", 60.0, min=5.0, max=600.0, step=5.0, disabled=not cc.authorised, order=-1.5
+            )
+            run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1)
+        cc.handles = [cc.mode, start, stop, estop, recal, reseed, rpms, dur, run]
+
+        def guarded(fn):
+            def cb(event: viser.GuiEvent) -> None:
+                if event.client is None:  # a server-side value sync, not an operator
+                    return
+                if not cc.authorised:
+                    cc.status.content = "*read-only viewer: action refused*"
+                    return
+                fn(event)
+
+            return cb
+
+        @cc.mode.on_update
+        @guarded
+        def _(event: viser.GuiEvent) -> None:
+            mode = str(cc.mode.value).lower()
+            self.controls.set_mode(mode)
+            self.state.update_numbers(mode=mode)
+            with self._clients_lock:
+                clients = list(self._clients.values())
+            for other in clients:
+                self._sync_rpm_enabled(other, mode)
+
+        @cc.rpm.on_update
+        @guarded
+        def _(event: viser.GuiEvent) -> None:
+            self.controls.set_manual_rpm(float(cc.rpm.value))
+
+        start.on_click(guarded(lambda e: self.controls.start_mill()))
+        stop.on_click(guarded(lambda e: self.controls.stop_mill()))
+        estop.on_click(guarded(lambda e: self.controls.emergency_stop()))
+        recal.on_click(guarded(lambda e: self.controls.recalibrate()))
+        reseed.on_click(guarded(lambda e: self.controls.reseed_twin()))
+
+        @run.on_click
+        @guarded
+        def _(event: viser.GuiEvent) -> None:
+            try:
+                rpm_list = parse_rpm_list(str(rpms.value))
+            except ValueError as exc:
+                cc.status.content = f"**what-if: {exc}**"
+                return
+            self.controls.run_whatif(rpm_list, float(dur.value))
+
+    def _sync_rpm_enabled(self, cc: _ClientControls, mode: str) -> None:
+        """Show ``mode`` in the viewer's selector; the rpm slider is live only in MANUAL."""
+        if cc.mode is not None and mode.upper() in MODE_LABELS:
+            cc.mode.value = mode.upper()
+        if cc.rpm is not None:
+            cc.rpm.disabled = not (cc.authorised and mode.lower() == "manual")
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._clients_lock:
+            self._clients.pop(client.client_id, None)
+
+    # -- updates ---------------------------------------------------------------------
+    def start(self) -> Dashboard:
+        """Start the update thread; returns self."""
+        self._thread = threading.Thread(target=self._run, name="dashboard", daemon=True)
+        self._thread.start()
+        return self
+
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::") else self.host
+        return f"http://{host}:{self.port}"
+
+    def _run(self) -> None:
+        period = 1.0 / self.update_hz
+        seen = {"camera": -1, "twin": -1, "hist": -1, "mode": None}
+        next_t = time.monotonic()
+        tick = 0
+        while not self._stop.is_set():
+            try:
+                self._push(self.state.snapshot(), seen, plots=(tick % 2 == 0))
+            except Exception:  # a viewer closing mid-push must not kill the thread
+                if self._stop.is_set():
+                    break
+            tick += 1
+            next_t += period
+            delay = next_t - time.monotonic()
+            if delay < 0:
+                next_t = time.monotonic()
+                delay = 0
+            self._stop.wait(delay)
+
+    def _push(self, snap: Snapshot, seen: dict, plots: bool) -> None:
+        pushed = False
+        if snap.camera_image is not None and snap.camera_seq != seen["camera"]:
+            self._camera_img.image = _rgb(snap.camera_image)
+            seen["camera"] = snap.camera_seq
+            pushed = True
+        if snap.twin_image is not None and snap.twin_seq != seen["twin"]:
+            self._twin_img.image = _rgb(snap.twin_image)
+            seen["twin"] = snap.twin_seq
+        self._alarm.content = alarms_html(snap.alarms)
+        self._numbers.content = numbers_markdown(snap.numbers)
+        if plots and snap.history_seq != seen["hist"] and len(snap.history["t_s"]) >= 2:
+            h = {k: forward_fill(v) for k, v in snap.history.items()}
+            t = h["t_s"]
+            self._mi_plot.data = (
+                t, h["mi"], h["trend_mi"], h["trend_lo95"], h["trend_hi95"], h["ma_mi"], h["twin_mi"]
+            )
+            self._rpm_plot.data = (t, h["rpm_setpoint"], h["rpm_actual"])
+            self._slope_plot.data = (t, h["slope_deg"], h["twin_slope_deg"])
+            seen["hist"] = snap.history_seq
+            pushed = True
+        mode = str(snap.numbers.get("mode", "off"))
+        if mode != seen["mode"]:
+            seen["mode"] = mode
+            with self._clients_lock:
+                clients = list(self._clients.values())
+            for cc in clients:
+                self._sync_rpm_enabled(cc, mode)
+        if snap.whatif.seq != self._whatif_seq:
+            self._push_whatif(snap)
+        if pushed:
+            self.pushes += 1
+
+    def _push_whatif(self, snap: Snapshot) -> None:
+        w = snap.whatif
+        self._whatif_seq = w.seq
+        self._whatif_status.content = f"**status:** {w.status}"
+        if not w.rpms:
+            return
+        # one x axis for all curves: the union of the time grids, each curve interpolated
+        t = np.unique(np.concatenate([np.asarray(x, float) for x in w.t_s]))
+        ys = tuple(np.interp(t, np.asarray(x, float), np.asarray(y, float)) for x, y in zip(w.t_s, w.mi))
+        series = ({"label": "t s"},) + tuple(
+            {"label": f"{r:g} rpm", "stroke": _WHATIF_COLOURS[i % len(_WHATIF_COLOURS)], "width": 2}
+            for i, r in enumerate(w.rpms)
+        )
+        with self._server.atomic():
+            self._whatif_plot.series = series
+            self._whatif_plot.data = (t,) + ys
+        lines = ["| rpm | plateau MI | regime |", "|---:|---:|---|"]
+        lines += [
+            f"| {r:g} | {_fmt(p)} | {g} |" for r, p, g in zip(w.rpms, w.plateau_mi, w.regime)
+        ]
+        self._whatif_table.content = "\n".join(lines)
+
+    def stop(self) -> None:
+        """Stop the update thread and the server."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._server.stop()

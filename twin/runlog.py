@@ -1,0 +1,272 @@
+"""Crash-safe run log: ``frames.csv`` (one row per camera frame), ``events.jsonl``
+(decisions, faults, calibrations) and ``metadata.json`` (config, calibration, versions).
+
+Every row and every event is written with one ``write`` and flushed to the OS at
+once, so ``kill -9`` of the process loses nothing that was logged; ``fsync`` (for a
+power cut) runs at most once per ``fsync_interval_s``, so a crash of the machine
+loses at most the last second. The metadata file is replaced atomically
+(write to a temporary file, then ``os.replace``).
+"""
+
+from __future__ import annotations
+
+import csv
+import enum
+import io
+import json
+import math
+import os
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+FRAME_COLUMNS: tuple[str, ...] = (
+    "t_s",  # run time (demo clock, scaled by --speed), s
+    "wall_s",  # unix time when the row was written, s
+    "frame",
+    "mi",
+    "mi_sigmoid",
+    "mi_linear",
+    "d_px",
+    "dsigma_px",
+    "concentration",
+    "slope_deg",
+    "valid",
+    "trend_mi",
+    "trend_lo95",
+    "trend_hi95",
+    "trend_rate",
+    "ma_mi",  # the paper's 150-sample moving average
+    "twin_mi",
+    "twin_slope_deg",
+    "rpm_setpoint",
+    "rpm_actual",
+    "mode",
+    "flags",  # ';'-separated
+)
+
+FRAMES_FILE = "frames.csv"
+EVENTS_FILE = "events.jsonl"
+METADATA_FILE = "metadata.json"
+
+
+def _cell(value: Any) -> str:
+    """One CSV cell: floats with 6 significant digits, bools as 0/1, None as ''."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.13g}"
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return ";".join(str(v) for v in value)
+    return str(value)
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Plain JSON data of ``obj``: numpy scalars/arrays, enums, paths and dataclasses
+    converted; NaN/inf floats become ``None`` so the JSON is strict."""
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [to_jsonable(v) for v in obj]
+    if is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: to_jsonable(getattr(obj, f.name)) for f in fields(obj)}
+    if isinstance(obj, enum.Enum):
+        return to_jsonable(obj.value)
+    if hasattr(obj, "tolist"):  # numpy scalar or array
+        return to_jsonable(obj.tolist())
+    return str(obj)
+
+
+def dumps(obj: Any) -> str:
+    """Strict one-line JSON of ``obj`` (see ``to_jsonable``)."""
+    return json.dumps(to_jsonable(obj), allow_nan=False)
+
+
+@dataclass(frozen=True)
+class RunLogPaths:
+    """Where one run's files live."""
+
+    directory: Path
+    frames: Path
+    events: Path
+    metadata: Path
+
+    @classmethod
+    def of(cls, directory: Path | str) -> RunLogPaths:
+        d = Path(directory)
+        return cls(d, d / FRAMES_FILE, d / EVENTS_FILE, d / METADATA_FILE)
+
+
+class RunLog:
+    """Append-only, thread-safe writer of one run's log directory.
+
+    ``frame(row)`` takes a mapping with (a subset of) ``FRAME_COLUMNS``;
+    ``event(kind, t_s, **fields)`` one JSON line; ``set_metadata(**fields)`` merges
+    into ``metadata.json``. Files are line-buffered by hand: one ``write`` + ``flush``
+    per record, ``fsync`` at most every ``fsync_interval_s``.
+    """
+
+    def __init__(
+        self,
+        directory: Path | str,
+        *,
+        columns: Sequence[str] = FRAME_COLUMNS,
+        fsync_interval_s: float = 1.0,
+    ) -> None:
+        self.paths = RunLogPaths.of(directory)
+        self.paths.directory.mkdir(parents=True, exist_ok=True)
+        self.columns = tuple(columns)
+        self.fsync_interval_s = float(fsync_interval_s)
+        self._lock = threading.Lock()
+        self._frames = open(self.paths.frames, "w", encoding="utf-8", newline="")
+        self._events = open(self.paths.events, "w", encoding="utf-8")
+        self._metadata: dict[str, Any] = {}
+        self._last_sync = time.monotonic()
+        self._closed = False
+        self.n_frames = 0
+        self.n_events = 0
+        self._write(self._frames, ",".join(self.columns) + "\n")
+        self._sync(force=True)
+
+    # -- writing -----------------------------------------------------------------
+    def _write(self, fh: io.TextIOBase, text: str) -> None:
+        fh.write(text)
+        fh.flush()  # into the kernel: survives kill -9 of this process
+
+    def _sync(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if force or now - self._last_sync >= self.fsync_interval_s:
+            for fh in (self._frames, self._events):
+                try:
+                    os.fsync(fh.fileno())
+                except OSError:
+                    pass
+            self._last_sync = now
+
+    def frame(self, row: Mapping[str, Any]) -> None:
+        """Append one frame row (missing columns are empty cells; ``wall_s`` is filled in)."""
+        row = {"wall_s": time.time(), **row}
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerow([_cell(row.get(c)) for c in self.columns])
+        with self._lock:
+            if self._closed:
+                return
+            self._write(self._frames, buf.getvalue())
+            self.n_frames += 1
+            self._sync()
+
+    def event(self, kind: str, t_s: float, **data: Any) -> dict[str, Any]:
+        """Append one event ``{"t_s", "wall_s", "kind", **data}``; returns it as JSON data."""
+        record = to_jsonable({"t_s": float(t_s), "wall_s": time.time(), "kind": kind, **data})
+        line = json.dumps(record, allow_nan=False) + "\n"
+        with self._lock:
+            if self._closed:
+                return record
+            self._write(self._events, line)
+            self.n_events += 1
+            self._sync()
+        return record
+
+    def set_metadata(self, **data: Any) -> None:
+        """Merge ``data`` into ``metadata.json`` (atomic replace)."""
+        with self._lock:
+            self._metadata.update(data)
+            text = json.dumps(to_jsonable(self._metadata), indent=2, allow_nan=False) + "\n"
+            tmp = self.paths.metadata.with_suffix(".json.tmp")
+            with open(tmp, "w", encoding="utf-8") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.paths.metadata)
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        with self._lock:
+            return dict(self._metadata)
+
+    def close(self) -> None:
+        """Flush, fsync and close (idempotent)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._sync(force=True)
+            self._frames.close()
+            self._events.close()
+            self._closed = True
+
+    def __enter__(self) -> RunLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# -- reading (tests, plots, summaries) ------------------------------------------------
+def _parse(value: str) -> Any:
+    if value == "":
+        return None
+    try:
+        return float(value)
+    except ValueError:
+        return value
+
+
+def read_frames(path: Path | str) -> list[dict[str, Any]]:
+    """Rows of a ``frames.csv`` (a run dir or the file), numbers as floats.
+
+    A trailing line cut short by a crash (wrong number of cells) is dropped.
+    """
+    p = Path(path)
+    if p.is_dir():
+        p = p / FRAMES_FILE
+    with open(p, encoding="utf-8", newline="") as fh:
+        text = fh.read()
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    elif lines:
+        lines.pop()  # no final newline: the last line was being written
+    reader = csv.reader(lines)
+    header = next(reader, None)
+    if header is None:
+        return []
+    rows = []
+    for cells in reader:
+        if len(cells) != len(header):
+            continue
+        rows.append({h: _parse(c) for h, c in zip(header, cells)})
+    return rows
+
+
+def read_events(path: Path | str) -> list[dict[str, Any]]:
+    """Events of an ``events.jsonl`` (a run dir or the file); a cut-off last line is dropped."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / EVENTS_FILE
+    out = []
+    with open(p, encoding="utf-8") as fh:
+        for line in fh:
+            if not line.endswith("\n"):
+                break
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return out
+
+
+def read_metadata(path: Path | str) -> dict[str, Any]:
+    """The ``metadata.json`` of a run dir (or the file)."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / METADATA_FILE
+    return json.loads(p.read_text(encoding="utf-8"))

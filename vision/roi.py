@@ -1,0 +1,165 @@
+"""The drum region of interest: a circle (front view) or a rectangle (top view).
+
+``detect_drum`` finds the drum circle automatically (Hough on a downscaled image, then
+a least-squares refinement on the rim edges); ``DrumROI`` given by hand overrides it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from vision.errors import VisionError
+
+__all__ = ["DrumROI", "roi_mask", "roi_bbox", "detect_drum", "parse_roi"]
+
+
+@dataclass(frozen=True, slots=True)
+class DrumROI:
+    """Drum region in image pixels.
+
+    ``kind="circle"``: centre ``(cx_px, cy_px)`` and radius ``r_px``.
+    ``kind="rect"``: centre and half sizes ``half_w_px``/``half_h_px``; ``r_px`` is the
+    length used for the characteristic distance ``d_c`` (default ``min`` half size).
+    """
+
+    cx_px: float
+    cy_px: float
+    r_px: float
+    kind: str = "circle"
+    half_w_px: float | None = None
+    half_h_px: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("circle", "rect"):
+            raise VisionError(f"ROI kind must be 'circle' or 'rect', got {self.kind!r}")
+        vals = [self.cx_px, self.cy_px, self.r_px]
+        if not all(isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) for v in vals):
+            raise VisionError(f"ROI needs finite cx, cy, r in px, got {vals}")
+        if self.r_px <= 0:
+            raise VisionError(f"ROI radius must be > 0 px, got {self.r_px}")
+        if self.kind == "rect":
+            hw = self.r_px if self.half_w_px is None else self.half_w_px
+            hh = self.r_px if self.half_h_px is None else self.half_h_px
+            if hw <= 0 or hh <= 0:
+                raise VisionError(f"rectangular ROI needs positive half sizes, got {hw}, {hh}")
+            object.__setattr__(self, "half_w_px", float(hw))
+            object.__setattr__(self, "half_h_px", float(hh))
+
+    def scaled(self, factor: float) -> "DrumROI":
+        """The same ROI in an image scaled by ``factor``."""
+        f = float(factor)
+        return DrumROI(
+            self.cx_px * f, self.cy_px * f, self.r_px * f, self.kind,
+            None if self.half_w_px is None else self.half_w_px * f,
+            None if self.half_h_px is None else self.half_h_px * f,
+        )
+
+
+def parse_roi(text: str) -> DrumROI:
+    """Parse ``"cx,cy,r"`` (px) into a circular ROI; a clear error otherwise."""
+    try:
+        parts = [float(p) for p in str(text).replace(" ", "").split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != 3:
+        raise VisionError(f"--roi must be 'cx,cy,r' in pixels, got {text!r}")
+    return DrumROI(parts[0], parts[1], parts[2])
+
+
+def roi_bbox(roi: DrumROI, shape_hw: tuple[int, int]) -> tuple[int, int, int, int]:
+    """Bounding box ``(x0, y0, x1, y1)`` (half-open, clipped to the image) of the ROI."""
+    h, w = int(shape_hw[0]), int(shape_hw[1])
+    if roi.kind == "circle":
+        hw = hh = roi.r_px
+    else:
+        hw, hh = roi.half_w_px, roi.half_h_px  # type: ignore[assignment]
+    x0 = max(0, int(math.floor(roi.cx_px - hw)))
+    y0 = max(0, int(math.floor(roi.cy_px - hh)))
+    x1 = min(w, int(math.ceil(roi.cx_px + hw)) + 1)
+    y1 = min(h, int(math.ceil(roi.cy_px + hh)) + 1)
+    if x1 <= x0 or y1 <= y0:
+        raise VisionError(f"ROI {roi} lies outside the {w}x{h} image")
+    return x0, y0, x1, y1
+
+
+def _mask_in_box(roi: DrumROI, box: tuple[int, int, int, int]) -> np.ndarray:
+    x0, y0, x1, y1 = box
+    ys = (np.arange(y0, y1, dtype=np.float64) - roi.cy_px)[:, None]
+    xs = (np.arange(x0, x1, dtype=np.float64) - roi.cx_px)[None, :]
+    if roi.kind == "circle":
+        return xs * xs + ys * ys <= roi.r_px * roi.r_px
+    return (np.abs(xs) <= roi.half_w_px) & (np.abs(ys) <= roi.half_h_px)
+
+
+def roi_mask(roi: DrumROI, shape_hw: tuple[int, int]) -> np.ndarray:
+    """Boolean mask (``shape_hw``) of the pixels inside the ROI (pixel centres at integers)."""
+    h, w = int(shape_hw[0]), int(shape_hw[1])
+    out = np.zeros((h, w), dtype=bool)
+    try:
+        x0, y0, x1, y1 = roi_bbox(roi, (h, w))
+    except VisionError:
+        return out
+    out[y0:y1, x0:x1] = _mask_in_box(roi, (x0, y0, x1, y1))
+    return out
+
+
+def _refine_circle(gray: np.ndarray, cx: float, cy: float, r: float) -> tuple[float, float, float]:
+    """Least-squares circle (Kasa) through the edge pixels within 6% of the coarse circle."""
+    edges = cv2.Canny(cv2.GaussianBlur(gray, (5, 5), 0), 20, 60)
+    for band in (0.06, 0.03):
+        ys, xs = np.nonzero(edges)
+        rr = np.hypot(xs - cx, ys - cy)
+        sel = np.abs(rr - r) < band * r
+        if sel.sum() < 50:
+            break
+        x = xs[sel].astype(np.float64)
+        y = ys[sel].astype(np.float64)
+        a = np.column_stack([x, y, np.ones_like(x)])
+        b = x * x + y * y
+        sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+        ncx, ncy = sol[0] / 2.0, sol[1] / 2.0
+        nr2 = sol[2] + ncx * ncx + ncy * ncy
+        if nr2 <= 0 or math.hypot(ncx - cx, ncy - cy) > 0.1 * r:
+            break
+        cx, cy, r = ncx, ncy, math.sqrt(nr2)
+    return cx, cy, r
+
+
+def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.01) -> DrumROI:
+    """Find the drum circle in a front-view frame (px of the original image).
+
+    Hough transform on a copy downscaled to <= 400 px, then a least-squares circle fit
+    on the rim edges. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
+    Raises ``VisionError`` when no circle is found (pass ``--roi cx,cy,r`` then).
+    """
+    img = np.asarray(image_bgr)
+    if img.ndim == 3 and img.shape[2] == 3:
+        gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    elif img.ndim == 2:
+        gray = img
+    else:
+        raise VisionError(f"cannot detect a drum in an image of shape {img.shape}")
+    if gray.dtype != np.uint8:
+        raise VisionError(f"expected an 8-bit image, got dtype {gray.dtype}")
+    h, w = gray.shape
+    s = min(1.0, 400.0 / max(h, w))
+    small = cv2.resize(gray, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1.0 else gray.copy()
+    small = cv2.medianBlur(small, 5)
+    sh, sw = small.shape
+    circles = None
+    for acc in (30, 20, 12):
+        circles = cv2.HoughCircles(
+            small, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
+            minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
+        )
+        if circles is not None:
+            break
+    if circles is None:
+        raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")
+    cx, cy, r = (float(v) / s for v in circles[0][0][:3])
+    cx, cy, r = _refine_circle(gray, cx, cy, r)
+    return DrumROI(float(cx), float(cy), float(r * (1.0 - inset)))
