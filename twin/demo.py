@@ -23,8 +23,8 @@ from twin.clock import RunClock
 from vision.sources import Frame
 
 # The plant differs from the twin's defaults: the twin must calibrate to it.
-PLANT_FRICTION = 0.30  # twin default 0.25
-PLANT_ROLLING = 0.05  # twin default 0.10: this plant segregates within a minute at 5 rpm
+PLANT_FRICTION = 0.30  # twin default 0.5 (sim.drum.DEFAULT_FRICTION)
+PLANT_ROLLING = 0.05  # twin default 0.0: this plant segregates within a minute at 5 rpm
 PLANT_SEED_OFFSET = 1000
 
 
@@ -61,10 +61,8 @@ class DemoPlant:
         self.emulator = MillEmulator(DeviceConfig(watchdog_s=config.watchdog_s, motor=motor), seed=config.seed)
         self.url = self.emulator.open_pty()
         # the mill is running at the start speed when the demo begins (as a real one would be)
-        with self.emulator._lock:  # noqa: SLF001 - the in-process "front panel" of the board
-            m = self.emulator.device.motor
-            m.setpoint_rpm = m.actual_rpm = float(config.start_rpm)
-            m.running = True
+        start = float(config.start_rpm)
+        self.emulator.set_motor(setpoint_rpm=start, actual_rpm=start, running=True)
         self.sim = DrumSim(
             case=config.case,
             seed=config.seed + PLANT_SEED_OFFSET,

@@ -11,6 +11,8 @@ import importlib
 import os
 import sys
 
+from rich.markup import escape
+
 from twin.cli.app import USER_ERRORS, app, bench_app, console_err  # noqa: F401
 
 # Command modules, in the order they appear in --help. Each registers its commands
@@ -38,5 +40,5 @@ def main(argv: list[str] | None = None) -> None:
         if os.environ.get("DRUMTWIN_DEBUG"):
             raise
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        console_err.print(f"[bold red]error:[/] {msg}", highlight=False)
+        console_err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
         sys.exit(2)

@@ -7,6 +7,7 @@ from rich.console import Console
 
 from control.errors import ControlError
 from sim.errors import SimError
+from twin.errors import TwinError
 from vision.errors import VisionError
 
 app = typer.Typer(
@@ -27,6 +28,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     VisionError,
     SimError,
     ControlError,
+    TwinError,
     FileNotFoundError,
     PermissionError,
     IsADirectoryError,
