@@ -41,7 +41,9 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         say = log or (lambda s: None)
         vga = [drum_frame((640, 480), mix=m, slope_deg=s, seed=i)
                for i, (m, s) in enumerate([(0.0, 30), (0.3, 25), (0.7, 35), (1.0, 28)])]
-        hd = [cv2.resize(f, (1920, 1080), interpolation=cv2.INTER_LINEAR) for f in vga]
+        # the same scenes drawn natively at 1080p (a resize would stretch the drum into an ellipse)
+        hd = [drum_frame((1920, 1080), mix=m, slope_deg=s, seed=i)
+              for i, (m, s) in enumerate([(0.0, 30), (0.3, 25), (0.7, 35), (1.0, 28)])]
         roi = Meter().measure(vga[0]).roi  # the drum is where detect_drum finds it; fix it for all
         roi_hd = Meter().measure(hd[0]).roi
         res: dict = {}

@@ -1,9 +1,10 @@
 """The meter: one BGR frame in, one ``Reading`` (centroids, spreads, MI, slope) out.
 
-Per frame it crops to the ROI's bounding box, converts to HSV once, classifies every
-pixel with lookup tables, and gets each class's pixel count, centroid and spread from
-row/column projections (``cv2.reduce``) dotted with precomputed coordinate vectors.
-Masks and coordinate vectors are built once per ROI and frame size.
+Per frame one compiled pass over the ROI (``vision.moments``) classifies every pixel
+with lookup tables made from the colour classes (exactly the classes' HSV boxes) and
+sums each class's pixel count and first and second moments; centroids, spreads, the
+MI and the bed's slope angle follow from those sums. The ROI's row spans are built
+once per ROI and frame size.
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from vision.colours import DEFAULT_CLASSES, Classifier, ColourClass
 from vision.errors import VisionError
 from vision.mixing import mixing_indices
+from vision.moments import class_tables, frame_moments, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import slope_from_moments
 
@@ -75,16 +76,9 @@ class Reading:
 @dataclass
 class _Geometry:
     shape_hw: tuple[int, int]
-    box: tuple[int, int, int, int]
-    mask: np.ndarray  # uint8 0/255, (strided) crop size
-    xs: np.ndarray  # float64 x of each (strided) crop column, original px
-    ys: np.ndarray
-    xs2: np.ndarray
-    ys2: np.ndarray
-    hsv: np.ndarray  # reusable per-frame buffers
-    planes: list[np.ndarray]
-    colsum: np.ndarray
-    rowsum: np.ndarray
+    box: tuple[int, int, int, int]  # x0, y0, x1, y1 of the ROI's bounding box, px
+    first: np.ndarray  # per grid row of the box: first and one-past-last grid column inside the ROI
+    last: np.ndarray
 
 
 class Meter:
@@ -95,8 +89,8 @@ class Meter:
     takes the pixels with V <= ``dark_v_max`` inside the ROI (dark bed on a backlit drum).
     Classes with fewer than ``min_pixels`` pixels give NaN and a flag. ``stride`` > 1 is an
     explicit, opt-in decimation (every ``stride``-th row and column); the default 1 uses
-    every pixel. The slope uses a 4-px grid of the bed mask (``slope_stride``).
-    The MI uses the first two classes.
+    every pixel. The slope uses the exact moments of the whole bed. The MI uses the
+    first two classes.
     """
 
     def __init__(
@@ -108,15 +102,14 @@ class Meter:
         *,
         dark_v_max: int = 80,
         stride: int = 1,
-        slope_stride: int = 4,
     ) -> None:
         self.classes = tuple(classes)
         if len(self.classes) < 2:
             raise VisionError(f"the mixing index needs at least two colour classes, got {len(self.classes)}")
         if bed not in BED_MODES:
             raise VisionError(f"bed must be one of {BED_MODES}, got {bed!r}")
-        if int(stride) < 1 or int(slope_stride) < 1:
-            raise VisionError("stride and slope_stride must be >= 1")
+        if int(stride) < 1:
+            raise VisionError(f"stride must be >= 1, got {stride}")
         if not 0 <= int(dark_v_max) <= 255:
             raise VisionError(f"dark_v_max must be within 0..255, got {dark_v_max}")
         self.classifier = Classifier(self.classes)
@@ -124,12 +117,12 @@ class Meter:
         self.min_pixels = int(min_pixels)
         self.dark_v_max = int(dark_v_max)
         self.stride = int(stride)
-        self.slope_stride = int(slope_stride)
+        self._tables = class_tables(self.classifier)
+        self._sums = np.zeros((len(self.classes) + 1, 6), np.int64)
         self._roi = roi
         self._roi_given = roi is not None
         self._geom: _Geometry | None = None
         self._d0: float | None = None
-        self._dark_lut = np.where(np.arange(256) <= self.dark_v_max, 255, 0).astype(np.uint8).reshape(256, 1)
 
     @property
     def roi(self) -> DrumROI | None:
@@ -154,22 +147,11 @@ class Meter:
         if g is not None and g.shape_hw == shape_hw:
             return g
         assert self._roi is not None
-        x0, y0, x1, y1 = roi_bbox(self._roi, shape_hw)
+        box = roi_bbox(self._roi, shape_hw)
         s = self.stride
-        if s > 1:  # whole s x s blocks, so the nearest-neighbour downscale takes pixels [::s, ::s]
-            x1 = x0 + max(1, (x1 - x0) // s) * s if x0 + s <= shape_hw[1] else x1
-            y1 = y0 + max(1, (y1 - y0) // s) * s if y0 + s <= shape_hw[0] else y1
-        box = (x0, y0, x1, y1)
-        full = _mask_in_box(self._roi, box)
-        mask = np.ascontiguousarray(np.where(full[::s, ::s], 255, 0).astype(np.uint8))
-        xs = np.arange(x0, x1, s, dtype=np.float64)
-        ys = np.arange(y0, y1, s, dtype=np.float64)
-        hh, ww = mask.shape
-        g = _Geometry(
-            shape_hw, box, mask, xs, ys, xs * xs, ys * ys,
-            np.empty((hh, ww, 3), np.uint8), [np.empty((hh, ww), np.uint8) for _ in range(3)],
-            np.empty((1, ww), np.int32), np.empty((hh, 1), np.int32),
-        )
+        inside = _mask_in_box(self._roi, box)[::s, ::s]
+        first, last = row_spans(inside)
+        g = _Geometry(shape_hw, box, first, last)
         self._geom = g
         return g
 
@@ -197,35 +179,21 @@ class Meter:
                 f"size_changed:frame is {shape_hw[1]}x{shape_hw[0]}, stream started at {g.shape_hw[1]}x{g.shape_hw[0]}"
             )
         g = self._geometry(shape_hw)
-        x0, y0, x1, y1 = g.box
-        s = self.stride
-        crop = img[y0:y1, x0:x1]
-        if s > 1:  # every s-th row and column, exactly (nearest neighbour at 1/s)
-            crop = cv2.resize(crop, (g.hsv.shape[1], g.hsv.shape[0]), interpolation=cv2.INTER_NEAREST)
-        cv2.cvtColor(crop, cv2.COLOR_BGR2HSV, dst=g.hsv)
-        cv2.split(g.hsv, g.planes)
-        hp, sp, vp = g.planes
-        masks = self.classifier.class_masks(hp, sp, vp, g.mask)
-        return self._reading(masks, vp, g)
+        dark = self.dark_v_max if self.bed == "dark" else -1
+        sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums)
+        return self._reading(sums)
 
-    def _reading(self, masks: list[np.ndarray], vp: np.ndarray, g: _Geometry) -> Reading:
+    def _reading(self, sums: np.ndarray) -> Reading:
         roi = self._roi
         assert roi is not None
         area = float(self.stride * self.stride)
         flags: list[str] = []
-        raw: list[tuple[float, float, float, float, float]] = []  # n, sx, sy, sxx, syy (strided px)
-        col, row = g.colsum, g.rowsum
-        for mk in masks:
-            cv2.reduce(mk, 0, cv2.REDUCE_SUM, dst=col, dtype=cv2.CV_32S)
-            cv2.reduce(mk, 1, cv2.REDUCE_SUM, dst=row, dtype=cv2.CV_32S)
-            c = col.ravel()
-            r = row.ravel()
-            n = float(c.sum()) / 255.0
-            raw.append((n, float(c @ g.xs) / 255.0, float(r @ g.ys) / 255.0,
-                        float(c @ g.xs2) / 255.0, float(r @ g.ys2) / 255.0))
-        total = sum(r[0] for r in raw)
+        k = len(self.classes)
+        ns = [float(sums[i, 0]) for i in range(k)]
+        total = sum(ns)
         stats: list[ClassStats] = []
-        for cls, (n, sx, sy, sxx, syy) in zip(self.classes, raw):
+        for i, cls in enumerate(self.classes):
+            n, sx, sy, sxx, syy, _ = (float(v) for v in sums[i])
             n_px = int(round(n * area))
             frac = n / total if total > 0 else _NAN
             if n_px < self.min_pixels or n <= 0:
@@ -240,33 +208,15 @@ class Meter:
         if self._d0 is None and math.isfinite(mix.d_px) and mix.d_px > 0:
             self._d0 = mix.d_px
             mix = mixing_indices((a.cx_px, a.cy_px), (b.cx_px, b.cy_px), a.sigma_px, b.sigma_px, roi.r_px, self._d0)
-        n12 = raw[0][0] + raw[1][0]
-        conc = raw[0][0] / n12 if n12 > 0 else _NAN
-        slope = self._slope(masks, vp, g)
+        n12 = ns[0] + ns[1]
+        conc = ns[0] / n12 if n12 > 0 else _NAN
+        bed = sums[k] if self.bed == "dark" else sums[:k].sum(axis=0)  # classes are exclusive: moments add up
+        m00, m10, m01, m20, m02, m11 = (float(v) for v in bed)
+        slope = slope_from_moments(
+            m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=max(1.0, self.min_pixels / area)
+        )
         valid = math.isfinite(mix.mi)
         return Reading(
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
             tuple(flags), tuple(stats), roi,
-        )
-
-    def _slope(self, masks: list[np.ndarray], vp: np.ndarray, g: _Geometry) -> float:
-        ss = self.slope_stride
-        if self.bed == "dark":
-            sub = np.ascontiguousarray(vp[::ss, ::ss])
-            cv2.LUT(sub, self._dark_lut, dst=sub)
-            cv2.bitwise_and(sub, np.ascontiguousarray(g.mask[::ss, ::ss]), dst=sub)
-        else:
-            sub = np.ascontiguousarray(masks[0][::ss, ::ss])
-            for mk in masks[1:]:
-                cv2.bitwise_or(sub, np.ascontiguousarray(mk[::ss, ::ss]), dst=sub)
-        mo = cv2.moments(sub, binaryImage=True)
-        step = float(self.stride * ss)
-        x0, y0 = g.box[0], g.box[1]
-        roi = self._roi
-        assert roi is not None
-        # moments are in sub-grid units: map the drum centre into the same frame
-        return slope_from_moments(
-            mo["m00"], mo["m10"], mo["m01"], mo["m20"], mo["m11"], mo["m02"],
-            (roi.cx_px - x0) / step, (roi.cy_px - y0) / step,
-            min_px=max(1.0, self.min_pixels / (step * step)),
         )

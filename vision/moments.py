@@ -1,0 +1,183 @@
+"""Per-class pixel moments of a BGR frame in one pass: the meter's hot loop.
+
+The classes of a ``Classifier`` are compiled once into lookup tables over BGR colours:
+a 6-bit table (64^3 bins, 256 KB, stays in cache) answers for every bin whose 64 colours
+all fall in the same class, and a full 24-bit table (16 MB) answers the few pixels whose
+bin straddles a class boundary. Both tables are made by running the classifier itself on
+every BGR colour, so the result is exactly what ``Classifier.class_masks`` on OpenCV's
+HSV gives, pixel for pixel. A compiled (numba) loop then visits the ROI's pixels row
+span by row span and sums, per class, n, x, y, x^2, y^2 and xy (integers, exact), plus
+the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from vision.colours import Classifier, ColourClass
+
+__all__ = ["ClassTables", "class_tables", "row_spans", "frame_moments", "MOMENT_FIELDS"]
+
+MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
+"""Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
+
+_AMBIGUOUS = 255  # 6-bit table: this bin straddles a class boundary, ask the 24-bit table
+
+
+class ClassTables:
+    """The two BGR lookup tables of one class set: ``coarse`` (64^3) and ``fine`` (256^3).
+
+    Values: 0 = no class, k = the k-th class (1-based); ``coarse`` uses 255 for a bin
+    that the fine table must decide.
+    """
+
+    def __init__(self, coarse: np.ndarray, fine: np.ndarray, n_classes: int) -> None:
+        self.coarse = coarse
+        self.fine = fine
+        self.n_classes = n_classes
+
+
+@lru_cache(maxsize=8)
+def _tables(classes: tuple[ColourClass, ...]) -> ClassTables:
+    every = np.arange(1 << 24, dtype=np.uint32).view(np.uint8).reshape(-1, 4)  # little-endian: R, G, B, 0
+    bgr = np.ascontiguousarray(every[:, 2::-1]).reshape(4096, 4096, 3)  # colour index = B << 16 | G << 8 | R
+    h, s, v = cv2.split(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV))
+    masks = Classifier(classes).class_masks(h, s, v)
+    fine = np.zeros(1 << 24, np.uint8)
+    for k in range(len(masks) - 1, -1, -1):  # exclusive: the first class wins, so it is written last
+        fine[masks[k].ravel() != 0] = k + 1
+    bins = fine.reshape(64, 4, 64, 4, 64, 4)
+    lo = bins.min(axis=(1, 3, 5))
+    hi = bins.max(axis=(1, 3, 5))
+    coarse = np.where(lo == hi, lo, _AMBIGUOUS).astype(np.uint8).ravel()
+    return ClassTables(coarse, fine, len(classes))
+
+
+def class_tables(classifier: Classifier) -> ClassTables:
+    """The lookup tables of ``classifier``'s classes (built once per class set, ~1 s; cached)."""
+    return _tables(tuple(classifier.classes))
+
+
+def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and one-past-last nonzero column of each row of a convex ``mask`` (H, W).
+
+    Rows with nothing set get an empty span (0, 0). Returns two int64 arrays of length H.
+    """
+    m = np.asarray(mask) != 0
+    any_ = m.any(axis=1)
+    first = np.where(any_, m.argmax(axis=1), 0)
+    last = np.where(any_, m.shape[1] - m[:, ::-1].argmax(axis=1), 0)
+    return first.astype(np.int64), last.astype(np.int64)
+
+
+def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out):  # pragma: no cover - compiled
+    """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels."""
+    out[:, :] = 0
+    hist = np.zeros((n_classes + 1, 3), np.int64)
+    for i in range(first.shape[0]):
+        a = first[i]
+        b = last[i]
+        if b <= a:
+            continue
+        y = y0 + i * step
+        row = img[y]
+        n1 = 0
+        sx1 = 0
+        sxx1 = 0
+        n2 = 0
+        sx2 = 0
+        sxx2 = 0
+        nd = 0
+        sxd = 0
+        sxxd = 0
+        hist[:, :] = 0
+        xa = x0 + a * step
+        xb = x0 + b * step
+        for x in range(xa, xb, step):
+            bb = np.int64(row[x, 0])
+            gg = np.int64(row[x, 1])
+            rr = np.int64(row[x, 2])
+            c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
+            if c == 255:
+                c = fine[(bb << 16) | (gg << 8) | rr]
+            if c == 1:
+                n1 += 1
+                sx1 += x
+                sxx1 += x * x
+            elif c == 2:
+                n2 += 1
+                sx2 += x
+                sxx2 += x * x
+            elif c != 0:
+                hist[c, 0] += 1
+                hist[c, 1] += x
+                hist[c, 2] += x * x
+        if dark_v_max >= 0:  # a second pass, only for a backlit (dark) bed
+            for x in range(xa, xb, step):
+                if row[x, 0] <= dark_v_max and row[x, 1] <= dark_v_max and row[x, 2] <= dark_v_max:
+                    nd += 1
+                    sxd += x
+                    sxxd += x * x
+        hist[1, 0] += n1
+        hist[1, 1] += sx1
+        hist[1, 2] += sxx1
+        if n_classes >= 2:
+            hist[2, 0] += n2
+            hist[2, 1] += sx2
+            hist[2, 2] += sxx2
+        for k in range(1, n_classes + 1):
+            n = hist[k, 0]
+            if n:
+                out[k - 1, 0] += n
+                out[k - 1, 1] += hist[k, 1]
+                out[k - 1, 2] += n * y
+                out[k - 1, 3] += hist[k, 2]
+                out[k - 1, 4] += n * y * y
+                out[k - 1, 5] += hist[k, 1] * y
+        if nd:
+            out[n_classes, 0] += nd
+            out[n_classes, 1] += sxd
+            out[n_classes, 2] += nd * y
+            out[n_classes, 3] += sxxd
+            out[n_classes, 4] += nd * y * y
+            out[n_classes, 5] += sxd * y
+
+
+_kernel = None
+
+
+def _compiled():
+    global _kernel
+    if _kernel is None:
+        import numba  # imported here: the CLI starts fast when no frame is measured
+
+        _kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_kernel_py)
+    return _kernel
+
+
+def frame_moments(
+    image_bgr: np.ndarray,
+    tables: ClassTables,
+    origin_xy: tuple[int, int],
+    first: np.ndarray,
+    last: np.ndarray,
+    step: int = 1,
+    dark_v_max: int = -1,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """Moments of every class (and of dark pixels) over the ROI's row spans.
+
+    Row ``i`` of the spans is image row ``y0 + i * step``; its span ``[first[i], last[i])``
+    counts grid columns ``x0 + j * step``. ``dark_v_max`` < 0 skips the dark sums.
+    Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
+    in original image px: row k is class k+1, the last row the dark pixels.
+    """
+    if out is None:
+        out = np.empty((tables.n_classes + 1, 6), np.int64)
+    x0, y0 = origin_xy
+    _compiled()(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
+                tables.n_classes, int(dark_v_max), out)
+    return out
