@@ -269,6 +269,7 @@ class DrumSim:
         self._bodies: list[pymunk.Body] = []
         self._shapes: list[pymunk.Circle] = []
         self._motors: list[pymunk.SimpleMotor] = []
+        self._motors_in_space = False
         slab = 4.0 / 3.0 * r_max
         for i, k in enumerate(self._cls):
             c = st.classes[k]
@@ -280,7 +281,7 @@ class DrumSim:
             b.angular_velocity = float(st.omega_rad_s[i])
             s = pymunk.Circle(b, c.radius_m * radius_scale)
             mo = pymunk.SimpleMotor(b, space.static_body, 0.0)
-            space.add(b, s, mo)
+            space.add(b, s)  # the rolling-resistance motors join the space in _apply_params
             self._bodies.append(b)
             self._shapes.append(s)
             self._motors.append(mo)
@@ -310,6 +311,14 @@ class DrumSim:
         torque_cap = p.rolling * self._masses * G_M_S2 * self._r
         for mo, cap in zip(self._motors, torque_cap):
             mo.max_force = float(cap)
+        # A motor capped at zero torque applies no impulse: leave it out of the solver (~10% faster).
+        want = p.rolling > 0
+        have = self._motors_in_space
+        if want and not have:
+            self._space.add(*self._motors)
+        elif have and not want:
+            self._space.remove(*self._motors)
+        self._motors_in_space = want
         self._space.iterations = p.iterations
 
     def _settle(self, settle_s: float) -> None:

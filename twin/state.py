@@ -12,9 +12,12 @@ import threading
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from sim.drum import Particles
 
 # Plot series (x is run time ``t_s``); each is a ring buffer of ``HISTORY_LEN`` points.
 SERIES: tuple[str, ...] = (
@@ -54,7 +57,8 @@ class Snapshot:
     camera_seq: int
     twin_image: np.ndarray | None
     twin_seq: int
-    twin_particles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None  # x_m, y_m, r_m, cls
+    twin_particles: Particles | None  # the twin's disks (drum frame, m)
+    twin_drum_r_m: float | None
     history: dict[str, np.ndarray]
     history_seq: int
     numbers: dict[str, Any]
@@ -84,7 +88,8 @@ class LiveState:
         self._camera_seq = 0
         self._twin: np.ndarray | None = None
         self._twin_seq = 0
-        self._particles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._particles: Particles | None = None
+        self._drum_r_m: float | None = None
         self._hist: dict[str, deque] = {k: deque(maxlen=history_len) for k in SERIES}
         self._hist_seq = 0
         self._numbers: dict[str, Any] = {}
@@ -97,14 +102,17 @@ class LiveState:
             self._camera = image_bgr
             self._camera_seq += 1
 
-    def publish_twin(self, image_bgr: np.ndarray | None, particles: Any = None) -> None:
-        """The newest twin frame and (optionally) its particles (x_m, y_m, r_m, cls arrays)."""
+    def publish_twin(
+        self, image_bgr: np.ndarray | None, particles: Particles | None = None, drum_r_m: float | None = None
+    ) -> None:
+        """The newest twin frame and (optionally) its particles and drum radius (m)."""
         with self._lock:
             if image_bgr is not None:
                 self._twin = image_bgr
                 self._twin_seq += 1
             if particles is not None:
                 self._particles = particles
+                self._drum_r_m = drum_r_m
 
     def publish_point(self, values: Mapping[str, float]) -> None:
         """Append one point to every plot series (missing ones repeat their last value)."""
@@ -152,6 +160,7 @@ class LiveState:
                 twin_image=self._twin,
                 twin_seq=self._twin_seq,
                 twin_particles=self._particles,
+                twin_drum_r_m=self._drum_r_m,
                 history={k: np.fromiter(v, dtype=float, count=len(v)) for k, v in self._hist.items()},
                 history_seq=self._hist_seq,
                 numbers=dict(self._numbers),

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from twin.loop import LiveLoop
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
-TWIN_FPS = 5.0  # twin renders per run second
+TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
 MAX_LAG_S = 5.0  # run seconds the twin may fall behind before it skips ahead
 SNAPSHOT_EVERY_S = 2.0  # run seconds between twin snapshots kept for what-if studies
 
@@ -131,7 +131,7 @@ class TwinRunner:
             self.sim.step(min(lag, 1.0 / TWIN_FPS))
             self.updated_s = self.now_s
             if self.now_s >= next_render:
-                next_render = self.now_s + 1.0 / TWIN_FPS
+                next_render = max(next_render + 1.0 / TWIN_FPS, self.now_s)
                 self._render_and_measure()
             if self.now_s >= next_snap:
                 next_snap = self.now_s + SNAPSHOT_EVERY_S
@@ -231,7 +231,7 @@ class TwinRunner:
         r = self.meter.measure(image)
         self.fps.tick()
         self.latest = {"mi": r.mi, "slope_deg": r.slope_deg, "t_s": self.now_s}
-        self.loop.state.publish_twin(image, (parts.x_m, parts.y_m, parts.r_m, parts.cls))
+        self.loop.state.publish_twin(image, parts, self.sim.drum.radius_m)
         self.loop.state.update_numbers(twin_mi=r.mi, twin_slope_deg=r.slope_deg, twin_fps=self.fps.rate())
 
 

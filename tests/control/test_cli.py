@@ -34,6 +34,18 @@ def test_bench_trend_json(capsys):
 
 
 @pytest.mark.timeout(60)
+def test_bench_link_times_both_transports(capsys):
+    code, out, _ = cli(capsys, "bench", "link", "--json", "--requests", "30")
+    assert code == 0
+    d = json.loads(out)
+    for tr in ("pty", "tcp"):
+        assert 0 < d[f"{tr}_median_ms"] <= d[f"{tr}_p99_ms"] < 500
+        assert d[f"{tr}_resends"] == 0  # a clean line needs no resend
+    code, _, err = cli(capsys, "bench", "link", "--requests", "0")
+    assert code == 2 and "--requests" in err
+
+
+@pytest.mark.timeout(60)
 def test_bench_trend_table(capsys):
     code, out, _ = cli(capsys, "bench", "trend", "--sequences", "1")
     assert code == 0 and "Kalman" in out and "moving average (150)" in out

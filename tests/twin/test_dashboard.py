@@ -23,7 +23,9 @@ from tests.twin.dashboard_helpers import (
     slider_value,
     wait_until,
 )
-from twin.dashboard import Dashboard, numbers_markdown, parse_rpm_list
+from sim.drum import Particles
+from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
+from twin.dashboard.scene import ring_segments
 from twin.state import LiveState, forward_fill
 
 
@@ -85,7 +87,10 @@ class Feeder:
             img = np.zeros((120, 120, 3), np.uint8)
             img[:, (i * 3) % 120] = (0, 0, 255)
             self.state.publish_camera(img)
-            self.state.publish_twin(img[:, ::-1].copy())
+            a = np.linspace(0, 2 * np.pi, 12, endpoint=False) + 0.1 * i
+            disks = Particles(0.1 * np.cos(a), 0.1 * np.sin(a), np.full(12, 0.01), np.arange(12) % 2,
+                              class_bgr=((0, 0, 220), (220, 60, 0)))
+            self.state.publish_twin(img[:, ::-1].copy(), disks, 0.15)
             t = i * 0.05
             self.state.publish_point(
                 {"t_s": t, "mi": 0.8 + 0.1 * np.sin(t), "trend_mi": 0.8, "trend_lo95": 0.7, "trend_hi95": 0.9,
@@ -112,8 +117,17 @@ def test_pure_helpers() -> None:
         parse_rpm_list("500")
     md = numbers_markdown({"mi": 0.8123, "mode": "auto", "last_decision": "rpm 5 -> 20"})
     assert "0.812" in md and "auto" in md and "rpm 5 -> 20" in md
+    assert axis_range(np.array([np.nan, 31.2, 44.9]), np.array([np.nan, np.nan, 38.0]), step=5.0, pad=1.0) == (30.0, 50.0)
+    assert axis_range(np.array([np.nan]), step=5.0) is None
+    assert axis_range(np.array([20.0, 20.0]), step=5.0) == (20.0, 25.0)
     x = forward_fill(np.array([np.nan, 1.0, np.nan, 3.0, np.nan]))
     assert np.isnan(x[0]) and list(x[1:]) == [1.0, 1.0, 3.0, 3.0]
+
+
+def test_scene_geometry() -> None:
+    seg = ring_segments(0.15, 96)
+    assert seg.shape == (96, 2, 3) and np.allclose(np.hypot(seg[..., 0], seg[..., 1]), 0.15, atol=1e-6)
+    assert np.allclose(seg[1:, 0], seg[:-1, 1])  # a connected ring
 
 
 @pytest.mark.browser
@@ -155,6 +169,12 @@ def test_dashboard_updates_and_controls(page, tmp_path: Path) -> None:
             assert {"emergency_stop", "reseed_twin"} <= set(controls.names())
             page.screenshot(path=str(tmp_path / "dashboard.png"))
         assert dash.pushes > 5
+        assert dash.scene.updates > 5  # the twin's particles moved in the 3D scene
+        clouds = dash.scene.clouds  # one cloud per class; the Feeder's 12 disks sit on a 0.1 m circle
+        assert sorted((k, len(h.points)) for k, h in clouds.items()) == [(0, 6), (1, 6)]
+        for h in clouds.values():
+            assert np.allclose(np.hypot(h.points[:, 0], h.points[:, 1]), 0.1, atol=1e-3)
+            assert np.all(h.points[:, 2] == 0.0) and h.point_size == pytest.approx(0.01)
     finally:
         dash.stop()
 

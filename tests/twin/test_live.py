@@ -99,6 +99,20 @@ def test_auto_ends_clearly_more_mixed_than_off(auto_and_off) -> None:
 
 
 @pytest.mark.slow
+def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
+    """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from the two run logs."""
+    (_, auto_dir), (_, off_dir) = auto_and_off["auto"], auto_and_off["off"]
+    png = tmp_path / "auto-vs-off.png"
+    p = subprocess.run([*DRUMTWIN, "compare", f"AUTO={auto_dir}", f"OFF={off_dir}", "--plot", str(png)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "AUTO" in p.stdout and "OFF" in p.stdout
+    assert png.stat().st_size > 20_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = subprocess.run([*DRUMTWIN, "compare", str(tmp_path), "--plot", str(png)], capture_output=True, text=True)
+    assert bad.returncode == 2 and "not a run log dir" in bad.stderr and "Traceback" not in bad.stderr
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_faults_safe_state_alarm_and_recovery(tmp_path: Path) -> None:
     """Unplug the mill: fault, safe state, recovery on replug. Stop the camera: alarm, no

@@ -23,6 +23,15 @@ app.add_typer(bench_app, name="bench")
 console = Console()
 console_err = Console(stderr=True)
 
+
+def print_json(obj: object) -> None:
+    """Print ``obj`` as one line of strict JSON on stdout (NaN/inf -> null, numpy -> plain)."""
+    import json
+
+    from twin.runlog import to_jsonable
+
+    print(json.dumps(to_jsonable(obj)))
+
 # Errors that mean "bad input or environment", reported as one line, exit 2.
 USER_ERRORS: tuple[type[BaseException], ...] = (
     VisionError,

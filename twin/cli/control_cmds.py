@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import signal
 import threading
 import time
@@ -18,7 +17,7 @@ from control.emulator import Faults, MillEmulator
 from control.errors import ControlError
 from control.motor import MotorConfig
 from control.protocol import MillStatus
-from twin.cli.app import app, bench_app, console, console_err
+from twin.cli.app import app, bench_app, console, console_err, print_json
 
 if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
     from control.trendbench import SequenceSource, TrendBenchResult
@@ -69,7 +68,7 @@ def _report(status: MillStatus, as_json: bool, what: str = "") -> None:
         d = status.as_dict()
         if what:
             d["ok"] = what
-        print(json.dumps(d))
+        print_json(d)
         return
     if what:
         console.print(f"[green]ok[/] {what}")
@@ -206,10 +205,35 @@ def bench_trend(
     print_trend_result(res, as_json)
 
 
+@bench_app.command("link")
+def bench_link(
+    as_json: bool = JSON_OPT,
+    requests: int = typer.Option(500, "--requests", help="Status requests per transport."),
+) -> None:
+    """Round trip of the real serial driver to the emulator over a pty and over TCP."""
+    from control.linkbench import run_link_bench
+
+    if requests < 1:
+        raise ControlError("--requests must be >= 1")
+    with console_err.status("timing the link ...") as st:
+        res = run_link_bench(requests, progress=lambda s: st.update(f"timing the link: {s}"))
+    if as_json:
+        print_json({f"{r.transport}_{k}": v for r in res
+                    for k, v in (("median_ms", r.median_ms), ("p99_ms", r.p99_ms), ("resends", r.resends))})
+        return
+    t = Table(title=f"serial link: driver <-> emulator, {requests} STATUS requests each")
+    for col in ("transport", "median ms", "p99 ms", "max ms", "requests/s", "resends"):
+        t.add_column(col, justify="left" if col == "transport" else "right")
+    for r in res:
+        t.add_row(r.transport, f"{r.median_ms:.3f}", f"{r.p99_ms:.3f}", f"{r.max_ms:.3f}",
+                  f"{r.requests_per_s:,.0f}", str(r.resends))
+    console.print(t)
+
+
 def print_trend_result(res: "TrendBenchResult", as_json: bool) -> None:
     """Print a trend benchmark result as a table or one JSON object (reused by twin)."""
     if as_json:
-        print(json.dumps(res.as_dict()))
+        print_json(res.as_dict())
         return
     t = Table(title=f"MI trend: Kalman vs {res.ma_window}-sample moving average ({len(res.per_sequence)} sequences)")
     t.add_column("filter")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import platform
 import signal
 import threading
@@ -14,7 +13,7 @@ from typing import Any
 
 import typer
 
-from twin.cli.app import app, console_err
+from twin.cli.app import app, console_err, print_json
 from twin.errors import TwinError
 
 
@@ -169,9 +168,6 @@ def run(
             host=host, control_token=control_token, scheduler=scheduler,
         ).resolved()
         summary = run_live(cfg, progress=not json_out)
-    except TwinError as exc:
-        console_err.print(f"[bold red]error:[/] {exc}", highlight=False)
-        raise typer.Exit(2) from None
     except OSError as exc:
         if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
             raise
@@ -190,12 +186,45 @@ def run(
         "twin_fps": round(summary.twin_fps, 1),
     }
     if json_out:
-        from twin.runlog import to_jsonable
-
-        print(json.dumps(to_jsonable(out)))
+        print_json(out)
     else:
         console_err.print(
             f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
             f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}",
             highlight=False,
         )
+
+
+@app.command("compare")
+def compare(
+    runs: list[str] = typer.Argument(..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name is the label)."),
+    plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
+    title: str = typer.Option("", "--title", help="Plot title."),
+) -> None:
+    """Compare run logs: one plot of their MI curves and rpm (e.g. AUTO against OFF)."""
+    from rich.table import Table
+
+    from twin.cli.app import console
+    from twin.plots import plot_runs
+    from twin.runlog import FRAMES_FILE, read_events, read_frames
+
+    labelled: dict[str, Path] = {}
+    for spec in runs:
+        label, sep, d = spec.partition("=")
+        path = Path(d if sep else spec)
+        if not (path / FRAMES_FILE).is_file():
+            raise TwinError(f"{path} is not a run log dir (no {FRAMES_FILE})")
+        labelled[label if sep else path.name] = path
+    table = Table(title="runs")
+    for col in ("run", "frames", "run time s", "final trend MI", "final rpm", "rpm moves"):
+        table.add_column(col, justify="right" if col != "run" else "left")
+    for label, path in labelled.items():
+        rows = read_frames(path)
+        last = next((r for r in reversed(rows) if r.get("trend_mi") is not None), rows[-1] if rows else {})
+        moves = sum(1 for e in read_events(path) if e["kind"] == "decision" and e.get("decision") == "move")
+        fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
+        table.add_row(label, str(len(rows)), fmt(last.get("t_s"), ".1f"), fmt(last.get("trend_mi"), ".3f"),
+                      fmt(last.get("rpm_actual"), ".1f"), str(moves))
+    console.print(table)
+    out = plot_runs(labelled, plot, title)
+    console_err.print(f"plot written to {out}", highlight=False)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
 from pathlib import Path
@@ -13,7 +12,7 @@ import numpy as np
 import typer
 
 from sim.errors import SimError
-from twin.cli.app import app, bench_app, console, console_err
+from twin.cli.app import app, bench_app, console, console_err, print_json
 
 SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "mi_sigmoid_particles", "slope_deg", "slope_deg_particles", "valid")
 
@@ -23,22 +22,6 @@ def _progress(label: str):
 
     return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=console_err, transient=True)
-
-
-def _nan_to_none(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return _nan_to_none(obj.item())
-    return _nan_to_none(obj)
 
 
 def _parse_list(text: str, what: str) -> list[float]:
@@ -148,7 +131,7 @@ def sim_cmd(
         "video": str(video) if video else None,
     }
     if as_json:
-        print(json.dumps(_jsonable(summary)))
+        print_json(summary)
     else:
         console.print(
             f"case {sim.case} at {rpm:g} rpm for {duration:g} s: MI {summary['mi_start']:.3f} -> "
@@ -209,7 +192,7 @@ def calibrate_cmd(
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "evaluations": cal.evaluations, "frames": n_frames, "source": source}
     if as_json:
-        print(json.dumps(_jsonable(out)))
+        print_json(out)
     else:
         console.print(
             f"target slope {target:.1f} deg -> twin {cal.twin_slope_deg:.1f} deg "
@@ -262,7 +245,7 @@ def whatif_cmd(
     out = {"rpm": summary, "duration_s": duration, "case": case.upper(), "seeds": seeds, "wall_s": wall,
            "scheduler": scheduler, "workers": workers}
     if as_json:
-        print(json.dumps(_jsonable(out)))
+        print_json(out)
     else:
         from rich.table import Table
 
@@ -333,7 +316,16 @@ def bench_twin(
             prog.advance(task)
     out.update(counts)
     if as_json:
-        print(json.dumps(_jsonable(out)))
+        print_json(out)
     else:
-        for k, v in out.items():
-            console.print(f"{k:18s} {v:10.1f}" if k.startswith("rtf") else f"{k:18s} {v:10d}")
+        from rich.table import Table
+
+        table = Table(title="twin real-time factor = sim s per wall s (one core)")
+        for col in ("bed", "particles", "RTF", "µs/particle/sim-s"):
+            table.add_column(col, justify="left" if col == "bed" else "right")
+        for name, drum, rpm in cases:
+            n = counts[name.replace("rtf_", "n_")]
+            rtf = out[name]
+            bed = "paper" if name.startswith("rtf_paper") else name[4:] + " particles"
+            table.add_row(f"{bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}", f"{1e6 / (rtf * n):.0f}")
+        console.print(table)

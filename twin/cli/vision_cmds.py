@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 import sys
 import time
@@ -13,7 +12,7 @@ from typing import Optional
 
 import typer
 
-from twin.cli.app import app, bench_app, console, console_err
+from twin.cli.app import app, bench_app, console, console_err, print_json
 from vision.errors import VisionError
 
 classes_app = typer.Typer(help="Colour classes: suggest a TOML config from a frame.")
@@ -228,7 +227,7 @@ def bench_vision(
 
     res = run_vision_bench(seconds=seconds, log=lambda s: console_err.print(s, highlight=False))
     if json_out:
-        sys.stdout.write(json.dumps(res) + "\n")
+        print_json(res)
         return
     from rich.table import Table
 

@@ -1,7 +1,9 @@
 """The viser dashboard: camera against twin, plots, numbers, controls, what-if.
 
 Display elements (images, plots, numbers) are shared by all viewers and pushed by
-one update thread at ``update_hz`` from ``LiveState.snapshot()``; it never touches
+one update thread from ``LiveState.snapshot()``: it polls at twice ``update_hz`` so
+no image published at ``update_hz`` is missed, and redraws the plots at a quarter of
+that poll rate (uPlot redraws cost the browser more than images); it never touches
 the loop's threads. Controls are built per viewer (per viser client): when the
 server binds beyond loopback a viewer must enter the control token before its
 controls are enabled, so remote viewers without it are read-only. Every control
@@ -22,6 +24,7 @@ import cv2
 import numpy as np
 import viser
 
+from twin.dashboard.scene import TwinScene
 from twin.state import Controls, LiveState, Snapshot, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
@@ -82,6 +85,22 @@ def numbers_markdown(numbers: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def axis_range(*series: np.ndarray, step: float, pad: float = 0.0) -> tuple[float, float] | None:
+    """Y-axis range over the finite values of ``series``, padded and widened to multiples of ``step``.
+
+    uPlot's own auto-range turns NaN (a twin not started yet) into an empty plot, so the
+    dashboard sets the range itself; the step keeps it from changing on every update.
+    None when no value is finite.
+    """
+    vals = np.concatenate([np.asarray(x, float).ravel() for x in series]) if series else np.zeros(0)
+    vals = vals[np.isfinite(vals)]
+    if vals.size == 0:
+        return None
+    lo = math.floor((float(vals.min()) - pad) / step) * step
+    hi = math.ceil((float(vals.max()) + pad) / step) * step
+    return (lo, hi) if hi > lo else (lo, lo + step)
+
+
 def alarms_html(alarms: Sequence[str]) -> str:
     """A red banner per alarm, or a quiet OK line."""
     if not alarms:
@@ -131,10 +150,12 @@ class Dashboard:
         self._clients_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._y_ranges: dict[int, tuple[float, float]] = {}  # per plot: the y range last sent
         self.pushes = 0  # display updates pushed (images or plots), for the fps readout
         self._server = viser.ViserServer(host=host, port=port, label=title, verbose=False)
         self.port = int(self._server.get_port())
         self._build_shared(title)
+        self.scene = TwinScene(self._server)
         self._server.on_client_connect(self._on_connect)
         self._server.on_client_disconnect(self._on_disconnect)
 
@@ -327,13 +348,13 @@ class Dashboard:
         return f"http://{host}:{self.port}"
 
     def _run(self) -> None:
-        period = 1.0 / self.update_hz
+        period = 0.5 / self.update_hz
         seen = {"camera": -1, "twin": -1, "hist": -1, "mode": None}
         next_t = time.monotonic()
         tick = 0
         while not self._stop.is_set():
             try:
-                self._push(self.state.snapshot(), seen, plots=(tick % 2 == 0))
+                self._push(self.state.snapshot(), seen, plots=(tick % 4 == 0))
             except Exception:  # a viewer closing mid-push must not kill the thread
                 if self._stop.is_set():
                     break
@@ -353,6 +374,8 @@ class Dashboard:
             pushed = True
         if snap.twin_image is not None and snap.twin_seq != seen["twin"]:
             self._twin_img.image = _rgb(snap.twin_image)
+            if snap.twin_particles is not None and snap.twin_drum_r_m:
+                self.scene.update(snap.twin_particles, snap.twin_drum_r_m)
             seen["twin"] = snap.twin_seq
         self._alarm.content = alarms_html(snap.alarms)
         self._numbers.content = numbers_markdown(snap.numbers)
@@ -362,8 +385,15 @@ class Dashboard:
             self._mi_plot.data = (
                 t, h["mi"], h["trend_mi"], h["trend_lo95"], h["trend_hi95"], h["ma_mi"], h["twin_mi"]
             )
-            self._rpm_plot.data = (t, h["rpm_setpoint"], h["rpm_actual"])
-            self._slope_plot.data = (t, h["slope_deg"], h["twin_slope_deg"])
+            for plot, ys, step in (
+                (self._rpm_plot, (h["rpm_setpoint"], h["rpm_actual"]), 5.0),
+                (self._slope_plot, (h["slope_deg"], h["twin_slope_deg"]), 5.0),
+            ):
+                rng = axis_range(*ys, step=step, pad=1.0)
+                if rng is not None and rng != self._y_ranges.get(id(plot)):
+                    plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": rng}}
+                    self._y_ranges[id(plot)] = rng
+                plot.data = (t, *ys)
             seen["hist"] = snap.history_seq
             pushed = True
         mode = str(snap.numbers.get("mode", "off"))
@@ -393,6 +423,11 @@ class Dashboard:
         )
         with self._server.atomic():
             self._whatif_plot.series = series
+            # pin x to this study's horizon (uPlot otherwise keeps a wider range from an earlier study)
+            self._whatif_plot.scales = {
+                "x": {"time": False, "auto": False, "range": (float(t[0]), float(max(t[-1], t[0] + 1.0)))},
+                "y": {"auto": False, "range": (0.0, 1.0)},
+            }
             self._whatif_plot.data = (t,) + ys
         lines = ["| rpm | plateau MI | regime |", "|---:|---:|---|"]
         lines += [
