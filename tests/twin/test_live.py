@@ -271,3 +271,20 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     events = read_events(tmp_path / "run")
     assert any(e["kind"] == "operator" and e.get("action") == "manual_rpm" for e in events)
     assert any(e["kind"] == "decision" and e["decision"] == "manual" for e in events)
+
+
+@pytest.mark.browser
+@pytest.mark.timeout(240)
+def test_bench_dashboard_counts_image_updates_in_chromium() -> None:
+    """`drumtwin bench dashboard` runs the demo, opens it in chromium and reports rates."""
+    p = subprocess.run(
+        [*DRUMTWIN, "bench", "dashboard", "--seconds", "4", "--warmup", "10", "--speed", "2",
+         "--port", str(_free_port()), "--json"],
+        capture_output=True, text=True, timeout=220,
+    )
+    assert p.returncode == 0, p.stderr[-2000:]
+    rate = json.loads(p.stdout)
+    assert rate["seconds"] == 4.0
+    assert rate["camera_hz"] > 1.0 and rate["twin_hz"] > 1.0  # both images moved while counting
+    bad = subprocess.run([*DRUMTWIN, "bench", "dashboard", "--seconds", "0"], capture_output=True, text=True)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--seconds" in bad.stderr

@@ -13,7 +13,7 @@ from typing import Any
 
 import typer
 
-from twin.cli.app import app, console_err, print_json
+from twin.cli.app import app, bench_app, console_err, print_json
 from twin.errors import TwinError
 
 
@@ -228,3 +228,63 @@ def compare(
     console.print(table)
     out = plot_runs(labelled, plot, title)
     console_err.print(f"plot written to {out}", highlight=False)
+
+
+@bench_app.command("dashboard")
+def bench_dashboard(
+    seconds: float = typer.Option(20.0, "--seconds", help="Counting window (s)."),
+    warmup: float = typer.Option(15.0, "--warmup", help="Seconds after the page opens before counting."),
+    speed: float = typer.Option(1.0, "--speed", help="Demo clock speed."),
+    port: int = typer.Option(8079, "--port", help="Dashboard port of the demo started for the bench."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON: camera_hz, twin_hz, seconds."),
+) -> None:
+    """Image updates/s the dashboard delivers to a real browser while the demo runs.
+
+    Starts `drumtwin run` (the embedded demo) in a subprocess and opens its dashboard in
+    headless Debian chromium; needs Playwright (the `test` extra) and /usr/bin/chromium.
+    """
+    import re
+    import subprocess
+    import sys
+    import tempfile
+
+    from twin.dashboard.ratebench import measure_dashboard_rate
+
+    if not (seconds > 0) or warmup < 0 or not (speed > 0):
+        raise TwinError("--seconds and --speed must be > 0 and --warmup >= 0")
+    budget = warmup + seconds + 90.0
+    with tempfile.TemporaryDirectory(prefix="drumtwin-bench-dash-") as tmp:
+        cmd = [sys.executable, "-c", "from twin.cli import main; main()", "run", "--port", str(port),
+               "--speed", str(speed), "--duration", str(budget * speed), "--log", str(Path(tmp) / "run")]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            url = None
+            lines: list[str] = []
+            with console_err.status("starting the demo ..."):
+                assert proc.stderr is not None
+                for line in proc.stderr:
+                    lines.append(line.strip())
+                    m = re.search(r"dashboard on (http://\S+)", line)
+                    if m:
+                        url = m.group(1)
+                        break
+            if url is None:
+                last = next((s for s in reversed(lines) if s), "no output")
+                raise TwinError(f"the demo did not start its dashboard: {last}")
+            stderr = proc.stderr
+            threading.Thread(target=stderr.read, daemon=True).start()  # keep draining: a full pipe would stall the demo
+            with console_err.status(f"counting image updates on {url} ({warmup:g} s warm-up, {seconds:g} s) ..."):
+                rate = measure_dashboard_rate(url, seconds=seconds, warmup_s=warmup)
+        finally:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+    if as_json:
+        print_json(rate.as_dict())
+    else:
+        console_err.print(
+            f"dashboard in headless chromium over {rate.seconds:g} s: camera {rate.camera_hz:.1f} updates/s, "
+            f"twin {rate.twin_hz:.1f} updates/s (target 10)", highlight=False
+        )

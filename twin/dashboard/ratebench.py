@@ -1,0 +1,75 @@
+"""Benchmark: how often the dashboard's camera and twin images change in a real browser.
+
+A headless chromium (driven by Playwright) opens the dashboard, waits for it to warm
+up, then counts the changes of each GUI image's ``src`` (viser swaps a new blob URL in
+for every pushed frame) with a ``MutationObserver`` for a fixed window. This is what
+a viewer sees, after the server's encoding, the websocket and the browser's decoding,
+with the 3D scene rendering beside it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twin.errors import TwinError
+
+__all__ = ["DashboardRate", "measure_dashboard_rate", "CHROMIUM"]
+
+CHROMIUM = Path("/usr/bin/chromium")
+_IMG = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
+
+_COUNT_JS = """([sel, ms]) => new Promise(resolve => {
+  const imgs = Array.from(document.querySelectorAll(sel));
+  const counts = imgs.map(() => 0);
+  const obs = imgs.map((im, i) => {
+    const o = new MutationObserver(() => counts[i]++);
+    o.observe(im, {attributes: true, attributeFilter: ['src']});
+    return o;
+  });
+  setTimeout(() => { obs.forEach(o => o.disconnect()); resolve(counts); }, ms);
+})"""
+
+
+@dataclass(frozen=True)
+class DashboardRate:
+    """Image updates per second seen by the browser over ``seconds`` (s)."""
+
+    camera_hz: float
+    twin_hz: float
+    seconds: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"camera_hz": self.camera_hz, "twin_hz": self.twin_hz, "seconds": self.seconds}
+
+
+def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15.0,
+                           chromium: Path = CHROMIUM) -> DashboardRate:
+    """Open ``url`` in headless chromium and count image updates for ``seconds`` (s)."""
+    try:
+        from playwright.sync_api import Error as PlaywrightError
+        from playwright.sync_api import sync_playwright
+    except ImportError as exc:
+        raise TwinError("bench dashboard needs Playwright: pip install 'drumtwin[test]'") from exc
+    if not chromium.exists():
+        raise TwinError(f"bench dashboard needs {chromium}: apt-get install chromium")
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(chromium), headless=True,
+                                        args=["--no-sandbox", "--no-first-run"])
+            try:
+                page = browser.new_page(viewport={"width": 1600, "height": 1000})
+                page.goto(url, timeout=20_000)
+                page.wait_for_selector(_IMG, timeout=30_000)
+                deadline = time.monotonic() + 30.0
+                while len(page.query_selector_all(_IMG)) < 2 and time.monotonic() < deadline:
+                    time.sleep(0.2)
+                time.sleep(max(0.0, warmup_s))
+                counts = page.evaluate(_COUNT_JS, [_IMG, int(seconds * 1000)])
+            finally:
+                browser.close()
+    except PlaywrightError as exc:
+        raise TwinError(f"bench dashboard: the browser failed: {str(exc).splitlines()[0]}") from exc
+    counts = list(counts) + [0, 0]
+    return DashboardRate(camera_hz=counts[0] / seconds, twin_hz=counts[1] / seconds, seconds=seconds)
