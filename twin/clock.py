@@ -1,4 +1,4 @@
-"""A run clock that runs ``speed`` times faster than the wall clock (``--speed``)."""
+"""A run clock that runs ``speed`` times faster than the wall clock (``--speed``), and a cadence."""
 
 from __future__ import annotations
 
@@ -36,3 +36,30 @@ class RunClock:
     def sleep(self, run_s: float) -> bool:
         """Sleep ``run_s`` of run time; False when stopped."""
         return not self.stop.wait(max(0.0, run_s / self.speed))
+
+
+class Cadence:
+    """Ticks every ``period_s`` on average from irregular calls, keeping its schedule.
+
+    ``due(now_s)`` is True when a tick is due and then books the next one a period after
+    the last booked tick, not after ``now_s``: frames at 20 Hz give a 12 Hz cadence 12
+    times a second, not every second frame (10 Hz). After falling more than a period
+    behind it drops the missed ticks instead of catching up. Pure: the caller passes the
+    time (any clock, s).
+    """
+
+    def __init__(self, period_s: float, start_s: float = 0.0) -> None:
+        if not period_s > 0:
+            raise ValueError(f"period must be > 0 s, got {period_s}")
+        self.period_s = float(period_s)
+        self._next = float(start_s)
+
+    def due(self, now_s: float) -> bool:
+        if now_s < self._next:
+            return False
+        self._next = max(self._next + self.period_s, now_s)
+        return True
+
+    def restart(self, now_s: float) -> None:
+        """Make the next tick due at ``now_s`` (after a jump of the clock)."""
+        self._next = float(now_s)

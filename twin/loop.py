@@ -37,7 +37,7 @@ import numpy as np
 from control.driver import MillClient
 from control.supervisor import Action, AsyncPredictor, Mode, Supervisor, SupervisorConfig, SupervisorInputs
 from control.trend import MITrend, TrendConfig
-from twin.clock import RunClock
+from twin.clock import Cadence, RunClock
 from twin.config import RunConfig
 from twin.runlog import RunLog
 from twin.state import LiveState
@@ -155,7 +155,6 @@ class LiveLoop:
         self._faults_active: set[str] = set()
         self._camera_fps = Rate()
         self._threads: list[threading.Thread] = []
-        self._overlay_next = 0.0
         self.state.update_numbers(mode=config.mode, rpm_setpoint=config.start_rpm)
 
     # -- lifecycle -------------------------------------------------------------------------
@@ -239,7 +238,7 @@ class LiveLoop:
     # -- camera ----------------------------------------------------------------------------
     def _camera_loop(self) -> None:
         want_overlay = self.config.dashboard
-        overlay_period = 1.0 / max(self.config.dashboard_hz, 1.0)
+        overlay = Cadence(1.0 / max(self.config.dashboard_hz, 1.0))  # wall clock
         for frame in self.frames:
             if self.stop_event.is_set():
                 return
@@ -256,11 +255,7 @@ class LiveLoop:
                 except queue.Empty:
                     pass
                 self._readings.put_nowait(item)
-            now = time.monotonic()
-            if want_overlay and now >= self._overlay_next:
-                # keep the schedule (not now + period): with 20 fps frames and a 12 Hz target the
-                # overlay then goes out at 12 Hz on average instead of every second frame (10 Hz)
-                self._overlay_next = max(self._overlay_next + overlay_period, now - overlay_period)
+            if want_overlay and overlay.due(time.monotonic()):
                 self.state.publish_camera(_overlay(frame.image, reading))
         if not self.stop_event.is_set():
             self.fault("camera_ended", "the camera source ended")

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from twin.clock import Cadence
 from twin.state import WhatIfView
 
 if TYPE_CHECKING:
@@ -112,7 +113,7 @@ class TwinRunner:
             return
         self._calibrate()
         self._reseed()
-        next_render = self.now_s
+        render = Cadence(1.0 / TWIN_FPS, start_s=self.now_s)  # run clock
         next_snap = self.now_s
         while not stop.is_set():
             self._serve_requests()
@@ -121,7 +122,7 @@ class TwinRunner:
             if lag > MAX_LAG_S:  # cannot keep up: skip ahead and say so
                 loop.runlog.event("twin_lag", loop.t_s, lag_s=lag)
                 self.t0_run += lag
-                next_render = self.now_s
+                render.restart(self.now_s)
             if lag <= 1e-6:
                 stop.wait(0.005)
                 continue
@@ -130,8 +131,7 @@ class TwinRunner:
                 self.sim.set_rpm(min(max(rpm, 0.0), 0.95 * self.sim.critical_rpm))
             self.sim.step(min(lag, 1.0 / TWIN_FPS))
             self.updated_s = self.now_s
-            if self.now_s >= next_render:
-                next_render = max(next_render + 1.0 / TWIN_FPS, self.now_s)
+            if render.due(self.now_s):
                 self._render_and_measure()
             if self.now_s >= next_snap:
                 next_snap = self.now_s + SNAPSHOT_EVERY_S

@@ -12,6 +12,7 @@ the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import cv2
@@ -27,6 +28,7 @@ MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 _AMBIGUOUS = 255  # 6-bit table: this bin straddles a class boundary, ask the 24-bit table
 
 
+@dataclass(frozen=True, eq=False)
 class ClassTables:
     """The two BGR lookup tables of one class set: ``coarse`` (64^3) and ``fine`` (256^3).
 
@@ -34,10 +36,9 @@ class ClassTables:
     that the fine table must decide.
     """
 
-    def __init__(self, coarse: np.ndarray, fine: np.ndarray, n_classes: int) -> None:
-        self.coarse = coarse
-        self.fine = fine
-        self.n_classes = n_classes
+    coarse: np.ndarray
+    fine: np.ndarray
+    n_classes: int
 
 
 @lru_cache(maxsize=8)

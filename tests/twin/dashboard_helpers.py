@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-IMG = 'img[src^="blob:"]'  # camera and twin frames (GUI image elements, in panel order)
+from twin.dashboard.ratebench import IMG_SELECTOR as IMG  # camera and twin frames, in panel order
 
 
 def image_srcs(page) -> list[str]:

@@ -15,10 +15,10 @@ from pathlib import Path
 
 from twin.errors import TwinError
 
-__all__ = ["DashboardRate", "measure_dashboard_rate", "CHROMIUM"]
+__all__ = ["DashboardRate", "measure_dashboard_rate", "CHROMIUM", "IMG_SELECTOR"]
 
 CHROMIUM = Path("/usr/bin/chromium")
-_IMG = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
+IMG_SELECTOR = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
 
 _COUNT_JS = """([sel, ms]) => new Promise(resolve => {
   const imgs = Array.from(document.querySelectorAll(sel));
@@ -61,12 +61,12 @@ def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15
             try:
                 page = browser.new_page(viewport={"width": 1600, "height": 1000})
                 page.goto(url, timeout=20_000)
-                page.wait_for_selector(_IMG, timeout=30_000)
+                page.wait_for_selector(IMG_SELECTOR, timeout=30_000)
                 deadline = time.monotonic() + 30.0
-                while len(page.query_selector_all(_IMG)) < 2 and time.monotonic() < deadline:
+                while len(page.query_selector_all(IMG_SELECTOR)) < 2 and time.monotonic() < deadline:
                     time.sleep(0.2)
                 time.sleep(max(0.0, warmup_s))
-                counts = page.evaluate(_COUNT_JS, [_IMG, int(seconds * 1000)])
+                counts = page.evaluate(_COUNT_JS, [IMG_SELECTOR, int(seconds * 1000)])
             finally:
                 browser.close()
     except PlaywrightError as exc:

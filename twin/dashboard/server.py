@@ -385,11 +385,11 @@ class Dashboard:
             self._mi_plot.data = (
                 t, h["mi"], h["trend_mi"], h["trend_lo95"], h["trend_hi95"], h["ma_mi"], h["twin_mi"]
             )
-            for plot, ys, step in (
-                (self._rpm_plot, (h["rpm_setpoint"], h["rpm_actual"]), 5.0),
-                (self._slope_plot, (h["slope_deg"], h["twin_slope_deg"]), 5.0),
+            for plot, ys in (
+                (self._rpm_plot, (h["rpm_setpoint"], h["rpm_actual"])),
+                (self._slope_plot, (h["slope_deg"], h["twin_slope_deg"])),
             ):
-                rng = axis_range(*ys, step=step, pad=1.0)
+                rng = axis_range(*ys, step=5.0, pad=1.0)  # rpm and degrees alike
                 if rng is not None and rng != self._y_ranges.get(id(plot)):
                     plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": rng}}
                     self._y_ranges[id(plot)] = rng
