@@ -1,4 +1,4 @@
-"""Shared fixtures: where the real drum frames live (``../shared/data``)."""
+"""Shared fixtures: the real drum frames that ship with the tests (``tests/data``)."""
 
 from __future__ import annotations
 
@@ -6,14 +6,16 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
+TEST_DATA = TESTS / "data"
 
 
 @pytest.fixture(scope="session")
 def real_drum_dir() -> Path:
-    """Folder of the real blue/white PMMA drum frames and their YOLO labels."""
-    path = SHARED_DATA / "real-drum-pmma"
+    """Folder of the real blue/white PMMA drum frames and their YOLO labels
+    (CC BY 4.0, T. Delorenzi; see ``tests/data/real-drum-pmma/README.md``)."""
+    path = TEST_DATA / "real-drum-pmma"
     if not path.is_dir():
-        raise FileNotFoundError(f"shared data missing: {path} (clone with ../shared beside the repo)")
+        raise FileNotFoundError(f"test data missing: {path}")
     return path

@@ -1,4 +1,4 @@
-"""The real blue/white PMMA frames (../shared/data/real-drum-pmma) against their YOLO labels."""
+"""The real blue/white PMMA frames (tests/data/real-drum-pmma, CC BY 4.0) against their YOLO labels."""
 
 import math
 import os
