@@ -10,7 +10,14 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+from typing import NoReturn
 
+try:  # typer >= 0.20 vendors click; older typer uses the click package
+    from typer._click import exceptions as click_exc
+except ImportError:  # pragma: no cover
+    from click import exceptions as click_exc  # type: ignore[no-redef]
+
+import typer
 from rich.markup import escape
 
 from twin.cli.app import USER_ERRORS, app, bench_app, console_err  # noqa: F401
@@ -32,13 +39,39 @@ for _name in _COMMAND_MODULES:
             raise
 
 
+def _one_line_error(msg: str) -> NoReturn:
+    """Print ``error: MSG`` (first line only) on stderr and exit with code 2."""
+    msg = msg.strip().splitlines()[0] if msg.strip() else "bad input"
+    console_err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+    sys.exit(2)
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``drumtwin`` console script."""
+    """Entry point of the ``drumtwin`` console script.
+
+    Usage errors (unknown option, a value out of range) and expected user errors
+    (``USER_ERRORS``) are one line on stderr and exit code 2, never a traceback.
+    """
     try:
-        app(args=argv, prog_name="drumtwin", standalone_mode=True)
+        rv = app(args=argv, prog_name="drumtwin", standalone_mode=False)
+    except click_exc.UsageError as exc:
+        if os.environ.get("DRUMTWIN_DEBUG"):
+            raise
+        hint = f" (see 'drumtwin {exc.ctx.command_path.split(' ', 1)[1]} --help')" if (
+            exc.ctx is not None and " " in exc.ctx.command_path) else " (see 'drumtwin --help')"
+        _one_line_error(exc.format_message() + hint)
+    except (typer.Abort, KeyboardInterrupt):
+        console_err.print("aborted", highlight=False)
+        sys.exit(130)
+    except typer.Exit as exc:
+        sys.exit(exc.exit_code)
+    except click_exc.ClickException as exc:
+        if os.environ.get("DRUMTWIN_DEBUG"):
+            raise
+        _one_line_error(exc.format_message())
     except USER_ERRORS as exc:
         if os.environ.get("DRUMTWIN_DEBUG"):
             raise
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        console_err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-        sys.exit(2)
+        _one_line_error(str(exc) if str(exc).strip() else type(exc).__name__)
+    if isinstance(rv, int) and rv != 0:
+        sys.exit(rv)
