@@ -20,7 +20,7 @@ from typing import Any
 import serial
 
 from control import protocol as p
-from control.errors import ControlError
+from control.errors import ControlError, MillRefused
 from control.protocol import MillStatus
 
 __all__ = ["MillClient", "MillStatus"]
@@ -226,7 +226,7 @@ class MillClient:
                         last_problem = "checksum errors"
                         continue
                     self._mark_ok()
-                    raise ControlError(f"mill refused {cmd}{'' if not args else ' ' + str(args[0])}: NAK {reason}")
+                    raise MillRefused(f"{cmd}{'' if not args else ' ' + str(args[0])}", str(reason))
                 self._mark_ok()
                 return reply
             self._connected = False

@@ -12,16 +12,14 @@ import pytest
 from control.device import DeviceConfig
 from control.driver import MillClient
 from control.emulator import MillEmulator
-from twin.cli import main
+from tests.cli import cli as run_cli
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exc:
-        main(list(args))
-    out = capsys.readouterr()
-    return int(exc.value.code or 0), out.out, out.err
+    r = run_cli(*args)
+    return r.code, r.out, r.err
 
 
 @pytest.mark.timeout(60)
