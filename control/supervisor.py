@@ -1,9 +1,13 @@
 """Supervisory rpm controller: segregation detection, AUTO rpm choice, limits, safe state.
 
-The :class:`Supervisor` is a pure state machine driven by ``step(now_s, inputs)``; it
-never does I/O and never blocks unless it is given a *synchronous* predictor. It returns
-a :class:`Decision` (an event with time, inputs, action and reason) when it wants
-something done, else ``None``; every decision is also kept in ``events``.
+The :class:`Supervisor` is a pure state machine:
+``step(now_s, inputs, predictions=None) -> StepResult(decision, request)``. It never does
+I/O, never blocks and never calls out. ``decision`` is a :class:`Decision` (an event with
+time, inputs, action and reason) when it wants something done, else ``None``; every
+decision is also kept in ``events``. ``request`` is a :class:`PredictionRequest` when it
+wants twin predictions: the application computes them (in the background, however it
+likes) and hands them in as ``predictions`` on a later step. That is the only way
+predictions get in.
 
 Modes
     ``OFF``: hands off, no commands. ``MANUAL``: follows the operator's rpm
@@ -22,8 +26,8 @@ AUTO rpm choice
     With predictions (``Mapping[rpm, predicted MI at now + horizon]``, no older than
     ``prediction_max_age_s``): ``score(r) = MI(r) - move_penalty_per_rpm * |r - current|``
     over the candidates inside the limits; move to the best when it beats staying by
-    ``min_gain``, else log a *hold* decision. Without predictions (none given, or an
-    asynchronous predictor did not answer within ``prediction_wait_s``), the
+    ``min_gain``, else log a *hold* decision. Without predictions (the request made when
+    the decision fell due was not answered within ``prediction_wait_s``), the
     **fallback rule**: step the rpm up by ``fallback_step_rpm`` (size segregation in
     the rolling regime is broken up by a faster, more energetic cascade), clipped to the
     upper limit; at the upper limit, step down by ``fallback_step_rpm`` instead.
@@ -32,40 +36,40 @@ AUTO rpm choice
 
 Limits
     Every commanded rpm is inside ``[min_rpm, min(max_rpm, max_critical_frac * n_c)]``
-    with ``n_c = 42.3 / sqrt(drum_diameter_m)`` rpm (critical speed). The setpoint moves
+    with ``n_c`` = ``critical_rpm``, the drum's critical speed, handed in by the
+    application (``sim.recipe.DrumSpec.critical_rpm`` is the one formula; ``None``: only
+    ``max_rpm`` limits). The setpoint moves
     at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
     ``ramp`` decision).
 
+Board resync
+    ``inputs.mill_epoch`` changes whenever the application has (re)read the board after a
+    link loss or a refused command: the supervisor then takes the board's state as its
+    own (``commanded_rpm`` = the board's actual rpm while running, else its setpoint), so
+    a ramp goes on from where the motor really is, never from a stale belief.
+
 Safe state
-    Mill link lost (``inputs.mill_connected`` False), no valid MI for ``vision_timeout_s``
-    or the twin not updated for ``twin_timeout_s`` (AUTO) -> ``safe_action``: ``HOLD``
+    Mill link lost (``inputs.mill_connected`` False), the camera ended, no valid MI for
+    ``vision_timeout_s`` (the one vision timeout: applications raise their own alarm with
+    :meth:`SupervisorConfig.vision_lost`) or the twin not updated for ``twin_timeout_s``
+    (AUTO) -> ``safe_action``: ``HOLD``
     (keep the setpoint, the device watchdog covers a dead link), ``RAMP`` (ramp to
     ``safe_rpm``) or ``STOP``. HOLD/RAMP recover by themselves after ``recover_s`` without
     faults; STOP is latched until the operator sets a mode again.
 
-Predictions, synchronous or not
-    ``Predictor = Callable[[Sequence[float] rpms, float horizon_s], Mapping[float, float]]``.
-    Pass a plain callable to have it called inside ``step`` (blocking), or wrap a slow one
-    in :class:`AsyncPredictor` (runs it in a worker thread; ``step`` submits and polls, never
-    waits). Alternatively drive it yourself: ``prediction_request(now_s)`` tells what is
-    wanted and ``offer_predictions(PredictionResult(...))`` hands results in.
 """
 
 from __future__ import annotations
 
 import math
-import threading
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
+from typing import NamedTuple
 
 from control.errors import ControlError
 from control.trend import TrendEstimate
-
-Predictor = Callable[[Sequence[float], float], Mapping[float, float]]
-"""``predictor(rpms, horizon_s) -> {rpm: predicted MI after horizon_s}``."""
-
 
 class Mode(str, Enum):
     OFF = "off"
@@ -94,7 +98,7 @@ class SupervisorConfig:
     # limits
     min_rpm: float = 2.0
     max_rpm: float = 45.0
-    drum_diameter_m: float = 0.3
+    critical_rpm: float | None = None  # the drum's critical speed (rpm), from the application
     max_critical_frac: float = 0.6
     max_rate_rpm_per_s: float = 2.0
     ramp_interval_s: float = 1.0
@@ -128,22 +132,26 @@ class SupervisorConfig:
             raise ControlError(f"rpm limits must satisfy 0 <= min < max (got {self.min_rpm}, {self.max_rpm})")
         if not 0 < self.max_critical_frac <= 1:
             raise ControlError("max_critical_frac must be in (0, 1]")
-        if self.drum_diameter_m <= 0:
-            raise ControlError("drum_diameter_m must be positive")
+        if self.critical_rpm is not None and not (math.isfinite(self.critical_rpm) and self.critical_rpm > 0):
+            raise ControlError(f"critical_rpm must be a positive number, got {self.critical_rpm}")
+        if not (math.isfinite(self.vision_timeout_s) and self.vision_timeout_s > 0):
+            raise ControlError(f"vision_timeout_s must be > 0, got {self.vision_timeout_s}")
         if self.clear_level < self.seg_level:
             raise ControlError("clear_level must be >= seg_level (hysteresis)")
         if self.rpm_limits[1] <= self.min_rpm:
             raise ControlError("the critical-speed limit leaves no rpm above min_rpm")
 
     @property
-    def critical_rpm(self) -> float:
-        """Critical speed ``n_c = 42.3 / sqrt(D_m)`` rpm."""
-        return 42.3 / math.sqrt(self.drum_diameter_m)
-
-    @property
     def rpm_limits(self) -> tuple[float, float]:
         """(lowest, highest) rpm the supervisor will ever command."""
+        if self.critical_rpm is None:
+            return self.min_rpm, self.max_rpm
         return self.min_rpm, min(self.max_rpm, self.max_critical_frac * self.critical_rpm)
+
+    def vision_lost(self, now_s: float, last_valid_mi_s: float | None) -> bool:
+        """True when no valid MI has been seen for more than ``vision_timeout_s`` (the one
+        vision timeout of supervisor and application; None = never seen: not lost yet)."""
+        return last_valid_mi_s is not None and now_s - last_valid_mi_s > self.vision_timeout_s
 
     def clamp(self, rpm: float) -> float:
         lo, hi = self.rpm_limits
@@ -163,18 +171,24 @@ class SupervisorConfig:
 class SupervisorInputs:
     """What the supervisor sees each step.
 
-    ``trend``: the latest Kalman estimate; ``actual_rpm``/``setpoint_rpm``: from the mill
-    status; ``mill_connected``: the driver's flag; ``radial_factor``: MI(eq. 4)/MI(eq. 3)
-    of the latest valid reading (None: not used); ``last_valid_mi_s``: time of the last
-    valid MI; ``twin_updated_s``: time the twin last synced (None: no twin).
+    ``trend``: the latest Kalman estimate; ``actual_rpm``/``setpoint_rpm``/``mill_running``:
+    from the mill status; ``mill_connected``: the link is up; ``mill_epoch``: changes each
+    time the board was (re)read after a link loss or a refusal (the supervisor resyncs);
+    ``radial_factor``: MI(eq. 4)/MI(eq. 3) of the latest valid reading (None: not used);
+    ``last_valid_mi_s``: time of the last valid MI; ``camera_ended``: the frame source has
+    ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
+    (None: no twin).
     """
 
     trend: TrendEstimate | None = None
     actual_rpm: float | None = None
     setpoint_rpm: float | None = None
     mill_connected: bool = True
+    mill_running: bool | None = None
+    mill_epoch: int = 0
     radial_factor: float | None = None
     last_valid_mi_s: float | None = None
+    camera_ended: bool = False
     twin_updated_s: float | None = None
 
 
@@ -242,61 +256,14 @@ class Decision:
                 "actual_rpm": inp.actual_rpm,
                 "setpoint_rpm": inp.setpoint_rpm,
                 "mill_connected": inp.mill_connected,
+                "mill_running": inp.mill_running,
+                "mill_epoch": inp.mill_epoch,
+                "camera_ended": inp.camera_ended,
                 "radial_factor": inp.radial_factor,
                 "last_valid_mi_s": inp.last_valid_mi_s,
                 "twin_updated_s": inp.twin_updated_s,
             },
         }
-
-
-class AsyncPredictor:
-    """Runs a slow :data:`Predictor` in a worker thread, one request at a time.
-
-    ``submit(request)`` starts it (returns False when busy), ``poll()`` hands back a
-    finished :class:`PredictionResult` once. Errors are kept in ``last_error``.
-    """
-
-    def __init__(self, predictor: Predictor) -> None:
-        self.predictor = predictor
-        self._lock = threading.Lock()
-        self._thread: threading.Thread | None = None
-        self._result: PredictionResult | None = None
-        self.last_error: str | None = None
-        self.pending: PredictionRequest | None = None
-
-    @property
-    def busy(self) -> bool:
-        t = self._thread
-        return t is not None and t.is_alive()
-
-    def submit(self, request: PredictionRequest) -> bool:
-        if self.busy:
-            return False
-        self.pending = request
-        self._thread = threading.Thread(target=self._work, args=(request,), name="predictor", daemon=True)
-        self._thread.start()
-        return True
-
-    def _work(self, req: PredictionRequest) -> None:
-        try:
-            preds = dict(self.predictor(list(req.rpms), req.horizon_s))
-            res = PredictionResult(req.t_s, req.horizon_s, {float(k): float(v) for k, v in preds.items()})
-            with self._lock:
-                self._result = res
-            self.last_error = None
-        except Exception as exc:  # noqa: BLE001 - a failed prediction means "no prediction"
-            self.last_error = f"{type(exc).__name__}: {exc}"
-        finally:
-            self.pending = None
-
-    def poll(self) -> PredictionResult | None:
-        with self._lock:
-            res, self._result = self._result, None
-        return res
-
-    def join(self, timeout_s: float | None = None) -> None:
-        if self._thread is not None:
-            self._thread.join(timeout_s)
 
 
 class SegregationDetector:
@@ -360,18 +327,24 @@ class SegregationDetector:
         return not self.segregated and self._since is not None
 
 
+class StepResult(NamedTuple):
+    """What one :meth:`Supervisor.step` gives back: a decision to carry out (or None) and
+    predictions it wants computed (or None)."""
+
+    decision: Decision | None
+    request: PredictionRequest | None
+
+
 class Supervisor:
     """The supervisory controller (see the module docstring for the rules)."""
 
     def __init__(
         self,
         config: SupervisorConfig | None = None,
-        predictor: Predictor | AsyncPredictor | None = None,
         mode: Mode = Mode.OFF,
         max_events: int = 10000,
     ) -> None:
         self.config = config or SupervisorConfig()
-        self.predictor = predictor
         self._mode = Mode(mode)
         self.detector = SegregationDetector(self.config)
         self.events: deque[Decision] = deque(maxlen=max_events)
@@ -382,13 +355,14 @@ class Supervisor:
         self.safe_reason = ""
         self._latched_stop = False
         self._t0: float | None = None
+        self._epoch: int | None = None  # the board state last synced to
         self._last_cmd_s = -math.inf
         self._last_eval_s = -math.inf
-        self._due_since: float | None = None  # AUTO decision due but waiting for predictions
+        self._due_since: float | None = None  # AUTO decision due, waiting for predictions
         self._clear_since: float | None = None
         self._predictions: PredictionResult | None = None
         self._last_inputs: SupervisorInputs | None = None
-        self._pred_error: str | None = None
+        self._request: PredictionRequest | None = None  # wanted by the current step
 
     # -- operator ----------------------------------------------------------------------------
     @property
@@ -419,46 +393,36 @@ class Supervisor:
         return self.manual_rpm
 
     # -- predictions -------------------------------------------------------------------------
-    def offer_predictions(self, result: PredictionResult) -> None:
-        """Hand in predictions computed elsewhere (e.g. in a background thread)."""
-        if self._predictions is None or result.t_s >= self._predictions.t_s:
+    def _take_predictions(self, result: PredictionResult | None) -> None:
+        if result is not None and (self._predictions is None or result.t_s >= self._predictions.t_s):
             self._predictions = result
 
     def fresh_predictions(self, now_s: float) -> PredictionResult | None:
+        """The latest predictions handed in, unless older than ``prediction_max_age_s``."""
         p = self._predictions
         if p is None or now_s - p.t_s > self.config.prediction_max_age_s:
             return None
         return p
 
-    def prediction_request(self, now_s: float) -> PredictionRequest | None:
-        """Predictions wanted now (AUTO, mix suspect or segregated, none fresh), else None."""
-        if self._mode is not Mode.AUTO or self.safe:
-            return None
-        if not (self.detector.segregated or self.detector.suspect):
-            return None
-        if self.fresh_predictions(now_s) is not None:
-            return None
-        return PredictionRequest(now_s, self.config.candidates(self.commanded_rpm), self.config.horizon_s)
-
     # -- the step ----------------------------------------------------------------------------
-    def step(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
-        """Advance to ``now_s`` with ``inputs``; a :class:`Decision` when there is one."""
+    def step(
+        self, now_s: float, inputs: SupervisorInputs, predictions: PredictionResult | None = None
+    ) -> StepResult:
+        """Advance to ``now_s`` with ``inputs`` (and any ``predictions`` that arrived since
+        the last step); see :class:`StepResult`."""
+        self._request = None
+        decision = self._step(now_s, inputs, predictions)
+        return StepResult(decision, self._request)
+
+    def _step(self, now_s: float, inputs: SupervisorInputs, predictions: PredictionResult | None) -> Decision | None:
         if self._t0 is None:
             self._t0 = now_s
         self._last_inputs = inputs
-        if self.commanded_rpm is None:
-            known = inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm
-            if known is not None and math.isfinite(known):
-                self.commanded_rpm = float(known)
-                self.target_rpm = self.commanded_rpm
-                if self.manual_rpm is None and self._mode is Mode.MANUAL:
-                    self.manual_rpm = self.commanded_rpm
+        if inputs.mill_connected and inputs.mill_epoch != self._epoch:
+            self._resync(inputs)
+        self._take_predictions(predictions)
         if self._mode is Mode.OFF:
             return None
-        if isinstance(self.predictor, AsyncPredictor):
-            res = self.predictor.poll()
-            if res is not None:
-                self.offer_predictions(res)
         self.detector.update(now_s, inputs.trend, inputs.radial_factor)
 
         faults = self.faults(now_s, inputs)
@@ -486,6 +450,20 @@ class Supervisor:
             return ramp
         return self._auto(now_s, inputs)
 
+    def _resync(self, inputs: SupervisorInputs) -> None:
+        """Take the board's state as ours (see "Board resync" in the module doc)."""
+        first = inputs.actual_rpm if inputs.mill_running else inputs.setpoint_rpm
+        board = first if first is not None else (inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm)
+        if board is None or not math.isfinite(board):
+            return
+        self._epoch = inputs.mill_epoch
+        ramping = self._ramping
+        self.commanded_rpm = round(float(board), 2)
+        if not ramping or self.safe:
+            self.target_rpm = self.commanded_rpm
+        if self.manual_rpm is None and self._mode is Mode.MANUAL:
+            self.manual_rpm = self.commanded_rpm
+
     # -- internals ---------------------------------------------------------------------------
     def faults(self, now_s: float, inputs: SupervisorInputs) -> list[str]:
         """Reasons for the safe state now (empty: none)."""
@@ -495,7 +473,9 @@ class Supervisor:
         if self._mode is Mode.AUTO:
             t0 = self._t0 if self._t0 is not None else now_s
             seen = inputs.last_valid_mi_s if inputs.last_valid_mi_s is not None else t0
-            if now_s - seen > c.vision_timeout_s:
+            if inputs.camera_ended:
+                out.append("camera ended: no valid MI")
+            elif c.vision_lost(now_s, seen):
                 out.append(f"no valid MI for {now_s - seen:.1f} s")
             if c.twin_timeout_s is not None and (inputs.twin_updated_s is not None or c.require_twin):
                 tw = inputs.twin_updated_s if inputs.twin_updated_s is not None else t0
@@ -593,27 +573,16 @@ class Supervisor:
             return None
         current = self.commanded_rpm if self.commanded_rpm is not None else c.clamp(inputs.actual_rpm or c.safe_rpm)
         preds = self.fresh_predictions(now_s)
-        if preds is None and self.predictor is not None:
-            req = PredictionRequest(now_s, c.candidates(current), c.horizon_s)
-            if isinstance(self.predictor, AsyncPredictor):
-                self._due_since = now_s if self._due_since is None else self._due_since
-                if not self.predictor.busy:
-                    self.predictor.submit(req)
-                if now_s - self._due_since < c.prediction_wait_s:
-                    return None  # wait for the worker (bounded)
-            else:
-                try:
-                    res = self.predictor(list(req.rpms), req.horizon_s)
-                    preds = PredictionResult(now_s, req.horizon_s, {float(k): float(v) for k, v in res.items()})
-                    self.offer_predictions(preds)
-                except Exception as exc:  # noqa: BLE001 - a failing twin means "no prediction"
-                    preds = None
-                    self._pred_error = f"{type(exc).__name__}: {exc}"
+        if preds is None:
+            if self._due_since is None:  # ask once per decision; wait a bounded time
+                self._due_since = now_s
+                self._request = PredictionRequest(now_s, c.candidates(current), c.horizon_s)
+            if now_s - self._due_since < c.prediction_wait_s:
+                return None
         self._due_since = None
         why = self.detector.why or "segregation"
         if preds is not None:
             return self._choose(now_s, current, preds, why, inputs)
-        lo, hi = c.rpm_limits
         target = c.clamp(current + c.fallback_step_rpm)
         if abs(target - current) < 1e-6:
             target = c.clamp(current - c.fallback_step_rpm)

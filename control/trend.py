@@ -18,6 +18,7 @@ may change at run time). The measurement is ``MI = level + ripple_c + noise``.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -208,16 +209,57 @@ class MITrend:
         )
 
 
+class MovingAverage:
+    """The paper's baseline filter: causal mean of the last ``window`` *finite* samples.
+
+    The one moving average of the project. ``update(x)`` returns the current mean; a NaN
+    (or inf) sample is skipped: it neither enters the window nor resets it, so the
+    average holds its value over invalid frames. NaN before the first finite sample.
+    """
+
+    def __init__(self, window: int = 150) -> None:
+        if int(window) < 1:
+            raise ControlError(f"moving-average window must be >= 1, got {window}")
+        self.window = int(window)
+        self._buf: deque[float] = deque(maxlen=self.window)
+        self._sum = 0.0
+
+    def update(self, x: float) -> float:
+        """Add one sample; return the current average."""
+        x = float(x)
+        if math.isfinite(x):
+            if len(self._buf) == self.window:
+                self._sum -= self._buf[0]
+            self._buf.append(x)
+            self._sum += x
+            if len(self._buf) == self.window:  # curb float drift once per full window
+                self._sum = math.fsum(self._buf)
+        return self.value
+
+    @property
+    def value(self) -> float:
+        """The current average (NaN before any finite sample)."""
+        return self._sum / len(self._buf) if self._buf else math.nan
+
+    def reset(self) -> None:
+        self._buf.clear()
+        self._sum = 0.0
+
+
 def moving_average(x: Sequence[float] | np.ndarray, window: int = 150) -> np.ndarray:
-    """The paper's baseline: trailing mean of the last ``window`` samples (NaNs skipped;
-    a partial window at the start; NaN until the first valid sample). Kept tiny here
-    because ``control`` may not import ``vision.smoothing``."""
-    a = np.asarray(x, dtype=float)
+    """:class:`MovingAverage` over a whole sequence (same length; same NaN rule: element i
+    is the mean of the last ``window`` finite samples up to i, NaN before the first)."""
+    if int(window) < 1:
+        raise ControlError(f"moving-average window must be >= 1, got {window}")
+    a = np.asarray(x, dtype=float).ravel()
     ok = np.isfinite(a)
-    cs = np.concatenate([[0.0], np.cumsum(np.where(ok, a, 0.0))])
-    cn = np.concatenate([[0], np.cumsum(ok)])
-    idx = np.arange(1, a.size + 1)
-    lo = np.maximum(idx - int(window), 0)
-    n = cn[idx] - cn[lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, (cs[idx] - cs[lo]) / np.maximum(n, 1), np.nan)
+    vals = a[ok]
+    cs = np.concatenate([[0.0], np.cumsum(vals)])
+    k = np.arange(1, vals.size + 1)
+    lo = np.maximum(k - int(window), 0)
+    means = (cs[k] - cs[lo]) / (k - lo)  # mean of the finite samples ending at each finite one
+    n_seen = np.cumsum(ok)  # finite samples up to and including i
+    out = np.full(a.size, np.nan)
+    has = n_seen > 0
+    out[has] = means[n_seen[has] - 1]
+    return out

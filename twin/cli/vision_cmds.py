@@ -65,10 +65,10 @@ def mi_cmd(
     import cv2
     import numpy as np
 
+    from control.trend import MovingAverage
     from vision.config import load_config
     from vision.overlay import draw_overlay
     from vision.roi import parse_roi
-    from vision.smoothing import MovingAverage
     from vision.sources import open_source, source_kind
 
     cfg = load_config(config)

@@ -1,0 +1,268 @@
+"""What the live workers exchange: immutable snapshots, typed commands, a read-only view
+of the run, and the event sink (run log + dashboard alarms).
+
+Threads never share mutable fields. Each snapshot has exactly one writer (the worker
+that owns it) and is replaced whole in a :class:`Latest` box; readers get the current
+value and keep it as long as they like. Commands are small frozen dataclasses put on
+the owning worker's queue.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Generic, Protocol, TypeVar
+
+import numpy as np
+
+from control.protocol import MillStatus
+from control.trend import TrendEstimate
+from twin.state import LiveState
+from vision.meter import Reading
+
+T = TypeVar("T")
+
+
+class Latest(Generic[T]):
+    """The newest value of one snapshot: one writer ``set``s, any thread ``get``s."""
+
+    def __init__(self, value: T) -> None:
+        self._lock = threading.Lock()
+        self._value = value
+
+    def get(self) -> T:
+        with self._lock:
+            return self._value
+
+    def set(self, value: T) -> None:
+        with self._lock:
+            self._value = value
+
+
+# -- snapshots --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MillSnapshot:
+    """The mill as the mill worker last saw it: the board's own report (``status``, None
+    before the first answer) plus the link. ``epoch`` grows by one each time the board
+    was read again after a link loss or a refused command: commands decided on an older
+    epoch are stale and are dropped. ``polled``: the worker has tried at least once."""
+
+    status: MillStatus | None = None
+    connected: bool = False
+    epoch: int = 0
+    polled: bool = False
+
+    @property
+    def actual_rpm(self) -> float:
+        return math.nan if self.status is None else float(self.status.actual_rpm)
+
+    @property
+    def setpoint_rpm(self) -> float:
+        return math.nan if self.status is None else float(self.status.setpoint_rpm)
+
+    @property
+    def running(self) -> bool:
+        return bool(self.status is not None and self.status.running)
+
+    @property
+    def fault(self) -> str | None:
+        return None if self.status is None else self.status.fault
+
+    @property
+    def state(self) -> str:
+        """One word for the dashboard: link lost, fault X, running, stopped."""
+        if not self.connected:
+            return "link lost" if self.polled else "connecting"
+        if self.fault:
+            return f"fault {self.fault}"
+        return "running" if self.running else "stopped"
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """The camera worker's newest frame: run time ``t_s`` (None before the first),
+    ``wall_s`` (``time.monotonic()`` when it arrived), the image (never mutated), the
+    drum ROI the meter used, frame count, and whether the source has ended."""
+
+    t_s: float | None = None
+    wall_s: float = 0.0
+    image: np.ndarray | None = None
+    roi: Any = None
+    n_frames: int = 0
+    ended: bool = False
+
+
+@dataclass(frozen=True)
+class FrameInfo:
+    """The process worker's newest result: run time of the newest processed frame, frames
+    processed, time of the last valid MI, the reading and the Kalman estimate."""
+
+    t_s: float = 0.0
+    n_frames: int = 0
+    last_valid_t_s: float | None = None
+    reading: Reading | None = None
+    estimate: TrendEstimate | None = None
+
+
+@dataclass(frozen=True)
+class TwinInfo:
+    """The twin worker's newest state: run time it last stepped to (None: no twin yet),
+    its measured MI and slope, and a ``SimState`` no older than a few seconds for
+    what-if studies."""
+
+    updated_s: float | None = None
+    mi: float = math.nan
+    slope_deg: float = math.nan
+    state: Any = None
+
+
+# -- commands ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SetRpm:
+    """Set the mill's setpoint; ``epoch``: the :class:`MillSnapshot` epoch it was decided on."""
+
+    rpm: float
+    epoch: int
+    source: str = "supervisor"
+
+
+@dataclass(frozen=True)
+class StartMill:
+    """Start the motor (only ever on an operator's command); ``epoch`` as in :class:`SetRpm`."""
+
+    epoch: int
+    source: str = "operator"
+
+
+@dataclass(frozen=True)
+class StopMill:
+    """Stop the motor. Never stale. ``urgent``: drop every pending command first (E-stop)."""
+
+    source: str = "operator"
+    urgent: bool = False
+
+
+MillCommand = SetRpm | StartMill | StopMill
+
+
+@dataclass(frozen=True)
+class SetMode:
+    mode: str
+
+
+@dataclass(frozen=True)
+class SetManualRpm:
+    rpm: float
+
+
+SupervisorCommand = SetMode | SetManualRpm
+
+
+# -- the read-only view -----------------------------------------------------------------------
+class RunView:
+    """What a worker may read: run time and the newest snapshots (never the loop itself).
+
+    Run time is the newest camera frame's time plus the run time since it arrived (so time
+    still passes for the supervisor when the camera stops); before the first frame it is
+    the run clock since ``start``. It never goes backwards.
+    """
+
+    def __init__(
+        self,
+        speed: float,
+        camera: Latest[CameraInfo],
+        frames: Latest[FrameInfo],
+        mill: Latest[MillSnapshot],
+        twin: Latest[TwinInfo],
+        mode: Latest[str],
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.speed = float(speed)
+        self._camera, self._frames, self._mill, self._twin, self._mode = camera, frames, mill, twin, mode
+        self._monotonic = monotonic
+        self._start = monotonic()
+        self._lock = threading.Lock()
+        self._last = 0.0
+
+    def now_s(self) -> float:
+        cam = self._camera.get()
+        wall = self._monotonic()
+        if cam.t_s is None:
+            t = (wall - self._start) * self.speed
+        else:
+            t = cam.t_s + (wall - cam.wall_s) * self.speed
+        with self._lock:
+            self._last = max(self._last, t)
+            return self._last
+
+    def camera(self) -> CameraInfo:
+        return self._camera.get()
+
+    def frames(self) -> FrameInfo:
+        return self._frames.get()
+
+    def mill(self) -> MillSnapshot:
+        return self._mill.get()
+
+    def twin(self) -> TwinInfo:
+        return self._twin.get()
+
+    def mode(self) -> str:
+        return self._mode.get()
+
+
+# -- events -----------------------------------------------------------------------------------
+class EventSink(Protocol):
+    """Where workers report: run-log events, named faults (alarms) and dashboard numbers."""
+
+    def event(self, kind: str, t_s: float, **data: Any) -> None: ...
+    def fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
+    def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
+    def numbers(self, **values: Any) -> None: ...
+
+
+class RunEvents:
+    """The run's :class:`EventSink`: events to the run log (``event(kind, t_s, **data)``),
+    faults raised once until cleared (an event plus a dashboard alarm), numbers to the
+    dashboard. Thread-safe; counts faults and decisions."""
+
+    def __init__(self, runlog: Any, state: LiveState) -> None:
+        self.runlog = runlog
+        self.state = state
+        self._lock = threading.Lock()
+        self._active: set[str] = set()
+        self.n_faults = 0
+        self.n_decisions = 0
+
+    def event(self, kind: str, t_s: float, **data: Any) -> None:
+        if kind == "decision":
+            with self._lock:
+                self.n_decisions += 1
+        self.runlog.event(kind, t_s, **data)
+
+    def fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
+        with self._lock:
+            if key in self._active:
+                return
+            self._active.add(key)
+            self.n_faults += 1
+        self.runlog.event("fault", t_s, fault=key, message=message, **data)
+        self.state.set_alarm(key, message)
+
+    def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
+        with self._lock:
+            if key not in self._active:
+                return
+            self._active.discard(key)
+        self.runlog.event("recovered", t_s, fault=key, message=message, **data)
+        self.state.set_alarm(key, None)
+
+    def numbers(self, **values: Any) -> None:
+        self.state.update_numbers(**values)
+
+    def active(self) -> frozenset[str]:
+        with self._lock:
+            return frozenset(self._active)
