@@ -7,14 +7,21 @@ send back; ``tick(now_s)`` advances the motor and the watchdog. The emulator
 
 Rules (see ``docs/mill-protocol.md``):
 
-- checksum-valid frames feed the watchdog; a frame with a bad checksum whose sequence
-  number can still be read gets ``NAK,CRC`` (the host resends at once); anything else
-  that is not a frame is dropped silently;
-- a frame with the same sequence number *and* payload as the previous one is a resend:
-  the cached reply is sent again and nothing is applied a second time;
+- only the *controlling* host's frames feed the watchdog: ``HB``, ``SET``, ``RUN`` and
+  ``STP`` (answered ACK or NAK, resends included); ``STA`` (status) does not, so a status
+  poller (a second dashboard, a monitoring script) never keeps the motor running after
+  the controlling host died. A frame with a bad checksum whose sequence number can
+  still be read gets ``NAK,CRC`` (the host resends at once); anything else that is not
+  a frame is dropped silently;
+- a state-changing frame (``SET RUN STP``) with the same sequence number *and* payload as
+  the previous one is a resend: the cached reply is sent again and nothing is applied a
+  second time; ``STA``/``HB`` change nothing and are always answered with a fresh
+  status (never from the cache, so another host's request with the same number can
+  never return a stale status);
 - ``SET`` takes an absolute setpoint in 0..max rpm (idempotent), ``RUN`` starts (and
   clears a watchdog fault), ``STP`` stops, ``STA``/``HB`` answer with the status;
-- while running, no valid frame for ``watchdog_s`` stops the motor with fault ``WDOG``.
+- while running, no watchdog-feeding frame for ``watchdog_s`` stops the motor with fault
+  ``WDOG``.
 """
 
 from __future__ import annotations
@@ -83,7 +90,10 @@ class MillDevice:
 
     def _handle(self, frame: p.Frame, now_s: float) -> bytes:
         self.counters["frames"] += 1
-        self._last_valid_s = now_s
+        if frame.cmd in p.WATCHDOG_COMMANDS:
+            self._last_valid_s = now_s
+        if frame.cmd in p.READ_ONLY_COMMANDS:  # a fresh status, never from or into the cache
+            return self._execute(frame, now_s)
         key = (frame.seq, frame.payload)
         if key == self._last_key:
             self.counters["resends"] += 1
@@ -137,7 +147,7 @@ class MillDevice:
             self.counters["watchdog_trips"] += 1
 
     def feed_watchdog(self, now_s: float) -> None:
-        """Restart the watchdog time (as a valid frame would)."""
+        """Restart the watchdog time (as a watchdog-feeding frame would)."""
         self._last_valid_s = now_s
 
     def status(self) -> p.MillStatus:

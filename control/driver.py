@@ -2,17 +2,23 @@
 
 ``url`` is anything pyserial opens: ``/dev/ttyUSB0``, a pty path, ``socket://host:port``,
 ``rfc2217://host:port``. One request is in flight at a time (a lock): a request is
-framed by ``control.protocol`` with a fresh sequence number, written, and answered by
-the device with ACK/NAK under the same number. A timeout, a garbled reply or
-``NAK,CRC`` resend the *same* frame (same sequence number, so the device never applies
-it twice) up to ``retries`` times. A broken port is closed and reopened with
-exponential back-off. A heartbeat thread (``heartbeat_s``) keeps the device watchdog
-fed, refreshes :attr:`MillClient.last_status` and reconnects in the background.
+framed by ``control.protocol`` with a fresh sequence number (each client starts at a
+random one, so two hosts or two CLI calls never reuse each other's numbers), written,
+and answered by the device with ACK/NAK under the same number. A timeout, a garbled
+reply or ``NAK,CRC`` resend the *same* frame (same sequence number, so the device never
+applies it twice) up to ``retries`` times; any other ``NAK`` raises
+:class:`control.errors.MillRefused` at once (never resent). A broken port is closed and
+reopened with exponential back-off. A heartbeat thread (``heartbeat_s``; ``None``: the
+caller polls ``heartbeat()`` itself) keeps the device watchdog fed, refreshes
+:attr:`MillClient.last_status` and reconnects in the background. Only the host that
+controls the motor should send ``HB`` (or SET/RUN/STP): ``status()`` does not feed the
+board's watchdog.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import threading
 import time
 from typing import Any
@@ -20,7 +26,7 @@ from typing import Any
 import serial
 
 from control import protocol as p
-from control.errors import ControlError, MillRefused
+from control.errors import ControlError, MillRefused, check_number
 from control.protocol import MillStatus
 
 __all__ = ["MillClient", "MillStatus"]
@@ -45,7 +51,8 @@ class MillClient:
     ``connect``: open the port now (raises ``ConnectionError`` when it cannot) or leave
     it to the first request / the heartbeat thread.
     Requests raise ``ConnectionError`` (port cannot be opened), ``TimeoutError`` (no valid
-    answer after all retries) or ``ControlError`` (the device refused: NAK with a reason).
+    answer after all retries) or ``MillRefused`` (a ``ControlError``: the device answered
+    NAK with a reason; the link is fine and nothing was applied).
     """
 
     def __init__(
@@ -63,19 +70,23 @@ class MillClient:
     ) -> None:
         if not url:
             raise ControlError("empty mill URL")
+        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+            raise ControlError(f"retries must be an integer >= 0 (got {retries})")
+        if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
+            raise ControlError(f"baudrate must be a positive integer (got {baudrate})")
         self.url = url
         self.baudrate = baudrate
-        self.timeout_s = timeout_s
-        self.retries = max(0, int(retries))
-        self.heartbeat_s = heartbeat_s
-        self.backoff_s = backoff_s
-        self.backoff_max_s = backoff_max_s
-        self.reconnect_wait_s = reconnect_wait_s
+        self.timeout_s = check_number("timeout_s", timeout_s, above=0.0, at_most=60.0)
+        self.retries = retries
+        self.heartbeat_s = None if heartbeat_s is None else check_number("heartbeat_s", heartbeat_s, above=0.0)
+        self.backoff_s = check_number("backoff_s", backoff_s, above=0.0)
+        self.backoff_max_s = max(self.backoff_s, check_number("backoff_max_s", backoff_max_s, above=0.0))
+        self.reconnect_wait_s = check_number("reconnect_wait_s", reconnect_wait_s, at_least=0.0)
         self._poll_s = min(0.02, max(0.002, timeout_s / 5))
         self._lock = threading.RLock()
         self._port: Any = None
         self._decoder = p.FrameDecoder()
-        self._seq = 0
+        self._seq = secrets.randbelow(p.SEQ_MOD)  # each host starts at a random number
         self._backoff = backoff_s
         self._next_open_s = 0.0
         self._connected = False
@@ -123,11 +134,11 @@ class MillClient:
         self._request(p.STP)
 
     def status(self) -> MillStatus:
-        """Read setpoint, actual rpm, running and fault."""
+        """Read setpoint, actual rpm, running and fault (does not feed the board's watchdog)."""
         return self._status_of(self._request(p.STA))
 
     def heartbeat(self, retries: int | None = None, wait_s: float | None = None) -> MillStatus:
-        """Feed the device watchdog; returns the status it answers with."""
+        """Feed the device watchdog (controlling host only); returns the status it answers with."""
         return self._status_of(self._request(p.HB, retries=retries, wait_s=wait_s))
 
     def close(self) -> None:

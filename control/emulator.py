@@ -28,8 +28,9 @@ from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from control import protocol as p
 from control.device import Applied, DeviceConfig, MillDevice
-from control.errors import ControlError
+from control.errors import ControlError, check_number
 from control.motor import MotorState
 from control.protocol import MillStatus
 
@@ -79,10 +80,11 @@ class Faults:
                     raise
                 raise ControlError(f"bad fault value in {item!r}") from None
         for name in ("drop_p", "corrupt_p"):
-            if not 0.0 <= getattr(f, name) <= 1.0:
-                raise ControlError(f"fault probability {name}={getattr(f, name)} outside 0..1")
-        if f.delay_s < 0 or (f.disconnect_every_s is not None and f.disconnect_every_s <= 0):
-            raise ControlError("fault times must be positive")
+            check_number(f"fault {name}", getattr(f, name), at_least=0.0, at_most=1.0)
+        check_number("fault delay", f.delay_s, at_least=0.0, at_most=60.0)
+        if f.disconnect_every_s is not None:
+            check_number("fault disconnect EVERY", f.disconnect_every_s, above=0.0)
+            check_number("fault disconnect FOR", f.disconnect_for_s, above=0.0)
         return f
 
 
@@ -155,6 +157,16 @@ class MillEmulator:
                     m.fault = None
                     self.device.feed_watchdog(self.now_s())
             return m.state()
+
+    def set_drive_fault(self, active: bool = True) -> None:
+        """The power stage reports a fault (``DRIVE``: motor stops, ``RUN`` is refused) or
+        the fault was cleared on the board."""
+        with self._lock:
+            m = self.device.motor
+            if active:
+                m.fault, m.running = p.FAULT_DRIVE, False
+            elif m.fault == p.FAULT_DRIVE:
+                m.fault = None
 
     @property
     def applied(self) -> list[Applied]:

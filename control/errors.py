@@ -1,5 +1,9 @@
 """The one exception type of ``control``: bad input or a broken environment, said in one line."""
 
+from __future__ import annotations
+
+import math
+
 
 class ControlError(ValueError):
     """A clear, user-facing error of the ``control`` package (the CLI prints it as one line)."""
@@ -13,3 +17,24 @@ class MillRefused(ControlError):
         super().__init__(f"mill refused {command}: NAK {reason}")
         self.command = command
         self.reason = reason
+
+
+def check_number(
+    name: str, value: float, *, above: float | None = None, at_least: float | None = None,
+    at_most: float | None = None,
+) -> float:
+    """``value`` as a finite float inside the given bounds, else a one-line ControlError
+    naming ``name`` (an option such as ``--timeout``) and the allowed range."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    ok = math.isfinite(v)
+    ok = ok and (above is None or v > above) and (at_least is None or v >= at_least)
+    ok = ok and (at_most is None or v <= at_most)
+    if not ok:
+        lo = f"> {above:g}" if above is not None else (f">= {at_least:g}" if at_least is not None else "")
+        hi = f"<= {at_most:g}" if at_most is not None else ""
+        rng = " and ".join(x for x in (lo, hi) if x) or "finite"
+        raise ControlError(f"{name} must be a finite number {rng} (got {value})")
+    return v

@@ -39,6 +39,12 @@ STP = "STP"  #: stop the motor (ramps down to 0 rpm).
 STA = "STA"  #: read status.
 HB = "HB"  #: heartbeat: feeds the watchdog, answered with the status.
 HOST_COMMANDS = (SET, RUN, STP, STA, HB)
+WATCHDOG_COMMANDS = frozenset({SET, RUN, STP, HB})
+"""Commands that feed the device watchdog: only the controlling host sends them. ``STA``
+does not, so a status poller cannot keep a motor running whose controller died."""
+READ_ONLY_COMMANDS = frozenset({STA, HB})
+"""Commands that change nothing on the board: always answered with a fresh status,
+never from the resend cache."""
 
 # Device -> host replies.
 ACK = "ACK"

@@ -1,13 +1,19 @@
-"""Calibration of the twin by the bed's slope angle (the approach of the paper's ref. [31]).
+"""Calibration of the twin by the bed's free surface (the approach of the paper's ref. [31]).
 
-The twin's dynamic slope angle at a given rpm grows with sliding friction and, past
-the friction at which the disks interlock, with rolling resistance. ``calibrate``
-walks one monotone path through both -- first sliding friction from ``FRICTION_RANGE``
-(rolling resistance tied to it by ``rolling_ratio``), then, if the target is steeper
-still, rolling resistance up to ``ROLLING_MAX`` at the top friction -- and bisects
-(regula falsi) the path parameter until the twin's mean slope matches the target.
-Every evaluation uses the same seed (common random numbers), so the slope is a
-smooth function of the path parameter.
+The twin's dynamic slope angle at a given rpm grows with sliding friction and with
+rolling friction. ``calibrate`` searches the (sliding, rolling) plane between
+``FRICTION_RANGE`` and ``ROLLING_RANGE``:
+
+1. **Reachable range.** The two corners (least and most friction) bound the slopes the
+   twin can show at this rpm. A target outside that range (with ``RANGE_TOL_DEG`` of
+   grace) is a ``SimError`` that names the range -- never a silent best effort.
+2. **Slope.** Along a path from the low to the high corner the slope is monotone, and
+   a bracketing search (regula falsi) finds the point whose mean free-surface slope
+   matches the target. Every evaluation uses the same seed (common random numbers).
+3. **Curvature** (when measured). Several paths through the plane -- sliding friction
+   first, both together, rolling friction first -- each give a point on the target's
+   iso-slope line; the one whose surface S-shape (``sim.measure.FreeSurface.curvature``)
+   is nearest the measured one wins. That is the second dimension of the search.
 """
 
 from __future__ import annotations
@@ -18,20 +24,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.drum import DEFAULT_FRICTION, DEFAULT_ROLLING, DrumSim, check_rpm
+from sim.drum import DrumSim, check_rpm
 from sim.errors import SimError
-from sim.measure import particle_slope_deg
+from sim.measure import free_surface
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 
-FRICTION_RANGE = (0.05, 1.0)
-ROLLING_MAX = 1.0
+FRICTION_RANGE = (0.05, 1.0)  # sliding friction searched (geometric)
+ROLLING_RANGE = (0.0, 1.0)  # rolling friction searched
+RANGE_TOL_DEG = 1.0  # a target this close outside the range still calibrates (to the end)
+PATHS = ("diagonal", "sliding-first", "rolling-first")
 
-__all__ = ["Calibration", "calibrate", "twin_slope_deg", "FRICTION_RANGE", "ROLLING_MAX"]
+__all__ = [
+    "FRICTION_RANGE", "PATHS", "RANGE_TOL_DEG", "ROLLING_RANGE", "Calibration", "calibrate", "path_point",
+    "reachable_range", "twin_slope_deg", "twin_surface",
+]
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """Fitted contact parameters and how well the twin's slope matches (deg)."""
+    """Fitted contact parameters and how well the twin's free surface matches (deg)."""
 
     friction: float
     rolling: float
@@ -41,16 +52,21 @@ class Calibration:
     rpm: float
     evaluations: int
     history: tuple[tuple[float, float, float], ...]  # (friction, rolling, slope_deg) per evaluation
+    range_deg: tuple[float, float] = (math.nan, math.nan)  # reachable slopes at this rpm
+    twin_curvature: float = math.nan
+    target_curvature: float | None = None
+    path: str = "diagonal"
 
     def as_dict(self) -> dict:
         return {
             "friction": self.friction, "rolling": self.rolling, "twin_slope_deg": self.twin_slope_deg,
             "residual_deg": self.residual_deg, "target_slope_deg": self.target_slope_deg, "rpm": self.rpm,
-            "evaluations": self.evaluations,
+            "evaluations": self.evaluations, "range_deg": list(self.range_deg),
+            "twin_curvature": self.twin_curvature, "target_curvature": self.target_curvature, "path": self.path,
         }
 
 
-def twin_slope_deg(
+def twin_surface(
     friction: float,
     rolling: float,
     rpm: float,
@@ -59,103 +75,155 @@ def twin_slope_deg(
     recipe: Recipe = PAPER_RECIPE,
     seed: int = 0,
     case: str = "C",
-    spin_up_s: float = 4.0,
-    window_s: float = 6.0,
+    spin_up_s: float = 3.0,
+    window_s: float = 5.0,
     sample_s: float = 0.1,
     **sim_kwargs,
-) -> float:
-    """Mean free-surface slope (deg) of a fresh twin at ``rpm`` over ``window_s`` after ``spin_up_s``."""
+) -> tuple[float, float]:
+    """Mean free-surface slope (deg) and curvature of a fresh twin at ``rpm`` over ``window_s`` after ``spin_up_s``."""
     sim = DrumSim(drum, recipe, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling, **sim_kwargs)
     sim.advance(spin_up_s)
-    vals = []
+    slopes, curvs = [], []
     for _ in range(max(1, int(round(window_s / sample_s)))):
         sim.advance(sample_s)
-        vals.append(particle_slope_deg(sim.particles(), drum))
-    v = np.asarray(vals, dtype=float)
-    v = v[np.isfinite(v)]
-    return float(np.mean(v)) if v.size else float("nan")
+        fs = free_surface(sim.particles(), drum)
+        slopes.append(fs.slope_deg)
+        curvs.append(fs.curvature)
+    s = np.asarray(slopes, dtype=float)
+    c = np.asarray(curvs, dtype=float)
+    s, c = s[np.isfinite(s)], c[np.isfinite(c)]
+    return (float(np.mean(s)) if s.size else math.nan, float(np.mean(c)) if c.size else math.nan)
 
 
-def _path(u: float, rolling_ratio: float) -> tuple[float, float]:
-    """(friction, rolling) at path parameter u in [0, 2]."""
+def twin_slope_deg(friction: float, rolling: float, rpm: float, **kwargs) -> float:
+    """Mean free-surface slope (deg) of a fresh twin (``twin_surface``'s first number)."""
+    return twin_surface(friction, rolling, rpm, **kwargs)[0]
+
+
+def path_point(u: float, path: str = "diagonal") -> tuple[float, float]:
+    """(sliding, rolling friction) at ``u`` in [0, 1] along one of ``PATHS`` (u=0: least, u=1: most friction)."""
+    if path not in PATHS:
+        raise SimError(f"calibration path must be one of {', '.join(PATHS)} (got {path!r})")
+    u = min(max(float(u), 0.0), 1.0)
     lo, hi = FRICTION_RANGE
-    if u <= 1.0:
-        f = lo * (hi / lo) ** u  # geometric in friction
-        return f, rolling_ratio * f
-    r0 = rolling_ratio * hi
-    return hi, r0 + (u - 1.0) * (max(ROLLING_MAX, r0) - r0)
+    r_lo, r_hi = ROLLING_RANGE
+    if path == "diagonal":
+        us, ur = u, u
+    elif path == "sliding-first":
+        us, ur = min(2 * u, 1.0), max(2 * u - 1.0, 0.0)
+    else:
+        us, ur = max(2 * u - 1.0, 0.0), min(2 * u, 1.0)
+    return lo * (hi / lo) ** us, r_lo + ur * (r_hi - r_lo)
+
+
+def _check_target(target_slope_deg: float) -> float:
+    try:
+        target = float(target_slope_deg)
+    except (TypeError, ValueError):
+        raise SimError(f"target slope must be a number of degrees (got {target_slope_deg!r})") from None
+    if not math.isfinite(target) or not (0.0 < abs(target) < 90.0):
+        raise SimError(f"target slope must be between 0 and 90 degrees (got {target_slope_deg})")
+    return target
+
+
+def reachable_range(rpm: float, *, seed: int = 0, **kwargs) -> tuple[float, float]:
+    """(lowest, highest) free-surface slope (deg) the twin reaches at ``rpm`` within the search bounds."""
+    lo = twin_slope_deg(*path_point(0.0), rpm, seed=seed, **kwargs)
+    hi = twin_slope_deg(*path_point(1.0), rpm, seed=seed, **kwargs)
+    return lo, hi
 
 
 def calibrate(
     target_slope_deg: float,
     rpm: float,
     *,
+    target_curvature: float | None = None,
     drum: DrumSpec = PAPER_DRUM,
     recipe: Recipe = PAPER_RECIPE,
-    rolling_ratio: float | None = None,
     seed: int = 0,
-    spin_up_s: float = 4.0,
-    window_s: float = 6.0,
+    spin_up_s: float = 3.0,
+    window_s: float = 5.0,
     tol_deg: float = 0.4,
-    max_evals: int = 9,
+    max_evals: int = 8,
     progress: Callable[[int, int], None] | None = None,
     **sim_kwargs,
 ) -> Calibration:
-    """Fit friction (and rolling resistance) so the twin's slope at ``rpm`` is ``target_slope_deg``.
+    """Fit sliding and rolling friction so the twin's free surface at ``rpm`` matches the target.
 
-    ``rolling_ratio`` ties rolling resistance to friction on the first leg of the path
-    (default: the twin defaults' ratio). Returns the best evaluation seen; the residual
-    says how close it came (a target outside the reachable range ends at the nearest end).
+    ``max_evals`` is the budget per path (two corner runs, then the bracketing search).
+    A target outside the reachable range is a ``SimError`` naming the range.
     """
-    try:
-        target = float(target_slope_deg)
-    except (TypeError, ValueError):
-        raise SimError(f"target slope must be a number of degrees (got {target_slope_deg!r})") from None
-    if not math.isfinite(target) or not (0.0 < abs(target) < 80.0):
-        raise SimError(f"target slope must be between 0 and 80 degrees (got {target_slope_deg})")
+    target = _check_target(target_slope_deg)
     rpm = check_rpm(rpm, drum)
     if rpm == 0:
         raise SimError("calibration needs a turning drum (rpm > 0)")
+    if target_curvature is not None and not math.isfinite(float(target_curvature)):
+        raise SimError(f"target curvature must be a finite number (got {target_curvature})")
+    if not (math.isfinite(tol_deg) and tol_deg > 0):
+        raise SimError(f"tolerance must be > 0 deg (got {tol_deg})")
+    if max_evals < 2:
+        raise SimError(f"calibration needs at least 2 evaluations (got {max_evals})")
     sign = 1.0 if target > 0 else -1.0  # compare magnitudes; report with the target's sign
     target_mag = abs(target)
-    ratio = (DEFAULT_ROLLING / DEFAULT_FRICTION) if rolling_ratio is None else float(rolling_ratio)
-    if ratio < 0:
-        raise SimError(f"rolling_ratio must be >= 0 (got {ratio})")
+    paths = PATHS if target_curvature is not None else PATHS[:1]
+    total = max_evals + (len(paths) - 1) * (max_evals - 2)
     history: list[tuple[float, float, float]] = []
+    curv: dict[tuple[float, float], float] = {}
 
-    def slope_at(u: float) -> float:
-        f, r = _path(u, ratio)
-        s = abs(twin_slope_deg(f, r, abs(rpm), drum=drum, recipe=recipe, seed=seed, spin_up_s=spin_up_s,
-                                  window_s=window_s, **sim_kwargs))
+    def evaluate(f: float, r: float) -> float:
+        s, c = twin_surface(f, r, abs(rpm), drum=drum, recipe=recipe, seed=seed, spin_up_s=spin_up_s,
+                            window_s=window_s, **sim_kwargs)
+        s = abs(s) if math.isfinite(s) else math.nan
         history.append((f, r, s))
+        curv[(f, r)] = c
         if progress is not None:
-            progress(len(history), max_evals)
+            progress(len(history), total)
         return s
 
-    # bracket on [0, 1] (friction leg), extend to the rolling leg only if needed
-    lo_u, hi_u = 0.0, 1.0
-    s_lo, s_hi = slope_at(lo_u), slope_at(hi_u)
-    if s_hi < target_mag and max_evals > 2:
-        lo_u, s_lo = hi_u, s_hi
-        hi_u = 2.0
-        s_hi = slope_at(hi_u)
-    while len(history) < max_evals:
-        best = min(history, key=lambda h: abs(h[2] - target_mag))
-        if abs(best[2] - target_mag) <= tol_deg:
-            break
-        if not (s_lo < target_mag < s_hi):
-            break  # target out of reach (or non-monotone): keep the nearest end
-        # regula falsi, kept away from the ends so the bracket shrinks
-        w = (target_mag - s_lo) / (s_hi - s_lo)
-        w = min(max(w, 0.15), 0.85)
-        u = lo_u + w * (hi_u - lo_u)
-        s = slope_at(u)
-        if s < target_mag:
-            lo_u, s_lo = u, s
-        else:
-            hi_u, s_hi = u, s
-    f, r, s = min(history, key=lambda h: abs(h[2] - target_mag) if math.isfinite(h[2]) else math.inf)
+    s_lo = evaluate(*path_point(0.0))
+    s_hi = evaluate(*path_point(1.0))
+    if not (math.isfinite(s_lo) and math.isfinite(s_hi)):
+        raise SimError(f"the twin shows no free surface at {rpm:g} rpm: it cannot be calibrated by slope there")
+    lo_b, hi_b = min(s_lo, s_hi), max(s_lo, s_hi)
+    if not (lo_b - RANGE_TOL_DEG <= target_mag <= hi_b + RANGE_TOL_DEG):
+        raise SimError(
+            f"target slope {target_mag:.1f} deg is outside the twin's reachable range {lo_b:.1f}-{hi_b:.1f} deg "
+            f"at {abs(rpm):g} rpm (sliding friction {FRICTION_RANGE[0]:g}-{FRICTION_RANGE[1]:g}, "
+            f"rolling friction {ROLLING_RANGE[0]:g}-{ROLLING_RANGE[1]:g})"
+        )
+    candidates: list[tuple[str, tuple[float, float, float]]] = []
+    for path in paths:
+        start = len(history)
+        lo_u, hi_u, sl, sh = 0.0, 1.0, s_lo, s_hi
+        own: list[tuple[float, float, float]] = [history[0], history[1]]
+        while len(history) - start < max_evals - 2:
+            best = min(own, key=lambda h: abs(h[2] - target_mag))
+            if abs(best[2] - target_mag) <= tol_deg or not (sl < target_mag < sh):
+                break
+            w = min(max((target_mag - sl) / (sh - sl), 0.15), 0.85)  # regula falsi, kept off the ends
+            u = lo_u + w * (hi_u - lo_u)
+            s = evaluate(*path_point(u, path))
+            own.append(history[-1])
+            if not math.isfinite(s):
+                break
+            if s < target_mag:
+                lo_u, sl = u, s
+            else:
+                hi_u, sh = u, s
+        candidates.append((path, min(own, key=lambda h: abs(h[2] - target_mag))))
+
+    def score(c: tuple[str, tuple[float, float, float]]) -> float:
+        _, (f, r, s) = c
+        err = abs(s - target_mag)
+        if target_curvature is None:
+            return err
+        # slope within tolerance first; then the surface shape decides (1 deg ~ 0.01 curvature)
+        return max(err - tol_deg, 0.0) + 100.0 * abs(curv[(f, r)] - float(target_curvature))
+
+    path, (f, r, s) = min(candidates, key=score)
     return Calibration(
         friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s), residual_deg=float(sign * (s - target_mag)),
         target_slope_deg=target, rpm=rpm, evaluations=len(history), history=tuple(history),
+        range_deg=(float(lo_b), float(hi_b)), twin_curvature=float(curv[(f, r)]),
+        target_curvature=None if target_curvature is None else float(target_curvature), path=path,
     )

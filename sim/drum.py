@@ -15,11 +15,18 @@ Model (all contacts are pymunk/Chipmunk2D impulses):
 * **Sliding friction** ``friction`` (particle-particle, and particle-wall unless
   ``wall_friction`` is given) and **restitution** are set per contact pair
   (Chipmunk multiplies the two shapes' values, so each shape holds the square root).
-* **Rolling resistance** ``rolling``: each disk has a ``SimpleMotor`` to the drum
-  frame's angular velocity whose torque is capped at ``rolling * m * g * r`` -- a
-  Coulomb-like rolling friction torque, solved inside the contact solver.
-* **Time step**: ``dt_s`` up to 15 rpm, shrinking as ``15 / rpm`` above, so that
-  particles never move more than a fraction of a small radius per step.
+* **Rolling friction** ``rolling`` (coefficient mu_r): at every contact, after each
+  solver step, a torque ``mu_r * r_i * F_n`` on each disk opposing the contact's
+  relative rotation ``omega_i - omega_j`` (the drum's rate for a wall contact), with
+  ``F_n`` the contact's normal impulse / step. It is capped so that it cannot reverse
+  the relative rotation within a step: the "constant directional torque" model of
+  DEM codes (EDEM's rolling friction CDT; Ai et al. 2011, type A). No contact, no
+  torque: a disk in free flight keeps its spin.
+* **Time step**: one fixed internal step ``dt_s`` (chosen by the convergence study in
+  docs/validation.md), independent of how the caller slices time: ``advance(d)``
+  adds ``d`` to an accumulator and runs whole steps; the remainder (< one step) waits
+  for the next call. Contacts are stiff (``collision_slop``, ``collision_bias`` and
+  ``iterations`` set for small overlaps), walls never let a disk sink in.
 
 Initial states (paper Fig. 1): Case A large/small split left-right, Case B
 split top-bottom (large above), Case C random; placed by random sequential
@@ -40,25 +47,24 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+from sim.contacts import STAT_AIRBORNE, STAT_CONTACTS, STAT_OVERLAP_MAX, STAT_WALL_MAX, contact_pass
 from sim.errors import SimError
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 CASES = ("A", "B", "C")
 WALL_SEGMENTS = 72
-# 2D-effective contact parameters, tuned so the slice shows the paper's radial size
-# segregation at 5 rpm and its weakening towards cataracting (docs/validation.md).
-# The paper's 3D Hertz-Mindlin values (table 2: sliding 0.25, rolling 0.1,
-# restitution 0.5) are PAPER_CONTACT; in 2D they give a much weaker segregation.
-DEFAULT_FRICTION = 0.5  # particle-particle sliding friction
-DEFAULT_WALL_FRICTION = 0.8  # particle-wall: also stands for the end plates' grip a slice lacks
-DEFAULT_ROLLING = 0.0  # rolling resistance coefficient (torque cap rolling * m g r)
-DEFAULT_RESTITUTION = 0.05
+# The paper's Hertz-Mindlin parameters (tables 1-2, ball-ball = ball-vessel) are the defaults.
 PAPER_CONTACT = {"friction": 0.25, "rolling": 0.10, "restitution": 0.5}
+DEFAULT_FRICTION = PAPER_CONTACT["friction"]  # particle-particle sliding friction
+DEFAULT_WALL_FRICTION: float | None = None  # particle-wall: None = same as particle-particle
+DEFAULT_ROLLING = PAPER_CONTACT["rolling"]  # rolling friction coefficient mu_r (torque mu_r r F_n)
+DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
-DEFAULT_DT_S = 0.01
-DEFAULT_ITERATIONS = 6
-_RPM_FULL_DT = 15.0  # below this rpm the full dt_s is used
-_MIN_STEP_S = 1e-5
+DEFAULT_DT_S = 0.001  # converged internal step (docs/validation.md, convergence study)
+DEFAULT_ITERATIONS = 10
+DEFAULT_BIAS = 1e-4  # fraction of an overlap left after 1 s of position correction
+SLOP_R = 0.002  # allowed overlap before correction, in small radii
+_OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
 _HASH_ABOVE = 500
 _SHRINK = 0.8  # placement size before inflation
 
@@ -74,6 +80,25 @@ class SimParams:
     accel_rpm_s: float = DEFAULT_ACCEL_RPM_S
     dt_s: float = DEFAULT_DT_S
     iterations: int = DEFAULT_ITERATIONS
+    bias: float = DEFAULT_BIAS
+
+
+@dataclass(frozen=True)
+class ContactStats:
+    """Contact quality since the last ``reset_stats()``: overlaps and wall penetration.
+
+    ``overlap_p99_r``: 99th percentile of disk-disk overlap over all contacts of all
+    steps, in small radii; ``overlap_max_r`` the largest; ``wall_max_mm`` the deepest
+    any disk got into the wall; ``airborne`` the fraction of disks without a contact
+    in the last step.
+    """
+
+    steps: int
+    contacts: int
+    overlap_p99_r: float
+    overlap_max_r: float
+    wall_max_mm: float
+    airborne: float
 
 
 @dataclass(frozen=True)
@@ -144,12 +169,14 @@ def _check_params(p: SimParams) -> None:
         raise SimError(f"restitution must be in [0, 1] (got {p.restitution})")
     if p.wall_friction is not None and not (0.0 <= p.wall_friction <= 5.0):
         raise SimError(f"wall friction must be in [0, 5] (got {p.wall_friction})")
-    if not (0.0 < p.dt_s <= 0.05):
-        raise SimError(f"time step must be in (0, 0.05] s (got {p.dt_s})")
+    if not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s):
+        raise SimError(f"time step must be in [0.01, 20] ms (got {p.dt_s * 1e3:g} ms)")
+    if not (0.0 < p.bias < 1.0):
+        raise SimError(f"collision bias must be in (0, 1) (got {p.bias})")
     if p.accel_rpm_s <= 0:
         raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
-    if p.iterations < 1:
-        raise SimError(f"solver iterations must be >= 1 (got {p.iterations})")
+    if not (1 <= p.iterations <= 200):
+        raise SimError(f"solver iterations must be in [1, 200] (got {p.iterations})")
 
 
 def _place(classes: list[DiskClass], case: str, radius_m: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -206,13 +233,15 @@ class DrumSim:
         accel_rpm_s: float = DEFAULT_ACCEL_RPM_S,
         dt_s: float = DEFAULT_DT_S,
         iterations: int = DEFAULT_ITERATIONS,
+        bias: float = DEFAULT_BIAS,
         settle_s: float = 1.0,
     ) -> None:
         case = str(case).upper()
         if case not in CASES:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
-        params = SimParams(float(friction), float(rolling), float(restitution), wall_friction,
-                           float(accel_rpm_s), float(dt_s), int(iterations))
+        params = SimParams(float(friction), float(rolling), float(restitution),
+                           None if wall_friction is None else float(wall_friction),
+                           float(accel_rpm_s), float(dt_s), int(iterations), float(bias))
         _check_params(params)
         rpm = check_rpm(rpm, drum)
         classes = tuple(slice_2d(recipe, drum))
@@ -228,6 +257,8 @@ class DrumSim:
         self._settle(0.0 if case == "B" else settle_s)
         self.t_s = 0.0
         self.n_steps = 0
+        self._acc_s = 0.0
+        self.reset_stats()
         self._rpm_target = rpm
         self._set_rpm_actual(rpm)
 
@@ -241,21 +272,26 @@ class DrumSim:
         self.params = st.params
         self.t_s = st.t_s
         self.n_steps = st.n_steps
+        self._acc_s = float(st.extra.get("acc_s", 0.0))
         space = pymunk.Space()
         space.gravity = (0.0, -G_M_S2)
-        space.iterations = st.params.iterations
         r_max = max(c.radius_m for c in st.classes)
         r_min = min(c.radius_m for c in st.classes)
-        space.collision_slop = 0.02 * r_min
+        self._r_min = r_min
+        space.collision_slop = SLOP_R * r_min
+        # only this step's contacts stay cached, so the batch arbiter read sees live contacts only
+        space.collision_persistence = 1
         space.sleep_time_threshold = float("inf")
         self._space = space
-        wall = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        wall.angle = st.drum_angle_rad
-        space.add(wall)
+        # The drum is round, so its turning is all in the surface velocity of a static wall:
+        # static shapes are never re-indexed, and contacts see the same relative velocity.
+        wall = space.static_body
         self._wall = wall
+        self._drum_angle_rad = float(st.drum_angle_rad)
         seg_r = 2.0 * r_max
         big_r = (st.drum.radius_m + seg_r) / math.cos(math.pi / WALL_SEGMENTS)
         self._wall_shapes = []
+        self._wall_tangent = []
         for i in range(WALL_SEGMENTS):
             a0 = 2 * math.pi * i / WALL_SEGMENTS
             a1 = 2 * math.pi * (i + 1) / WALL_SEGMENTS
@@ -264,12 +300,12 @@ class DrumSim:
             )
             space.add(seg)
             self._wall_shapes.append(seg)
+            am = 0.5 * (a0 + a1)
+            self._wall_tangent.append((-math.sin(am), math.cos(am)))  # counter-clockwise
         self._cls = np.asarray(st.cls, dtype=np.int64)
         self._r = np.array([st.classes[k].radius_m for k in self._cls])
         self._bodies: list[pymunk.Body] = []
         self._shapes: list[pymunk.Circle] = []
-        self._motors: list[pymunk.SimpleMotor] = []
-        self._motors_in_space = False
         slab = 4.0 / 3.0 * r_max
         for i, k in enumerate(self._cls):
             c = st.classes[k]
@@ -280,12 +316,11 @@ class DrumSim:
             b.angle = float(st.angle_rad[i])
             b.angular_velocity = float(st.omega_rad_s[i])
             s = pymunk.Circle(b, c.radius_m * radius_scale)
-            mo = pymunk.SimpleMotor(b, space.static_body, 0.0)
-            space.add(b, s)  # the rolling-resistance motors join the space in _apply_params
+            space.add(b, s)
             self._bodies.append(b)
             self._shapes.append(s)
-            self._motors.append(mo)
         self._masses = np.array([st.classes[k].mass_kg(slab) for k in self._cls])
+        self._inertia = 0.4 * self._masses * self._r**2
         if self._cls.size >= _HASH_ABOVE:  # large beds: the spatial hash beats the bounding-box tree
             space.use_spatial_hash(2.5 * r_max, 10 * self._cls.size)
         self._rpm_target = st.rpm_target
@@ -293,9 +328,16 @@ class DrumSim:
         self._apply_params()
         self._set_rpm_actual(st.rpm_actual)
         self._buf = pymunk.batch.Buffer()
-        ids = np.array([b.id for b in self._bodies], dtype=np.uintp)
+        self._abuf = pymunk.batch.Buffer()
+        self._wbuf = pymunk.batch.Buffer()
+        ids = np.array([b.id for b in self._bodies], dtype=np.uint64)
         self._ids_order = np.argsort(ids)
         self._ids_sorted = ids[self._ids_order]
+        self._inv_i = 1.0 / self._inertia
+        self._slot = self._space_slots()
+        self._w_dummy = np.zeros(self._n_space_bodies)
+        if not hasattr(self, "_hist"):
+            self.reset_stats()
 
     def _apply_params(self) -> None:
         p = self.params
@@ -308,18 +350,8 @@ class DrumSim:
         for s in self._wall_shapes:
             s.friction = (mu_w / mu_p) if mu_p > 0 else 0.0
             s.elasticity = e
-        torque_cap = p.rolling * self._masses * G_M_S2 * self._r
-        for mo, cap in zip(self._motors, torque_cap):
-            mo.max_force = float(cap)
-        # A motor capped at zero torque applies no impulse: leave it out of the solver (~10% faster).
-        want = p.rolling > 0
-        have = self._motors_in_space
-        if want and not have:
-            self._space.add(*self._motors)
-        elif have and not want:
-            self._space.remove(*self._motors)
-        self._motors_in_space = want
         self._space.iterations = p.iterations
+        self._space.collision_bias = p.bias
 
     def _settle(self, settle_s: float) -> None:
         """Inflate the disks to full size (no gravity), then let the bed settle with the drum at rest."""
@@ -354,6 +386,7 @@ class DrumSim:
 
     @property
     def critical_rpm(self) -> float:
+        """Critical speed of this drum (rpm), ``DrumSpec.critical_rpm``."""
         return self.drum.critical_rpm
 
     def set_rpm(self, rpm: float) -> None:
@@ -361,7 +394,7 @@ class DrumSim:
         self._rpm_target = check_rpm(rpm, self.drum)
 
     def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling resistance) at run time."""
+        """Change sliding friction (and rolling friction) at run time."""
         params = replace(self.params, friction=float(mu), rolling=self.params.rolling if rolling is None else float(rolling))
         _check_params(params)
         self.params = params
@@ -371,26 +404,38 @@ class DrumSim:
         if rpm == self._rpm_actual:
             return
         self._rpm_actual = float(rpm)
-        w = rpm_to_rad_s(rpm)
-        self._wall.angular_velocity = w
-        for mo in self._motors:
-            mo.rate = w
+        self._omega_wall = rpm_to_rad_s(rpm)
+        v = self._omega_wall * self.drum.radius_m
+        for s, (tx, ty) in zip(self._wall_shapes, self._wall_tangent, strict=True):
+            s.surface_velocity = (v * tx, v * ty)  # the drum's tangential velocity at this segment
 
     def substep_s(self) -> float:
-        """Largest internal step (s) at the current speed."""
-        rpm = max(abs(self._rpm_actual), abs(self._rpm_target))
-        return self.params.dt_s * min(1.0, _RPM_FULL_DT / max(rpm, 1e-9))
+        """The fixed internal step (s)."""
+        return self.params.dt_s
 
     # ---------------------------------------------------------------- time
     def step(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` seconds (split into equal substeps no longer than ``substep_s()``)."""
+        """Advance by ``dt_s`` seconds (same as ``advance``; kept for callers of the old API)."""
         if not (dt_s > 0) or not math.isfinite(dt_s):
             raise SimError(f"step must be a positive number of seconds (got {dt_s})")
-        if dt_s < _MIN_STEP_S:  # the contact solver divides by dt: never take a sliver of a step
-            self.t_s += dt_s
+        self.advance(dt_s)
+
+    def advance(self, duration_s: float) -> None:
+        """Advance the clock by ``duration_s`` s, running every whole fixed step that fits.
+
+        The physics runs in steps of exactly ``dt_s``; what is left over (less than a
+        step) is carried to the next call, so any way of slicing the same time runs
+        the same steps.
+        """
+        if duration_s < 0 or not math.isfinite(duration_s):
+            raise SimError(f"duration must be >= 0 s (got {duration_s})")
+        h = self.params.dt_s
+        self._acc_s += duration_s
+        n = int(math.floor(self._acc_s / h + 1e-9))
+        self.t_s += duration_s
+        if n <= 0:
             return
-        n = max(1, math.ceil(dt_s / self.substep_s() - 1e-9))
-        h = dt_s / n
+        self._acc_s = max(0.0, self._acc_s - n * h)
         accel = self.params.accel_rpm_s * h
         space = self._space
         for _ in range(n):
@@ -398,20 +443,85 @@ class DrumSim:
                 diff = self._rpm_target - self._rpm_actual
                 self._set_rpm_actual(self._rpm_target if abs(diff) <= accel else self._rpm_actual + math.copysign(accel, diff))
             space.step(h)
-        self.t_s += dt_s
+            self._drum_angle_rad += self._omega_wall * h
+            self._after_step()
         self.n_steps += n
 
-    def advance(self, duration_s: float) -> None:
-        """Advance by ``duration_s`` seconds in equal steps no longer than ``dt_s``."""
-        if duration_s < 0 or not math.isfinite(duration_s):
-            raise SimError(f"duration must be >= 0 s (got {duration_s})")
-        n = math.ceil(duration_s / self.params.dt_s - 1e-6)
-        if n <= 0 or duration_s < _MIN_STEP_S:
-            self.t_s += duration_s
-            return
-        h = duration_s / n
-        for _ in range(n):
-            self.step(h)
+    # ------------------------------------------------- contacts: rolling friction and statistics
+    def _index(self, ids: np.ndarray) -> np.ndarray:
+        """Insertion index of each body id; -1 for the wall (or anything else)."""
+        pos = np.minimum(np.searchsorted(self._ids_sorted, ids), self._ids_sorted.size - 1)
+        return np.where(self._ids_sorted[pos] == ids, self._ids_order[pos], -1)
+
+    def _space_slots(self) -> np.ndarray:
+        """Position of each disk in the space's body iteration order (stable: bodies never leave)."""
+        buf = self._wbuf
+        buf.clear()
+        pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, buf)
+        order = self._index(np.frombuffer(buf.int_buf(), dtype=np.uint64))
+        slot = np.empty(self._r.size, dtype=np.int64)
+        slot[order[order >= 0]] = np.nonzero(order >= 0)[0]
+        self._n_space_bodies = order.size
+        return slot
+
+    def _read_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """This step's contacts: (m, 2) body ids and (m, 5) impulse x, y, normal x, y, distance."""
+        buf = self._abuf
+        buf.clear()
+        f = pymunk.batch.ArbiterFields
+        pymunk.batch.get_space_arbiters(
+            self._space, f.BODY_A_ID | f.BODY_B_ID | f.TOTAL_IMPULSE | f.NORMAL | f.DISTANCE_1, buf
+        )
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uint64).reshape(-1, 2)
+        fl = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 5)
+        return ids, fl
+
+    def _after_step(self) -> None:
+        """Rolling friction and contact statistics from the step just taken (``sim.contacts``)."""
+        ids, fl = self._read_contacts()
+        mu_r = self.params.rolling
+        if mu_r > 0:
+            buf = self._wbuf
+            buf.clear()
+            pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.ANGULAR_VELOCITY, buf)
+            w_space = np.frombuffer(buf.float_buf(), dtype=np.float64)  # writable view of the batch buffer
+            if w_space.size != self._n_space_bodies:
+                self._slot = self._space_slots()
+                return self._after_step()
+        else:
+            w_space = self._w_dummy
+        self._stat_steps += 1
+        contact_pass(ids, fl, self._ids_sorted, self._ids_order, self._r, self._inv_i, self._slot, w_space,
+                     self._omega_wall, mu_r, self._r_min, self._hist, self._acc)
+        if mu_r > 0:  # the spins were changed in place: write them back
+            pymunk.batch.set_space_bodies(self._space, pymunk.batch.BodyFields.ANGULAR_VELOCITY, self._wbuf)
+
+    def reset_stats(self) -> None:
+        """Start counting contact statistics (``stats()``) afresh."""
+        self._hist = np.zeros(_OVERLAP_BINS + 1, dtype=np.int64)
+        self._acc = np.zeros(4)
+        self._acc[STAT_AIRBORNE] = np.nan
+        self._stat_steps = 0
+
+    def stats(self) -> ContactStats:
+        """Overlap percentiles, wall penetration and airborne fraction since ``reset_stats()``."""
+        total = int(self._hist.sum())
+        acc = self._acc
+        if total:
+            k = int(np.searchsorted(np.cumsum(self._hist), 0.99 * total))
+            p99 = min((k + 1) * 2.0 / _OVERLAP_BINS, float(acc[STAT_OVERLAP_MAX]))
+        else:
+            p99 = 0.0
+        return ContactStats(self._stat_steps, int(acc[STAT_CONTACTS]), float(p99), float(acc[STAT_OVERLAP_MAX]),
+                            1e3 * float(acc[STAT_WALL_MAX]), float(acc[STAT_AIRBORNE]))
+
+    def contact_counts(self) -> np.ndarray:
+        """Number of contacts (with disks or the wall) of each disk in the last step."""
+        ids, _ = self._read_contacts()
+        a = self._index(ids[:, 0])
+        b = self._index(ids[:, 1])
+        n = self._r.size
+        return (np.bincount(a[a >= 0], minlength=n) + np.bincount(b[b >= 0], minlength=n)).astype(np.int64)
 
     # ----------------------------------------------------------------- read
     def _body_arrays(self) -> np.ndarray:
@@ -426,7 +536,7 @@ class DrumSim:
             | pymunk.batch.BodyFields.ANGULAR_VELOCITY
         )
         pymunk.batch.get_space_bodies(self._space, fields, buf)
-        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uint64)
         arr = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)
         # map the space's body order to insertion order by body id
         pos = np.searchsorted(self._ids_sorted, ids)
@@ -464,8 +574,9 @@ class DrumSim:
         return SimState(
             drum=self.drum, recipe=self.recipe, classes=self.classes, case=self.case, seed=self.seed,
             params=self.params, t_s=self.t_s, rpm_target=self._rpm_target, rpm_actual=self._rpm_actual,
-            drum_angle_rad=float(self._wall.angle), cls=self._cls.copy(), pos_m=a[:, 0:2].copy(),
+            drum_angle_rad=self._drum_angle_rad, cls=self._cls.copy(), pos_m=a[:, 0:2].copy(),
             vel_m_s=a[:, 3:5].copy(), angle_rad=a[:, 2].copy(), omega_rad_s=a[:, 5].copy(), n_steps=self.n_steps,
+            extra={"acc_s": self._acc_s},
         )
 
     def restore(self, state: SimState) -> None:
@@ -482,6 +593,8 @@ class DrumSim:
 
 __all__ = [
     "CASES",
+    "ContactStats",
+    "DEFAULT_DT_S",
     "DEFAULT_FRICTION",
     "DEFAULT_ROLLING",
     "DrumSim",

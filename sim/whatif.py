@@ -6,8 +6,10 @@ curve, the plateau MI and the regime. ``run_study`` runs many: in this process
 (``workers=1``), on a local process pool (default: all cores), or on an existing Dask
 cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within seconds).
 
-Regime by Froude number ``Fr = omega^2 R / g`` (Mellmann 2001): slumping < 1e-4 <=
-rolling < 1e-2 <= cascading < 0.1 <= cataracting < 1 <= centrifuging.
+Regime from the flow (``flow_regime``): the fraction of disks without any contact
+(airborne) and the S-shape of the free surface decide rolling / cascading /
+cataracting; the Froude number ``Fr = omega^2 R / g`` is reported beside it (and
+``froude_regime`` keeps Mellmann's (2001) Froude thresholds for comparison).
 """
 
 from __future__ import annotations
@@ -24,12 +26,12 @@ import numpy as np
 
 from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
 from sim.errors import SimError
-from sim.measure import particle_mi, particle_slope_deg
+from sim.measure import free_surface, particle_mi
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
 
 __all__ = [
-    "WhatIfJob", "WhatIfResult", "froude", "regime", "run_job", "run_study", "summarize", "plateau",
-    "DEFAULT_CONNECT_TIMEOUT_S", "make_pool",
+    "WhatIfJob", "WhatIfResult", "froude", "froude_regime", "flow_regime", "regime", "run_job", "run_study",
+    "summarize", "plateau", "DEFAULT_CONNECT_TIMEOUT_S", "make_pool", "AIRBORNE_CATARACTING", "CURVATURE_CASCADING",
 ]
 
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
@@ -42,13 +44,36 @@ def froude(rpm: float, drum: DrumSpec = PAPER_DRUM) -> float:
     return w * w * drum.radius_m / G_M_S2
 
 
-def regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
-    """Bed regime by Froude number: slumping, rolling, cascading, cataracting or centrifuging."""
+def froude_regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
+    """Bed regime by Froude number alone (Mellmann 2001): slumping ... centrifuging."""
     fr = froude(rpm, drum)
     for limit, name in _REGIMES:
         if fr < limit:
             return name
     return "centrifuging"
+
+
+# Flow-based regime thresholds (docs/validation.md, section "regime from the flow")
+AIRBORNE_CATARACTING = 0.05  # mean fraction of disks in free flight
+CURVATURE_CASCADING = 0.03  # mean S-shape of the free surface (sim.measure.FreeSurface.curvature)
+
+
+def flow_regime(airborne: float, curvature: float) -> str:
+    """Regime from the flow: ``cataracting`` if at least ``AIRBORNE_CATARACTING`` of the disks fly,
+    else ``cascading`` if the free surface is S-shaped (curvature >= ``CURVATURE_CASCADING``),
+    else ``rolling`` (a flat surface). ``unknown`` without data."""
+    if not math.isfinite(airborne):
+        return "unknown"
+    if airborne >= AIRBORNE_CATARACTING:
+        return "cataracting"
+    if math.isfinite(curvature) and curvature >= CURVATURE_CASCADING:
+        return "cascading"
+    return "rolling"
+
+
+def regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
+    """Froude-number regime (kept for callers that have no flow data; prefer ``flow_regime``)."""
+    return froude_regime(rpm, drum)
 
 
 @dataclass(frozen=True)
@@ -81,18 +106,30 @@ class WhatIfResult:
     plateau_mi: float
     plateau_mi_sd: float
     t_plateau_s: float
-    regime: str
+    regime: str  # from the flow (flow_regime), over the last third of the run
     froude: float
     wall_s: float
+    airborne: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fraction of disks without contact
+    curvature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # free-surface S-shape
+    froude_regime: str = ""
 
     def summary(self) -> dict:
         j = self.job
         return {
             "rpm": j.rpm, "case": j.case, "seed": j.seed, "fill": j.fill, "tag": j.tag,
             "plateau_mi": self.plateau_mi, "plateau_mi_sd": self.plateau_mi_sd, "t_plateau_s": self.t_plateau_s,
-            "regime": self.regime, "froude": self.froude, "mi_start": float(self.mi[0]) if self.mi.size else math.nan,
-            "wall_s": self.wall_s,
+            "regime": self.regime, "froude": self.froude, "froude_regime": self.froude_regime,
+            "airborne": _tail_mean(self.airborne), "curvature": _tail_mean(self.curvature),
+            "mi_start": float(self.mi[0]) if self.mi.size else math.nan, "wall_s": self.wall_s,
         }
+
+
+def _tail_mean(a: np.ndarray, tail: float = 1.0 / 3.0) -> float:
+    """Mean of the finite values in the last ``tail`` of ``a`` (NaN if none)."""
+    a = np.asarray(a, float)
+    a = a[-max(1, int(round(tail * a.size))):] if a.size else a
+    a = a[np.isfinite(a)]
+    return float(np.mean(a)) if a.size else math.nan
 
 
 def plateau(t_s: np.ndarray, mi: np.ndarray, tail: float = 1.0 / 3.0) -> tuple[float, float, float]:
@@ -133,15 +170,18 @@ def run_job(job: WhatIfJob) -> WhatIfResult:
         drum = job.drum
     t_start = sim.t_s
     n = max(1, int(round(job.duration_s / job.sample_s)))
-    ts, mis, sigs, slopes, rpms = [], [], [], [], []
+    ts, mis, sigs, slopes, rpms, air, curv = [], [], [], [], [], [], []
 
     def sample() -> None:
         p = sim.particles()
         m = particle_mi(p, drum)
+        fs = free_surface(p, drum)
         ts.append(sim.t_s - t_start)
         mis.append(m.mi)
         sigs.append(m.mi_sigmoid)
-        slopes.append(particle_slope_deg(p, drum))
+        slopes.append(fs.slope_deg)
+        curv.append(fs.curvature)
+        air.append(sim.stats().airborne)
         rpms.append(sim.rpm_actual)
 
     sample()
@@ -150,10 +190,13 @@ def run_job(job: WhatIfJob) -> WhatIfResult:
         sample()
     t_arr, mi_arr = np.array(ts), np.array(mis)
     p, sd, tp = plateau(t_arr, mi_arr)
+    air_arr, curv_arr = np.array(air), np.array(curv)
     return WhatIfResult(
         job=job, t_s=t_arr, mi=mi_arr, mi_sigmoid=np.array(sigs), slope_deg=np.array(slopes),
         rpm_actual=np.array(rpms), plateau_mi=p, plateau_mi_sd=sd, t_plateau_s=tp,
-        regime=regime(job.rpm, drum), froude=froude(job.rpm, drum), wall_s=time.perf_counter() - t0,
+        regime=flow_regime(_tail_mean(air_arr), _tail_mean(curv_arr)), froude=froude(job.rpm, drum),
+        wall_s=time.perf_counter() - t0, airborne=air_arr, curvature=curv_arr,
+        froude_regime=froude_regime(job.rpm, drum),
     )
 
 
@@ -280,9 +323,13 @@ def summarize(results: Sequence[WhatIfResult]) -> list[dict]:
         p = np.array([r.plateau_mi for r in rs])
         within = np.array([r.plateau_mi_sd for r in rs])
         sd = float(np.sqrt(np.nanmean(within**2) + (np.nanvar(p) if p.size > 1 else 0.0)))
+        regimes = [r.regime for r in rs]
         out.append({
             "rpm": rpm, "plateau_mi": float(np.nanmean(p)), "plateau_mi_sd": sd,
-            "t_plateau_s": float(np.nanmean([r.t_plateau_s for r in rs])), "regime": rs[0].regime,
-            "froude": rs[0].froude, "runs": len(rs),
+            "plateau_mi_sem": float(np.nanstd(p, ddof=1) / math.sqrt(p.size)) if p.size > 1 else math.nan,
+            "t_plateau_s": float(np.nanmean([r.t_plateau_s for r in rs])),
+            "regime": max(set(regimes), key=regimes.count), "froude": rs[0].froude,
+            "froude_regime": rs[0].froude_regime, "airborne": float(np.nanmean([_tail_mean(r.airborne) for r in rs])),
+            "curvature": float(np.nanmean([_tail_mean(r.curvature) for r in rs])), "runs": len(rs),
         })
     return out

@@ -6,6 +6,12 @@ once, so ``kill -9`` of the process loses nothing that was logged; ``fsync`` (fo
 power cut) runs at most once per ``fsync_interval_s``, so a crash of the machine
 loses at most the last second. The metadata file is replaced atomically
 (write to a temporary file, then ``os.replace``).
+
+A run log never overwrites another run: ``RunLog`` claims its directory by creating
+``frames.csv`` exclusively (``O_EXCL``) and refuses a directory that already holds
+anything (``TwinError``: one line, exit 2). ``default_run_dir`` names a fresh directory
+(timestamp, pid and a random suffix) and ``make_run_dir`` creates it with an exclusive
+``mkdir``, so two runs started in the same second never collide.
 """
 
 from __future__ import annotations
@@ -16,12 +22,15 @@ import io
 import json
 import math
 import os
+import secrets
 import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
 from typing import Any
+
+from twin.errors import TwinError
 
 FRAME_COLUMNS: tuple[str, ...] = (
     "t_s",  # run time (demo clock, scaled by --speed), s
@@ -106,8 +115,39 @@ class RunLogPaths:
         return cls(d, d / FRAMES_FILE, d / EVENTS_FILE, d / METADATA_FILE)
 
 
+def default_run_dir(root: Path | str = "runs", now_s: float | None = None) -> Path:
+    """A fresh run directory name under ``root``: ``YYYYmmdd-HHMMSS-<pid>-<random>``
+    (not created; :func:`make_run_dir` creates it exclusively)."""
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now_s))
+    return Path(root) / f"{stamp}-{os.getpid()}-{secrets.token_hex(3)}"
+
+
+def make_run_dir(root: Path | str = "runs") -> Path:
+    """Create and return a new, empty run directory under ``root`` (exclusive ``mkdir``:
+    never one another run uses, even for runs started in the same second)."""
+    Path(root).mkdir(parents=True, exist_ok=True)
+    for _ in range(100):
+        d = default_run_dir(root)
+        try:
+            d.mkdir()
+        except FileExistsError:
+            continue
+        return d
+    raise TwinError(f"cannot create a fresh run directory under {root}")
+
+
+def _claim(directory: Path) -> None:
+    """Make ``directory`` (parents too) unless it exists; refuse one that holds anything."""
+    if directory.exists() and not directory.is_dir():
+        raise TwinError(f"--log {directory} is a file, not a directory")
+    directory.mkdir(parents=True, exist_ok=True)
+    if any(directory.iterdir()):
+        raise TwinError(f"--log {directory} already holds files (a previous run?): choose a new or empty directory")
+
+
 class RunLog:
-    """Append-only, thread-safe writer of one run's log directory.
+    """Append-only, thread-safe writer of one run's log directory (new or empty: an
+    existing run is never overwritten, ``TwinError`` instead).
 
     ``frame(row)`` takes a mapping with (a subset of) ``FRAME_COLUMNS``;
     ``event(kind, t_s, **fields)`` one JSON line; ``set_metadata(**fields)`` merges
@@ -123,12 +163,15 @@ class RunLog:
         fsync_interval_s: float = 1.0,
     ) -> None:
         self.paths = RunLogPaths.of(directory)
-        self.paths.directory.mkdir(parents=True, exist_ok=True)
+        _claim(self.paths.directory)
         self.columns = tuple(columns)
         self.fsync_interval_s = float(fsync_interval_s)
         self._lock = threading.Lock()
-        self._frames = open(self.paths.frames, "w", encoding="utf-8", newline="")
-        self._events = open(self.paths.events, "w", encoding="utf-8")
+        try:  # exclusive: of two runs racing for one directory, exactly one gets it
+            self._frames = open(self.paths.frames, "x", encoding="utf-8", newline="")
+        except FileExistsError:
+            raise TwinError(f"--log {self.paths.directory} is being written by another run") from None
+        self._events = open(self.paths.events, "x", encoding="utf-8")
         self._metadata: dict[str, Any] = {}
         self._last_sync = time.monotonic()
         self._closed = False

@@ -11,13 +11,49 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from sim.drum import Particles
+
+@dataclass(frozen=True)
+class FrameRow:
+    """One processed camera frame: the run log's CSV row and the plots' point.
+
+    Its fields, in order, are the CSV columns (``FRAME_ROW_COLUMNS``, with ``wall_s``
+    that the run log fills in); :data:`SERIES` are the plotted ones. Times in run seconds.
+    """
+
+    t_s: float
+    frame: int
+    mi: float
+    mi_sigmoid: float
+    mi_linear: float
+    d_px: float
+    dsigma_px: float
+    concentration: float
+    slope_deg: float
+    valid: bool
+    trend_mi: float
+    trend_lo95: float
+    trend_hi95: float
+    trend_rate: float
+    ma_mi: float  # the paper's 150-sample moving average
+    twin_mi: float | None
+    twin_slope_deg: float | None
+    rpm_setpoint: float
+    rpm_actual: float
+    mode: str
+    flags: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+FRAME_ROW_COLUMNS: tuple[str, ...] = ("t_s", "wall_s") + tuple(f.name for f in fields(FrameRow))[1:]
 
 # Plot series (x is run time ``t_s``); each is a ring buffer of ``HISTORY_LEN`` points.
 SERIES: tuple[str, ...] = (

@@ -1,20 +1,39 @@
-"""Colour classes: named sets of HSV boxes, and the one pixel classifier.
+"""Colour classes: a learned colour model (CIELAB Gaussians) or named sets of HSV boxes.
 
-HSV uses OpenCV's 8-bit scale: H in 0..179 (degrees / 2), S and V in 0..255.
-A class is the union of its boxes; red wraps around hue 0, so it is two boxes.
-Classification is exclusive: a pixel matching several classes goes to the first.
+Two forms, one per class set (not mixed):
+
+- learned (``classes suggest``): each class is a small mixture of Gaussians in CIELAB
+  (OpenCV float scale: L 0..100, a and b about -128..127) with a reject distance
+  ``max_distance`` (Mahalanobis, in sigmas); ``reject=True`` classes are background,
+  rim, shadow or glare colours that are never counted. A pixel goes to the component
+  with the highest likelihood; it counts for that component's class when the class is
+  not a reject class and the pixel lies within its ``max_distance``. Otherwise it is
+  class 0 (no class).
+- HSV boxes (hand-written configs): OpenCV's 8-bit scale, H in 0..179 (degrees / 2),
+  S and V in 0..255. A class is the union of its boxes; red wraps around hue 0, so it
+  is two boxes. Where boxes of two classes overlap the first class wins (the config
+  loader warns, see :func:`overlapping_classes`).
+
+Both forms are baked into the same exact BGR lookup table (``vision.moments``).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from vision.errors import VisionError
 
-__all__ = ["HSVRange", "ColourClass", "DEFAULT_CLASSES", "Classifier", "classify", "MAX_RANGES"]
+__all__ = [
+    "HSVRange", "LabComponent", "ColourClass", "DEFAULT_CLASSES", "Classifier", "classify", "MAX_RANGES",
+    "counted_classes", "is_learned", "overlapping_classes", "check_class_set", "class_lut", "lut_labels",
+    "bgr_to_lab",
+]
 
 HSVRange = tuple[tuple[int, int, int], tuple[int, int, int]]
 """``((h_lo, s_lo, v_lo), (h_hi, s_hi, v_hi))``, inclusive, OpenCV 8-bit HSV scale."""
@@ -26,35 +45,108 @@ _CHANNEL_MAX = (179, 255, 255)
 _CHANNEL_NAME = ("H", "S", "V")
 
 
+def _finite(where: str, key: str, values, n: int) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise VisionError(f"{where}: {key} must be {n} numbers, got {values!r}") from None
+    if len(out) != n or any(isinstance(v, bool) for v in values):
+        raise VisionError(f"{where}: {key} must be {n} numbers, got {values!r}")
+    if not all(math.isfinite(v) for v in out):
+        raise VisionError(f"{where}: {key} must be finite numbers, got {values!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class LabComponent:
+    """One Gaussian of a learned colour class in CIELAB (OpenCV float scale: L 0..100).
+
+    ``mean_lab`` = (L, a, b); ``cov`` = upper triangle (LL, La, Lb, aa, ab, bb) of the
+    covariance, positive definite; ``weight`` > 0 = its share in the fitted mixture.
+    """
+
+    mean_lab: tuple[float, float, float]
+    cov: tuple[float, float, float, float, float, float]
+    weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mean_lab", _finite("Lab component", "lab_mean", self.mean_lab, 3))
+        cov = _finite("Lab component", "lab_cov", self.cov, 6)
+        object.__setattr__(self, "cov", cov)
+        w = float(self.weight)
+        if not (math.isfinite(w) and w > 0):
+            raise VisionError(f"Lab component: weight must be a finite number > 0, got {self.weight!r}")
+        object.__setattr__(self, "weight", w)
+        if not np.all(np.linalg.eigvalsh(self.matrix()) > 1e-9):
+            raise VisionError(f"Lab component: lab_cov {cov} is not positive definite")
+
+    def matrix(self) -> np.ndarray:
+        """The 3x3 covariance matrix."""
+        ll, la, lb, aa, ab, bb = self.cov
+        return np.array([[ll, la, lb], [la, aa, ab], [lb, ab, bb]], np.float64)
+
+
 @dataclass(frozen=True)
 class ColourClass:
-    """A named particle colour: one or more inclusive HSV boxes and a display colour (BGR)."""
+    """A named particle colour and its display colour (BGR).
+
+    Either ``hsv_ranges`` (inclusive HSV boxes) or ``lab`` (learned Gaussians, with the
+    reject distance ``max_distance`` in sigmas). ``reject=True``: a learned background
+    colour (never counted, it only claims pixels so that no particle class does).
+    """
 
     name: str
-    hsv_ranges: tuple[HSVRange, ...]
+    hsv_ranges: tuple[HSVRange, ...] = ()
     display_bgr: tuple[int, int, int] = (255, 255, 255)
+    lab: tuple[LabComponent, ...] = ()
+    max_distance: float = 4.0
+    reject: bool = False
 
     def __post_init__(self) -> None:
         name = str(self.name)
         if not name or not all(ch.isalnum() or ch in "_-" for ch in name):
             raise VisionError(f"colour class name {self.name!r} must be non-empty letters, digits, '_' or '-'")
         ranges = tuple(_check_range(name, r) for r in self.hsv_ranges)
-        if not ranges:
+        lab = tuple(self.lab)
+        if not ranges and not lab:
             raise VisionError(f"colour class {name!r} has no HSV range")
+        if ranges and lab:
+            raise VisionError(f"colour class {name!r}: give either hsv ranges or a learned lab model, not both")
+        if not all(isinstance(c, LabComponent) for c in lab):
+            raise VisionError(f"colour class {name!r}: lab must be LabComponent values")
+        dist = self.max_distance
+        if isinstance(dist, bool) or not isinstance(dist, (int, float)) or not math.isfinite(dist) or not 0.5 <= dist <= 50:
+            raise VisionError(f"colour class {name!r}: max_distance must be a number within 0.5..50 (sigmas), got {dist!r}")
+        if self.reject and not lab:
+            raise VisionError(f"colour class {name!r}: only learned (lab) classes can be reject classes")
+        object.__setattr__(self, "lab", lab)
+        object.__setattr__(self, "max_distance", float(dist))
+        object.__setattr__(self, "reject", bool(self.reject))
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "hsv_ranges", ranges)
-        bgr = tuple(int(c) for c in self.display_bgr)
-        if len(bgr) != 3 or not all(0 <= c <= 255 for c in bgr):
-            raise VisionError(f"colour class {name!r}: display_bgr must be three values 0..255, got {self.display_bgr!r}")
-        object.__setattr__(self, "display_bgr", bgr)
+        raw = self.display_bgr
+        try:
+            ok = len(raw) == 3 and all(isinstance(c, (int, np.integer)) and not isinstance(c, bool) for c in raw)
+        except TypeError:
+            ok = False
+        if not ok or not all(0 <= int(c) <= 255 for c in raw):
+            raise VisionError(f"colour class {name!r}: display_bgr must be three integers 0..255, got {raw!r}")
+        object.__setattr__(self, "display_bgr", tuple(int(c) for c in raw))
+
+    @property
+    def learned(self) -> bool:
+        """True for a learned (CIELAB model) class."""
+        return bool(self.lab)
 
 
 def _check_range(name: str, rng) -> HSVRange:
     try:
         lo, hi = rng
+        if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (*lo, *hi)):
+            raise TypeError
         lo = tuple(int(v) for v in lo)
         hi = tuple(int(v) for v in hi)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise VisionError(f"colour class {name!r}: an HSV range must be [[h,s,v],[h,s,v]], got {rng!r}") from None
     if len(lo) != 3 or len(hi) != 3:
         raise VisionError(f"colour class {name!r}: an HSV range must be [[h,s,v],[h,s,v]], got {rng!r}")
@@ -69,6 +161,45 @@ def _check_range(name: str, rng) -> HSVRange:
                 "(for red, which wraps around hue 0, give two ranges)"
             )
     return (lo, hi)  # type: ignore[return-value]
+
+
+def is_learned(classes: Sequence[ColourClass]) -> bool:
+    """True when the class set is a learned (CIELAB) model."""
+    return any(c.learned for c in classes)
+
+
+def counted_classes(classes: Sequence[ColourClass]) -> tuple[ColourClass, ...]:
+    """The classes that are measured (reject classes left out), in order."""
+    return tuple(c for c in classes if not c.reject)
+
+
+def check_class_set(classes: Sequence[ColourClass]) -> tuple[ColourClass, ...]:
+    """Validate a class set: unique names, one form (all HSV or all learned), >= 1 counted class."""
+    classes = tuple(classes)
+    if not classes:
+        raise VisionError("at least one colour class is needed")
+    names = [c.name for c in classes]
+    if len(set(names)) != len(names):
+        raise VisionError(f"colour class names must be unique, got {names}")
+    kinds = {c.learned for c in classes}
+    if len(kinds) > 1:
+        raise VisionError("a class set is either HSV ranges or a learned lab model, not a mix of both")
+    if not counted_classes(classes):
+        raise VisionError("every colour class is a reject class; at least one must be counted")
+    if len(counted_classes(classes)) > 254:
+        raise VisionError("too many colour classes")
+    return classes
+
+
+def overlapping_classes(classes: Sequence[ColourClass]) -> list[tuple[str, str]]:
+    """Pairs ``(earlier, later)`` of HSV classes whose boxes overlap (the earlier one wins there)."""
+    out = []
+    hsv = [c for c in classes if c.hsv_ranges]
+    for k, ck in enumerate(hsv):
+        for cj in hsv[:k]:
+            if any(_boxes_overlap(a, b) for a in ck.hsv_ranges for b in cj.hsv_ranges):
+                out.append((cj.name, ck.name))
+    return out
 
 
 DEFAULT_CLASSES: tuple[ColourClass, ...] = (
@@ -89,14 +220,9 @@ class Classifier:
     """
 
     def __init__(self, classes: tuple[ColourClass, ...] | list[ColourClass]) -> None:
-        classes = tuple(classes)
-        if not classes:
-            raise VisionError("at least one colour class is needed")
-        names = [c.name for c in classes]
-        if len(set(names)) != len(names):
-            raise VisionError(f"colour class names must be unique, got {names}")
-        if len(classes) > 254:
-            raise VisionError("too many colour classes")
+        classes = check_class_set(classes)
+        if is_learned(classes):
+            raise VisionError("Classifier takes HSV classes; learned classes are classified by their lookup table")
         nbits = sum(len(c.hsv_ranges) for c in classes)
         if nbits > MAX_RANGES:
             raise VisionError(f"at most {MAX_RANGES} HSV ranges over all classes, got {nbits}")
@@ -242,16 +368,128 @@ def _as_bgr(image_bgr: np.ndarray) -> np.ndarray:
     return img
 
 
+def bgr_to_lab(bgr: np.ndarray) -> np.ndarray:
+    """CIELAB (float32, OpenCV float scale: L 0..100, a, b about -128..127) of uint8 BGR
+    colours of shape (..., 3), through OpenCV's exact 8-bit conversion (the lookup
+    table and the fitting see the same numbers)."""
+    a = np.ascontiguousarray(bgr, dtype=np.uint8)
+    flat = a.reshape(-1, 1, 3)
+    lab8 = np.empty_like(flat)
+    # cvtColor takes at most 2^31 bytes per call; chunk rows
+    step = 1 << 22
+    for i in range(0, flat.shape[0], step):
+        lab8[i:i + step] = cv2.cvtColor(flat[i:i + step], cv2.COLOR_BGR2Lab)
+    out = lab8.reshape(-1, 3).astype(np.float32)
+    out[:, 0] *= np.float32(100.0 / 255.0)
+    out[:, 1:] -= np.float32(128.0)
+    return out.reshape(a.shape)
+
+
+def _every_bgr() -> np.ndarray:
+    """All 2^24 BGR colours as a (4096, 4096, 3) image; colour index = B << 16 | G << 8 | R."""
+    every = np.arange(1 << 24, dtype=np.uint32).view(np.uint8).reshape(-1, 4)  # little-endian: R, G, B, 0
+    return np.ascontiguousarray(every[:, 2::-1]).reshape(4096, 4096, 3)
+
+
+@lru_cache(maxsize=1)
+def _every_lab8() -> np.ndarray:
+    """OpenCV 8-bit CIELAB of every BGR colour, (2^24, 3) uint8 (48 MB, built once)."""
+    return cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2Lab).reshape(-1, 3)
+
+
+def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, out):  # pragma: no cover - compiled
+    n_comp = means.shape[0]
+    for i in range(lab8.shape[0]):
+        x0 = lab8[i, 0] * (100.0 / 255.0)
+        x1 = lab8[i, 1] - 128.0
+        x2 = lab8[i, 2] - 128.0
+        best = 1e30
+        best_j = 0
+        best_d2 = 0.0
+        for j in range(n_comp):
+            d0 = x0 - means[j, 0]
+            d1 = x1 - means[j, 1]
+            d2 = x2 - means[j, 2]
+            p = precs[j]
+            q = (p[0] * d0 * d0 + p[3] * d1 * d1 + p[5] * d2 * d2
+                 + 2.0 * (p[1] * d0 * d1 + p[2] * d0 * d2 + p[4] * d1 * d2))
+            sc = q + offsets[j]
+            if sc < best:
+                best = sc
+                best_j = j
+                best_d2 = q
+        out[i] = labels[best_j] if best_d2 <= max_d2[best_j] else 0
+
+
+_lab_kernel = None
+
+
+def _lab_lut(classes: tuple[ColourClass, ...]) -> np.ndarray:
+    """Learned model -> class per BGR colour (0 = none/reject, k = k-th counted class)."""
+    global _lab_kernel
+    means, precs, offsets, max_d2, labels = [], [], [], [], []
+    k = 0
+    for c in classes:
+        label = 0
+        if not c.reject:
+            k += 1
+            label = k
+        for comp in c.lab:
+            cov = comp.matrix()
+            p = np.linalg.inv(cov)
+            means.append(comp.mean_lab)
+            precs.append((p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]))
+            offsets.append(float(np.log(np.linalg.det(cov)) - 2.0 * np.log(comp.weight)))
+            max_d2.append(c.max_distance ** 2)
+            labels.append(label)
+    if _lab_kernel is None:
+        import numba  # imported here: the CLI starts fast when no table is built
+
+        _lab_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_lab_lut_py)
+    out = np.zeros(1 << 24, np.uint8)
+    _lab_kernel(_every_lab8(), np.array(means, np.float64), np.array(precs, np.float64), np.array(offsets, np.float64),
+                np.array(max_d2, np.float64), np.array(labels, np.uint8), out)
+    return out
+
+
+@lru_cache(maxsize=8)
+def class_lut(classes: tuple[ColourClass, ...]) -> np.ndarray:
+    """The exact class of every BGR colour: uint8 array of 2^24, index ``B << 16 | G << 8 | R``;
+    0 = no class (or a reject class), ``k`` = the k-th counted class (1-based).
+
+    HSV classes go through :class:`Classifier` itself (pixel for pixel what it gives on
+    OpenCV's HSV); learned classes through their Gaussians (most likely component, within
+    its class's ``max_distance``). Built once per class set (about 1-3 s) and cached.
+    """
+    classes = check_class_set(classes)
+    if is_learned(classes):
+        return _lab_lut(classes)
+    h, s, v = cv2.split(cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2HSV))
+    masks = Classifier(classes).class_masks(h, s, v)
+    fine = np.zeros(1 << 24, np.uint8)
+    for k in range(len(masks) - 1, -1, -1):  # exclusive: the first class wins, so it is written last
+        fine[masks[k].ravel() != 0] = k + 1
+    return fine
+
+
+def lut_labels(image_bgr: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """Label map (uint8, h x w) of a BGR uint8 image through a :func:`class_lut` table."""
+    img = _as_bgr(image_bgr)
+    idx = (img[..., 0].astype(np.int32) << 16) | (img[..., 1].astype(np.int32) << 8) | img[..., 2]
+    return lut[idx]
+
+
 def classify(image_bgr: np.ndarray, classes=DEFAULT_CLASSES, mask: np.ndarray | None = None) -> np.ndarray:
-    """Label map of an image: uint8, 0 = no class, ``k + 1`` = ``classes[k]``.
+    """Label map of an image: uint8, 0 = no class, ``k + 1`` = the k-th counted class of ``classes``
+    (reject classes are 0). The same lookup table as the meter's.
 
     ``mask`` (bool or uint8, image-sized) restricts classification; outside it is 0.
     """
     img = _as_bgr(image_bgr)
-    m = None
+    lab = lut_labels(img, class_lut(tuple(classes)))
     if mask is not None:
         mask = np.asarray(mask)
         if mask.shape != img.shape[:2]:
             raise VisionError(f"mask shape {mask.shape} does not match image {img.shape[:2]}")
-        m = np.where(mask.astype(bool), np.uint8(255), np.uint8(0))
-    return Classifier(classes).labels(img, m)
+        lab[~mask.astype(bool)] = 0
+    return lab

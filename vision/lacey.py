@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision.colours import Classifier, ColourClass, DEFAULT_CLASSES
+from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, class_lut, counted_classes, lut_labels
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
 __all__ = ["LaceyResult", "LaceyMeter", "lacey_from_labels"]
@@ -94,8 +94,9 @@ class LaceyMeter:
         cell_px: int | None = None,
         seed: int = 0,
     ) -> None:
-        self.classes = tuple(classes)
-        self.classifier = Classifier(self.classes)
+        self.colour_classes = check_class_set(classes)
+        self.classes = counted_classes(self.colour_classes)
+        self._lut = class_lut(self.colour_classes)  # the centroid meter's exact classification
         self.roi = roi
         self.cell_px = cell_px
         self.rng = np.random.default_rng(seed)
@@ -112,10 +113,10 @@ class LaceyMeter:
             box = roi_bbox(self.roi, shape)
             inside = _mask_in_box(self.roi, box)
             self._box, self._inside = box, inside
-            self._mask_u8 = np.where(inside, 255, 0).astype(np.uint8)
             self._cell = int(self.cell_px or max(4, round(self.roi.r_px / 5)))
             self._key = shape
         x0, y0, x1, y1 = self._box
         crop = np.ascontiguousarray(image_bgr[y0:y1, x0:x1])
-        labels = self.classifier.labels(crop, self._mask_u8)
+        labels = lut_labels(crop, self._lut)
+        labels[~self._inside] = 0
         return lacey_from_labels(labels, self._inside, self._cell, self.rng)

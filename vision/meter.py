@@ -1,27 +1,29 @@
 """The meter: one BGR frame in, one ``Reading`` (centroids, spreads, MI, slope) out.
 
 Per frame one compiled pass over the ROI (``vision.moments``) classifies every pixel
-with lookup tables made from the colour classes (exactly the classes' HSV boxes) and
-sums each class's pixel count and first and second moments; centroids, spreads, the
-MI and the bed's slope angle follow from those sums. The ROI's row spans are built
-once per ROI and frame size.
+with the exact BGR lookup table of the colour classes (learned model or HSV boxes) and
+sums each class's pixel count and first and second moments, and the bed's pixels per
+small cell; centroids, spreads and the MI follow from the sums, the free-surface angle
+from the cells (``vision.slope``). The drum is detected, and the ROI's row spans built,
+once per frame size.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from vision.colours import DEFAULT_CLASSES, Classifier, ColourClass
+from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
 from vision.errors import VisionError
 from vision.mixing import mixing_indices
 from vision.moments import class_tables, frame_moments, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
-from vision.slope import slope_from_moments
+from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
-__all__ = ["ClassStats", "Reading", "Meter", "BED_MODES"]
+__all__ = ["ClassStats", "Reading", "Meter", "BED_MODES", "check_meter_numbers"]
 
 BED_MODES = ("color", "dark")
 _NAN = float("nan")
@@ -29,10 +31,11 @@ _NAN = float("nan")
 
 @dataclass(frozen=True, slots=True)
 class ClassStats:
-    """One colour class in one frame: centroid and spread (px, original image), pixel count, share.
+    """One colour class in one frame: centroid and spread (px, original image), pixel count, shares.
 
-    ``sigma_px = sqrt(var_x + var_y)``; ``frac`` = this class's pixels / all classified pixels.
-    NaN centroid/spread when the class has fewer than ``min_pixels`` pixels.
+    ``sigma_px = sqrt(var_x + var_y)``; ``frac`` = this class's pixels / all classified pixels;
+    ``roi_share`` = this class's pixels / the ROI's pixels. NaN centroid/spread when the class
+    is too small (see ``Meter``).
     """
 
     name: str
@@ -41,6 +44,7 @@ class ClassStats:
     sigma_px: float
     n_px: int
     frac: float
+    roi_share: float = _NAN
 
 
 @dataclass(frozen=True)
@@ -48,9 +52,12 @@ class Reading:
     """Everything measured in one frame.
 
     ``mi`` (eq. 4), ``mi_sigmoid`` (eq. 3), ``mi_linear`` (eq. 1, relative to the first
-    valid frame), ``d_px``, ``dsigma_px``, ``slope_deg`` (free surface, see vision.slope),
-    ``concentration`` = n_1 / (n_1 + n_2). ``valid`` is False when ``mi`` is NaN; ``flags``
-    say why (e.g. ``few_pixels:blue``, ``bad_frame:...``, ``size_changed:...``).
+    valid frame), ``d_px``, ``dsigma_px``, ``concentration`` = n_1 / (n_1 + n_2).
+    ``slope_deg`` = angle of the bed's free surface over the central chord,
+    ``surface_curvature`` = its S-shape, ``slope_axis_deg`` = the bed's principal axis
+    (see ``vision.slope``). ``roi`` = the drum region used for this frame. ``valid`` is
+    False when ``mi`` is NaN; ``flags`` say why (``few_pixels:blue``, ``collapsed:blue``,
+    ``bad_frame:...``).
     """
 
     mi: float
@@ -64,6 +71,8 @@ class Reading:
     flags: tuple[str, ...]
     classes: tuple[ClassStats, ...]
     roi: DrumROI | None
+    slope_axis_deg: float = _NAN
+    surface_curvature: float = _NAN
 
     def cls(self, name: str) -> ClassStats:
         """The stats of the class called ``name``."""
@@ -75,22 +84,32 @@ class Reading:
 
 @dataclass
 class _Geometry:
-    shape_hw: tuple[int, int]
+    roi: DrumROI
     box: tuple[int, int, int, int]  # x0, y0, x1, y1 of the ROI's bounding box, px
     first: np.ndarray  # per grid row of the box: first and one-past-last grid column inside the ROI
     last: np.ndarray
+    roi_px: float  # grid pixels inside the ROI
+    shift: int  # occupancy cells of 2^shift px
+    area: np.ndarray  # grid pixels of the ROI per occupancy cell
+    full_area: float
+    occ: np.ndarray  # bed pixels per cell (filled by the kernel)
+    work: np.ndarray
 
 
 class Meter:
     """Measures mixing in BGR frames with a fixed set of colour classes.
 
-    ``roi=None`` detects the drum on the first good frame (``detect_drum``). ``bed``:
-    ``"color"`` takes the bed for the slope angle as the union of the classes; ``"dark"``
-    takes the pixels with V <= ``dark_v_max`` inside the ROI (dark bed on a backlit drum).
-    Classes with fewer than ``min_pixels`` pixels give NaN and a flag. ``stride`` > 1 is an
-    explicit, opt-in decimation (every ``stride``-th row and column); the default 1 uses
-    every pixel. The slope uses the exact moments of the whole bed. The MI uses the
-    first two classes.
+    ``classes``: HSV classes or a learned model (reject classes included; they are never
+    counted). ``roi=None`` detects the drum on the first good frame of every frame size
+    (``detect_drum``; :meth:`redetect` forgets it). ``bed``: ``"color"`` takes the bed for
+    the slope as the union of the classes; ``"dark"`` the pixels with V <= ``dark_v_max``
+    inside the ROI (dark bed on a backlit drum). ``stride`` > 1 is an explicit, opt-in
+    decimation (every ``stride``-th row and column). The MI uses the first two counted classes.
+
+    Validity is relative to the ROI: a class with less than ``min_share`` of the ROI's
+    pixels (or fewer than ``min_pixels``) is ``few_pixels``; one whose share drops below
+    ``collapse_ratio`` x its running median over the last ``history`` good frames is
+    ``collapsed``. Either gives MI = NaN (collapsed frames do not enter the median).
     """
 
     def __init__(
@@ -102,31 +121,37 @@ class Meter:
         *,
         dark_v_max: int = 80,
         stride: int = 1,
+        min_share: float = 0.005,
+        collapse_ratio: float = 0.4,
+        history: int = 25,
     ) -> None:
-        self.classes = tuple(classes)
+        self.colour_classes = check_class_set(classes)
+        self.classes = counted_classes(self.colour_classes)
         if len(self.classes) < 2:
             raise VisionError(f"the mixing index needs at least two colour classes, got {len(self.classes)}")
         if bed not in BED_MODES:
             raise VisionError(f"bed must be one of {BED_MODES}, got {bed!r}")
-        if int(stride) < 1:
-            raise VisionError(f"stride must be >= 1, got {stride}")
-        if not 0 <= int(dark_v_max) <= 255:
-            raise VisionError(f"dark_v_max must be within 0..255, got {dark_v_max}")
-        self.classifier = Classifier(self.classes)
+        check_meter_numbers(min_pixels=min_pixels, dark_v_max=dark_v_max, stride=stride, min_share=min_share,
+                            collapse_ratio=collapse_ratio, history=history)
         self.bed = bed
         self.min_pixels = int(min_pixels)
         self.dark_v_max = int(dark_v_max)
         self.stride = int(stride)
-        self._tables = class_tables(self.classifier)
+        self.min_share = float(min_share)
+        self.collapse_ratio = float(collapse_ratio)
+        self.history = int(history)
+        self._tables = class_tables(self.colour_classes)
         self._sums = np.zeros((len(self.classes) + 1, 6), np.int64)
         self._roi = roi
         self._roi_given = roi is not None
-        self._geom: _Geometry | None = None
+        self._rois: dict[tuple[int, int], DrumROI] = {}
+        self._geoms: dict[tuple[int, int], _Geometry] = {}
+        self._shares: list[deque[float]] = [deque(maxlen=self.history) for _ in self.classes]
         self._d0: float | None = None
 
     @property
     def roi(self) -> DrumROI | None:
-        """The ROI in use (None until the first frame when auto-detecting)."""
+        """The ROI of the last measured frame (None until the first frame when auto-detecting)."""
         return self._roi
 
     @property
@@ -135,24 +160,41 @@ class Meter:
         return self._d0
 
     def reset(self) -> None:
-        """Forget the eq. 1 reference distance (and an auto-detected ROI)."""
+        """Forget the eq. 1 reference distance, the share history and auto-detected ROIs."""
         self._d0 = None
-        self._geom = None
+        for h in self._shares:
+            h.clear()
+        self.redetect()
+
+    def redetect(self) -> None:
+        """Detect the drum again on the next frame (of every size); a given ROI is kept."""
+        self._rois.clear()
+        self._geoms.clear()
         if not self._roi_given:
             self._roi = None
 
     # -- geometry --------------------------------------------------------------------
-    def _geometry(self, shape_hw: tuple[int, int]) -> _Geometry:
-        g = self._geom
-        if g is not None and g.shape_hw == shape_hw:
+    def _geometry(self, img: np.ndarray, shape_hw: tuple[int, int]) -> _Geometry:
+        g = self._geoms.get(shape_hw)
+        if g is not None:
             return g
-        assert self._roi is not None
-        box = roi_bbox(self._roi, shape_hw)
+        if self._roi_given:
+            roi = self._roi
+        else:
+            roi = self._rois.get(shape_hw)
+            if roi is None:
+                roi = self._rois[shape_hw] = detect_drum(img)
+        assert roi is not None
+        box = roi_bbox(roi, shape_hw)
         s = self.stride
-        inside = _mask_in_box(self._roi, box)[::s, ::s]
+        inside = _mask_in_box(roi, box)[::s, ::s]
         first, last = row_spans(inside)
-        g = _Geometry(shape_hw, box, first, last)
-        self._geom = g
+        shift = occupancy_shift(roi.r_px, s)
+        area = cell_areas(inside, s, shift)
+        full = float(((1 << shift) + s - 1) // s) ** 2
+        g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
+                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 3, np.float64))
+        self._geoms[shape_hw] = g
         return g
 
     # -- per frame -------------------------------------------------------------------
@@ -163,7 +205,7 @@ class Meter:
     def measure(self, image_bgr: np.ndarray) -> Reading:
         """Measure one BGR uint8 frame. Bad frames give an invalid, flagged Reading.
 
-        Raises ``VisionError`` only when the drum cannot be found on the first frame.
+        Raises ``VisionError`` only when the drum cannot be found in a frame of a new size.
         """
         img = image_bgr
         if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
@@ -171,21 +213,15 @@ class Meter:
             dtype = getattr(img, "dtype", type(img).__name__)
             return self._invalid(f"bad_frame:not a 3-channel 8-bit BGR image (shape {shape}, dtype {dtype})")
         shape_hw = (int(img.shape[0]), int(img.shape[1]))
-        if self._roi is None:
-            self._roi = detect_drum(img)
-        g = self._geom
-        if g is not None and g.shape_hw != shape_hw:
-            return self._invalid(
-                f"size_changed:frame is {shape_hw[1]}x{shape_hw[0]}, stream started at {g.shape_hw[1]}x{g.shape_hw[0]}"
-            )
-        g = self._geometry(shape_hw)
+        g = self._geometry(img, shape_hw)
+        self._roi = g.roi
         dark = self.dark_v_max if self.bed == "dark" else -1
-        sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums)
-        return self._reading(sums)
+        sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
+                             occupancy=g.occ, occ_shift=g.shift)
+        return self._reading(sums, g)
 
-    def _reading(self, sums: np.ndarray) -> Reading:
-        roi = self._roi
-        assert roi is not None
+    def _reading(self, sums: np.ndarray, g: _Geometry) -> Reading:
+        roi = g.roi
         area = float(self.stride * self.stride)
         flags: list[str] = []
         k = len(self.classes)
@@ -196,13 +232,22 @@ class Meter:
             n, sx, sy, sxx, syy, _ = (float(v) for v in sums[i])
             n_px = int(round(n * area))
             frac = n / total if total > 0 else _NAN
-            if n_px < self.min_pixels or n <= 0:
-                flags.append(f"few_pixels:{cls.name}")
-                stats.append(ClassStats(cls.name, _NAN, _NAN, _NAN, n_px, frac))
+            share = n / g.roi_px if g.roi_px > 0 else _NAN
+            hist = self._shares[i]
+            bad = None
+            if n_px < self.min_pixels or n <= 0 or not share >= self.min_share:
+                bad = "few_pixels"
+            elif len(hist) >= 5 and share < self.collapse_ratio * _median(hist):
+                bad = "collapsed"
+            else:
+                hist.append(share)
+            if bad is not None:
+                flags.append(f"{bad}:{cls.name}")
+                stats.append(ClassStats(cls.name, _NAN, _NAN, _NAN, n_px, frac, share))
                 continue
             cx, cy = sx / n, sy / n
             var = max(sxx / n - cx * cx, 0.0) + max(syy / n - cy * cy, 0.0)
-            stats.append(ClassStats(cls.name, cx, cy, math.sqrt(var), n_px, frac))
+            stats.append(ClassStats(cls.name, cx, cy, math.sqrt(var), n_px, frac, share))
         a, b = stats[0], stats[1]
         mix = mixing_indices((a.cx_px, a.cy_px), (b.cx_px, b.cy_px), a.sigma_px, b.sigma_px, roi.r_px, self._d0)
         if self._d0 is None and math.isfinite(mix.d_px) and mix.d_px > 0:
@@ -212,11 +257,37 @@ class Meter:
         conc = ns[0] / n12 if n12 > 0 else _NAN
         bed = sums[k] if self.bed == "dark" else sums[:k].sum(axis=0)  # classes are exclusive: moments add up
         m00, m10, m01, m20, m02, m11 = (float(v) for v in bed)
-        slope = slope_from_moments(
-            m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=max(1.0, self.min_pixels / area)
-        )
+        min_bed = max(1.0, self.min_pixels / area, self.min_share * g.roi_px)
+        axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)
+        if m00 >= min_bed:
+            surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.box[:2], g.shift, roi.r_px, g.work)
+            slope, curv = surf.slope_deg, surf.curvature
+        else:
+            slope = curv = _NAN
         valid = math.isfinite(mix.mi)
         return Reading(
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
-            tuple(flags), tuple(stats), roi,
+            tuple(flags), tuple(stats), roi, axis, curv,
         )
+
+
+def _median(values: deque[float]) -> float:
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+def check_meter_numbers(**values: float) -> None:
+    """Validate the meter's numeric settings by name (one clear ``VisionError`` naming the key)."""
+    limits = {
+        "min_pixels": (1, 10**9, True), "dark_v_max": (0, 255, True), "stride": (1, 16, True),
+        "min_share": (0.0, 0.5, False), "collapse_ratio": (0.0, 1.0, False), "history": (1, 10_000, True),
+    }
+    for key, v in values.items():
+        lo, hi, integer = limits[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise VisionError(f"{key} must be a number within {lo}..{hi}, got {v!r}")
+        if integer and not float(v).is_integer():
+            raise VisionError(f"{key} must be an integer within {lo}..{hi}, got {v!r}")
+        if not math.isfinite(v) or not lo <= v <= hi:
+            raise VisionError(f"{key} must be within {lo}..{hi}, got {v!r}")

@@ -1,24 +1,23 @@
 """Per-class pixel moments of a BGR frame in one pass: the meter's hot loop.
 
-The classes of a ``Classifier`` are compiled once into lookup tables over BGR colours:
+A class set (HSV boxes or a learned CIELAB model) is compiled once into lookup tables over BGR colours:
 a 6-bit table (64^3 bins, 256 KB, stays in cache) answers for every bin whose 64 colours
 all fall in the same class, and a full 24-bit table (16 MB) answers the few pixels whose
-bin straddles a class boundary. Both tables are made by running the classifier itself on
-every BGR colour, so the result is exactly what ``Classifier.class_masks`` on OpenCV's
-HSV gives, pixel for pixel. A compiled (numba) loop then visits the ROI's pixels row
+bin straddles a class boundary. Both come from ``vision.colours.class_lut``, which runs the
+classifier itself on every BGR colour, so the result is exact, pixel for pixel. A compiled (numba) loop then visits the ROI's pixels row
 span by row span and sums, per class, n, x, y, x^2, y^2 and xy (integers, exact), plus
 the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
-import cv2
 import numpy as np
 
-from vision.colours import Classifier, ColourClass
+from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
 __all__ = ["ClassTables", "class_tables", "row_spans", "frame_moments", "MOMENT_FIELDS"]
 
@@ -43,23 +42,19 @@ class ClassTables:
 
 @lru_cache(maxsize=8)
 def _tables(classes: tuple[ColourClass, ...]) -> ClassTables:
-    every = np.arange(1 << 24, dtype=np.uint32).view(np.uint8).reshape(-1, 4)  # little-endian: R, G, B, 0
-    bgr = np.ascontiguousarray(every[:, 2::-1]).reshape(4096, 4096, 3)  # colour index = B << 16 | G << 8 | R
-    h, s, v = cv2.split(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV))
-    masks = Classifier(classes).class_masks(h, s, v)
-    fine = np.zeros(1 << 24, np.uint8)
-    for k in range(len(masks) - 1, -1, -1):  # exclusive: the first class wins, so it is written last
-        fine[masks[k].ravel() != 0] = k + 1
+    fine = class_lut(classes)
     bins = fine.reshape(64, 4, 64, 4, 64, 4)
     lo = bins.min(axis=(1, 3, 5))
     hi = bins.max(axis=(1, 3, 5))
     coarse = np.where(lo == hi, lo, _AMBIGUOUS).astype(np.uint8).ravel()
-    return ClassTables(coarse, fine, len(classes))
+    return ClassTables(coarse, fine, len(counted_classes(classes)))
 
 
-def class_tables(classifier: Classifier) -> ClassTables:
-    """The lookup tables of ``classifier``'s classes (built once per class set, ~1 s; cached)."""
-    return _tables(tuple(classifier.classes))
+def class_tables(classes: Sequence[ColourClass] | Classifier) -> ClassTables:
+    """The lookup tables of a class set (HSV or learned; built once per class set, ~1-3 s; cached)."""
+    if isinstance(classes, Classifier):
+        classes = classes.classes
+    return _tables(tuple(classes))
 
 
 def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,9 +69,13 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first.astype(np.int64), last.astype(np.int64)
 
 
-def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out):  # pragma: no cover - compiled
-    """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels."""
+def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark):  # pragma: no cover - compiled
+    """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+
+    ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
+    class pixels, or the dark pixels when ``occ_dark``."""
     out[:, :] = 0
+    occ[:, :] = 0
     hist = np.zeros((n_classes + 1, 3), np.int64)
     for i in range(first.shape[0]):
         a = first[i]
@@ -85,6 +84,7 @@ def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_m
             continue
         y = y0 + i * step
         row = img[y]
+        orow = occ[(i * step) >> occ_shift]
         n1 = 0
         sx1 = 0
         sxx1 = 0
@@ -104,6 +104,10 @@ def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_m
             c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
             if c == 255:
                 c = fine[(bb << 16) | (gg << 8) | rr]
+            if c == 0:
+                continue
+            if not occ_dark:
+                orow[(x - x0) >> occ_shift] += 1
             if c == 1:
                 n1 += 1
                 sx1 += x
@@ -112,7 +116,7 @@ def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_m
                 n2 += 1
                 sx2 += x
                 sxx2 += x * x
-            elif c != 0:
+            else:
                 hist[c, 0] += 1
                 hist[c, 1] += x
                 hist[c, 2] += x * x
@@ -122,6 +126,8 @@ def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_m
                     nd += 1
                     sxd += x
                     sxxd += x * x
+                    if occ_dark:
+                        orow[(x - x0) >> occ_shift] += 1
         hist[1, 0] += n1
         hist[1, 1] += sx1
         hist[1, 2] += sxx1
@@ -168,6 +174,8 @@ def frame_moments(
     step: int = 1,
     dark_v_max: int = -1,
     out: np.ndarray | None = None,
+    occupancy: np.ndarray | None = None,
+    occ_shift: int = 3,
 ) -> np.ndarray:
     """Moments of every class (and of dark pixels) over the ROI's row spans.
 
@@ -175,10 +183,18 @@ def frame_moments(
     counts grid columns ``x0 + j * step``. ``dark_v_max`` < 0 skips the dark sums.
     Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
     in original image px: row k is class k+1, the last row the dark pixels.
+
+    ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``)
+    receives the bed pixels per square cell of ``2^occ_shift`` px, counted from ``origin_xy``:
+    the class pixels, or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
     if out is None:
         out = np.empty((tables.n_classes + 1, 6), np.int64)
     x0, y0 = origin_xy
+    if occupancy is None:
+        rows = (len(first) * step >> occ_shift) + 1
+        cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
+        occupancy = np.empty((rows, cols), np.int32)
     _compiled()(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
-                tables.n_classes, int(dark_v_max), out)
+                tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
     return out

@@ -1,44 +1,69 @@
-"""Bed slope angle (degrees) from the moments of the bed mask.
+"""Bed slope: the angle of the bed's free surface, its shape, and the principal-axis angle.
 
-The bed of a rotating drum is close to a circular segment whose free surface is a
-chord. Such a segment is mirror-symmetric about the line through the drum centre
-perpendicular to the chord, so one principal axis of the bed's pixel distribution lies
-along the free surface. Of the two principal axes we take the one more perpendicular to
-the offset from the drum centre to the bed centroid (that offset points away from the
-surface), so the choice is right at any fill level. Cost: one moments pass.
+Free surface (``slope_deg``): the bed is counted into square cells (the meter's one pass
+fills an occupancy grid; :func:`bed_surface` does it from a mask). For each column of
+cells, scanning up from the drum wall, the bed's upper boundary is where the cell fill
+drops below half the bed's interior fill (gaps of up to two cells are holes in the bed,
+not its surface; a column whose bed reaches the wall above has no free surface), with a
+sub-cell position from the fill of the boundary cells. A robust (Tukey-weighted,
+orthogonal) line through those points over the central chord -- +-0.5 R along the
+surface around its midpoint -- gives the angle. A cubic through all surface points gives
+the shape: ``surface_curvature`` = minus the cubic coefficient of the profile ``v(u)``
+(``u`` uphill along the central line, ``v`` out of the bed, both in units of R): 0 for
+a flat surface, > 0 for the S-shape of a cascading bed (steeper in the middle, flatter
+at both ends), < 0 for the reverse.
 
-Sign: the angle of the free surface against the image horizontal, in (-90, 90] degrees,
-positive when the surface rises towards +x (to the right in the image, y up).
+Principal axis (``slope_axis_deg``, :func:`slope_from_moments`): of the two principal
+axes of the bed's pixels, the one more perpendicular to the offset from the drum centre
+to the bed centroid. Exact for a flat surface (a circular segment), flatter than the
+free surface for an S-shaped one.
+
+Sign: angle against the image horizontal, in (-90, 90] degrees, positive when the
+surface rises towards +x (to the right in the image, y up).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from vision.roi import DrumROI, roi_mask
+from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
-__all__ = ["bed_slope_deg", "slope_from_moments"]
+__all__ = ["SurfaceFit", "bed_slope_deg", "bed_surface", "slope_from_moments", "surface_from_occupancy",
+           "occupancy_shift", "cell_areas"]
+
+_NAN = float("nan")
+CENTRAL_HALF_CHORD = 0.5
+"""Half length of the central chord used for the angle, in units of the drum radius R."""
+
+
+@dataclass(frozen=True, slots=True)
+class SurfaceFit:
+    """The free surface of one frame: angle (deg), S-shape (see module doc), points used."""
+
+    slope_deg: float
+    curvature: float
+    n_points: int
 
 
 def slope_from_moments(
     m00: float, m10: float, m01: float, m20: float, m11: float, m02: float,
     cx_px: float, cy_px: float, min_px: float = 1.0,
 ) -> float:
-    """Free-surface angle (deg) from raw image moments of the bed (px units) and drum centre.
+    """Principal-axis angle (deg) from raw image moments of the bed (px units) and drum centre.
 
     NaN when the bed has fewer than ``min_px`` pixels or is isotropic (full drum).
     """
     if not (m00 >= min_px) or not math.isfinite(m00):
-        return float("nan")
+        return _NAN
     xb, yb = m10 / m00, m01 / m00
     mu20 = m20 / m00 - xb * xb
     mu02 = m02 / m00 - yb * yb
     mu11 = m11 / m00 - xb * yb
     if not (math.isfinite(mu20) and math.isfinite(mu02) and math.isfinite(mu11)):
-        return float("nan")
+        return _NAN
     theta = 0.5 * math.atan2(2.0 * mu11, mu20 - mu02)  # major axis, image coords (y down)
     ux, uy = math.cos(theta), math.sin(theta)
     ox, oy = xb - cx_px, yb - cy_px
@@ -49,8 +74,11 @@ def slope_from_moments(
         if abs(ux * ox + uy * oy) > abs(-uy * ox + ux * oy):
             ux, uy = -uy, ux
     elif abs(mu20 - mu02) < 1e-9 and abs(mu11) < 1e-9:
-        return float("nan")
-    ang = math.degrees(math.atan2(-uy, ux))  # y up
+        return _NAN
+    return _fold(math.degrees(math.atan2(-uy, ux)))  # y up
+
+
+def _fold(ang: float) -> float:
     if ang <= -90.0:
         ang += 180.0
     elif ang > 90.0:
@@ -58,13 +86,210 @@ def slope_from_moments(
     return ang
 
 
-def bed_slope_deg(bed_mask: np.ndarray, roi: DrumROI) -> float:
-    """Slope angle (deg) of the free surface of the bed in ``bed_mask`` (bool/uint8, image-sized).
+def occupancy_shift(r_px: float, step: int = 1) -> int:
+    """log2 of the occupancy cell size (px): cells of about R / 24, at least 2 grid pixels."""
+    cell = max(2.0 * step, r_px / 24.0)
+    return max(1, int(round(math.log2(cell))))
 
-    Only pixels inside ``roi`` count. NaN for an empty bed.
+
+def cell_areas(inside: np.ndarray, step: int, shift: int) -> np.ndarray:
+    """Grid pixels of the ROI per occupancy cell: ``inside`` is the ROI mask of the box
+    sampled at ``step`` (as the meter visits it); float64, one entry per cell."""
+    h, w = inside.shape
+    ys = (np.arange(h) * step) >> shift
+    xs = (np.arange(w) * step) >> shift
+    out = np.zeros((int(ys[-1]) + 1 if h else 1, int(xs[-1]) + 1 if w else 1), np.float64)
+    np.add.at(out, (ys[:, None], xs[None, :]), inside.astype(np.float64))
+    return out
+
+
+def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # pragma: no cover - compiled
+    """Free-surface angle and S-shape from an occupancy grid; fills res = (deg, curvature, n)."""
+    rows, cols = area.shape
+    res[0] = np.nan
+    res[1] = np.nan
+    res[2] = 0.0
+    # interior fill of the bed: a high quantile of the fill of well-covered cells
+    vals = np.empty(rows * cols)
+    nv = 0
+    for i in range(rows):
+        for j in range(cols):
+            if area[i, j] >= 0.5 * full_area:
+                f = occ[i, j] / area[i, j]
+                if f > 0.1:
+                    vals[nv] = f
+                    nv += 1
+    if nv < 8:
+        return
+    rho = np.percentile(vals[:nv], 85.0)
+    if rho <= 0.0:
+        return
+    tau = 0.5 * rho
+    npts = 0
+    for j in range(cols):
+        # fill of this column, smoothed over the neighbouring columns
+        top = -1
+        bot = -1
+        for i in range(rows):
+            if area[i, j] >= 0.5 * full_area:
+                if top < 0:
+                    top = i
+                bot = i
+        if top < 0 or bot - top < 3:
+            continue
+        fcol = np.zeros(rows)
+        for i in range(top, bot + 1):
+            s = 0.0
+            a = 0.0
+            for jj in range(max(0, j - 1), min(cols, j + 2)):
+                if area[i, jj] >= 0.5 * full_area:
+                    s += occ[i, jj]
+                    a += area[i, jj]
+            fcol[i] = s / a if a > 0 else 0.0
+        if fcol[bot] < tau and fcol[bot - 1] < tau:
+            continue  # no bed at the bottom of this column
+        it = bot if fcol[bot] >= tau else bot - 1
+        gap = 0
+        i = it - 1
+        while i >= top:
+            if fcol[i] >= tau:
+                it = i
+                gap = 0
+            else:
+                gap += 1
+                if gap > 2:
+                    break
+            i -= 1
+        if it <= top + 1:
+            continue  # the bed reaches the wall above: no free surface in this column
+        fill = (fcol[it] + fcol[it - 1]) / rho
+        if fill > 2.0:
+            fill = 2.0
+        pts_x[npts] = x0 + j * cs + 0.5 * (cs - 1)
+        pts_y[npts] = y0 + (it + 1) * cs - 0.5 - cs * fill
+        npts += 1
+    if npts < 5:
+        return
+    px = pts_x[:npts]
+    py = pts_y[:npts]
+    w = np.ones(npts)
+    # robust orthogonal line over all points, then over the central chord
+    ux = 1.0
+    uy = 0.0
+    mx = 0.0
+    my = 0.0
+    for stage in range(2):
+        if stage == 1:
+            u = (px - mx) * ux + (py - my) * uy
+            mid = 0.5 * (u.min() + u.max())
+            for k in range(npts):
+                w[k] = 1.0 if abs(u[k] - mid) <= CENTRAL_HALF_CHORD * r_px else 0.0
+            if w.sum() < 4:
+                return
+        base = w.copy()
+        for _ in range(6):
+            sw = w.sum()
+            if sw <= 0:
+                return
+            mx = (w * px).sum() / sw
+            my = (w * py).sum() / sw
+            dx = px - mx
+            dy = py - my
+            sxx = (w * dx * dx).sum()
+            syy = (w * dy * dy).sum()
+            sxy = (w * dx * dy).sum()
+            th = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+            ux = math.cos(th)
+            uy = math.sin(th)
+            resid = -dx * uy + dy * ux
+            ar = np.abs(resid[base > 0])
+            scale = 1.4826 * np.median(ar)
+            lim = 4.685 * max(scale, 0.25 * cs)
+            for k in range(npts):
+                if base[k] > 0:
+                    t = resid[k] / lim
+                    w[k] = (1.0 - t * t) ** 2 if abs(t) < 1.0 else 0.0
+                else:
+                    w[k] = 0.0
+    ang = math.degrees(math.atan2(-uy, ux))
+    if ang <= -90.0:
+        ang += 180.0
+    elif ang > 90.0:
+        ang -= 180.0
+    res[0] = ang
+    res[2] = npts
+    # shape: cubic v(u) over all points; u uphill, v out of the bed (up), in units of R
+    if ux < 0:
+        ux = -ux
+        uy = -uy
+    sgn = 1.0 if ang >= 0 else -1.0  # uphill is +x for a surface rising to the right
+    u = sgn * ((px - mx) * ux + (py - my) * uy) / r_px
+    v = -(-(px - mx) * uy + (py - my) * ux) / r_px  # image y is down: flip to "up"
+    mid = 0.5 * (u.min() + u.max())
+    u = u - mid
+    ata = np.zeros((4, 4))
+    atb = np.zeros(4)
+    for k in range(npts):
+        p = 1.0
+        row = np.empty(4)
+        for m in range(4):
+            row[m] = p
+            p *= u[k]
+        for m in range(4):
+            atb[m] += row[m] * v[k]
+            for q in range(4):
+                ata[m, q] += row[m] * row[q]
+    if abs(np.linalg.det(ata)) < 1e-12:
+        return
+    c = np.linalg.solve(ata, atb)
+    res[1] = -c[3]
+
+
+_surface_kernel = None
+
+
+def _surface_fn():
+    global _surface_kernel
+    if _surface_kernel is None:
+        import numba
+
+        _surface_kernel = numba.njit(nogil=True, cache=True)(_surface_py)
+    return _surface_kernel
+
+
+def surface_from_occupancy(
+    occ: np.ndarray, area: np.ndarray, full_area: float, origin_xy: tuple[int, int], shift: int, r_px: float,
+    work: np.ndarray | None = None,
+) -> SurfaceFit:
+    """Free surface from bed pixels per cell ``occ`` and ROI pixels per cell ``area``.
+
+    ``full_area`` = grid pixels of a whole cell; cells of ``2^shift`` px from ``origin_xy``;
+    ``r_px`` = drum radius. ``work`` (float64, >= 2 x columns + 3) avoids allocations.
     """
-    m = np.asarray(bed_mask)
-    inside = roi_mask(roi, m.shape[:2])
-    b = ((m != 0) & inside).astype(np.uint8)
-    mo = cv2.moments(b, binaryImage=False)
-    return slope_from_moments(mo["m00"], mo["m10"], mo["m01"], mo["m20"], mo["m11"], mo["m02"], roi.cx_px, roi.cy_px)
+    rows, cols = area.shape
+    if work is None or work.shape[0] < 2 * cols + 3:
+        work = np.empty(2 * cols + 3, np.float64)
+    res = work[2 * cols: 2 * cols + 3]
+    _surface_fn()(occ[:rows, :cols], area, float(full_area), float(origin_xy[0]), float(origin_xy[1]),
+                  float(1 << shift), float(r_px), work[:cols], work[cols: 2 * cols], res)
+    return SurfaceFit(float(res[0]), float(res[1]), int(res[2]))
+
+
+def bed_surface(bed_mask: np.ndarray, roi: DrumROI) -> SurfaceFit:
+    """The free surface of the bed in ``bed_mask`` (bool/uint8, image-sized; only pixels in ``roi``)."""
+    m = np.asarray(bed_mask) != 0
+    box = roi_bbox(roi, m.shape[:2])
+    x0, y0, x1, y1 = box
+    inside = _mask_in_box(roi, box)
+    bed = m[y0:y1, x0:x1] & inside
+    shift = occupancy_shift(roi.r_px)
+    area = cell_areas(inside, 1, shift)
+    occ = np.zeros(area.shape, np.int32)
+    ys, xs = np.nonzero(bed)
+    np.add.at(occ, (ys >> shift, xs >> shift), 1)
+    return surface_from_occupancy(occ, area, float(1 << (2 * shift)), (x0, y0), shift, roi.r_px)
+
+
+def bed_slope_deg(bed_mask: np.ndarray, roi: DrumROI) -> float:
+    """Free-surface angle (deg) of the bed in ``bed_mask`` (bool/uint8, image-sized); NaN if none."""
+    return bed_surface(bed_mask, roi).slope_deg

@@ -1,23 +1,48 @@
-"""``classes suggest``: cluster the particle pixels inside the ROI into colour classes.
+"""``classes suggest``: learn the particle colour classes from the bed, over many frames.
 
-K-means (OpenCV) in CIE Lab on a sample of the ROI pixels with ``k + 1`` clusters; the
-cluster that dominates the ring just inside the drum wall is the background. Each other
-cluster becomes a class whose HSV box spans its 2nd..98th percentiles (plus a margin);
-for weakly saturated clusters (white, grey) the hue is left open.
+1. Sample pixels inside the drum (to 0.94 R, off the rim) from every frame given, with
+   their height in the drum.
+2. Fit a Gaussian mixture (EM, full covariances, ``k + 3`` components, k-means start) to
+   their CIELAB colours with lightness down-weighted.
+3. Components over-represented in the top cap of the drum (the empty part above the
+   bed) are background: the drum's back wall, rim, reflections.
+4. The other components are grouped into ``k`` classes by continuity of the fitted
+   density: two components joined by a ridge (no valley in the mixture's density on the
+   segment between their means) are one material seen under different shading, two
+   separated by a valley are two materials; single linkage merges the shallowest valleys
+   first until ``k`` groups remain. So a white particle in shadow stays white, while white
+   and pale teal, or dark and light green, stay apart. A particle component joined more
+   closely to the background than to any other particle component (gaps, shadows) joins
+   the background.
+5. Each class keeps its Gaussians; the background is one reject class. The meter's
+   lookup table assigns every colour to its most likely component, and counts it only
+   within ``max_distance`` sigmas of a particle class.
+
+Classes are named by colour and sorted by name, so the TOML is the same for any frames
+of the same material pair.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
-from vision.colours import ColourClass
+from vision.colours import ColourClass, LabComponent, bgr_to_lab, classify, counted_classes
 from vision.config import MeterConfig
 from vision.errors import VisionError
-from vision.roi import DrumROI, roi_bbox, _mask_in_box
+from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
-__all__ = ["suggest_classes", "colour_name"]
+__all__ = ["suggest_classes", "colour_name", "class_preview", "sample_drum_pixels", "fit_colour_model",
+           "DrumSamples", "MAX_DISTANCE"]
 
+MAX_DISTANCE = 4.5
+"""Reject distance of a suggested class (Mahalanobis, sigmas)."""
+
+_L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
+_COV_FLOOR = (4.0, 1.0, 1.0)  # variance floor (L, a, b): JPEG noise, frames not seen
 _HUE_NAMES = ((8, "red"), (20, "orange"), (33, "yellow"), (78, "green"), (95, "teal"), (130, "blue"),
               (155, "purple"), (170, "magenta"), (180, "red"))
 
@@ -34,71 +59,244 @@ def colour_name(h: float, s: float, v: float) -> str:
     return "red"
 
 
-def _hsv_box(hsv: np.ndarray, margin: int = 8) -> tuple[tuple, ...]:
-    h, s, v = hsv[:, 0].astype(int), hsv[:, 1].astype(int), hsv[:, 2].astype(int)
-    s_lo, s_hi = np.percentile(s, [2, 98])
-    v_lo, v_hi = np.percentile(v, [2, 98])
-    s_lo, s_hi = max(0, int(s_lo) - margin), min(255, int(s_hi) + margin)
-    v_lo, v_hi = max(0, int(v_lo) - margin), min(255, int(v_hi) + margin)
-    if np.median(s) < 70:  # hue is meaningless for white/grey
-        return (((0, s_lo, v_lo), (179, s_hi, v_hi)),)
-    # circular hue: rotate so the cluster's mean hue sits at 90, take percentiles, rotate back
-    ang = h * (np.pi / 90.0)
-    mean = int(round(np.degrees(np.arctan2(np.sin(ang).mean(), np.cos(ang).mean())) / 2.0)) % 180
-    rot = (h - mean + 90) % 180
-    lo, hi = np.percentile(rot, [2, 98])
-    lo, hi = int(lo) - margin // 2 + mean - 90, int(hi) + margin // 2 + mean - 90
-    if hi - lo >= 179:
-        return (((0, s_lo, v_lo), (179, s_hi, v_hi)),)
-    if lo < 0:
-        return (((0, s_lo, v_lo), (hi, s_hi, v_hi)), ((180 + lo, s_lo, v_lo), (179, s_hi, v_hi)))
-    if hi > 179:
-        return (((lo, s_lo, v_lo), (179, s_hi, v_hi)), ((0, s_lo, v_lo), (hi - 180, s_hi, v_hi)))
-    return (((lo, s_lo, v_lo), (hi, s_hi, v_hi)),)
+@dataclass(frozen=True)
+class DrumSamples:
+    """Pixels sampled inside the drum: CIELAB colour (N, 3) and height ``(cy - y) / R`` (N,)."""
+
+    lab: np.ndarray
+    height: np.ndarray
 
 
-def suggest_classes(image_bgr: np.ndarray, roi: DrumROI, k: int = 2, seed: int = 0, max_samples: int = 40000) -> MeterConfig:
-    """A ``MeterConfig`` with ``k`` classes found in the frame (ROI kept as given)."""
-    img = np.asarray(image_bgr)
-    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-        raise VisionError(f"classes suggest needs a colour (BGR) image, got shape {img.shape}")
+def sample_drum_pixels(
+    frames: Sequence[np.ndarray], rois: Sequence[DrumROI], per_frame: int = 12000, seed: int = 0,
+    r_max: float = 0.94,
+) -> DrumSamples:
+    """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum."""
+    rng = np.random.default_rng(seed)
+    labs, heights = [], []
+    for img, roi in zip(frames, rois):
+        box = roi_bbox(roi, img.shape[:2])
+        x0, y0, x1, y1 = box
+        inner = DrumROI(roi.cx_px, roi.cy_px, roi.r_px * r_max, roi.kind,
+                        None if roi.half_w_px is None else roi.half_w_px * r_max,
+                        None if roi.half_h_px is None else roi.half_h_px * r_max)
+        yy, xx = np.nonzero(_mask_in_box(inner, box))
+        if yy.size == 0:
+            continue
+        if yy.size > per_frame:
+            pick = rng.choice(yy.size, per_frame, replace=False)
+            yy, xx = yy[pick], xx[pick]
+        labs.append(bgr_to_lab(img[y0:y1, x0:x1][yy, xx]))
+        heights.append((roi.cy_px - (yy + y0)) / roi.r_px)
+    if not labs:
+        raise VisionError("no drum pixels to learn colours from")
+    return DrumSamples(np.concatenate(labs).astype(np.float64), np.concatenate(heights))
+
+
+def _em(x: np.ndarray, n: int, seed: int, iters: int = 80) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Gaussian mixture by EM (full covariances) from a seeded k-means start.
+
+    Returns weights (n,), means (n, 3), covariances (n, 3, 3), hard labels (N,)."""
+    cv2.setRNGSeed(seed)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.1)
+    _, lbl, _ = cv2.kmeans(x.astype(np.float32), n, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+    resp = np.zeros((x.shape[0], n))
+    resp[np.arange(x.shape[0]), lbl.ravel()] = 1.0
+    floor = np.diag([1e-2, 1e-2, 1e-2])
+    prev = -np.inf
+    for _ in range(iters):
+        nk = resp.sum(axis=0) + 1e-9
+        w = nk / nk.sum()
+        mu = (resp.T @ x) / nk[:, None]
+        cov = np.empty((n, 3, 3))
+        for j in range(n):
+            d = x - mu[j]
+            cov[j] = (resp[:, j, None] * d).T @ d / nk[j] + floor
+        logp = np.empty((x.shape[0], n))
+        for j in range(n):
+            d = x - mu[j]
+            inv = np.linalg.inv(cov[j])
+            q = np.einsum("ni,ij,nj->n", d, inv, d)
+            logp[:, j] = np.log(w[j]) - 0.5 * (q + np.log(np.linalg.det(cov[j])))
+        top = logp.max(axis=1, keepdims=True)
+        p = np.exp(logp - top)
+        s = p.sum(axis=1, keepdims=True)
+        resp = p / s
+        ll = float((np.log(s) + top).mean())
+        if ll - prev < 1e-5:
+            break
+        prev = ll
+    return w, mu, cov, resp.argmax(axis=1)
+
+
+def _mixture_logpdf(x: np.ndarray, w: np.ndarray, mu: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    out = np.full(x.shape[0], -np.inf)
+    for j in range(w.shape[0]):
+        d = x - mu[j]
+        q = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov[j]), d)
+        out = np.logaddexp(out, np.log(w[j]) - 0.5 * (q + np.log(np.linalg.det(cov[j]))))
+    return out
+
+
+def _ridge(w: np.ndarray, mu: np.ndarray, cov: np.ndarray, steps: int = 24) -> np.ndarray:
+    """Pairwise continuity of the mixture: the lowest density on the segment between two
+    means over the lower of the two end densities (log). Near 0: one material (shading,
+    no valley between them); very negative: a valley, two materials."""
+    n = w.shape[0]
+    out = np.zeros((n, n))
+    ts = np.linspace(0.0, 1.0, steps)[:, None]
+    for i in range(n):
+        for j in range(i + 1, n):
+            line = mu[i] + ts * (mu[j] - mu[i])
+            lp = _mixture_logpdf(line, w, mu, cov)
+            out[i, j] = out[j, i] = float(lp.min() - min(lp[0], lp[-1]))
+    return out
+
+
+def _lab_to_bgr(lab: np.ndarray) -> tuple[int, int, int]:
+    px = np.array([[[lab[0] * 255.0 / 100.0, lab[1] + 128.0, lab[2] + 128.0]]])
+    bgr = cv2.cvtColor(np.clip(px, 0, 255).astype(np.uint8), cv2.COLOR_Lab2BGR)[0, 0]
+    return int(bgr[0]), int(bgr[1]), int(bgr[2])
+
+
+def _name_of(lab: np.ndarray) -> str:
+    bgr = _lab_to_bgr(lab)
+    h, s, v = cv2.cvtColor(np.array([[bgr]], np.uint8), cv2.COLOR_BGR2HSV)[0, 0]
+    return colour_name(float(h), float(s), float(v))
+
+
+def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[ColourClass, ...]:
+    """``k`` particle classes (sorted by name) and one reject class ``background``."""
     if not 2 <= k <= 6:
         raise VisionError(f"k must be within 2..6, got {k}")
-    box = roi_bbox(roi, img.shape[:2])
-    x0, y0, x1, y1 = box
-    crop = img[y0:y1, x0:x1]
-    inside = _mask_in_box(roi, box)
-    yy, xx = np.nonzero(inside)
-    rng = np.random.default_rng(seed)
-    if yy.size > max_samples:
-        pick = rng.choice(yy.size, max_samples, replace=False)
-        yy, xx = yy[pick], xx[pick]
-    bgr = crop[yy, xx].reshape(-1, 1, 3)
-    lab = cv2.cvtColor(bgr, cv2.COLOR_BGR2Lab).reshape(-1, 3).astype(np.float32)
-    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV).reshape(-1, 3)
-    cv2.setRNGSeed(seed)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.5)
-    _, lbl, _ = cv2.kmeans(lab, k + 1, None, crit, 4, cv2.KMEANS_PP_CENTERS)
-    lbl = lbl.ravel()
-    rr = np.hypot(xx + x0 - roi.cx_px, yy + y0 - roi.cy_px) / roi.r_px
-    ring = (rr > 0.8) & (rr < 0.95)
-    counts = np.bincount(lbl[ring] if ring.any() else lbl, minlength=k + 1)
-    bg = int(np.argmax(counts))
-    classes: list[ColourClass] = []
-    used: set[str] = set()
-    order = sorted((c for c in range(k + 1) if c != bg), key=lambda c: -np.sum(lbl == c))
-    for c in order:
-        members = hsv[lbl == c]
-        if members.shape[0] < 20:
-            raise VisionError("could not find two particle colours inside the drum (too few pixels)")
-        h_mean = np.degrees(np.arctan2(np.sin(members[:, 0] * np.pi / 90).mean(),
-                                       np.cos(members[:, 0] * np.pi / 90).mean())) / 2 % 180
-        name = colour_name(h_mean, float(np.median(members[:, 1])), float(np.median(members[:, 2])))
-        base, n = name, 2
-        while name in used:
-            name = f"{base}{n}"
-            n += 1
-        used.add(name)
-        mean_bgr = tuple(int(v) for v in crop[yy[lbl == c], xx[lbl == c]].mean(axis=0))
-        classes.append(ColourClass(name, _hsv_box(members), mean_bgr))
-    return MeterConfig(tuple(classes), None, "color", 50, 80, 1, "<suggested>")
+    n = k + 3
+    if samples.lab.shape[0] < 50 * n:
+        raise VisionError("too few drum pixels to learn colours from")
+    scale = np.array([_L_WEIGHT_FIT, 1.0, 1.0])
+    w, mu_f, cov_f, lbl = _em(samples.lab * scale, n, seed)
+    mu = mu_f / scale
+    cov = cov_f / np.outer(scale, scale)[None] + np.diag(_COV_FLOOR)[None]
+    top = samples.height > 0.5
+    top_share = float(top.mean())
+    counts = np.bincount(lbl, minlength=n).astype(float)
+    in_top = np.bincount(lbl[top], minlength=n).astype(float)
+    t = np.where(counts > 0, in_top / np.maximum(counts, 1.0), 0.0)
+    order = np.argsort(t)
+    background = [j for j in range(n) if top_share > 0.02 and t[j] >= 0.5 * top_share and counts[j] > 0]
+    particles = [j for j in order if j not in background and counts[j] > 0]
+    if len(particles) < k:  # no empty space above the bed (top view?): the least "top" components
+        particles = [int(j) for j in order[:k]]
+        background = [j for j in range(n) if j not in particles]
+    ridge = _ridge(w, mu_f, cov_f)
+    if background and len(particles) > k:
+        keep = []
+        biggest = max(counts[i] for i in particles)
+        for j in particles:
+            to_bg = max(ridge[j, b] for b in background)
+            to_others = max(ridge[j, i] for i in particles if i != j)
+            if to_bg > to_others and counts[j] < biggest:
+                background.append(j)
+            else:
+                keep.append(j)
+        particles = keep if len(keep) >= k else particles
+    groups = [[j] for j in particles]
+    while len(groups) > k:  # single linkage on continuity: merge the pair with the shallowest valley
+        best = None
+        for a in range(len(groups)):
+            for b in range(a + 1, len(groups)):
+                link = max(ridge[i, j] for i in groups[a] for j in groups[b])
+                if best is None or link > best[0]:
+                    best = (link, a, b)
+        assert best is not None
+        _, a, b = best
+        groups[a] = groups[a] + groups[b]
+        del groups[b]
+    total = counts.sum()
+    named = []
+    for g in groups:
+        lab_mean = np.average(mu[g], axis=0, weights=counts[g])
+        comps = tuple(_component(mu[j], cov[j], counts[j] / total) for j in g)
+        named.append((_name_of(lab_mean), float(lab_mean[0]), comps, _lab_to_bgr(lab_mean)))
+    named.sort(key=lambda x: (x[0], x[1]))
+    names = [x[0] for x in named]
+    classes = []
+    for i, (name, _, comps, bgr) in enumerate(named):
+        if names.count(name) > 1:
+            same = [j for j, m in enumerate(names) if m == name]
+            rank = same.index(i)
+            suffix = "dark" if rank == 0 else ("light" if rank == len(same) - 1 else f"mid{rank}")
+            name = f"{name}-{suffix}"
+        classes.append(ColourClass(name, display_bgr=bgr, lab=comps, max_distance=MAX_DISTANCE))
+    if background:
+        comps = tuple(_component(mu[j], cov[j], max(counts[j], 1.0) / total) for j in background)
+        classes.append(ColourClass("background", display_bgr=(40, 40, 40), lab=comps, reject=True))
+    return tuple(classes)
+
+
+def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent:
+    c = 0.5 * (cov + cov.T)
+    return LabComponent(
+        tuple(round(float(v), 3) for v in mean),  # type: ignore[arg-type]
+        tuple(round(float(c[i, j]), 4) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))),  # type: ignore[arg-type]
+        round(max(float(weight), 1e-6), 6),
+    )
+
+
+def suggest_classes(
+    frames: Sequence[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
+    per_frame: int | None = None,
+) -> MeterConfig:
+    """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames.
+
+    ``roi`` fixes the drum for every frame; ``None`` detects it in each frame. The ROI is
+    not written into the config (the meter finds the drum per frame size)."""
+    if isinstance(frames, np.ndarray):
+        frames = [frames]
+    frames = list(frames)
+    if not frames:
+        raise VisionError("classes suggest needs at least one frame")
+    for img in frames:
+        if not (isinstance(img, np.ndarray) and img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8):
+            shape = getattr(img, "shape", None)
+            raise VisionError(f"classes suggest needs colour (BGR, 8-bit) frames, got shape {shape}")
+    rois = [roi if roi is not None else detect_drum(img) for img in frames]
+    per = per_frame or max(3000, 120000 // len(frames))
+    samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
+    return MeterConfig(fit_colour_model(samples, k=k, seed=seed), None, "color", source="<suggested>")
+
+
+def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: DrumROI) -> np.ndarray:
+    """The frame beside its class map (each class in its display colour, no class dark grey),
+    with the drum circle and a legend: a check at a glance."""
+    img = np.asarray(image_bgr)
+    h, w = img.shape[:2]
+    labels = classify(img, tuple(classes))
+    counted = counted_classes(classes)
+    cmap = np.full((len(counted) + 1, 3), 45, np.uint8)
+    for i, c in enumerate(counted):
+        cmap[i + 1] = c.display_bgr
+    painted = cmap[labels]
+    left, right = img.copy(), painted
+    th = max(1, int(round(min(h, w) / 300)))
+    for pane in (left, right):
+        cv2.circle(pane, (int(round(roi.cx_px)), int(round(roi.cy_px))), int(round(roi.r_px)), (0, 255, 255), th,
+                   cv2.LINE_AA)
+    out = np.hstack([left, right])
+    fs = max(0.4, min(h, w) / 900.0)
+    lh = int(30 * fs) + 6
+    y = lh
+    inside = _mask_in_box(roi, (0, 0, w, h))
+    n_in = max(int(inside.sum()), 1)
+    for i, c in enumerate(counted):
+        share = float(((labels == i + 1) & inside).sum()) / n_in
+        text = f"{c.name}  {100 * share:.1f}% of drum"
+        x = w + 10
+        cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), c.display_bgr, -1)
+        cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), (255, 255, 255), 1)
+        cv2.putText(out, text, (x + lh, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(out, text, (x + lh, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs, (255, 255, 255), 1, cv2.LINE_AA)
+        y += lh
+    text = "grey: no class (background, rim, glare, shadow)"
+    cv2.putText(out, text, (w + 10, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs * 0.8, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(out, text, (w + 10, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs * 0.8, (220, 220, 220), 1, cv2.LINE_AA)
+    return out

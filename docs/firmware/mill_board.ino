@@ -1,9 +1,10 @@
 // drumtwin mill board -- reference firmware (Arduino Uno/Nano class board).
 //
 // Implements docs/mill-protocol.md v1: frames "$seq,CMD[,args]*CRC16\n", ACK/NAK with the
-// same seq, resend detection (last seq+payload -> cached reply, never applied twice),
-// absolute setpoints, and the watchdog (no valid frame for WATCHDOG_MS while running ->
-// stop, fault WDOG). The logic mirrors control/device.py, which the emulator runs and the
+// same seq, resend detection (last seq+payload of SET/RUN/STP -> cached reply, never
+// applied twice; STA/HB are always answered with a fresh status),
+// absolute setpoints, and the watchdog (no HB/SET/RUN/STP frame for WATCHDOG_MS while
+// running -> stop, fault WDOG; STA does not feed it). The logic mirrors control/device.py, which the emulator runs and the
 // tests exercise; keep the two in step.
 //
 // Hardware assumed: a DC gear motor on a PWM driver (PWM_PIN, DIR not needed: one
@@ -123,6 +124,18 @@ void execute(long seq, char *payload, char *reply) {
   frame(reply, body);
 }
 
+// True when the payload's command is `cmd` ("SET" matches "SET,12.00", not "SETX").
+bool isCommand(const char *payload, const char *cmd) {
+  size_t n = strlen(cmd);
+  return !strncmp(payload, cmd, n) && (payload[n] == ',' || payload[n] == 0);
+}
+
+// The controlling host's commands feed the watchdog: HB, SET, RUN, STP (not STA).
+bool feedsWatchdog(const char *payload) {
+  return isCommand(payload, "HB") || isCommand(payload, "SET") || isCommand(payload, "RUN") ||
+         isCommand(payload, "STP");
+}
+
 // One complete line "$...": check syntax and CRC, dedup, execute, answer.
 void handleLine(const char *l, uint8_t n) {
   const char *star = (const char *)memchr(l, '*', n);
@@ -148,8 +161,16 @@ void handleLine(const char *l, uint8_t n) {
     Serial.write(reply);
     return;
   }
-  lastValidMs = millis();  // any checksum-valid frame feeds the watchdog
   char *payload = comma + 1;
+  // Only the controlling host feeds the watchdog (HB, SET, RUN, STP, resends included);
+  // STA does not, so a status poller cannot keep the motor running after the
+  // controlling host died.
+  if (feedsWatchdog(payload)) lastValidMs = millis();
+  if (isCommand(payload, "STA") || isCommand(payload, "HB")) {  // read-only: always a fresh
+    execute(seq, payload, reply);                                // status, never cached
+    Serial.write(reply);
+    return;
+  }
   if (seq == lastSeq && !strcmp(payload, lastPayload)) {  // resend: same answer, no re-apply
     Serial.write(lastReply);
     return;

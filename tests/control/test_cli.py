@@ -12,6 +12,7 @@ import pytest
 from control.device import DeviceConfig
 from control.driver import MillClient
 from control.emulator import MillEmulator
+from tests.cli import assert_one_line_error
 from tests.cli import cli as run_cli
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
@@ -39,8 +40,6 @@ def test_bench_link_times_both_transports(capsys):
     for tr in ("pty", "tcp"):
         assert 0 < d[f"{tr}_median_ms"] <= d[f"{tr}_p99_ms"] < 500
         assert d[f"{tr}_resends"] == 0  # a clean line needs no resend
-    code, _, err = cli(capsys, "bench", "link", "--requests", "0")
-    assert code == 2 and "--requests" in err
 
 
 @pytest.mark.timeout(60)
@@ -65,13 +64,63 @@ def test_mill_commands_against_emulator(capsys):
         assert code == 2 and "RANGE" in err and emu.motor.setpoint_rpm == 14.5
 
 
-def test_bad_url_and_bad_faults_are_one_line_errors(capsys):
-    code, out, err = cli(capsys, "mill", "/nonexistent/ttyUSB7", "status")
-    assert code == 2 and err.startswith("error:") and "Traceback" not in err and out == ""
-    code, _, err = cli(capsys, "mill-emulator", "--faults", "bogus=1", "--duration", "0.1")
-    assert code == 2 and "unknown fault" in err
-    code, _, err = cli(capsys, "mill-emulator", "--pty", "--tcp", "0", "--duration", "0.1")
-    assert code == 2 and "one of" in err
+def test_bad_url_and_bad_faults_are_one_line_errors():
+    r = run_cli("mill", "/nonexistent/ttyUSB7", "status")
+    assert_one_line_error(r, "cannot open mill link")
+    assert r.out == ""
+    assert_one_line_error(run_cli("mill-emulator", "--faults", "bogus=1", "--duration", "0.1"), "unknown fault")
+    assert_one_line_error(run_cli("mill-emulator", "--pty", "--tcp", "0", "--duration", "0.1"), "one of")
+
+
+NAN, INF = "nan", "inf"
+BAD_NUMBERS = [
+    (("mill-emulator", "--tcp", "99999"), "--tcp"),
+    (("mill-emulator", "--tcp", "-1"), "--tcp"),
+    (("mill-emulator", "--watchdog", NAN), "--watchdog"),  # used to disable the watchdog silently
+    (("mill-emulator", "--watchdog", "-1"), "--watchdog"),
+    (("mill-emulator", "--max-rpm", INF), "--max-rpm"),  # used to accept 5000 rpm
+    (("mill-emulator", "--max-rpm", "0"), "--max-rpm"),
+    (("mill-emulator", "--accel", NAN), "--accel"),
+    (("mill-emulator", "--tau", "-0.5"), "--tau"),
+    (("mill-emulator", "--duration", NAN), "--duration"),
+    (("mill-emulator", "--duration", "0"), "--duration"),
+    (("mill-emulator", "--faults", "delay=nan"), "delay"),
+    (("mill", "--timeout", NAN, "socket://127.0.0.1:9", "status"), "--timeout"),  # used to hang
+    (("mill", "--timeout", "0", "socket://127.0.0.1:9", "status"), "--timeout"),
+    (("mill", "--timeout", INF, "socket://127.0.0.1:9", "status"), "--timeout"),
+    (("mill", "--retries", "-1", "socket://127.0.0.1:9", "status"), "--retries"),
+    (("mill", "socket://127.0.0.1:9", "set-rpm", NAN), "rpm"),
+    (("mill", "socket://127.0.0.1:9", "set-rpm", "--", "-3"), "rpm"),
+    (("mill", "socket://127.0.0.1:9", "set-rpm", "5", "--hold", INF), "--hold"),
+    (("mill", "socket://127.0.0.1:9", "start", "--hold", NAN), "--hold"),
+    (("mill", "socket://127.0.0.1:9", "start", "--hold", "-1"), "--hold"),
+    (("bench", "link", "--requests", "0"), "--requests"),
+    (("bench", "link", "--requests", "-5"), "--requests"),
+    (("bench", "trend", "--fps", NAN), "--fps"),
+    (("bench", "trend", "--noise", INF), "--noise"),
+    (("bench", "trend", "--ripple", "-1"), "--ripple"),
+]
+
+
+@pytest.mark.timeout(20)
+@pytest.mark.parametrize(("args", "needle"), BAD_NUMBERS, ids=[" ".join(a) for a, _ in BAD_NUMBERS])
+def test_bad_numbers_are_one_line_errors(args, needle):
+    """Refused before any port is opened or any thread started: exit 2, one line, no hang."""
+    assert_one_line_error(run_cli(*args), needle)
+
+
+@pytest.mark.timeout(20)
+def test_two_status_calls_see_the_fresh_state():
+    """Every CLI call is a new host: its status is never a reply cached for the last one."""
+    with MillEmulator(DeviceConfig(watchdog_s=0.0)) as emu:
+        emu.open_tcp(0)
+        r1 = run_cli("mill", emu.url, "status", "--json")
+        assert r1.code == 0 and json.loads(r1.out)["setpoint_rpm"] == 0.0
+        emu.set_motor(setpoint_rpm=9.0, actual_rpm=9.0, running=True)  # front panel
+        r2 = run_cli("mill", emu.url, "status", "--json")
+        assert r2.code == 0 and json.loads(r2.out) == {
+            "setpoint_rpm": 9.0, "actual_rpm": 9.0, "running": True, "fault": None
+        }
 
 
 @pytest.mark.timeout(60)

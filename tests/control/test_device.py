@@ -113,3 +113,41 @@ def test_garbage_never_moves_the_motor():
     # and it still works afterwards
     r = replies(d.receive(b"\n" + p.encode_frame(100, p.SET, 3.0), 0.0))
     assert r == [p.Frame(100, p.ACK)] and d.motor.setpoint_rpm == 3.0
+
+
+def test_only_the_controlling_hosts_commands_feed_the_watchdog():
+    """A status poller (STA) does not keep the motor running; HB, SET, STP do feed."""
+    d = MillDevice(DeviceConfig(watchdog_s=0.5))
+    d.receive(p.encode_frame(1, p.SET, 20.0) + p.encode_frame(2, p.RUN), 0.0)
+    for k in range(1, 10):  # a monitor polls the status every 0.1 s
+        r = replies(d.receive(p.encode_frame(100 + k, p.STA), 0.1 * k))
+        assert r[0].cmd == p.ACK
+    d.tick(0.95)
+    assert not d.motor.running and d.motor.fault == p.FAULT_WATCHDOG
+    assert d.counters["watchdog_trips"] == 1
+    # every controlling command feeds it: SET, HB and a refused SET (the host is alive)
+    d.receive(p.encode_frame(20, p.RUN), 1.0)
+    feeds = [p.encode_frame(21, p.SET, 10.0), p.encode_frame(22, p.HB), p.encode_frame(23, p.SET, 999.0)]
+    for i, frame in enumerate(feeds):
+        d.receive(frame, 1.4 + 0.4 * i)
+    d.tick(2.2 + 0.45)
+    assert d.motor.running and d.motor.fault is None
+    assert p.WATCHDOG_COMMANDS == {p.SET, p.RUN, p.STP, p.HB}
+
+
+def test_status_is_never_answered_from_the_resend_cache():
+    """Two hosts (or two CLI calls) asking STA under the same seq get the status of now."""
+    d = MillDevice(DeviceConfig(watchdog_s=0.0))
+    first = p.parse_status(replies(d.receive(p.encode_frame(1, p.STA), 0.0))[0].args)
+    assert first == p.MillStatus(0.0, 0.0, False, None)
+    d.motor.setpoint_rpm, d.motor.running = 9.0, True  # front panel: no frame, cache untouched
+    d.tick(5.0)
+    again = p.parse_status(replies(d.receive(p.encode_frame(1, p.STA), 5.0))[0].args)
+    assert again.setpoint_rpm == 9.0 and again.running and again.actual_rpm > 8.0
+    hb = p.parse_status(replies(d.receive(p.encode_frame(1, p.HB), 5.0))[0].args)
+    assert hb.running and d.counters["resends"] == 0
+    # a status between a SET and its resend does not break the resend detection
+    d.receive(p.encode_frame(2, p.SET, 4.0), 5.1)
+    d.receive(p.encode_frame(3, p.STA), 5.1)
+    d.receive(p.encode_frame(2, p.SET, 4.0), 5.2)
+    assert [a.cmd for a in d.applied] == [p.SET] and d.counters["resends"] == 1

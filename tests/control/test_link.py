@@ -14,7 +14,7 @@ from control import protocol as p
 from control.device import DeviceConfig, MillDevice
 from control.driver import MillClient
 from control.emulator import Faults, MillEmulator
-from control.errors import ControlError
+from control.errors import ControlError, MillRefused
 from control.motor import MotorConfig
 
 FAST_MOTOR = MotorConfig(max_rpm=60.0, accel_rpm_per_s=40.0, tau_s=0.2)
@@ -48,7 +48,6 @@ def make_emulator(kind: str, **kw) -> MillEmulator:
 @pytest.mark.timeout(30)
 def test_set_rpm_converges_start_stop(kind):
     with make_emulator(kind) as emu, MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.1) as c:
-        assert c.connected is False or c.connected is True  # flag exists before any request
         st = c.status()
         assert st == p.MillStatus(0.0, 0.0, False, None) and c.connected
         c.set_rpm(15.0)
@@ -62,7 +61,7 @@ def test_set_rpm_converges_start_stop(kind):
         assert wait_for(lambda: c.status().actual_rpm == 0.0, 5.0)
         st = c.status()
         assert not st.running and st.setpoint_rpm == 25.5
-        with pytest.raises(ControlError, match="RANGE"):
+        with pytest.raises(MillRefused, match="RANGE"):
             c.set_rpm(61.0)  # above the board's max rpm: NAK, not retried
         assert [a.cmd for a in emu.applied] == [p.SET, p.RUN, p.SET, p.STP]
 
@@ -242,7 +241,7 @@ def test_fault_spec_parsing():
     f = Faults.parse("corrupt=0.05, drop=0.01,delay=0.02,disconnect=10:1.5")
     assert f == Faults(drop_p=0.01, corrupt_p=0.05, delay_s=0.02, disconnect_every_s=10.0, disconnect_for_s=1.5)
     assert Faults.parse("") == Faults()
-    for bad in ("corrupt=2", "drop=x", "melt=1", "delay=-1"):
+    for bad in ("corrupt=2", "drop=x", "melt=1", "delay=-1", "delay=nan", "corrupt=nan", "disconnect=inf:1", "disconnect=5:0"):
         with pytest.raises(ControlError):
             Faults.parse(bad)
 
@@ -386,3 +385,63 @@ def test_rfc2217_url_works():
                 assert [a.cmd for a in emu.applied] == [p.SET, p.RUN]
         finally:
             srv.close()
+
+
+@pytest.mark.timeout(20)
+def test_refusals_raise_mill_refused_once_and_keep_the_link():
+    """A NAK is not a lost link: one frame on the line, no resend, the link stays up."""
+    with make_emulator("tcp") as emu, MillClient(emu.url, timeout_s=0.2, heartbeat_s=None) as c:
+        c.set_rpm(5.0)
+        frames0 = emu.counters["frames"]
+        with pytest.raises(MillRefused) as exc:
+            c.set_rpm(61.0)  # above max_rpm
+        assert (exc.value.command, exc.value.reason) == ("SET 61.0", p.NAK_RANGE)
+        emu.set_drive_fault()
+        with pytest.raises(MillRefused) as exc:
+            c.start()
+        assert (exc.value.command, exc.value.reason) == ("RUN", p.NAK_FAULT)
+        assert emu.counters["frames"] == frames0 + 2 and c.stats["resends"] == 0
+        assert c.stats["naks"] == 2 and c.connected and c.last_error is None
+        assert c.status().fault == p.FAULT_DRIVE and not emu.motor.running
+        emu.set_drive_fault(False)
+        c.start()
+        assert emu.motor.running and [a.cmd for a in emu.applied] == [p.SET, p.RUN]
+
+
+@pytest.mark.timeout(20)
+def test_a_status_poller_does_not_keep_the_motor_running_after_its_controller_died():
+    cfg = DeviceConfig(watchdog_s=0.4, motor=FAST_MOTOR)
+    with make_emulator("tcp", config=cfg) as emu:
+        with MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.05) as controller:
+            controller.set_rpm(12.0)
+            controller.start()
+            time.sleep(0.6)  # > watchdog: the controller's heartbeat keeps it running
+            assert emu.motor.running
+        # the controlling host is gone; a monitor keeps reading the status
+        with MillClient(emu.url, timeout_s=0.2, heartbeat_s=None) as monitor:
+            t_end = time.monotonic() + 1.0
+            while time.monotonic() < t_end:
+                monitor.status()
+                time.sleep(0.05)
+            st = monitor.status()
+        assert not st.running and st.fault == p.FAULT_WATCHDOG and emu.counters["watchdog_trips"] == 1
+
+
+def test_each_client_starts_its_sequence_numbers_at_a_random_value():
+    with make_emulator("tcp", config=DeviceConfig(watchdog_s=0.0)) as emu:
+        for _ in range(3):
+            with MillClient(emu.url, timeout_s=0.2, heartbeat_s=None) as c:
+                c.set_rpm(3.0)
+        seqs = [a.seq for a in emu.applied]
+    assert len(seqs) == 3 and len(set(seqs)) == 3  # 1 in ~2e9 to collide by chance
+
+
+@pytest.mark.parametrize(
+    ("kw", "needle"),
+    [({"timeout_s": float("nan")}, "timeout_s"), ({"timeout_s": 0.0}, "timeout_s"),
+     ({"retries": -1}, "retries"), ({"heartbeat_s": float("inf")}, "heartbeat_s"),
+     ({"backoff_s": -0.1}, "backoff_s"), ({"reconnect_wait_s": float("nan")}, "reconnect_wait_s")],
+)
+def test_bad_client_settings_are_refused(kw, needle):
+    with pytest.raises(ControlError, match=needle):
+        MillClient("socket://127.0.0.1:9", connect=False, **{"heartbeat_s": None, **kw})

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -15,7 +16,16 @@ import pytest
 
 from twin.config import RunConfig
 from twin.errors import TwinError
-from twin.runlog import FRAME_COLUMNS, RunLog, read_events, read_frames, read_metadata
+from tests.cli import assert_one_line_error, cli
+from twin.runlog import (
+    FRAME_COLUMNS,
+    RunLog,
+    default_run_dir,
+    make_run_dir,
+    read_events,
+    read_frames,
+    read_metadata,
+)
 
 
 def test_rows_events_metadata_round_trip(tmp_path: Path) -> None:
@@ -103,3 +113,60 @@ def test_config_validation() -> None:
     with pytest.raises(FileNotFoundError):
         RunConfig(video=Path("/nonexistent.mp4"), mill="loop://").resolved()
     assert RunConfig(control_token="s3cret").to_metadata()["control_token"] == "***"
+
+
+def test_an_existing_run_is_never_overwritten(tmp_path: Path) -> None:
+    with RunLog(tmp_path / "run") as log:
+        log.frame({"t_s": 0.5, "mi": 0.81})
+    before = (tmp_path / "run" / "frames.csv").read_bytes()
+    with pytest.raises(TwinError, match="already holds"):
+        RunLog(tmp_path / "run")
+    assert (tmp_path / "run" / "frames.csv").read_bytes() == before
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "todo.txt").write_text("mine")
+    with pytest.raises(TwinError, match="already holds"):
+        RunLog(tmp_path / "notes")
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(TwinError, match="not a directory"):
+        RunLog(tmp_path / "afile")
+    (tmp_path / "empty").mkdir()
+    with RunLog(tmp_path / "empty") as log:  # an empty directory is fine
+        log.event("start", 0.0)
+    assert read_events(tmp_path / "empty")[0]["kind"] == "start"
+
+
+def test_writers_racing_for_one_directory_exactly_one_wins(tmp_path: Path) -> None:
+    """The directory is claimed by an exclusive create: every loser gets a TwinError."""
+    barrier = threading.Barrier(8)
+    won: list[RunLog] = []
+    lost: list[Exception] = []
+
+    def claim() -> None:
+        barrier.wait()
+        try:
+            won.append(RunLog(tmp_path / "run"))
+        except TwinError as exc:
+            lost.append(exc)
+
+    threads = [threading.Thread(target=claim) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10)
+    assert len(won) == 1 and len(lost) == 7
+    won[0].close()
+
+
+def test_default_run_dirs_are_unique_within_one_second(tmp_path: Path) -> None:
+    names = {default_run_dir(tmp_path, now_s=1.7e9) for _ in range(200)}
+    assert len(names) == 200 and all(str(os.getpid()) in n.name for n in names)
+    made = [make_run_dir(tmp_path / "runs") for _ in range(20)]
+    assert len(set(made)) == 20 and all(d.is_dir() and not any(d.iterdir()) for d in made)
+
+
+def test_cli_refuses_an_existing_log_dir(tmp_path: Path) -> None:
+    with RunLog(tmp_path / "run") as log:
+        log.frame({"t_s": 0.5})
+    r = cli("run", "--log", tmp_path / "run", "--no-dashboard", "--duration", "1")
+    assert_one_line_error(r, "--log", "already holds")
+    assert len(read_frames(tmp_path / "run")) == 1

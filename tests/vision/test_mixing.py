@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from vision.mixing import characteristic_distance, mixing_indices, sigmoid_f
-from vision.smoothing import MovingAverage, moving_average
 
 
 def test_sigmoid_shape():
@@ -38,17 +37,3 @@ def test_mixing_indices_nan_safe():
     m = mixing_indices((float("nan"), 0), (1, 0), 1, 1, 100.0)
     assert all(math.isnan(v) for v in (m.mi, m.mi_sigmoid, m.mi_linear, m.d_px, m.dsigma_px))
     assert math.isnan(mixing_indices((0, 0), (1, 0), 1, 1, 0.0).mi)
-
-
-def test_moving_average_matches_window_and_skips_nan():
-    xs = [1, 2, 3, float("nan"), 4, 5]
-    out = moving_average(xs, 3)
-    assert out[0] == 1 and out[2] == pytest.approx(2)
-    assert out[3] == pytest.approx(2)  # NaN skipped, previous mean kept
-    assert out[4] == pytest.approx(3) and out[5] == pytest.approx(4)
-    ma = MovingAverage(150)
-    vals = np.random.default_rng(1).random(400)
-    last = [ma.update(v) for v in vals][-1]
-    assert last == pytest.approx(vals[-150:].mean())
-    with pytest.raises(ValueError):
-        MovingAverage(0)

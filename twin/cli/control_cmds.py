@@ -14,7 +14,7 @@ from rich.table import Table
 from control.device import DeviceConfig
 from control.driver import MillClient
 from control.emulator import Faults, MillEmulator
-from control.errors import ControlError
+from control.errors import ControlError, check_number
 from control.motor import MotorConfig
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json
@@ -38,6 +38,9 @@ def _mill(
     timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
     retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
 ) -> None:
+    check_number("--timeout", timeout_s, above=0.0, at_most=60.0)
+    if not 0 <= retries <= 100:
+        raise ControlError(f"--retries must be an integer in 0..100 (got {retries})")
     ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries}
 
 
@@ -50,6 +53,10 @@ HOLD_OPT = typer.Option(
     0.0, "--hold", help="Keep the link alive (heartbeat) this many seconds, printing the status; "
     "afterwards the board's watchdog stops the motor."
 )
+
+
+def _check_hold(hold_s: float) -> float:
+    return check_number("--hold", hold_s, at_least=0.0, at_most=86400.0)
 
 
 def _hold(c: MillClient, hold_s: float, as_json: bool) -> None:
@@ -94,6 +101,8 @@ def mill_set_rpm(
     hold_s: float = HOLD_OPT,
 ) -> None:
     """Set the speed setpoint (rpm)."""
+    check_number("rpm", rpm, at_least=0.0)
+    _check_hold(hold_s)
     with _client(ctx) as c:
         c.set_rpm(rpm)
         _hold(c, hold_s, as_json)
@@ -104,6 +113,7 @@ def mill_set_rpm(
 def mill_start(ctx: typer.Context, as_json: bool = JSON_OPT, hold_s: float = HOLD_OPT) -> None:
     """Start the motor (clears a watchdog fault). Without --hold the board's watchdog
     stops it again once the host is silent (see docs/mill-protocol.md)."""
+    _check_hold(hold_s)
     with _client(ctx) as c:
         c.start()
         _hold(c, hold_s, as_json)
@@ -135,8 +145,14 @@ def mill_emulator(
     """Run the motor-board emulator on a pty (prints its path) or a TCP port."""
     if pty and tcp is not None:
         raise ControlError("choose one of --pty and --tcp")
-    if watchdog_s < 0 or max_rpm <= 0 or accel <= 0 or tau_s < 0:
-        raise ControlError("--max-rpm and --accel must be positive, --watchdog and --tau >= 0")
+    if tcp is not None and not 0 <= tcp <= 65535:
+        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
+    check_number("--watchdog", watchdog_s, at_least=0.0, at_most=3600.0)
+    check_number("--max-rpm", max_rpm, above=0.0, at_most=1000.0)
+    check_number("--accel", accel, above=0.0, at_most=1e4)
+    check_number("--tau", tau_s, at_least=0.0, at_most=60.0)
+    if duration_s is not None:
+        check_number("--duration", duration_s, above=0.0)
     cfg = DeviceConfig(watchdog_s=watchdog_s, motor=MotorConfig(max_rpm=max_rpm, accel_rpm_per_s=accel, tau_s=tau_s))
     emu = MillEmulator(cfg, Faults.parse(faults), seed=seed)
     done = threading.Event()
@@ -187,8 +203,11 @@ def bench_trend(
     """Kalman MI trend vs the paper's 150-sample moving average: RMSE and step lag."""
     from control.trendbench import run_trend_bench, synthetic_sequence
 
-    if sequences < 1 or fps <= 0 or window < 1:
-        raise ControlError("--sequences, --fps and --window must be positive")
+    if sequences < 1 or window < 1:
+        raise ControlError("--sequences and --window must be >= 1")
+    check_number("--fps", fps, above=0.0, at_most=10000.0)
+    check_number("--noise", noise_sd, at_least=0.0, at_most=1.0)
+    check_number("--ripple", ripple, at_least=0.0, at_most=1.0)
     if source == "synthetic":
         make: "SequenceSource" = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
     elif source in TREND_SOURCES:
@@ -213,8 +232,8 @@ def bench_link(
     """Round trip of the real serial driver to the emulator over a pty and over TCP."""
     from control.linkbench import run_link_bench
 
-    if requests < 1:
-        raise ControlError("--requests must be >= 1")
+    if not 1 <= requests <= 1_000_000:
+        raise ControlError(f"--requests must be in 1..1000000 (got {requests})")
     with console_err.status("timing the link ...") as st:
         res = run_link_bench(requests, progress=lambda s: st.update(f"timing the link: {s}"))
     if as_json:

@@ -34,37 +34,54 @@ def _parse_list(text: str, what: str) -> list[float]:
     return vals
 
 
+MAX_SIM_S = 3600.0  # longest simulated run of one command, s
+MAX_WHATIF_RUNS = 2000  # rpm values x seeds of one study
+MAX_SEEDS = 1000
+SLOPE_AFTER_S = 5.0  # ``slope_deg`` averages the free surface after this start-up
+
+
+def _check_seed(seed: int) -> int:
+    from sim.errors import check_seed
+
+    return check_seed("--seed", seed)
+
+
 @app.command("sim")
 def sim_cmd(
     case: str = typer.Option("C", "--case", help="initial state: A (left/right), B (top/bottom), C (random)"),
     rpm: float = typer.Option(5.0, "--rpm", help="drum speed, rpm"),
-    duration: float = typer.Option(60.0, "--duration", help="simulated seconds"),
-    seed: int = typer.Option(0, "--seed"),
+    duration: float = typer.Option(60.0, "--duration", help=f"simulated seconds (at most {MAX_SIM_S:g})"),
+    seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     fps: float = typer.Option(10.0, "--fps", help="frames rendered and measured per simulated second"),
     size: int = typer.Option(480, "--size", help="rendered frame size, px"),
     csv_out: Optional[Path] = typer.Option(None, "--csv", help="write the MI curve here"),
     video: Optional[Path] = typer.Option(None, "--video", help="write the rendered frames as MP4"),
     realism: bool = typer.Option(False, "--realism", help="camera noise, blur, glare, drift, JPEG, drops"),
-    friction: Optional[float] = typer.Option(None, "--friction", help="sliding friction (twin default if unset)"),
-    rolling: Optional[float] = typer.Option(None, "--rolling", help="rolling resistance (twin default if unset)"),
+    friction: Optional[float] = typer.Option(None, "--friction", help="sliding friction (paper: 0.25)"),
+    rolling: Optional[float] = typer.Option(None, "--rolling", help="rolling friction (paper: 0.1)"),
+    dt_ms: Optional[float] = typer.Option(None, "--dt-ms", help="internal time step, ms (default: the converged step)"),
     as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
 ) -> None:
     """Run the twin and measure MI over time (vision meter on rendered frames + particle level)."""
     import cv2
 
-    from sim.drum import DrumSim
-    from sim.measure import particle_mi, particle_slope_deg, twin_meter
+    from sim.drum import DEFAULT_DT_S, DrumSim
+    from sim.errors import check_number
+    from sim.measure import free_surface, particle_mi, twin_meter
     from sim.render import Realism, Renderer
+    from sim.whatif import flow_regime, froude, froude_regime
 
-    if not (duration > 0) or not math.isfinite(duration):
-        raise SimError(f"--duration must be > 0 s (got {duration})")
-    if not (0 < fps <= 240):
-        raise SimError(f"--fps must be in (0, 240] (got {fps})")
-    kw = {}
+    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)
+    check_number("--fps", fps, 0.0, 240.0, lo_open=True)
+    check_number("--size", size, 32, 4096, integer=True)
+    seed = _check_seed(seed)
+    kw: dict = {}
     if friction is not None:
-        kw["friction"] = friction
+        kw["friction"] = check_number("--friction", friction, 0.0, 5.0)
     if rolling is not None:
-        kw["rolling"] = rolling
+        kw["rolling"] = check_number("--rolling", rolling, 0.0, 5.0)
+    if dt_ms is not None:
+        kw["dt_s"] = check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3
     sim = DrumSim(case=case, seed=seed, rpm=rpm, **kw)
     renderer = Renderer(sim, size, realism=Realism(seed=seed) if realism else None)
     meter = twin_meter(renderer)
@@ -77,6 +94,7 @@ def sim_cmd(
             raise SimError(f"cannot write video {video}")
     n = max(1, int(round(duration * fps)))
     rows = []
+    curv, air = [], []
     last = None
     try:
         with _progress("sim") as prog:
@@ -87,6 +105,9 @@ def sim_cmd(
                 p = sim.particles()
                 frame = renderer.render(p, sim.t_s)
                 pm = particle_mi(p, sim.drum)
+                fs = free_surface(p, sim.drum)
+                curv.append(fs.curvature)
+                air.append(sim.stats().airborne if i > 0 else float("nan"))
                 if frame is not None:
                     rd = meter.measure(frame)
                     mi, mi_s, sl, valid = rd.mi, rd.mi_sigmoid, rd.slope_deg, rd.valid
@@ -99,7 +120,7 @@ def sim_cmd(
                 rows.append({
                     "t_s": round(sim.t_s, 6), "rpm": sim.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
                     "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
-                    "slope_deg_particles": particle_slope_deg(p, sim.drum), "valid": int(bool(valid)),
+                    "slope_deg_particles": fs.slope_deg, "valid": int(bool(valid)),
                 })
                 prog.advance(task)
     finally:
@@ -111,22 +132,38 @@ def sim_cmd(
             w = csv.DictWriter(fh, fieldnames=SIM_COLUMNS)
             w.writeheader()
             w.writerows(rows)
+    t = np.array([r["t_s"] for r in rows], float)
     mi_arr = np.array([r["mi"] for r in rows], float)
     mip = np.array([r["mi_particles"] for r in rows], float)
     mis = np.array([r["mi_sigmoid"] for r in rows], float)
-    sl = np.array([r["slope_deg"] for r in rows], float)
+    sl_v = np.array([r["slope_deg"] for r in rows], float)
+    sl_p = np.array([r["slope_deg_particles"] for r in rows], float)
     tail = max(1, int(round(0.1 * len(rows))))
+    third = max(1, len(rows) // 3)
+    late = t >= min(SLOPE_AFTER_S, 0.5 * duration)
 
     def first_valid(a):
         f = a[np.isfinite(a)]
         return float(f[0]) if f.size else float("nan")
 
+    def mean(a):
+        f = np.asarray(a, float)
+        f = f[np.isfinite(f)]
+        return float(f.mean()) if f.size else float("nan")
+
+    st = sim.stats()
+    air_m, curv_m = mean(air[-third:]), mean(curv[-third:])
     summary = {
         "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
-        "mi_start": first_valid(mi_arr), "mi_end": float(np.nanmean(mi_arr[-tail:])),
-        "mi_sigmoid_end": float(np.nanmean(mis[-tail:])),
-        "mi_particles_start": float(mip[0]), "mi_particles_end": float(np.nanmean(mip[-tail:])),
-        "slope_deg": float(np.nanmean(sl[len(sl) // 2:])) if np.isfinite(sl).any() else float("nan"),
+        "dt_ms": sim.params.dt_s * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
+        "friction": sim.params.friction, "rolling": sim.params.rolling,
+        "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
+        "mi_sigmoid_end": mean(mis[-tail:]),
+        "mi_particles_start": float(mip[0]), "mi_particles_end": mean(mip[-tail:]),
+        "slope_deg": mean(sl_p[late]), "slope_deg_vision": mean(sl_v[late]), "surface_curvature": mean(curv[-third:]),
+        "overlap_p99_r": st.overlap_p99_r, "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm,
+        "airborne": air_m, "regime": flow_regime(air_m, curv_m), "froude": froude(rpm, sim.drum),
+        "froude_regime": froude_regime(rpm, sim.drum),
         "n_particles": len(sim.particles()), "csv": str(csv_out) if csv_out else None,
         "video": str(video) if video else None,
     }
@@ -136,29 +173,34 @@ def sim_cmd(
         console.print(
             f"case {sim.case} at {rpm:g} rpm for {duration:g} s: MI {summary['mi_start']:.3f} -> "
             f"{summary['mi_end']:.3f} (particles {summary['mi_particles_start']:.3f} -> "
-            f"{summary['mi_particles_end']:.3f}), slope {summary['slope_deg']:.1f} deg"
+            f"{summary['mi_particles_end']:.3f}), slope {summary['slope_deg']:.1f} deg, "
+            f"{summary['regime']} (Fr {summary['froude']:.3f}); step {summary['dt_ms']:g} ms, "
+            f"overlap p99 {summary['overlap_p99_r']:.3f} r, wall {summary['wall_max_mm']:.2f} mm"
         )
 
 
-def _measure_source_slope(source: str, max_frames: int, bed: str | None = None,
-                          config: Path | None = None) -> tuple[float, int]:
-    """Median slope (deg) of the bed in up to ``max_frames`` frames of ``source`` (vision meter)."""
+def _measure_source_surface(source: str, max_frames: int, bed: str | None = None,
+                            config: Path | None = None) -> tuple[float, float | None, int]:
+    """Median free-surface slope (deg), median curvature (None if the meter gives none) and frames used."""
     from vision.config import load_config
     from vision.sources import open_source
 
     meter = load_config(config).make_meter(bed=bed)
-    vals = []
+    vals, curvs = [], []
     n = 0
     for frame in open_source(source, loop=False, reconnect=False):
         n += 1
         rd = meter.measure(frame.image)
         if math.isfinite(rd.slope_deg):
             vals.append(rd.slope_deg)
+            c = getattr(rd, "surface_curvature", None)
+            if c is not None and math.isfinite(c):
+                curvs.append(float(c))
         if n >= max_frames:
             break
     if not vals:
         raise SimError(f"no bed slope could be measured in {n} frame(s) of {source}")
-    return float(np.median(vals)), len(vals)
+    return float(np.median(vals)), (float(np.median(curvs)) if curvs else None), len(vals)
 
 
 @app.command("calibrate")
@@ -166,35 +208,54 @@ def calibrate_cmd(
     source: Optional[str] = typer.Argument(None, help="frames to measure the slope in (video, folder, image, camera)"),
     rpm: float = typer.Option(..., "--rpm", help="drum speed of the source, rpm"),
     slope_deg: Optional[float] = typer.Option(None, "--slope-deg", help="target slope instead of a source, deg"),
+    curvature: Optional[float] = typer.Option(None, "--curvature",
+                                              help="target free-surface S-shape (default: measured, if the meter gives it)"),
     max_frames: int = typer.Option(300, "--max-frames", help="frames of SOURCE to measure"),
     bed: Optional[str] = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
     config: Optional[Path] = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
+    max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path (2..40)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
-    """Fit the twin's friction (and rolling resistance) to a measured bed slope angle."""
+    """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
+
+    Prints the slopes the twin can reach at this rpm; a target outside them is an error.
+    """
     from sim.calibrate import calibrate
+    from sim.drum import PAPER_DRUM, check_rpm
+    from sim.errors import check_number
 
     if (source is None) == (slope_deg is None):
         raise SimError("give either SOURCE or --slope-deg (exactly one)")
+    seed = _check_seed(seed)
+    check_rpm(rpm, PAPER_DRUM)
+    check_number("--rpm", rpm, 0.0, PAPER_DRUM.critical_rpm, lo_open=True)
+    check_number("--max-evals", max_evals, 2, 40, integer=True)
+    if curvature is not None:
+        check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
+    target_curv = curvature
     if source is not None:
-        if max_frames < 1:
-            raise SimError(f"--max-frames must be >= 1 (got {max_frames})")
-        target, n_frames = _measure_source_slope(source, max_frames, bed, config)
+        check_number("--max-frames", max_frames, 1, 100_000, integer=True)
+        target, measured_curv, n_frames = _measure_source_surface(source, max_frames, bed, config)
+        if target_curv is None:
+            target_curv = measured_curv
         console_err.print(f"measured slope {target:.1f} deg in {n_frames} frame(s)")
     else:
-        target = float(slope_deg)  # type: ignore[arg-type]
+        target = check_number("--slope-deg", slope_deg, -90.0, 90.0)
     with _progress("calibrate") as prog:
         task = prog.add_task("calibrate", total=None)
-        cal = calibrate(target, rpm, seed=seed, progress=lambda d, t: prog.update(task, completed=d))
+        cal = calibrate(target, rpm, target_curvature=target_curv, seed=seed, max_evals=max_evals,
+                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     out = {"slope_deg": target, "twin_slope_deg": cal.twin_slope_deg, "friction": cal.friction,
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
-           "evaluations": cal.evaluations, "frames": n_frames, "source": source}
+           "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
+           "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source}
     if as_json:
         print_json(out)
     else:
         console.print(
+            f"reachable at {rpm:g} rpm: {cal.range_deg[0]:.1f}-{cal.range_deg[1]:.1f} deg; "
             f"target slope {target:.1f} deg -> twin {cal.twin_slope_deg:.1f} deg "
             f"(residual {cal.residual_deg:+.2f}) with friction {cal.friction:.3f}, rolling {cal.rolling:.3f}"
         )
@@ -205,7 +266,7 @@ def whatif_cmd(
     rpm: str = typer.Option("5,10,20,40", "--rpm", help="comma-separated rpm values"),
     duration: float = typer.Option(60.0, "--duration", help="simulated seconds per run"),
     case: str = typer.Option("C", "--case"),
-    seeds: int = typer.Option(1, "--seeds", help="seeds per rpm (0..K-1)"),
+    seeds: int = typer.Option(1, "--seeds", help=f"seeds per rpm (0..K-1), at most {MAX_SEEDS}"),
     fill: Optional[float] = typer.Option(None, "--fill", help="filling degree (default: the recipe's 0.5)"),
     workers: Optional[int] = typer.Option(None, "--workers", help="local processes (default: all cores)"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler, tcp://HOST:PORT"),
@@ -217,9 +278,21 @@ def whatif_cmd(
     """Run the twin for several rpm values and report the plateau MI and regime of each."""
     from sim.whatif import WhatIfJob, run_study, summarize
 
+    from sim.drum import PAPER_DRUM, check_rpm
+    from sim.errors import check_number
+
     rpms = _parse_list(rpm, "--rpm")
-    if seeds < 1:
-        raise SimError(f"--seeds must be >= 1 (got {seeds})")
+    for r in rpms:
+        check_rpm(r, PAPER_DRUM)
+    check_number("--seeds", seeds, 1, MAX_SEEDS, integer=True)
+    if len(rpms) * seeds > MAX_WHATIF_RUNS:
+        raise SimError(f"a what-if study is at most {MAX_WHATIF_RUNS} runs (got {len(rpms)} rpm x {seeds} seeds)")
+    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)
+    check_number("--sample-s", sample_s, 0.0, duration, lo_open=True)
+    if fill is not None:
+        check_number("--fill", fill, 0.0, 0.85, lo_open=True)
+    if workers is not None:
+        check_number("--workers", workers, 1, 256, integer=True)
     if workers is not None and scheduler:
         raise SimError("give --workers or --scheduler, not both")
     jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s)
@@ -249,10 +322,10 @@ def whatif_cmd(
     else:
         from rich.table import Table
 
-        t = Table("rpm", "regime", "plateau MI", "sd", "t plateau (s)")
+        t = Table("rpm", "regime (flow)", "Fr", "airborne", "plateau MI", "sd", "t plateau (s)")
         for e in summary:
-            t.add_row(f"{e['rpm']:g}", e["regime"], f"{e['plateau_mi']:.3f}", f"{e['plateau_mi_sd']:.3f}",
-                      f"{e['t_plateau_s']:.0f}")
+            t.add_row(f"{e['rpm']:g}", e["regime"], f"{e['froude']:.3f}", f"{e['airborne']:.3f}",
+                      f"{e['plateau_mi']:.3f}", f"{e['plateau_mi_sd']:.3f}", f"{e['t_plateau_s']:.0f}")
         console.print(t)
 
 
@@ -292,10 +365,10 @@ def bench_twin(
     particle count grows at the same time step and contact physics.
     """
     from sim.drum import DrumSim
+    from sim.errors import check_number
     from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec
 
-    if not (duration > 0):
-        raise SimError(f"--duration must be > 0 s (got {duration})")
+    check_number("--duration", duration, 0.0, 600.0, lo_open=True)
     cases = [
         ("rtf_paper_5rpm", PAPER_DRUM, 5.0),
         ("rtf_paper_30rpm", PAPER_DRUM, 30.0),

@@ -222,12 +222,13 @@ class EventSink(Protocol):
     def fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
     def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
     def numbers(self, **values: Any) -> None: ...
+    def metadata(self, **data: Any) -> None: ...
 
 
 class RunEvents:
     """The run's :class:`EventSink`: events to the run log (``event(kind, t_s, **data)``),
     faults raised once until cleared (an event plus a dashboard alarm), numbers to the
-    dashboard. Thread-safe; counts faults and decisions."""
+    dashboard, metadata to the run log's ``metadata.json``. Thread-safe; counts faults and decisions."""
 
     def __init__(self, runlog: Any, state: LiveState) -> None:
         self.runlog = runlog
@@ -262,6 +263,9 @@ class RunEvents:
 
     def numbers(self, **values: Any) -> None:
         self.state.update_numbers(**values)
+
+    def metadata(self, **data: Any) -> None:
+        self.runlog.set_metadata(**data)
 
     def active(self) -> frozenset[str]:
         with self._lock:

@@ -30,6 +30,9 @@ FRAMES = [
     b"$8,SET," + b"9" * 100 + b"\n",
     b"\x00\xff garbage \n",
     p.encode_frame(9, p.STP),
+    p.encode_frame(9, p.STA),  # read-only: a fresh status, the STP stays cached
+    p.encode_frame(9, p.HB),
+    p.encode_frame(9, p.STP),  # resend of the STP: the cached ACK
     p.encode_frame(10, p.SET, "+3.125"),
 ]
 

@@ -1,0 +1,179 @@
+"""The camera worker (frames -> meter -> readings) and the process worker (readings ->
+Kalman trend + the paper's moving average -> CSV row, plot point, :class:`FrameInfo`)."""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from control.trend import MITrend, MovingAverage
+from twin.clock import Cadence
+from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
+from twin.state import FrameRow, LiveState
+from vision.meter import Reading
+
+READINGS_MAX = 512  # readings waiting for the process worker; beyond that the oldest go
+
+
+@dataclass(frozen=True)
+class CameraReading:
+    """One measured frame on its way to the process worker."""
+
+    t_s: float
+    frame: int
+    reading: Reading
+
+
+class Rate:
+    """Events per wall second over the last ``window_s`` seconds (thread-safe)."""
+
+    def __init__(self, window_s: float = 3.0, monotonic: Callable[[], float] = time.monotonic) -> None:
+        self.window_s = window_s
+        self._monotonic = monotonic
+        self._times: list[float] = []
+        self._lock = threading.Lock()
+
+    def tick(self) -> None:
+        now = self._monotonic()
+        with self._lock:
+            self._times.append(now)
+            cut = now - self.window_s
+            while self._times and self._times[0] < cut:
+                self._times.pop(0)
+
+    def rate(self) -> float:
+        with self._lock:
+            if len(self._times) < 2:
+                return 0.0
+            span = self._times[-1] - self._times[0]
+            return (len(self._times) - 1) / span if span > 0 else 0.0
+
+
+def put_dropping_oldest(q: queue.Queue, item: Any) -> None:
+    """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
+    while True:
+        try:
+            q.put_nowait(item)
+            return
+        except queue.Full:
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                pass
+
+
+class CameraWorker:
+    """Reads frames at the source's own rate, measures them, and hands the readings on
+    (never blocked by anything downstream). Publishes :class:`CameraInfo`; draws the
+    overlay for the dashboard at ``overlay_hz`` (0: none)."""
+
+    def __init__(
+        self,
+        frames: Iterable[Any],
+        meter: Any,
+        out: queue.Queue[CameraReading],
+        box: Latest[CameraInfo],
+        state: LiveState,
+        *,
+        overlay_hz: float = 0.0,
+        overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.frames = frames
+        self.meter = meter
+        self.out = out
+        self.box = box
+        self.state = state
+        self.overlay = overlay
+        self._overlay_cadence = Cadence(1.0 / overlay_hz) if overlay_hz > 0 and overlay is not None else None
+        self._monotonic = monotonic
+        self.fps = Rate(monotonic=monotonic)
+
+    def run(self, stop: threading.Event) -> None:
+        n = 0
+        for frame in self.frames:
+            if stop.is_set():
+                return
+            reading = self.meter.measure(frame.image)
+            n += 1
+            wall = self._monotonic()
+            self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
+            self.fps.tick()
+            put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
+            if self._overlay_cadence is not None and self.overlay is not None and self._overlay_cadence.due(wall):
+                self.state.publish_camera(self.overlay(frame.image, reading))
+        if not stop.is_set():
+            self.box.set(replace(self.box.get(), ended=True))
+
+
+class ProcessWorker:
+    """Readings -> trend, moving average, one :class:`FrameRow` (run log + plots) and the
+    newest :class:`FrameInfo`; camera slope angles go on to the twin (``slopes``)."""
+
+    def __init__(
+        self,
+        inbox: queue.Queue[CameraReading],
+        trend: MITrend,
+        box: Latest[FrameInfo],
+        view: RunView,
+        sink: EventSink,
+        write_row: Callable[[Mapping[str, Any]], None],
+        state: LiveState,
+        slopes: queue.SimpleQueue[tuple[float, float]] | None = None,
+        ma_window: int = 150,
+        camera_fps: Callable[[], float] = lambda: 0.0,
+    ) -> None:
+        self.inbox = inbox
+        self.trend = trend
+        self.ma = MovingAverage(ma_window)
+        self.box = box
+        self.view = view
+        self.sink = sink
+        self.write_row = write_row
+        self.state = state
+        self.slopes = slopes
+        self.camera_fps = camera_fps
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            try:
+                item = self.inbox.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            self.process(item)
+
+    def process(self, item: CameraReading) -> FrameRow:
+        r = item.reading
+        mill = self.view.mill()
+        rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
+        est = self.trend.update(item.t_s, r.mi, rpm)
+        ma = self.ma.update(r.mi if r.valid else math.nan)
+        prev = self.box.get()
+        last_valid = item.t_s if r.valid else prev.last_valid_t_s
+        self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
+        if r.valid and self.slopes is not None and math.isfinite(r.slope_deg):
+            self.slopes.put((item.t_s, float(r.slope_deg)))
+        tw = self.view.twin()
+        row = FrameRow(
+            t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
+            d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration, slope_deg=r.slope_deg,
+            valid=r.valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
+            ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
+            twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
+            rpm_setpoint=mill.setpoint_rpm, rpm_actual=mill.actual_rpm, mode=self.view.mode(), flags=tuple(r.flags),
+        )
+        values = row.as_dict()
+        self.write_row(values)
+        self.state.publish_point(values)
+        self.sink.numbers(
+            t_s=item.t_s, mi=r.mi, d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration,
+            slope_deg=r.slope_deg, trend_mi=est.level, camera_fps=self.camera_fps(),
+        )
+        return row

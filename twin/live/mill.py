@@ -1,0 +1,196 @@
+"""The mill worker: the one thread that talks to the mill, and the safety rules of the link.
+
+Shape (after pyserial's ``serial.threaded``): the protocol and transport live in
+``control.driver.MillClient`` (built with ``heartbeat_s=None``: no thread of its own);
+this worker owns the only thread that uses it. Each :meth:`MillWorker.cycle` sends what
+is pending, then polls the board with ``heartbeat()`` (this run controls the motor, so
+it feeds the board's watchdog; the answer is the board's status) and publishes one
+:class:`MillSnapshot`.
+
+Rules (each has a test in ``tests/twin/test_mill_worker.py``):
+
+- **Nothing moves unless asked.** The worker sends only commands it was given in this
+  run; it never starts the motor by itself: connecting, reconnecting or finding a
+  watchdog trip changes nothing on the board.
+- **Read before writing.** After the link comes back the first exchange is a read; the
+  snapshot's ``epoch`` grows, and only then are commands sent.
+- **No stale commands.** Commands queued before the newest read (an older ``epoch``)
+  are dropped with an event, never re-sent; of several pending set-rpm commands only
+  the newest is sent; a command that failed on a lost link is dropped, not re-queued
+  (a stop is the exception: stopping is always safe, so a failed stop is retried).
+- **A refusal is not a lost link.** ``MillRefused`` (NAK) is an event; the command is
+  dropped and the board is re-read (new epoch) so the supervisor resyncs to it.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+from collections.abc import Callable
+from typing import Protocol
+
+from control.errors import ControlError, MillRefused
+from control.protocol import MillStatus
+from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill
+
+MILL_POLL_S = 0.1  # wall seconds between polls
+
+
+class MillLink(Protocol):
+    """What the worker needs of ``control.driver.MillClient``."""
+
+    url: str
+
+    def set_rpm(self, rpm: float) -> None: ...
+    def start(self) -> None: ...
+    def stop(self) -> None: ...
+    def heartbeat(self) -> MillStatus: ...
+    def close(self) -> None: ...
+
+
+def _describe(cmd: MillCommand) -> dict[str, object]:
+    if isinstance(cmd, SetRpm):
+        return {"command": "set_rpm", "rpm": cmd.rpm, "source": cmd.source}
+    if isinstance(cmd, StartMill):
+        return {"command": "start", "source": cmd.source}
+    return {"command": "stop", "source": cmd.source}
+
+
+class MillWorker:
+    """The one poller of the mill (see module doc). ``submit`` from any thread; ``run``
+    (or, in tests, ``cycle``) on the worker's own thread only."""
+
+    def __init__(
+        self,
+        link: MillLink,
+        sink: EventSink,
+        box: Latest[MillSnapshot],
+        now_s: Callable[[], float],
+        poll_s: float = MILL_POLL_S,
+    ) -> None:
+        self.link = link
+        self.sink = sink
+        self.box = box
+        self.now_s = now_s
+        self.poll_s = float(poll_s)
+        self._inbox: queue.SimpleQueue[MillCommand] = queue.SimpleQueue()
+        self._wake = threading.Event()
+        # pending, owned by the worker thread
+        self._rpm: SetRpm | None = None
+        self._run: StartMill | StopMill | None = None
+
+    # -- any thread ------------------------------------------------------------------------
+    def submit(self, cmd: MillCommand) -> None:
+        """Queue a command (never blocks)."""
+        self._inbox.put(cmd)
+        self._wake.set()
+
+    # -- the worker thread -----------------------------------------------------------------
+    def run(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            self.cycle()
+            self._wake.wait(self.poll_s)
+            self._wake.clear()
+
+    def cycle(self) -> MillSnapshot:
+        """Take new commands, send what is due, poll; returns the published snapshot."""
+        snap = self.box.get()
+        self._take_commands()
+        if snap.connected:
+            for cmd in self._due(snap.epoch):
+                try:
+                    self._send(cmd)
+                except MillRefused as exc:
+                    self.sink.event("mill_refused", self.now_s(), reason=exc.reason, **_describe(cmd))
+                    return self._poll(snap, new_epoch=True)
+                except (OSError, ControlError) as exc:  # TimeoutError, ConnectionError, serial errors
+                    if isinstance(cmd, StopMill) and self._run is None:
+                        self._run = cmd  # a stop is always safe: try again once the link is back
+                    else:
+                        self._drop(cmd, f"link lost: {exc}")
+                    return self._lost(snap, exc)
+                self.sink.event("mill_command", self.now_s(), **_describe(cmd))
+        return self._poll(snap, new_epoch=not snap.connected)
+
+    def _take_commands(self) -> None:
+        while True:
+            try:
+                cmd = self._inbox.get_nowait()
+            except queue.Empty:
+                return
+            if isinstance(cmd, SetRpm):
+                if self._rpm is not None:
+                    self._drop(self._rpm, "superseded by a newer set-rpm")
+                self._rpm = cmd
+            else:
+                if isinstance(cmd, StopMill) and cmd.urgent and self._rpm is not None:
+                    self._drop(self._rpm, "emergency stop")
+                    self._rpm = None
+                if self._run is not None:
+                    self._drop(self._run, "superseded by a newer start/stop")
+                self._run = cmd
+
+    def _due(self, epoch: int) -> list[MillCommand]:
+        """The pending commands to send now, stop/start first; stale ones dropped."""
+        out: list[MillCommand] = []
+        for cmd in (self._run, self._rpm):
+            if cmd is None:
+                continue
+            if isinstance(cmd, (SetRpm, StartMill)) and cmd.epoch != epoch:
+                self._drop(cmd, f"decided on mill state {cmd.epoch}, the board was read again since ({epoch})")
+            else:
+                out.append(cmd)
+        self._run = self._rpm = None
+        return out
+
+    def _send(self, cmd: MillCommand) -> None:
+        if isinstance(cmd, SetRpm):
+            self.link.set_rpm(cmd.rpm)
+        elif isinstance(cmd, StartMill):
+            self.link.start()
+        else:
+            self.link.stop()
+
+    def _drop(self, cmd: MillCommand, why: str) -> None:
+        self.sink.event("mill_command_dropped", self.now_s(), reason=why, **_describe(cmd))
+
+    def _poll(self, snap: MillSnapshot, new_epoch: bool) -> MillSnapshot:
+        try:
+            st = self.link.heartbeat()
+        except (OSError, ControlError) as exc:
+            return self._lost(snap, exc)
+        epoch = snap.epoch + 1 if new_epoch else snap.epoch
+        new = MillSnapshot(status=st, connected=True, epoch=epoch, polled=True)
+        self.box.set(new)
+        t = self.now_s()
+        if not snap.connected:
+            self.sink.clear_fault("mill_link", "mill link restored", t, url=self.link.url)
+            self.sink.event("mill_synced", t, epoch=epoch, **st.as_dict())
+        if st.fault:
+            self.sink.fault("mill_fault", f"mill reports fault {st.fault}", t, mill_fault=st.fault)
+        else:
+            self.sink.clear_fault("mill_fault", "mill fault cleared", t)
+        self._publish(new)
+        return new
+
+    def _lost(self, snap: MillSnapshot, exc: BaseException) -> MillSnapshot:
+        new = MillSnapshot(status=snap.status, connected=False, epoch=snap.epoch, polled=True)
+        self.box.set(new)
+        if self._rpm is not None:  # decided on a board we can no longer see
+            self._drop(self._rpm, f"link lost: {exc}")
+            self._rpm = None
+        if isinstance(self._run, StartMill):
+            self._drop(self._run, f"link lost: {exc}")
+            self._run = None
+        self.sink.fault("mill_link", f"mill link lost: {exc}", self.now_s(), url=self.link.url)
+        self._publish(new)
+        return new
+
+    def _publish(self, snap: MillSnapshot) -> None:
+        sp, act = snap.setpoint_rpm, snap.actual_rpm
+        self.sink.numbers(
+            mill_state=snap.state,
+            rpm_setpoint=sp if math.isfinite(sp) else None,
+            rpm_actual=act if math.isfinite(act) else None,
+        )

@@ -1,0 +1,172 @@
+"""The supervisor worker: ticks the pure ``control.supervisor.Supervisor`` on run time,
+serves operator commands, raises the vision alarms, turns decisions into mill commands.
+
+Every ``period_s`` of run time (and at once after an operator command) one
+:meth:`SupervisorWorker.tick`: read the newest snapshots, raise or clear the camera and
+vision alarms (with the supervisor's own vision timeout: one timeout, so the alarm and
+the safe state come together), ``step`` the supervisor with any predictions that
+arrived, pass its prediction request on, and carry out its decision: a ``SetRpm``
+stamped with the mill epoch it was decided on, or a stop. Operator commands (mode,
+manual rpm) are handled on this thread too, so the supervisor has one owner.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from control.errors import ControlError
+from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
+from twin.live.records import (
+    EventSink,
+    Latest,
+    MillCommand,
+    RunView,
+    SetManualRpm,
+    SetMode,
+    SetRpm,
+    StopMill,
+    SupervisorCommand,
+)
+
+
+class Predictions(Protocol):
+    """The application's predictor: takes requests, hands results back later (never blocks)."""
+
+    def request(self, req: PredictionRequest) -> None: ...
+    def poll(self) -> PredictionResult | None: ...
+
+
+def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
+    """What the supervisor sees now, from the newest snapshots."""
+    frames, mill, twin, cam = view.frames(), view.mill(), view.twin(), view.camera()
+    r = frames.reading
+    radial = r.mi / r.mi_sigmoid if r is not None and r.valid and r.mi_sigmoid > 0 else None
+    sp, act = mill.setpoint_rpm, mill.actual_rpm
+    return SupervisorInputs(
+        trend=frames.estimate,
+        actual_rpm=act if math.isfinite(act) else None,
+        setpoint_rpm=sp if math.isfinite(sp) else None,
+        mill_connected=mill.connected,
+        mill_running=mill.running if mill.status is not None else None,
+        mill_epoch=mill.epoch,
+        radial_factor=radial,
+        last_valid_mi_s=frames.last_valid_t_s,
+        camera_ended=cam.ended,
+        twin_updated_s=twin.updated_s,
+    )
+
+
+class SupervisorWorker:
+    """Owner of the :class:`Supervisor` (see module doc)."""
+
+    def __init__(
+        self,
+        supervisor: Supervisor,
+        view: RunView,
+        sink: EventSink,
+        send: Callable[[MillCommand], None],
+        predictions: Predictions | None,
+        mode_box: Latest[str],
+        *,
+        period_s: float = 1.0,
+        speed: float = 1.0,
+    ) -> None:
+        self.supervisor = supervisor
+        self.view = view
+        self.sink = sink
+        self.send = send
+        self.predictions = predictions
+        self.mode_box = mode_box
+        self.period_s = float(period_s)
+        self.speed = float(speed)
+        self._inbox: queue.SimpleQueue[SupervisorCommand] = queue.SimpleQueue()
+        self._epoch = 0  # the mill epoch of the inputs of the latest step
+        self.safe = False  # mirrors supervisor.safe after each tick (read by tests and the CLI)
+        mode_box.set(supervisor.mode.value)
+
+    # -- any thread ------------------------------------------------------------------------
+    def submit(self, cmd: SupervisorCommand) -> None:
+        self._inbox.put(cmd)
+
+    # -- the worker thread -----------------------------------------------------------------
+    def run(self, stop: threading.Event) -> None:
+        period_wall = self.period_s / self.speed
+        while not stop.is_set():
+            try:
+                cmd = self._inbox.get(timeout=period_wall)
+            except queue.Empty:
+                self.tick(self.view.now_s())
+                continue
+            self.handle(cmd)
+
+    def handle(self, cmd: SupervisorCommand) -> None:
+        """An operator command, served at the current run time (never a frame's time)."""
+        now = self.view.now_s()
+        sup = self.supervisor
+        if isinstance(cmd, SetMode):
+            try:
+                d = sup.set_mode(cmd.mode, now, reason="operator")
+            except ControlError as exc:
+                self.sink.event("operator_rejected", now, action="mode", mode=cmd.mode, error=str(exc))
+                return
+            self.mode_box.set(sup.mode.value)
+            self.sink.numbers(mode=sup.mode.value)
+            self._apply(d)
+        elif isinstance(cmd, SetManualRpm):
+            try:
+                clamped = sup.set_manual_rpm(cmd.rpm)
+            except ControlError as exc:
+                self.sink.event("operator_rejected", now, action="manual_rpm", rpm=cmd.rpm, error=str(exc))
+                return
+            self.sink.event("operator", now, action="manual_rpm", rpm=cmd.rpm, clamped_rpm=clamped)
+        self.tick(now)  # act now, not at the next tick
+
+    def tick(self, now_s: float) -> Decision | None:
+        """One supervision step at run time ``now_s``."""
+        if not self.view.mill().polled:
+            return None  # nothing is known about the board yet: decide nothing
+        self._alarms(now_s)
+        res = self.predictions.poll() if self.predictions is not None else None
+        inputs = inputs_of(self.view, now_s)
+        self._epoch = inputs.mill_epoch
+        decision, request = self.supervisor.step(now_s, inputs, res)
+        self.safe = self.supervisor.safe
+        if request is not None and self.predictions is not None:
+            self.predictions.request(request)
+        if decision is not None:
+            self._apply(decision)
+        return decision
+
+    def _alarms(self, now: float) -> None:
+        c = self.supervisor.config
+        cam, frames = self.view.camera(), self.view.frames()
+        if cam.ended:
+            self.sink.fault("camera_ended", "the camera source ended", now)
+        if cam.t_s is not None:
+            silent = now - cam.t_s
+            if c.vision_lost(now, cam.t_s):
+                self.sink.fault("camera_stopped", f"camera stopped: no frame for {silent:.0f} s", now)
+            else:
+                self.sink.clear_fault("camera_stopped", "camera frames again", now)
+        last = frames.last_valid_t_s
+        if last is not None:
+            if c.vision_lost(now, last):
+                self.sink.fault("vision_lost", f"no valid MI for {now - last:.0f} s", now)
+            else:
+                self.sink.clear_fault("vision_lost", "valid MI again", now)
+
+    def _apply(self, d: Decision) -> None:
+        data: dict[str, Any] = d.as_dict()
+        data.pop("t_s", None)
+        data["decision"] = data.pop("kind")  # "kind" is the event's kind
+        self.sink.event("decision", d.t_s, **data)
+        rpm_txt = "" if d.rpm is None else f" -> {d.rpm:g} rpm"
+        self.sink.numbers(last_decision=f"{d.kind}{rpm_txt}", last_reason=d.reason)
+        if d.action is Action.STOP:
+            self.send(StopMill(source="supervisor"))
+        elif d.action is Action.SET_RPM and d.rpm is not None:
+            self.send(SetRpm(float(d.rpm), self._epoch))

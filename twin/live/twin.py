@@ -1,0 +1,226 @@
+"""The twin worker: calibrate, seed and run the physics twin beside the camera.
+
+Waits for ``CALIBRATION_WINDOW_S`` of camera slope angles, calibrates the twin's
+friction to their median (``sim.calibrate``), seeds its particles from the live frame
+(``sim.from_image``), then keeps it in step with run time at the mill's actual rpm,
+rendering it (``sim.render``) and measuring it with a vision ``Meter`` like the camera.
+``recalibrate``/``reseed`` requests are served between steps. It reads only the
+:class:`RunView`; it publishes :class:`TwinInfo` and reports through the event sink.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import statistics
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from twin.clock import Cadence
+from twin.live.camera import Rate
+from twin.live.records import EventSink, Latest, RunView, TwinInfo
+from twin.state import LiveState
+
+CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
+TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
+MAX_LAG_S = 5.0  # run seconds the twin may fall behind before it skips ahead
+SNAPSHOT_EVERY_S = 2.0  # run seconds between twin snapshots kept for what-if studies
+
+
+@dataclass(frozen=True)
+class TwinSettings:
+    """What the twin worker needs of the run's configuration."""
+
+    case: str = "C"
+    seed: int = 0
+    start_rpm: float = 5.0
+    size_px: int = 240
+    classes: tuple[Any, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
+    calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+
+class TwinWorker:
+    """The twin thread's state and work (see module doc)."""
+
+    def __init__(
+        self,
+        settings: TwinSettings,
+        view: RunView,
+        sink: EventSink,
+        state: LiveState,
+        box: Latest[TwinInfo],
+        slopes: queue.SimpleQueue[tuple[float, float]],
+    ) -> None:
+        self.settings = settings
+        self.view = view
+        self.sink = sink
+        self.state = state
+        self.box = box
+        self.slopes = slopes
+        self.sim: Any = None
+        self.renderer: Any = None
+        self.meter: Any = None
+        self.calibration: Any = None
+        self.fps = Rate()
+        self.t0_run = 0.0  # run time at which the twin's own clock read 0
+        self._requests: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._slopes: deque[tuple[float, float]] = deque(maxlen=4000)
+        self._state: Any = None
+        self._mi = math.nan
+        self._slope = math.nan
+
+    # -- any thread ------------------------------------------------------------------------
+    def request(self, kind: str) -> None:
+        """``"calibrate"`` or ``"reseed"``: served by the twin thread between steps."""
+        if kind not in ("calibrate", "reseed"):
+            raise ValueError(f"unknown twin request {kind!r}")
+        self._requests.put(kind)
+
+    # -- the worker thread -----------------------------------------------------------------
+    @property
+    def now_s(self) -> float:
+        """The twin's time on the run clock."""
+        return self.t0_run + (self.sim.t_s if self.sim is not None else 0.0)
+
+    def _publish(self, updated_s: float | None) -> None:
+        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state))
+
+    def _drain_slopes(self) -> None:
+        while True:
+            try:
+                self._slopes.append(self.slopes.get_nowait())
+            except queue.Empty:
+                return
+
+    def run(self, stop: threading.Event) -> None:
+        view = self.view
+        while not stop.is_set():
+            self._drain_slopes()
+            if self.camera_slope(view.frames().t_s) is not None:
+                break
+            stop.wait(0.05)
+        if stop.is_set():
+            return
+        self._calibrate()
+        self._reseed()
+        render = Cadence(1.0 / TWIN_FPS, start_s=self.now_s)  # run clock
+        next_snap = self.now_s
+        while not stop.is_set():
+            self._drain_slopes()
+            self._serve_requests()
+            target = view.frames().t_s
+            lag = target - self.now_s
+            if lag > MAX_LAG_S:  # cannot keep up: skip ahead and say so
+                self.sink.event("twin_lag", target, lag_s=lag)
+                self.t0_run += lag
+                render.restart(self.now_s)
+            if lag <= 1e-6:
+                stop.wait(0.005)
+                continue
+            rpm = view.mill().actual_rpm
+            if math.isfinite(rpm):
+                self.sim.set_rpm(min(max(rpm, 0.0), 0.95 * self.sim.critical_rpm))
+            self.sim.step(min(lag, 1.0 / TWIN_FPS))
+            if render.due(self.now_s):
+                self._render_and_measure()
+            if self.now_s >= next_snap:
+                next_snap = self.now_s + SNAPSHOT_EVERY_S
+                self._state = self.sim.snapshot()
+            self._publish(self.now_s)
+
+    def _serve_requests(self) -> None:
+        while True:
+            try:
+                kind = self._requests.get_nowait()
+            except queue.Empty:
+                return
+            if kind == "calibrate":
+                self._calibrate()
+            else:
+                self._reseed()
+
+    def camera_slope(self, now_s: float) -> float | None:
+        """Median camera slope angle over the last window, once a full window is seen."""
+        s = self._slopes
+        if not s or s[-1][0] - s[0][0] < CALIBRATION_WINDOW_S * 0.9:
+            return None
+        vals = [a for t, a in s if t >= now_s - CALIBRATION_WINDOW_S]
+        return statistics.median(vals) if len(vals) >= 3 else None
+
+    def _rpm_now(self) -> float:
+        rpm = self.view.mill().actual_rpm
+        return rpm if math.isfinite(rpm) and rpm > 0 else self.settings.start_rpm
+
+    def _calibrate(self) -> None:
+        t = self.view.frames().t_s
+        try:
+            self._fit(t)
+        except Exception as exc:  # the twin runs on with its current friction
+            self.sink.fault("calibration", f"calibration failed: {exc}", t)
+            self.sink.numbers(twin_state="running (uncalibrated)")
+        else:
+            self.sink.clear_fault("calibration", "calibrated", t)
+
+    def _fit(self, t: float) -> None:
+        from sim.calibrate import calibrate
+
+        target = self.camera_slope(t)
+        if target is None:
+            self.sink.event("calibration_skipped", t, reason="no camera slope angle yet")
+            return
+        rpm = self._rpm_now()
+        self.sink.numbers(twin_state="calibrating")
+        t0 = time.monotonic()
+        cal = calibrate(target, rpm, **dict(self.settings.calibrate_kwargs))
+        self.calibration = cal
+        self.sink.event(
+            "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
+            twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - t0,
+        )
+        self.sink.metadata(calibration=cal)
+        self.sink.numbers(friction=cal.friction, twin_state="running")
+        if self.sim is not None:
+            self.sim.set_friction(cal.friction, cal.rolling)
+
+    def _reseed(self) -> None:
+        from sim.drum import DrumSim
+        from sim.from_image import seed_from_frame
+        from sim.render import Renderer
+        from vision.meter import Meter
+
+        s = self.settings
+        cam = self.view.camera()
+        t = self.view.frames().t_s
+        cal = self.calibration
+        kw = {} if cal is None else {"friction": cal.friction, "rolling": cal.rolling}
+        rpm = self.view.mill().actual_rpm
+        rpm = rpm if math.isfinite(rpm) else s.start_rpm
+        if cam.image is None:
+            sim = DrumSim(case=s.case, seed=s.seed, rpm=rpm, **kw)
+            how = "recipe case"
+        else:
+            sim = seed_from_frame(cam.image, Meter(roi=cam.roi, classes=s.classes), rpm=rpm, seed=s.seed, **kw)
+            how = "live frame"
+        if self.renderer is None:
+            self.renderer = Renderer(sim.drum, s.size_px)
+            self.meter = Meter(roi=self.renderer.roi, classes=s.classes)
+        self.sim = sim
+        self.t0_run = t - sim.t_s
+        self._state = sim.snapshot()
+        self.sink.event("twin_seeded", t, source=how, n_particles=len(sim.particles()))
+        self._render_and_measure()
+        self._publish(t)
+
+    def _render_and_measure(self) -> None:
+        parts = self.sim.particles()
+        image = self.renderer.render(parts)
+        r = self.meter.measure(image)
+        self.fps.tick()
+        self._mi, self._slope = float(r.mi), float(r.slope_deg)
+        self.state.publish_twin(image, parts, self.sim.drum.radius_m)
+        self.sink.numbers(twin_mi=r.mi, twin_slope_deg=r.slope_deg, twin_fps=self.fps.rate())
+

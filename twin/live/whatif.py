@@ -1,0 +1,196 @@
+"""The what-if worker: twin studies in the background, for AUTO and for the operator.
+
+This is the application's predictor (the supervisor itself only asks): ``request`` takes
+the supervisor's :class:`PredictionRequest` (a newer one supersedes one not started
+yet), ``poll`` hands a finished :class:`PredictionResult` back once. ``submit`` starts an
+operator study. One thread serves both, one study at a time, from the twin's newest
+state (:class:`TwinInfo`); the studies themselves run in a local process pool
+(``sim.whatif.make_pool``) or on a Dask cluster (``--scheduler``), so they never compete
+with the loop for the GIL.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from control.supervisor import PredictionRequest, PredictionResult
+from twin.live.records import EventSink, RunView
+from twin.state import LiveState, WhatIfView
+
+Study = Callable[[Sequence[Any]], Sequence[Any]]
+"""``study(jobs) -> results`` (``sim.whatif.WhatIfJob`` -> ``WhatIfResult``, in order)."""
+
+
+@dataclass(frozen=True)
+class _OperatorStudy:
+    rpms: tuple[float, ...]
+    duration_s: float
+    reason: str
+
+
+class WhatIfWorker:
+    """See module doc. ``study`` replaces the process pool (tests)."""
+
+    def __init__(
+        self,
+        view: RunView,
+        sink: EventSink,
+        state: LiveState,
+        *,
+        scheduler: str | None = None,
+        workers: int = 1,
+        study: Study | None = None,
+    ) -> None:
+        self.view = view
+        self.sink = sink
+        self.state = state
+        self.scheduler = scheduler
+        self.workers = max(1, int(workers))
+        self._study_fn = study
+        self._pool: Executor | None = None
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._pending_pred: PredictionRequest | None = None
+        self._pending_study: _OperatorStudy | None = None
+        self._result: PredictionResult | None = None
+        self._busy = False
+        self._seq = 0
+
+    # -- any thread ------------------------------------------------------------------------
+    def request(self, req: PredictionRequest) -> None:
+        with self._lock:
+            self._pending_pred = req
+        self._wake.set()
+
+    def poll(self) -> PredictionResult | None:
+        with self._lock:
+            res, self._result = self._result, None
+        return res
+
+    def submit(self, rpms: Sequence[float], duration_s: float, reason: str = "operator") -> bool:
+        """Queue an operator study; False when one is already waiting or running."""
+        with self._lock:
+            if self._busy or self._pending_study is not None:
+                return False
+            self._pending_study = _OperatorStudy(tuple(float(r) for r in rpms), float(duration_s), reason)
+        self._wake.set()
+        return True
+
+    @property
+    def busy(self) -> bool:
+        with self._lock:
+            return self._busy
+
+    # -- the worker thread -----------------------------------------------------------------
+    def warm_up(self) -> None:
+        """Start the worker process(es) now, not at the first study."""
+        if self._study_fn is None and not self.scheduler:
+            from sim.whatif import froude
+
+            self._get_pool().submit(froude, 5.0)
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            self._wake.wait(0.1)
+            self._wake.clear()
+            self.serve_once()
+
+    def serve_once(self) -> bool:
+        """Run the next pending study (a prediction first); False when none was pending."""
+        with self._lock:
+            pred, study = self._pending_pred, self._pending_study
+            if pred is not None:
+                self._pending_pred = None
+            elif study is not None:
+                self._pending_study = None
+            else:
+                return False
+            self._busy = True
+        try:
+            if pred is not None:
+                try:
+                    preds = self._study(pred.rpms, pred.horizon_s, "AUTO")
+                except Exception:  # noqa: BLE001 - logged in _study; the supervisor falls back
+                    return True
+                with self._lock:
+                    self._result = PredictionResult(pred.t_s, pred.horizon_s, preds)
+            elif study is not None:
+                try:
+                    self._study(study.rpms, study.duration_s, study.reason)
+                except Exception:  # noqa: BLE001 - logged in _study
+                    pass
+            return True
+        finally:
+            with self._lock:
+                self._busy = False
+
+    def _get_pool(self) -> Executor:
+        if self._pool is None:
+            from sim.whatif import make_pool
+
+            self._pool = make_pool(self.workers)
+        return self._pool
+
+    def _run_jobs(self, jobs: Sequence[Any]) -> Sequence[Any]:
+        if self._study_fn is not None:
+            return self._study_fn(jobs)
+        from sim.whatif import run_study
+
+        if self.scheduler:
+            return run_study(jobs, scheduler=self.scheduler)
+        return run_study(jobs, workers=self.workers, pool=self._get_pool())
+
+    def _study(self, rpms: Sequence[float], duration_s: float, reason: str) -> dict[float, float]:
+        from sim.whatif import WhatIfJob
+
+        state = self.view.twin().state
+        t_req = self.view.now_s()
+        if state is None:
+            self.sink.event("whatif_error", t_req, reason=reason, error="the twin is not running yet")
+            raise RuntimeError("the twin is not running yet")
+        self._seq += 1
+        self.state.set_whatif(WhatIfView(status=f"running {len(rpms)} rpm x {duration_s:g} s ({reason})", seq=self._seq))
+        t0 = time.monotonic()
+        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state) for r in rpms]
+        try:
+            results = list(self._run_jobs(jobs))
+        except Exception as exc:
+            self._seq += 1
+            self.state.set_whatif(WhatIfView(status=f"error: {exc}", seq=self._seq))
+            self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
+            raise
+        preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results)}
+        self._seq += 1
+        t_done = self.view.now_s()
+        self.state.set_whatif(
+            WhatIfView(
+                status=f"done at t={t_done:.0f} s ({reason}, {time.monotonic() - t0:.1f} s wall)",
+                rpms=tuple(float(r) for r in rpms),
+                t_s=tuple(np.asarray(res.t_s, float) for res in results),
+                mi=tuple(np.asarray(res.mi, float) for res in results),
+                plateau_mi=tuple(preds.values()),
+                regime=tuple(str(getattr(res, "regime", "")) for res in results),
+                seq=self._seq,
+            )
+        )
+        self.sink.event(
+            "whatif", t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
+            predictions={str(k): v for k, v in preds.items()}, took_s=time.monotonic() - t0,
+        )
+        return preds
+
+    def close(self) -> None:
+        """Shut the worker processes down (a running study is abandoned)."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in list((getattr(pool, "_processes", None) or {}).values()):
+            p.terminate()
