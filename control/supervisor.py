@@ -574,9 +574,10 @@ class Supervisor:
         current = self.commanded_rpm if self.commanded_rpm is not None else c.clamp(inputs.actual_rpm or c.safe_rpm)
         preds = self.fresh_predictions(now_s)
         if preds is None:
-            if self._due_since is None:  # ask once per decision; wait a bounded time
+            if self._due_since is None:  # ask once per decision, then wait a bounded time
                 self._due_since = now_s
                 self._request = PredictionRequest(now_s, c.candidates(current), c.horizon_s)
+                return None
             if now_s - self._due_since < c.prediction_wait_s:
                 return None
         self._due_since = None

@@ -16,6 +16,8 @@ spins, so a disk with several contacts cannot be pushed past rest either.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -56,9 +58,23 @@ def contact_pass(
     m = ids.shape[0]
     nbins = hist.size - 1
     touched = np.zeros(n, dtype=np.bool_)
+    # pymunk hands out contacts in hash-set order, which follows memory addresses: put them in
+    # (lower disk, higher disk) order so the sequential pass is the same in every run
+    pa = np.empty(m, dtype=np.int64)
+    pb = np.empty(m, dtype=np.int64)
+    key = np.empty(m, dtype=np.float64)
     for c in range(m):
         ia = _lookup(ids_sorted, ids_order, ids[c, 0])
         ib = _lookup(ids_sorted, ids_order, ids[c, 1])
+        if ia > ib:
+            ia, ib = ib, ia
+        pa[c] = ia
+        pb[c] = ib
+        # a disk can touch two wall segments: the normal's direction breaks the tie
+        key[c] = (ia + 1) * (n + 1) + (ib + 1) + 0.5 + 0.15 * math.atan2(fl[c, 3], fl[c, 2]) / math.pi
+    for c in np.argsort(key, kind="mergesort"):
+        ia = pa[c]
+        ib = pb[c]
         if ia < 0 and ib < 0:
             continue
         ov = -fl[c, 4]

@@ -34,7 +34,7 @@ def check_number(
 
 def check_seed(name: str, seed: object) -> int:
     """A seed as an int with ``0 <= seed < 2**32``, else a one-line SimError naming ``name``."""
-    if isinstance(seed, bool) or not isinstance(seed, (int,)) and not (isinstance(seed, float) and seed.is_integer()):
+    if isinstance(seed, bool) or (not isinstance(seed, (int,)) and not (isinstance(seed, float) and seed.is_integer())):
         raise SimError(f"{name} must be an integer with 0 <= seed < 2**32 (got {seed!r})")
     s = int(seed)
     if not 0 <= s < MAX_SEED:

@@ -33,17 +33,17 @@ __all__ = [
 ]
 
 CHORD_HALF_R = 0.5  # half-width of the central chord, in drum radii
-_TRIM_K = 2.5  # robust fit: drop columns more than this many robust sd off the line
+_TUKEY_C = 4.685  # Tukey biweight tuning constant (in robust sd of the residuals)
 
 
 @dataclass(frozen=True)
 class FreeSurface:
-    """The bed's free surface: slope (deg, rising to the right > 0), S-shape, chord used.
+    """The bed's free surface: slope (deg, rising to the right > 0), S-shape, chord centre.
 
-    ``curvature``: the cubic term of ``y/R`` over the chord in the chord's own unit
-    ``u = (x - x_mid) / (CHORD_HALF_R R)``, sign chosen so that an S-shaped surface
-    (steeper in the middle, flatter at both ends -- the cascading "kidney") is positive
-    whichever way the bed leans; 0 for a straight surface.
+    ``curvature``: minus the cubic coefficient of the profile ``v(u)`` (``u`` uphill along
+    the surface line, ``v`` out of the bed, both in drum radii), as ``vision.slope``'s
+    ``surface_curvature``: 0 for a flat surface, > 0 for the S-shape of a cascading bed
+    (steeper in the middle, flatter at both ends) whichever way the bed leans.
     """
 
     slope_deg: float
@@ -98,53 +98,70 @@ def surface_profile(particles: Particles, drum: DrumSpec, step_m: float | None =
     return xs, np.where(np.isfinite(top), top, np.nan)
 
 
-def _robust_polyfit(x: np.ndarray, y: np.ndarray, deg: int, floor: float) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares polynomial with two rounds of trimming beyond ``_TRIM_K`` robust sd; (coefs, inliers)."""
-    keep = np.ones(x.size, dtype=bool)
-    coef = np.polyfit(x, y, deg)
-    for _ in range(2):
-        res = y - np.polyval(coef, x)
-        mad = 1.4826 * float(np.median(np.abs(res[keep] - np.median(res[keep]))))
-        keep = np.abs(res) <= max(_TRIM_K * mad, floor)
-        if keep.sum() <= deg + 2:
+def _tukey_line(px: np.ndarray, py: np.ndarray, base: np.ndarray, floor: float) -> tuple[float, float, float, float]:
+    """Robust (Tukey-weighted) orthogonal line through the points with ``base`` weight: (mx, my, ux, uy)."""
+    w = base.astype(float)
+    mx = my = 0.0
+    ux, uy = 1.0, 0.0
+    for _ in range(6):
+        sw = float(w.sum())
+        if sw <= 0:
             break
-        coef = np.polyfit(x[keep], y[keep], deg)
-    return coef, keep
+        mx = float(np.dot(w, px) / sw)
+        my = float(np.dot(w, py) / sw)
+        dx, dy = px - mx, py - my
+        th = 0.5 * math.atan2(2.0 * float(np.dot(w, dx * dy)), float(np.dot(w, dx * dx) - np.dot(w, dy * dy)))
+        ux, uy = math.cos(th), math.sin(th)
+        resid = -dx * uy + dy * ux
+        scale = 1.4826 * float(np.median(np.abs(resid[base])))
+        t = resid / (_TUKEY_C * max(scale, floor))
+        w = np.where(base & (np.abs(t) < 1.0), (1.0 - t * t) ** 2, 0.0)
+    return mx, my, ux, uy
 
 
 def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
-    """Slope and S-shape of the bed's free surface over the central chord (module doc); NaN if no bed."""
+    """Slope and S-shape of the bed's free surface (module doc); NaN if there is no free surface.
+
+    The same construction as the camera's meter (``vision.slope``), on the disks' upper
+    boundary instead of an occupancy grid: columns whose bed reaches the drum wall above
+    have no free surface; a robust orthogonal line through all surface points, then
+    through those within ``CHORD_HALF_R * R`` (along the line) of the midpoint of their
+    extent, gives the angle; a cubic ``v(u)`` through all surface points (``u`` uphill,
+    ``v`` out of the bed, in units of R, centred on that midpoint) gives
+    ``curvature = -c3``.
+    """
     nan = FreeSurface(float("nan"), float("nan"), float("nan"), 0)
     xs, top = surface_profile(particles, drum)
-    ok = np.isfinite(top)
-    if ok.sum() < 8:
+    if xs.size == 0:
         return nan
     big_r = drum.radius_m
-    half = CHORD_HALF_R * big_r
-    floor = 0.5 * float(particles.r_m.min())
-    x_mid = 0.0
-    coef = np.zeros(2)
-    sel = ok
-    for _ in range(3):  # centre the chord on the surface's midpoint
-        sel = ok & (np.abs(xs - x_mid) <= half)
-        if sel.sum() < 6:
-            return nan
-        coef, _ = _robust_polyfit(xs[sel], top[sel], 1, floor)
-        b, a = float(coef[0]), float(coef[1])
-        new_mid = float(np.clip(-a * b / (1.0 + b * b), -big_r + half, big_r - half))
-        if abs(new_mid - x_mid) < 1e-4:
-            x_mid = new_mid
-            break
-        x_mid = new_mid
-    sel = ok & (np.abs(xs - x_mid) <= half)
-    coef, keep = _robust_polyfit(xs[sel], top[sel], 1, floor)
-    slope = float(coef[0])
-    u = (xs[sel][keep] - x_mid) / half
+    r_min = float(particles.r_m.min())
+    wall_top = np.sqrt(np.maximum(big_r * big_r - xs * xs, 0.0))
+    ok = np.isfinite(top) & (top < wall_top - 2.0 * r_min)  # the bed reaches the wall above: no surface
+    if ok.sum() < 5:
+        return nan
+    px, py = xs[ok], top[ok]
+    floor = 0.5 * r_min
+    mx, my, ux, uy = _tukey_line(px, py, np.ones(px.size, dtype=bool), floor)
+    u = (px - mx) * ux + (py - my) * uy
+    mid = 0.5 * (float(u.min()) + float(u.max()))
+    chord = np.abs(u - mid) <= CHORD_HALF_R * big_r
+    if chord.sum() < 4:
+        return nan
+    mx, my, ux, uy = _tukey_line(px, py, chord, floor)
+    if ux < 0:
+        ux, uy = -ux, -uy
+    ang = math.degrees(math.atan2(uy, ux))  # y up: positive rises to the right
+    sgn = 1.0 if ang >= 0 else -1.0
+    u = sgn * ((px - mx) * ux + (py - my) * uy) / big_r
+    v = (-(px - mx) * uy + (py - my) * ux) / big_r
+    u = u - 0.5 * (float(u.min()) + float(u.max()))
+    x_mid = float(mx)  # centre of the chord fit
     curv = float("nan")
-    if u.size >= 6:
-        c3 = np.polyfit(u, top[sel][keep] / big_r, 3)
-        curv = float(-c3[0] * math.copysign(1.0, slope))
-    return FreeSurface(math.degrees(math.atan(slope)), curv, x_mid, int(keep.sum()))
+    if px.size >= 6:
+        c3 = np.polyfit(u, v, 3)[0]  # highest power first
+        curv = float(-c3)
+    return FreeSurface(ang, curv, x_mid, int(px.size))
 
 
 def particle_slope_deg(particles: Particles, drum: DrumSpec) -> float:

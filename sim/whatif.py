@@ -15,12 +15,12 @@ cataracting; the Froude number ``Fr = omega^2 R / g`` is reported beside it (and
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-import multiprocessing as mp
 
 import numpy as np
 
@@ -30,8 +30,20 @@ from sim.measure import free_surface, particle_mi
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
 
 __all__ = [
-    "WhatIfJob", "WhatIfResult", "froude", "froude_regime", "flow_regime", "regime", "run_job", "run_study",
-    "summarize", "plateau", "DEFAULT_CONNECT_TIMEOUT_S", "make_pool", "AIRBORNE_CATARACTING", "CURVATURE_CASCADING",
+    "AIRBORNE_CATARACTING",
+    "CURVATURE_CASCADING",
+    "DEFAULT_CONNECT_TIMEOUT_S",
+    "WhatIfJob",
+    "WhatIfResult",
+    "flow_regime",
+    "froude",
+    "froude_regime",
+    "make_pool",
+    "plateau",
+    "regime",
+    "run_job",
+    "run_study",
+    "summarize",
 ]
 
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
@@ -281,7 +293,7 @@ def run_study(
         return results  # type: ignore[return-value]
     own = pool is None
     if pool is None:
-        pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=_mp_context())
+        pool = _new_pool(n_workers)
     try:
         futs = {pool.submit(run_job, j): i for i, j in enumerate(jobs)}
         for fut in as_completed(futs):
@@ -304,12 +316,71 @@ def _mp_context():
     return mp.get_context("spawn")
 
 
+def _parent_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - a pid reused by another user's process
+        return False
+    return True
+
+
+def _die_with_parent(parent_pid: int, leftover_dir: str | None) -> None:
+    """Pool-worker initializer: a daemon thread ends this worker (``os._exit``) as soon as
+    the process that made the pool is gone, even after ``kill -9``, and then removes that
+    process's multiprocessing temp directory (the fork server's listener socket lives
+    there; a killed parent cannot remove it itself).
+
+    Why not ``PR_SET_PDEATHSIG``: a fork-server worker's parent is the fork server,
+    which stays alive as long as any worker does (each worker holds its "alive" pipe),
+    so the signal would never come. The thread waits on a pidfd of the parent (Linux
+    >= 5.3: no polling, no pid reuse) and falls back to polling ``kill(pid, 0)``.
+    """
+    import select
+    import shutil
+    import threading
+
+    try:
+        pidfd: int | None = os.pidfd_open(parent_pid)  # type: ignore[attr-defined]
+    except (AttributeError, OSError):
+        pidfd = None
+
+    def watch() -> None:
+        if pidfd is not None:
+            select.select([pidfd], [], [])  # readable once the parent has exited
+        else:
+            while _parent_alive(parent_pid):
+                time.sleep(0.5)
+        if leftover_dir:
+            shutil.rmtree(leftover_dir, ignore_errors=True)
+        os._exit(0)
+
+    if pidfd is None and not _parent_alive(parent_pid):
+        watch()
+    threading.Thread(target=watch, name="whatif-parent-watch", daemon=True).start()
+
+
+def _new_pool(n: int) -> ProcessPoolExecutor:
+    """A process pool whose workers die with this process (see ``_die_with_parent``)."""
+    ctx = _mp_context()
+    leftover = None
+    if ctx.get_start_method() == "forkserver":
+        from multiprocessing import util
+
+        leftover = util.get_temp_dir()  # where the fork server's socket will live
+    return ProcessPoolExecutor(
+        max_workers=n, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(), leftover)
+    )
+
+
 def make_pool(workers: int | None = None) -> Executor:
-    """A reusable local process pool for repeated studies (pass it as ``run_study(..., pool=)``)."""
+    """A reusable local process pool for repeated studies (pass it as ``run_study(..., pool=)``).
+    Its workers exit when this process dies, however it dies."""
     n = (os.cpu_count() or 1) if workers is None else int(workers)
     if n < 1:
         raise SimError(f"workers must be >= 1 (got {workers})")
-    return ProcessPoolExecutor(max_workers=n, mp_context=_mp_context())
+    return _new_pool(n)
 
 
 def summarize(results: Sequence[WhatIfResult]) -> list[dict]:

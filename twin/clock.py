@@ -23,6 +23,10 @@ class RunClock:
     def now_s(self) -> float:
         return (time.monotonic() - self._t0) * self.speed
 
+    def restart(self) -> None:
+        """Make run time 0 now (the run starts when its workers do, not when it was built)."""
+        self._t0 = time.monotonic()
+
     def wall_s(self, run_s: float) -> float:
         """Wall seconds that ``run_s`` run seconds take."""
         return run_s / self.speed

@@ -3,6 +3,7 @@ meter's TOML config through vision's loader)."""
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -14,6 +15,7 @@ MODES = ("off", "manual", "auto")
 CASES = ("A", "B", "C")
 TOKEN_ENV = "DRUMTWIN_CONTROL_TOKEN"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+MAX_SPEED = 100.0  # run seconds per wall second: beyond this the demo only drops frames
 
 
 @dataclass(frozen=True)
@@ -67,12 +69,27 @@ class RunConfig:
         case = self.case.upper()
         if case not in CASES:
             raise TwinError(f"--case must be one of A, B, C, got {self.case!r}")
-        if not (self.speed > 0):
-            raise TwinError(f"--speed must be > 0, got {self.speed}")
-        if self.duration_s is not None and not (self.duration_s > 0):
-            raise TwinError(f"--duration must be > 0 s, got {self.duration_s}")
+        if not (math.isfinite(self.speed) and 0 < self.speed <= MAX_SPEED):
+            raise TwinError(f"--speed must be a number in (0, {MAX_SPEED:g}], got {self.speed}")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise TwinError(f"--duration must be a number > 0 (s), got {self.duration_s}")
         if not (0 < self.port < 65536):
             raise TwinError(f"--port must be 1..65535, got {self.port}")
+        if not (0 <= self.seed < 2**32):
+            raise TwinError(f"--seed must be in 0..{2**32 - 1}, got {self.seed}")
+        for name, value in (
+            ("start_rpm", self.start_rpm),
+            ("camera_fps", self.camera_fps),
+            ("supervisor_period_s", self.supervisor_period_s),
+            ("whatif_horizon_s", self.whatif_horizon_s),
+            ("dashboard_hz", self.dashboard_hz),
+        ):
+            if not (math.isfinite(value) and value > 0):
+                raise TwinError(f"{name} must be a number > 0, got {value}")
+        if self.frame_px < 32 or self.whatif_workers < 1:
+            raise TwinError(f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}")
+        if self.mill is not None and not self.mill.strip():
+            raise TwinError("--mill must not be empty")
         if self.camera is not None and self.video is not None:
             raise TwinError("give either --camera or --video, not both")
         if (self.camera is not None or self.video is not None) and self.mill is None:

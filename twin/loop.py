@@ -118,7 +118,9 @@ class LiveLoop:
         self.mill_box: Latest[MillSnapshot] = Latest(MillSnapshot())
         self.twin_box: Latest[TwinInfo] = Latest(TwinInfo())
         self.mode_box: Latest[str] = Latest(config.mode)
-        self.view = RunView(self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box)
+        self.view = RunView(
+            self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box, self.clock.now_s
+        )
         readings: queue.Queue[CameraReading] = queue.Queue(maxsize=512)
         slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
         self.camera = CameraWorker(
@@ -188,18 +190,24 @@ class LiveLoop:
                 return
             self.stop_event.wait(0.05)
 
-    def stop(self) -> None:
-        """Stop and join every worker, then close the what-if pool and the mill link (the
-        mill keeps its last setpoint; its watchdog stops it once nobody feeds it)."""
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Stop every worker and join it (``timeout_s`` in all), then close the mill link.
+
+        The what-if pool is closed first, so a running study ends at once instead of being
+        waited for. The mill keeps its last setpoint; its watchdog stops it once nobody
+        feeds it.
+        """
         self.stop_event.set()
+        self.whatif.close()
+        deadline = time.monotonic() + timeout_s
         for th in self._threads:
-            th.join(timeout=10)
+            th.join(timeout=max(0.0, deadline - time.monotonic()))
         alive = [th.name for th in self._threads if th.is_alive()]
         if alive:
             log.warning("workers still running after stop: %s", ", ".join(alive))
-        self.whatif.close()
         self.mill_link.close()
-        self.events.event("stop", self.frames_box.get().t_s, frames=self.frames_box.get().n_frames)
+        f = self.frames_box.get()
+        self.events.event("stop", f.t_s, frames=f.n_frames, workers_alive=alive)
 
     def summary(self, wall_s: float = 0.0) -> Summary:
         f = self.frames_box.get()
@@ -279,7 +287,7 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
     min_gain=0.01,
     min_change_interval_s=30.0,
     max_rate_rpm_per_s=4.0,
-    vision_timeout_s=3.0,  # the one vision timeout: alarm and safe state together
+    vision_timeout_s=5.0,  # the one vision timeout (run s): alarm and safe state together
 )
 
 

@@ -4,38 +4,55 @@ Example (see ``configs/example.toml``)::
 
     [meter]
     bed = "color"          # "color" (union of classes) or "dark" (backlit drum)
-    min_pixels = 50        # fewer pixels of a class -> NaN + flag
+    min_share = 0.005      # a class below this share of the drum's pixels -> NaN + flag
     roi = [320, 318, 312]  # optional manual drum circle cx, cy, r (px)
 
-    [[classes]]            # two or more; the MI uses the first two
+    [[classes]]            # two or more counted classes; the MI uses the first two
     name = "blue"
     hsv = [[[95, 90, 50], [130, 255, 255]]]   # list of [[h,s,v] low, [h,s,v] high]
     display_bgr = [255, 80, 0]
 
-Unknown keys, wrong types and inverted HSV ranges are ``VisionError``s.
+A learned class (what ``classes suggest`` prints) has ``lab_mean``, ``lab_cov`` and
+``lab_weight`` (one entry per Gaussian) and ``max_distance`` instead of ``hsv``;
+``reject = true`` marks the learned background. Unknown keys, wrong types, non-finite
+numbers and inverted HSV ranges are ``VisionError``s naming the key.
 """
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from vision.colours import DEFAULT_CLASSES, ColourClass
+from vision.colours import (
+    DEFAULT_CLASSES,
+    Classifier,
+    ColourClass,
+    LabComponent,
+    check_class_set,
+    counted_classes,
+    is_learned,
+    overlapping_classes,
+)
 from vision.errors import VisionError
-from vision.meter import BED_MODES, Meter
+from vision.meter import BED_MODES, Meter, check_meter_numbers
 from vision.roi import DrumROI
 
 __all__ = ["MeterConfig", "load_config", "parse_config", "config_to_toml"]
 
-_METER_KEYS = {"bed", "min_pixels", "dark_v_max", "stride", "roi", "roi_kind", "half_w_px", "half_h_px"}
-_CLASS_KEYS = {"name", "hsv", "display_bgr"}
+_METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
+               "roi_kind", "half_w_px", "half_h_px"}
+_CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
 _TOP_KEYS = {"meter", "classes"}
 
 
 @dataclass(frozen=True)
 class MeterConfig:
-    """Everything a ``Meter`` needs; ``roi=None`` means detect the drum."""
+    """Everything a ``Meter`` needs; ``roi=None`` means detect the drum (per frame size).
+
+    ``classes`` may hold learned reject classes (never counted); ``warnings`` are notes for
+    the user (e.g. overlapping HSV ranges), not errors."""
 
     classes: tuple[ColourClass, ...] = DEFAULT_CLASSES
     roi: DrumROI | None = None
@@ -44,12 +61,27 @@ class MeterConfig:
     dark_v_max: int = 80
     stride: int = 1
     source: str = field(default="<defaults>", compare=False)
+    min_share: float = 0.005
+    collapse_ratio: float = 0.4
+    history: int = 25
+    warnings: tuple[str, ...] = field(default=(), compare=False)
+
+    @property
+    def is_default(self) -> bool:
+        """True when no config was given (the paper's red and blue)."""
+        return self.source == "<defaults>"
+
+    @property
+    def counted(self) -> tuple[ColourClass, ...]:
+        """The measured classes (reject classes left out)."""
+        return counted_classes(self.classes)
 
     def make_meter(self, roi: DrumROI | None = None, bed: str | None = None) -> Meter:
         """A fresh ``Meter``; ``roi``/``bed`` override the config (e.g. from the CLI)."""
         return Meter(
             self.classes, roi if roi is not None else self.roi, bed or self.bed, self.min_pixels,
-            dark_v_max=self.dark_v_max, stride=self.stride,
+            dark_v_max=self.dark_v_max, stride=self.stride, min_share=self.min_share,
+            collapse_ratio=self.collapse_ratio, history=self.history,
         )
 
 
@@ -69,6 +101,69 @@ def _int(where: str, key: str, v, lo: int, hi: int) -> int:
     if not lo <= v <= hi:
         raise VisionError(f"{where}: {key} must be within {lo}..{hi}, got {v}")
     return v
+
+
+def _float(where: str, key: str, v, lo: float, hi: float) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise VisionError(f"{where}: {key} must be a number, got {v!r}")
+    if not math.isfinite(v) or not lo <= v <= hi:
+        raise VisionError(f"{where}: {key} must be a finite number within {lo}..{hi}, got {v}")
+    return float(v)
+
+
+def _px(where: str, key: str, v) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise VisionError(f"{where}: {key} must be a finite number of px, got {v!r}")
+    return float(v)
+
+
+def _rows(w: str, key: str, v, width: int) -> list[list[float]]:
+    if not isinstance(v, list) or not v or not all(isinstance(r, list) and len(r) == width for r in v):
+        raise VisionError(f"{w}: {key} must be a list of [{', '.join(['x'] * width)}] rows, got {v!r}")
+    for r in v:
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in r):
+            raise VisionError(f"{w}: {key} must hold finite numbers, got {r!r}")
+    return [[float(x) for x in r] for r in v]
+
+
+def _parse_class(w: str, c: dict) -> ColourClass:
+    unknown = set(c) - _CLASS_KEYS
+    if unknown:
+        raise VisionError(f"{w}: unknown key(s) {sorted(unknown)} (allowed: {sorted(_CLASS_KEYS)})")
+    if "name" not in c or not isinstance(c["name"], str):
+        raise VisionError(f"{w}: needs name = \"...\"")
+    bgr = c.get("display_bgr", [255, 255, 255])
+    if not isinstance(bgr, list):
+        raise VisionError(f"{w}: display_bgr must be [b, g, r], three integers 0..255, got {bgr!r}")
+    learned = any(k in c for k in ("lab_mean", "lab_cov", "lab_weight"))
+    reject = c.get("reject", False)
+    if not isinstance(reject, bool):
+        raise VisionError(f"{w}: reject must be true or false, got {reject!r}")
+    max_d = _float(w, "max_distance", c.get("max_distance", 4.0), 0.5, 50.0)
+    if learned:
+        if "hsv" in c:
+            raise VisionError(f"{w}: give either hsv or lab_mean/lab_cov, not both")
+        means = _rows(w, "lab_mean", c.get("lab_mean"), 3)
+        covs = _rows(w, "lab_cov", c.get("lab_cov"), 6)
+        weights = c.get("lab_weight", [1.0] * len(means))
+        if not isinstance(weights, list):
+            raise VisionError(f"{w}: lab_weight must be a list of numbers")
+        weights = [_float(w, "lab_weight", x, 1e-9, 1.0) for x in weights]
+        if not len(means) == len(covs) == len(weights):
+            raise VisionError(f"{w}: lab_mean, lab_cov and lab_weight need one entry per component")
+        try:
+            comps = tuple(LabComponent(tuple(m), tuple(cv), wt) for m, cv, wt in zip(means, covs, weights))  # type: ignore[arg-type]
+            return ColourClass(c["name"], display_bgr=tuple(bgr), lab=comps, max_distance=max_d, reject=reject)  # type: ignore[arg-type]
+        except VisionError as exc:
+            raise VisionError(f"{w}: {exc}") from None
+    if "hsv" not in c or not isinstance(c["hsv"], list) or not c["hsv"]:
+        raise VisionError(f"{w}: needs hsv = [[[h,s,v],[h,s,v]], ...] (or a learned lab_mean/lab_cov)")
+    if reject:
+        raise VisionError(f"{w}: reject = true needs a learned class (lab_mean/lab_cov)")
+    try:
+        return ColourClass(c["name"], tuple(c["hsv"]), tuple(bgr))  # type: ignore[arg-type]
+    except VisionError as exc:
+        raise VisionError(f"{w}: {exc}") from None
 
 
 def parse_config(text: str, source: str = "<string>") -> MeterConfig:
@@ -91,15 +186,25 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     if bed not in BED_MODES:
         raise VisionError(f"{where}: bed must be one of {BED_MODES}, got {bed!r}")
     min_pixels = _int(where, "min_pixels", meter.get("min_pixels", 50), 1, 10**9)
+    min_share = _float(where, "min_share", meter.get("min_share", 0.005), 0.0, 0.5)
+    collapse_ratio = _float(where, "collapse_ratio", meter.get("collapse_ratio", 0.4), 0.0, 1.0)
+    history = _int(where, "history", meter.get("history", 25), 1, 10_000)
     dark_v_max = _int(where, "dark_v_max", meter.get("dark_v_max", 80), 0, 255)
     stride = _int(where, "stride", meter.get("stride", 1), 1, 16)
     roi = None
     if "roi" in meter:
         r = meter["roi"]
-        if not (isinstance(r, list) and len(r) == 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)):
+        if not (isinstance(r, list) and len(r) == 3):
             raise VisionError(f"{where}: roi must be [cx, cy, r] in px, got {r!r}")
+        vals = [_px(where, "roi", v) for v in r]
         kind = meter.get("roi_kind", "circle")
-        roi = DrumROI(float(r[0]), float(r[1]), float(r[2]), kind, meter.get("half_w_px"), meter.get("half_h_px"))
+        half = [None if k not in meter else _px(where, k, meter[k]) for k in ("half_w_px", "half_h_px")]
+        if kind == "rect" and any(h is not None and h <= 0 for h in half):
+            raise VisionError(f"{where}: half_w_px and half_h_px must be > 0 px, got {half}")
+        try:
+            roi = DrumROI(vals[0], vals[1], vals[2], kind, half[0], half[1])
+        except VisionError as exc:
+            raise VisionError(f"{where}: {exc}") from None
     elif any(k in meter for k in ("roi_kind", "half_w_px", "half_h_px")):
         raise VisionError(f"{where}: roi_kind/half_w_px/half_h_px need roi = [cx, cy, r]")
     classes = DEFAULT_CLASSES
@@ -107,37 +212,35 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         raw = data["classes"]
         if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
             raise VisionError(f"config {source}: classes must be an array of tables [[classes]]")
-        out = []
-        for i, c in enumerate(raw):
-            w = f"config {source} classes[{i}]"
-            unknown = set(c) - _CLASS_KEYS
-            if unknown:
-                raise VisionError(f"{w}: unknown key(s) {sorted(unknown)} (allowed: {sorted(_CLASS_KEYS)})")
-            if "name" not in c or not isinstance(c["name"], str):
-                raise VisionError(f"{w}: needs name = \"...\"")
-            if "hsv" not in c or not isinstance(c["hsv"], list) or not c["hsv"]:
-                raise VisionError(f"{w}: needs hsv = [[[h,s,v],[h,s,v]], ...]")
-            try:
-                out.append(ColourClass(c["name"], tuple(c["hsv"]), tuple(c.get("display_bgr", (255, 255, 255)))))
-            except VisionError as exc:
-                raise VisionError(f"config {source}: {exc}") from None
-            except TypeError:
-                raise VisionError(f"{w}: display_bgr must be [b, g, r]") from None
-        classes = tuple(out)
-    if len(classes) < 2:
-        raise VisionError(f"config {source}: at least two [[classes]] are needed for a mixing index")
-    names = [c.name for c in classes]
-    if len(set(names)) != len(names):
-        raise VisionError(f"config {source}: class names must be unique, got {names}")
-    cfg = MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source)
-    cfg.make_meter()  # validates the class set (e.g. too many HSV ranges)
-    return cfg
+        classes = tuple(_parse_class(f"config {source} classes[{i}]", c) for i, c in enumerate(raw))
+    if len(counted_classes(classes)) < 2:
+        raise VisionError(f"config {source}: at least two counted [[classes]] are needed for a mixing index")
+    try:
+        check_class_set(classes)
+        if not is_learned(classes):
+            Classifier(classes)  # e.g. too many HSV ranges
+    except VisionError as exc:
+        raise VisionError(f"config {source}: {exc}") from None
+    warnings = tuple(
+        f"config {source}: HSV ranges of {a!r} and {b!r} overlap; {a!r} wins there (use `drumtwin classes suggest`"
+        " for a learned model)" for a, b in overlapping_classes(classes)
+    )
+    return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
+                       warnings)
+
+
+def _nums(values, digits: int = 6) -> str:
+    return "[" + ", ".join(format(float(v), f".{digits}g") for v in values) + "]"
 
 
 def config_to_toml(cfg: MeterConfig, comment: str = "") -> str:
     """TOML text that ``parse_config`` reads back into ``cfg``."""
     lines = [f"# {ln}" if ln else "#" for ln in comment.splitlines()] if comment else []
-    lines += ["[meter]", f'bed = "{cfg.bed}"', f"min_pixels = {cfg.min_pixels}"]
+    lines += ["[meter]", f'bed = "{cfg.bed}"', f"min_pixels = {cfg.min_pixels}", f"min_share = {cfg.min_share:g}"]
+    if cfg.collapse_ratio != 0.4:
+        lines.append(f"collapse_ratio = {cfg.collapse_ratio:g}")
+    if cfg.history != 25:
+        lines.append(f"history = {cfg.history}")
     if cfg.dark_v_max != 80:
         lines.append(f"dark_v_max = {cfg.dark_v_max}")
     if cfg.stride != 1:
@@ -148,7 +251,17 @@ def config_to_toml(cfg: MeterConfig, comment: str = "") -> str:
         if r.kind != "circle":
             lines += [f'roi_kind = "{r.kind}"', f"half_w_px = {r.half_w_px:.1f}", f"half_h_px = {r.half_h_px:.1f}"]
     for c in cfg.classes:
-        rngs = ", ".join(f"[[{lo[0]}, {lo[1]}, {lo[2]}], [{hi[0]}, {hi[1]}, {hi[2]}]]" for lo, hi in c.hsv_ranges)
-        lines += ["", "[[classes]]", f'name = "{c.name}"', f"hsv = [{rngs}]",
-                  f"display_bgr = [{c.display_bgr[0]}, {c.display_bgr[1]}, {c.display_bgr[2]}]"]
+        lines += ["", "[[classes]]", f'name = "{c.name}"']
+        if c.learned:
+            if c.reject:
+                lines.append("reject = true  # background, rim, shadows, glare: never counted")
+            else:
+                lines.append(f"max_distance = {c.max_distance:g}  # sigmas; farther colours are no class")
+            lines.append("lab_mean = [" + ", ".join(_nums(p.mean_lab) for p in c.lab) + "]  # CIELAB L, a, b")
+            lines.append("lab_cov = [" + ", ".join(_nums(p.cov) for p in c.lab) + "]  # LL, La, Lb, aa, ab, bb")
+            lines.append("lab_weight = " + _nums([p.weight for p in c.lab]))
+        else:
+            rngs = ", ".join(f"[[{lo[0]}, {lo[1]}, {lo[2]}], [{hi[0]}, {hi[1]}, {hi[2]}]]" for lo, hi in c.hsv_ranges)
+            lines.append(f"hsv = [{rngs}]")
+        lines.append(f"display_bgr = [{c.display_bgr[0]}, {c.display_bgr[1]}, {c.display_bgr[2]}]")
     return "\n".join(lines) + "\n"

@@ -87,8 +87,8 @@ def _fold(ang: float) -> float:
 
 
 def occupancy_shift(r_px: float, step: int = 1) -> int:
-    """log2 of the occupancy cell size (px): cells of about R / 24, at least 2 grid pixels."""
-    cell = max(2.0 * step, r_px / 24.0)
+    """log2 of the occupancy cell size (px): cells of about R / 40, at least 2 grid pixels."""
+    cell = max(2.0 * step, r_px / 40.0)
     return max(1, int(round(math.log2(cell))))
 
 
@@ -109,25 +109,34 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     res[0] = np.nan
     res[1] = np.nan
     res[2] = 0.0
-    # interior fill of the bed: a high quantile of the fill of well-covered cells
-    vals = np.empty(rows * cols)
+    # interior fill of the bed: the 85th percentile of the fill of well-covered cells (histogram)
+    hist = np.zeros(129, np.int64)
     nv = 0
     for i in range(rows):
         for j in range(cols):
             if area[i, j] >= 0.5 * full_area:
                 f = occ[i, j] / area[i, j]
                 if f > 0.1:
-                    vals[nv] = f
+                    b = int(f * 128.0)
+                    hist[b if b < 128 else 128] += 1
                     nv += 1
     if nv < 8:
         return
-    rho = np.percentile(vals[:nv], 85.0)
-    if rho <= 0.0:
-        return
+    target = 0.85 * nv
+    acc = 0
+    rho = 1.0
+    for b in range(129):
+        acc += hist[b]
+        if acc >= target:
+            rho = (b + 0.5) / 128.0
+            break
     tau = 0.5 * rho
+    # per column: ROI span (top..bot) and the fill smoothed over the neighbouring columns
+    colsum = np.zeros(rows)
+    colarea = np.zeros(rows)
+    fcol = np.zeros(rows)
     npts = 0
     for j in range(cols):
-        # fill of this column, smoothed over the neighbouring columns
         top = -1
         bot = -1
         for i in range(rows):
@@ -137,7 +146,6 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
                 bot = i
         if top < 0 or bot - top < 3:
             continue
-        fcol = np.zeros(rows)
         for i in range(top, bot + 1):
             s = 0.0
             a = 0.0

@@ -52,7 +52,7 @@ def colour_name(h: float, s: float, v: float) -> str:
     if v < 60:
         return "black"
     if s < 60:
-        return "white" if v > 150 else "grey"
+        return "white" if v > 110 else "grey"
     for top, name in _HUE_NAMES:
         if h < top:
             return name
@@ -235,10 +235,14 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
 
 def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent:
     c = 0.5 * (cov + cov.T)
+
+    def r6(v: float) -> float:  # 6 significant digits: what the TOML holds, so it reads back equal
+        return float(format(float(v), ".6g"))
+
     return LabComponent(
-        tuple(round(float(v), 3) for v in mean),  # type: ignore[arg-type]
-        tuple(round(float(c[i, j]), 4) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))),  # type: ignore[arg-type]
-        round(max(float(weight), 1e-6), 6),
+        tuple(r6(v) for v in mean),  # type: ignore[arg-type]
+        tuple(r6(c[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))),  # type: ignore[arg-type]
+        r6(max(float(weight), 1e-6)),
     )
 
 
@@ -260,7 +264,7 @@ def suggest_classes(
             shape = getattr(img, "shape", None)
             raise VisionError(f"classes suggest needs colour (BGR, 8-bit) frames, got shape {shape}")
     rois = [roi if roi is not None else detect_drum(img) for img in frames]
-    per = per_frame or max(3000, 120000 // len(frames))
+    per = per_frame or max(2000, 40000 // len(frames))
     samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
     return MeterConfig(fit_colour_model(samples, k=k, seed=seed), None, "color", source="<suggested>")
 

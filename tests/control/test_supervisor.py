@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import json
 import math
-import threading
+from pathlib import Path
 
 import pytest
 
 from control.errors import ControlError
 from control.supervisor import (
     Action,
-    AsyncPredictor,
     Mode,
+    PredictionRequest,
     PredictionResult,
     SafeAction,
     Supervisor,
@@ -28,8 +28,12 @@ def est(t: float, level: float, rate: float = 0.0) -> TrendEstimate:
     return TrendEstimate(t, level, rate, 0.01, 0.001, level - 0.02, level + 0.02, True, False)
 
 
-def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, **inp):
-    """Step the supervisor from t0 to t1 on a scripted trend; return its decisions."""
+def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, predictor=None, requests=None, **inp):
+    """Step the supervisor from t0 to t1 on a scripted trend; return its decisions.
+
+    ``predictor(rpms, horizon_s)``: serves each prediction request at once (the step is
+    repeated at the same time with the result); ``requests``: a list the requests go to.
+    """
     out = []
     t = t0
     while t < t1 - 1e-9:
@@ -37,7 +41,16 @@ def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, **i
         rt = rate(t) if callable(rate) else rate
         kw = dict(setpoint_rpm=5.0, actual_rpm=5.0, last_valid_mi_s=t, twin_updated_s=t)
         kw.update(inp)
-        d = sup.step(t, SupervisorInputs(trend=est(t, lv, rt), radial_factor=radial, **kw))
+        inputs = SupervisorInputs(trend=est(t, lv, rt), radial_factor=radial, **kw)
+        d, req = sup.step(t, inputs)
+        if req is not None:
+            if requests is not None:
+                requests.append(req)
+            if predictor is not None:
+                res = PredictionResult(req.t_s, req.horizon_s, dict(predictor(req.rpms, req.horizon_s)))
+                d2, req2 = sup.step(t, inputs, res)
+                assert req2 is None  # answered: nothing more wanted
+                d = d2 if d is None else d
         if d is not None:
             out.append(d)
         t = round(t + DT, 6)
@@ -45,23 +58,33 @@ def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, **i
 
 
 def cfg(**kw) -> SupervisorConfig:
-    base = dict(detect_dwell_s=5.0, clear_dwell_s=5.0, min_change_interval_s=30.0, max_rate_rpm_per_s=100.0)
+    base = dict(detect_dwell_s=5.0, clear_dwell_s=5.0, min_change_interval_s=30.0, max_rate_rpm_per_s=100.0,
+                prediction_wait_s=0.0)  # no answer to a request: fall back at once
     base.update(kw)
     return SupervisorConfig(**base)
 
 
-def test_limits_include_critical_speed():
-    c = SupervisorConfig(min_rpm=2, max_rpm=100, drum_diameter_m=0.3, max_critical_frac=0.5)
-    assert c.critical_rpm == pytest.approx(42.3 / math.sqrt(0.3))
-    assert c.rpm_limits == (2, pytest.approx(0.5 * 42.3 / math.sqrt(0.3)))
-    assert c.clamp(500) == c.rpm_limits[1] and c.clamp(0) == 2
-    with pytest.raises(ControlError):
-        SupervisorConfig(seg_level=0.6, clear_level=0.5)
+def test_limits_include_the_critical_speed_it_is_given():
+    c = SupervisorConfig(min_rpm=2, max_rpm=100, critical_rpm=80.0, max_critical_frac=0.5)
+    assert c.rpm_limits == (2, 40.0)
+    assert c.clamp(500) == 40.0 and c.clamp(0) == 2
+    assert SupervisorConfig(min_rpm=2, max_rpm=30).rpm_limits == (2, 30)  # no drum given: max_rpm only
+    for bad in (dict(seg_level=0.6, clear_level=0.5), dict(critical_rpm=0.0), dict(critical_rpm=math.nan),
+                dict(vision_timeout_s=math.inf)):
+        with pytest.raises(ControlError):
+            SupervisorConfig(**bad)
+
+
+def test_control_has_no_critical_speed_formula_of_its_own():
+    """One critical-speed function (sim.recipe.DrumSpec.critical_rpm): control never repeats it."""
+    control = Path(__file__).resolve().parents[2] / "control"
+    for path in control.glob("*.py"):
+        assert "42.3" not in path.read_text(), path
 
 
 def test_no_action_when_well_mixed():
-    sup = Supervisor(cfg(), predictor=lambda r, h: {x: 0.9 for x in r}, mode=Mode.AUTO)
-    ds = run(sup, 0, 300, level=lambda t: 0.8 + 0.05 * math.sin(t), radial=0.9)
+    sup = Supervisor(cfg(), mode=Mode.AUTO)
+    ds = run(sup, 0, 300, level=lambda t: 0.8 + 0.05 * math.sin(t), radial=0.9, predictor=lambda r, h: {x: 0.9 for x in r})
     assert ds == [] and not sup.detector.segregated
 
 
@@ -78,8 +101,8 @@ def test_one_move_with_predictions_then_dwell():
         calls.append((tuple(rpms), horizon_s))
         return {r: 0.5 + 0.01 * min(r, 20) for r in rpms}  # best around 20 rpm
 
-    sup = Supervisor(cfg(move_penalty_per_rpm=0.001), predictor=predictor, mode=Mode.AUTO)
-    ds = run(sup, 0, 40, level=lambda t: 0.8 if t < 20 else 0.4)
+    sup = Supervisor(cfg(move_penalty_per_rpm=0.001, critical_rpm=77.0), mode=Mode.AUTO)
+    ds = run(sup, 0, 40, level=lambda t: 0.8 if t < 20 else 0.4, predictor=predictor)
     moves = [d for d in ds if d.kind == "move"]
     assert len(moves) == 1 and len(ds) == 1
     m = moves[0]
@@ -91,9 +114,9 @@ def test_one_move_with_predictions_then_dwell():
     assert 20 <= m.rpm < sup.config.rpm_limits[1]
     assert calls and calls[0][1] == sup.config.horizon_s
     # still segregated: nothing more before the minimum dwell between changes
-    ds2 = run(sup, 40, 55, level=0.4)
+    ds2 = run(sup, 40, 55, level=0.4, predictor=predictor)
     assert ds2 == []
-    ds3 = run(sup, 55, 60, level=0.4)
+    ds3 = run(sup, 55, 60, level=0.4, predictor=predictor)
     assert len(ds3) == 1 and ds3[0].t_s == pytest.approx(55.0)  # next evaluation: exactly at +30 s
     assert ds3[0].kind == "hold"  # already at the best rpm
 
@@ -129,8 +152,8 @@ def test_hysteresis_clears_only_above_clear_level():
 
 
 def test_rate_limit_ramps_the_setpoint():
-    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=1.0), predictor=lambda r, h: {x: x / 100 for x in r}, mode=Mode.AUTO)
-    ds = run(sup, 0, 40, level=0.3)
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=1.0), mode=Mode.AUTO)
+    ds = run(sup, 0, 40, level=0.3, predictor=lambda r, h: {x: x / 100 for x in r})
     assert ds[0].kind == "move" and ds[0].rpm == 7.0 and ds[0].target_rpm == sup.config.rpm_limits[1]
     ramps = [d for d in ds if d.kind == "ramp"]
     rpms = [ds[0].rpm] + [d.rpm for d in ramps]
@@ -140,46 +163,34 @@ def test_rate_limit_ramps_the_setpoint():
     assert rpms[-1] == sup.config.rpm_limits[1]
 
 
-def test_async_predictions_are_used_without_blocking():
-    gate = threading.Event()
-
-    def slow(rpms, horizon_s):
-        gate.wait(5)
-        return {r: (0.95 if r == 15.0 else 0.5) for r in list(rpms) + [15.0]}
-
-    ap = AsyncPredictor(slow)
-    sup = Supervisor(cfg(prediction_wait_s=20.0), predictor=ap, mode=Mode.AUTO)
-    ds = run(sup, 0, 10, level=0.3)
-    assert ds == [] and ap.busy  # decision due, predictor running, step did not block
-    gate.set()
-    ap.join(2)
-    ds = run(sup, 10, 11, level=0.3)
-    assert [(d.kind, d.rpm) for d in ds] == [("move", 15.0)]
+def test_predictions_are_asked_once_and_used_when_they_arrive():
+    """step never blocks: it asks (a request) and goes on; results come in on a later step."""
+    sup = Supervisor(cfg(prediction_wait_s=20.0), mode=Mode.AUTO)
+    reqs: list[PredictionRequest] = []
+    ds = run(sup, 0, 10, level=0.3, requests=reqs)
+    assert ds == [] and len(reqs) == 1  # decision due at 5 s: asked once, waiting
+    req = reqs[0]
+    assert req.t_s == pytest.approx(5.0) and req.horizon_s == sup.config.horizon_s and 5.0 in req.rpms
+    inp = SupervisorInputs(trend=est(10.0, 0.3), setpoint_rpm=5.0, actual_rpm=5.0, last_valid_mi_s=10.0)
+    d, again = sup.step(10.0, inp, PredictionResult(req.t_s, req.horizon_s, {5.0: 0.5, 15.0: 0.95}))
+    assert again is None and d is not None and (d.kind, d.rpm) == ("move", 15.0)
+    assert d.predictions == {5.0: 0.5, 15.0: 0.95}
 
 
-def test_async_predictor_timeout_falls_back():
-    never = threading.Event()
-    ap = AsyncPredictor(lambda r, h: never.wait(3) or {})
-    sup = Supervisor(cfg(prediction_wait_s=4.0), predictor=ap, mode=Mode.AUTO)
-    ds = run(sup, 0, 12, level=0.3)
+def test_unanswered_request_falls_back_after_the_wait():
+    sup = Supervisor(cfg(prediction_wait_s=4.0), mode=Mode.AUTO)
+    reqs: list[PredictionRequest] = []
+    ds = run(sup, 0, 12, level=0.3, requests=reqs)
     assert [d.kind for d in ds] == ["move"] and ds[0].t_s == pytest.approx(9.0) and "fallback" in ds[0].reason
-    never.set()
+    assert len(reqs) == 1
 
 
-def test_offered_predictions_and_staleness():
-    sup = Supervisor(cfg(prediction_max_age_s=10.0), mode=Mode.AUTO)
-    run(sup, 0, 3, level=0.3)
-    req = sup.prediction_request(3.0)
-    assert req is not None and req.horizon_s == sup.config.horizon_s and 5.0 in req.rpms
-    sup.offer_predictions(PredictionResult(3.0, req.horizon_s, {5.0: 0.3, 25.0: 0.9}))
-    assert sup.prediction_request(3.5) is None
-    ds = run(sup, 3, 6, level=0.3)
-    assert [(d.kind, d.rpm) for d in ds] == [("move", 25.0)]
-    # stale predictions are ignored -> fallback
-    sup2 = Supervisor(cfg(prediction_max_age_s=1.0), mode=Mode.AUTO)
-    sup2.offer_predictions(PredictionResult(0.0, 60.0, {25.0: 0.9}))
-    ds = run(sup2, 0, 6, level=0.3)
-    assert [(d.kind, d.rpm) for d in ds] == [("move", 10.0)]
+def test_stale_predictions_are_ignored():
+    sup = Supervisor(cfg(prediction_max_age_s=10.0, prediction_wait_s=0.0), mode=Mode.AUTO)
+    inp = SupervisorInputs(trend=est(0.0, 0.3), setpoint_rpm=5.0, actual_rpm=5.0, last_valid_mi_s=0.0)
+    sup.step(0.0, inp, PredictionResult(-20.0, 60.0, {25.0: 0.9}))  # 20 s old at hand-in: too old at 5 s
+    ds = run(sup, 0.5, 6, level=0.3)
+    assert [(d.kind, d.rpm) for d in ds] == [("move", 10.0)] and "fallback" in ds[0].reason
 
 
 @pytest.mark.parametrize(
@@ -253,3 +264,51 @@ def test_manual_retargets_a_ramp_in_progress():
     ds = run(sup, 3, 6, level=0.8)
     assert ds[0].kind == "manual" and ds[0].target_rpm == 6.0
     assert [d.rpm for d in ds if d.rpm is not None] == [7.0, 6.0]  # straight back, still rate-limited
+
+
+def test_after_a_link_loss_it_resyncs_to_the_board_and_ramps_from_its_actual_rpm():
+    """Defect 5: the board was at 17 rpm while the supervisor believed 25; its next command
+    must come from 17 (within the rate limit), not jump 17 -> 29."""
+    sup = Supervisor(cfg(max_rate_rpm_per_s=4.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
+    sup.set_manual_rpm(45.0)
+    ds = run(sup, 0, 5, level=0.9, setpoint_rpm=5.0, actual_rpm=5.0, mill_running=True, mill_epoch=1)
+    assert [d.rpm for d in ds] == [9.0, 13.0, 17.0, 21.0, 25.0]
+    assert sup.commanded_rpm == 25.0
+    ds = run(sup, 5, 7, level=0.9, mill_connected=False, mill_epoch=1)
+    assert [d.kind for d in ds] == ["safe"] and ds[0].action is Action.NONE  # hold: nothing sent
+    # the link is back; the board (read again: epoch 2) runs at 17 rpm
+    ds = run(sup, 7, 20, level=0.9, setpoint_rpm=17.0, actual_rpm=17.0, mill_running=True, mill_epoch=2)
+    rpms = [d.rpm for d in ds if d.rpm is not None]
+    assert sup.commanded_rpm is not None
+    assert rpms and rpms[0] <= 17.0 + 4.0  # from the board's actual, inside the rate limit
+    assert all(b - a <= 4.0 + 1e-9 for a, b in zip([17.0, *rpms], rpms))
+
+
+def test_resync_takes_the_setpoint_of_a_stopped_board_and_works_in_off_too():
+    sup = Supervisor(cfg())
+    sup.step(0.0, SupervisorInputs(setpoint_rpm=12.0, actual_rpm=0.0, mill_running=False, mill_epoch=1))
+    assert sup.commanded_rpm == 12.0
+    sup.step(1.0, SupervisorInputs(setpoint_rpm=12.0, actual_rpm=30.0, mill_running=True, mill_epoch=1))
+    assert sup.commanded_rpm == 12.0  # same epoch: no resync
+    sup.step(2.0, SupervisorInputs(setpoint_rpm=12.0, actual_rpm=8.0, mill_running=True, mill_epoch=2))
+    assert sup.commanded_rpm == 8.0
+
+
+def test_camera_end_is_a_safe_state_at_once_and_no_rpm_moves_follow():
+    """Defect 4: at the end of a video AUTO went on ramping; now it holds at once."""
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=1.0), mode=Mode.AUTO)
+    ds = run(sup, 0, 8, level=0.3, predictor=lambda r, h: {x: x / 100 for x in r})
+    assert ds[0].kind == "move" and sup.target_rpm > sup.commanded_rpm  # a ramp in progress
+    ds = run(sup, 8, 20, level=0.3, camera_ended=True, last_valid_mi_s=7.5)
+    assert ds[0].kind == "safe" and ds[0].t_s == 8.0 and "camera ended" in ds[0].reason
+    assert all(d.action is Action.NONE for d in ds)
+
+
+def test_one_vision_timeout_for_alarm_and_safe_state():
+    c = cfg(vision_timeout_s=3.0)
+    assert not c.vision_lost(13.0, 10.0) and c.vision_lost(13.01, 10.0) and not c.vision_lost(99.0, None)
+    sup = Supervisor(c, mode=Mode.AUTO)
+    run(sup, 0, 10, level=0.9)
+    ds = run(sup, 10, 16, level=0.9, last_valid_mi_s=10.0)
+    first = next(d for d in ds if d.kind == "safe")
+    assert first.t_s == pytest.approx(13.5)  # first step at which c.vision_lost(t, 10) holds

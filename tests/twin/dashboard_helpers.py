@@ -81,3 +81,73 @@ def choose_mode(page, mode: str) -> None:
 
 def mode_selector(page):
     return input_by_label(page, "Mode")
+
+
+# -- a viser viewer without a browser: the websocket protocol of viser 1.1 -------------------
+def open_viewer(http_url: str, origin: str | None = "same", timeout_s: float = 10.0):
+    """Open the dashboard's websocket as viser's page does (subprotocol ``viser-v<version>``).
+
+    ``origin="same"`` sends the dashboard's own origin (``http_url``), ``None`` none at all,
+    anything else that Origin. Raises ``websockets.exceptions.InvalidStatus`` when refused.
+    """
+    import viser
+    from websockets.sync.client import connect
+    from websockets.typing import Origin
+
+    sent = http_url.rstrip("/") if origin == "same" else origin
+    ws = connect(
+        "ws://" + http_url.split("://", 1)[1].rstrip("/"),
+        origin=None if sent is None else Origin(sent),
+        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+        open_timeout=timeout_s,
+        max_size=None,
+        compression=None,
+    )
+    # viser counts a viewer as connected (and builds its per-client GUI) on its first
+    # camera message, which the page sends once its 3D view is up
+    send_message(ws, "ViewerCameraMessage", wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, -1.0), fov=1.0,
+                 near=0.01, far=100.0, image_height=480, image_width=640, look_at=(0.0, 0.0, 0.0),
+                 up_direction=(0.0, -1.0, 0.0))
+    return ws
+
+
+def decode_window(data: bytes) -> list[dict]:
+    """The messages of one server->client websocket frame (zstd msgpack + binary tail)."""
+    import msgspec
+    import zstandard
+
+    n_inner = int.from_bytes(data[:8], "little")
+    n_comp = int.from_bytes(data[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(data[16:16 + n_comp], max_output_size=n_inner)
+    return list(msgspec.msgpack.decode(inner)["messages"])
+
+
+def _mentions(obj: object, text: str) -> bool:
+    if isinstance(obj, str):
+        return obj == text
+    if isinstance(obj, dict):
+        return any(_mentions(v, text) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return any(_mentions(v, text) for v in obj)
+    return False
+
+
+def wait_for_label(ws, label: str, timeout_s: float) -> bool:
+    """Read the viewer's websocket until a message carrying ``label`` arrives (True) or
+    ``timeout_s`` passes (False)."""
+    end = time.monotonic() + timeout_s
+    while (left := end - time.monotonic()) > 0:
+        try:
+            data = ws.recv(timeout=left)
+        except TimeoutError:
+            return False
+        if isinstance(data, bytes) and any(_mentions(m, label) for m in decode_window(data)):
+            return True
+    return False
+
+
+def send_message(ws, message_type: str, **fields: object) -> None:
+    """Send one client->server viser message (msgpack ``{"type": ..., **fields}``)."""
+    import msgspec
+
+    ws.send(msgspec.msgpack.encode({"type": message_type, **fields}))

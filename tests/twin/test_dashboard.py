@@ -5,26 +5,34 @@ token is read-only."""
 from __future__ import annotations
 
 import threading
+import time
+import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+import websockets
 
+from sim.drum import Particles
 from tests.twin.dashboard_helpers import (
     IMG,
     button,
     choose_mode,
-    mode_selector,
     drag_slider_to,
     image_srcs,
     input_by_label,
+    mode_selector,
+    open_viewer,
     plot_pixels,
+    send_message,
     slider_enabled,
     slider_value,
+    wait_for_label,
     wait_until,
 )
-from sim.drum import Particles
 from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
+from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origin_allowed, tokens_match
 from twin.dashboard.scene import ring_segments
 from twin.state import LiveState, forward_fill
 
@@ -132,7 +140,9 @@ def test_scene_geometry() -> None:
 
 @pytest.mark.browser
 @pytest.mark.timeout(120)
-def test_dashboard_updates_and_controls(page, tmp_path: Path) -> None:
+def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
+    """One chromium for the whole browser check: the local dashboard (updates and
+    controls), then a remote one (read-only until the token, rate-limited unlocks)."""
     state = LiveState()
     state.update_numbers(mode="auto", rpm_setpoint=5.0)
     controls = RecordingControls()
@@ -177,33 +187,180 @@ def test_dashboard_updates_and_controls(page, tmp_path: Path) -> None:
             assert np.all(h.points[:, 2] == 0.0) and h.point_size == pytest.approx(0.01)
     finally:
         dash.stop()
+    remote_viewer_without_token_is_read_only(page)
 
 
-@pytest.mark.browser
-@pytest.mark.timeout(120)
-def test_remote_viewer_without_token_is_read_only(page) -> None:
+def remote_viewer_without_token_is_read_only(page) -> None:
+    """Part two of the browser test (one chromium start): a dashboard bound beyond
+    loopback, its viewer read-only until the token; a quick retry is rate-limited."""
     state = LiveState()
     state.update_numbers(mode="auto")
     controls = RecordingControls()
     with pytest.raises(ValueError, match="token"):
         Dashboard(state, controls, host="127.0.0.2", port=0)
-    dash = Dashboard(state, controls, host="127.0.0.2", port=0, control_token="s3cret").start()
+    events: list[str] = []
+    dash = Dashboard(state, controls, host="127.0.0.2", port=0, control_token="s3cret",
+                     on_event=lambda kind, fields: events.append(kind)).start()
     try:
         page.goto(dash.url)
         manual = mode_selector(page)
         manual.wait_for()
         assert manual.is_disabled() and button(page, "EMERGENCY STOP").is_disabled()
         button(page, "EMERGENCY STOP").click(force=True)
-        input_by_label(page, "Control token").fill("wrong")
+        input_by_label(page, "Control token").fill("wrong ünïcode ✓")  # any input is safe
         button(page, "Unlock controls").click()
         page.get_by_text("wrong token").wait_for()
         assert manual.is_disabled()
         input_by_label(page, "Control token").fill("s3cret")
+        button(page, "Unlock controls").click()  # within a second of the failure: refused
+        page.get_by_text("too many attempts").wait_for()
+        assert manual.is_disabled()
+        time.sleep(1.1)
         button(page, "Unlock controls").click()
         wait_until(lambda: not manual.is_disabled(), 10, "controls to unlock")
         choose_mode(page, "MANUAL")
         wait_until(lambda: controls.args_of("set_mode"), 10, "set_mode after unlocking")
         assert controls.args_of("set_mode") == [("manual",)]
         assert "emergency_stop" not in controls.names()  # the locked click did nothing
+        assert events == ["dashboard_unlock_failed", "dashboard_unlock_limited", "dashboard_unlocked"]
+        assert dash.failed_unlocks == 1 and dash.refused_handshakes == 0  # chromium: own origin
     finally:
         dash.stop()
+
+
+# -- the door: origin, framing, share tunnel, many viewers (real websocket clients) ------
+def test_origin_policy() -> None:
+    ok = dict(bind_host="127.0.0.1", port=8080)
+    assert origin_allowed("http://127.0.0.1:8080", "127.0.0.1:8080", **ok)
+    assert origin_allowed("http://localhost:8080", "localhost:8080", **ok)
+    assert origin_allowed("http://[::1]:8080", "[::1]:8080", **ok)
+    for origin, host in [
+        ("http://evil.example", "127.0.0.1:8080"),  # a hostile page in the operator's browser
+        ("http://evil.example:8080", "evil.example:8080"),  # DNS rebinding to 127.0.0.1
+        ("http://127.0.0.1:9999", "127.0.0.1:8080"),  # another local port's page
+        ("http://127.0.0.1:8080", "127.0.0.1:9999"),
+        ("null", "127.0.0.1:8080"), (None, "127.0.0.1:8080"), ("", "127.0.0.1:8080"),
+        ("http://127.0.0.1:8080", None), ("http://127.0.0.1:8080/x", "127.0.0.1:8080"),
+        ("ftp://127.0.0.1:8080", "127.0.0.1:8080"), ("http://127.0.0.1:99999", "127.0.0.1:8080"),
+        ("http://127.0.0.1:8080", "127.0.0.1:notaport"),
+    ]:
+        assert not origin_allowed(origin, host, **ok), (origin, host)
+    lan = dict(bind_host="0.0.0.0", port=8080)  # beyond loopback: same origin, any name
+    assert origin_allowed("http://mill-pc.lan:8080", "mill-pc.lan:8080", **lan)
+    assert not origin_allowed("http://evil.example:8080", "mill-pc.lan:8080", **lan)
+    assert is_loopback("localhost") and is_loopback("[::1]") and not is_loopback("0.0.0.0")
+
+
+def test_token_compare_is_safe_for_any_input() -> None:
+    assert tokens_match("s3cret", "s3cret")
+    for given in ("", "s3cre", "s3cret ", "ünïcode ✓", "\udcff", "x" * 100_000, None, 12, b"s3cret"):
+        assert not tokens_match(given, "s3cret"), given
+    assert tokens_match("ünïcode ✓", "ünïcode ✓")
+    assert not tokens_match("anything", None) and not tokens_match("", "")
+
+
+def test_unlock_limiter() -> None:
+    lim = UnlockLimiter(UnlockPolicy(per_client_s=1.0, max_failures=3, window_s=60.0))
+    assert lim.wait_s(1, 0.0) == 0.0
+    lim.attempt(1, 0.0, ok=False)
+    assert lim.wait_s(1, 0.5) == pytest.approx(0.5) and lim.wait_s(2, 0.5) == 0.0
+    lim.attempt(2, 0.5, ok=False)
+    lim.attempt(3, 0.6, ok=False)  # three failures from three viewers: everybody waits
+    assert lim.wait_s(4, 1.0) == pytest.approx(59.0) and lim.wait_s(1, 30.0) == pytest.approx(30.0)
+    assert lim.wait_s(4, 60.01) == 0.0  # the oldest failure left the window
+    lim.attempt(4, 61.0, ok=True)
+    assert lim.wait_s(4, 61.5) == pytest.approx(0.5)
+    lim.forget(4)
+    assert lim.wait_s(4, 61.5) == 0.0
+
+
+@pytest.fixture(scope="module")
+def local_dash() -> Iterator[tuple[Dashboard, RecordingControls, list]]:
+    state = LiveState()
+    state.update_numbers(mode="off")
+    controls = RecordingControls()
+    events: list = []
+    dash = Dashboard(state, controls, port=0, update_hz=4,
+                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+    try:
+        yield dash, controls, events
+    finally:
+        dash.stop()
+
+
+@pytest.mark.timeout(60)
+def test_foreign_origins_are_refused_own_is_accepted(local_dash) -> None:
+    dash, _, events = local_dash
+    for origin in ("http://evil.example", None, f"http://localhost:{dash.port + 1}"):
+        with pytest.raises(websockets.exceptions.InvalidStatus) as exc:
+            open_viewer(dash.url, origin=origin)
+        assert exc.value.response.status_code == 403
+        assert exc.value.response.headers["X-Frame-Options"] == "DENY"
+    assert dash.refused_handshakes >= 3
+    assert [f["origin"] for k, f in events if k == "dashboard_refused"][-3:] == [
+        "http://evil.example", None, f"http://localhost:{dash.port + 1}"]
+    with open_viewer(dash.url) as ws:  # the dashboard's own page
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+
+
+def test_http_responses_forbid_framing(local_dash) -> None:
+    dash, _, _ = local_dash
+    with urllib.request.urlopen(dash.url + "/", timeout=10) as r:
+        assert r.status == 200
+        assert r.headers["X-Frame-Options"] == "DENY"
+        assert "frame-ancestors 'none'" in r.headers["Content-Security-Policy"]
+
+
+@pytest.mark.timeout(60)
+def test_a_viewer_cannot_start_the_share_tunnel(local_dash, monkeypatch) -> None:
+    import viser._viser
+
+    started: list[tuple] = []
+
+    def no_tunnel(*args: object, **kw: object) -> None:
+        started.append(args)
+        raise RuntimeError("test: no tunnel")
+
+    monkeypatch.setattr(viser._viser, "ViserTunnel", no_tunnel)
+    dash, _, _ = local_dash
+    with open_viewer(dash.url) as ws:
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+        send_message(ws, "ShareUrlRequest")
+        wait_for_label(ws, "never sent", 1.0)
+    assert started == [] and dash._server.request_share_url() is None and started == []
+
+
+@pytest.mark.timeout(90)
+def test_twenty_viewers_at_once_all_get_emergency_stop(local_dash) -> None:
+    dash, _, _ = local_dash
+    n = 20
+    barrier = threading.Barrier(n)
+    got: list[bool] = []
+    errors: list[BaseException] = []
+    lock = threading.Lock()
+
+    def viewer() -> None:
+        try:
+            barrier.wait(20)
+            with open_viewer(dash.url, timeout_s=30) as ws:
+                ok = wait_for_label(ws, "EMERGENCY STOP", 40)
+                with lock:
+                    got.append(ok)
+                barrier.wait(60)  # all still connected while the server is counted
+                if ok:
+                    with lock:
+                        if len(got) == n:
+                            got.append(dash.viewers_with_estop() >= n)
+        except BaseException as exc:  # noqa: BLE001
+            with lock:
+                errors.append(exc)
+
+    threads = [threading.Thread(target=viewer) for _ in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(80)
+    assert errors == [] and got[:n] == [True] * n
+    assert got[n:] == [True]  # the server built controls for every one of them
+
+

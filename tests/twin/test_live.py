@@ -1,6 +1,8 @@
-"""The live loop end to end against the embedded demo (hidden plant + mill emulator on a
-pty + the real serial driver): AUTO acts through the serial link and beats OFF; faults
-go to a safe state and recover; the CSV survives kill -9 of ``drumtwin run``."""
+"""Smoke tests of the whole live loop: the embedded demo (hidden plant + mill emulator on a
+pty + the real serial driver) and a recorded video against the emulator on TCP. The rules
+themselves are tested on the workers with fakes (test_workers.py, test_mill_worker.py);
+here they are checked once end to end. The README's AUTO-vs-OFF numbers come from its
+commands (220 s runs), not from these short runs."""
 
 from __future__ import annotations
 
@@ -8,152 +10,219 @@ import json
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
+from control.device import DeviceConfig
+from control.emulator import MillEmulator
+from tests.cli import assert_one_line_error, cli
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
-from twin.loop import supervisor_config
 from twin.runlog import read_events, read_frames, read_metadata
 
 DRUMTWIN = [str(Path(sys.executable).parent / "drumtwin")]
 SPEED = 4.0
-DURATION_S = 220.0
 
 
-def _drumtwin(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [*DRUMTWIN, "run", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
+class _Predicted:
+    """A stand-in what-if result: the twin 'predicts' MI = rpm / 100 (faster is better)."""
+
+    def __init__(self, rpm: float) -> None:
+        self.plateau_mi = rpm / 100.0
+        self.t_s, self.mi, self.regime = [0.0, 1.0], [0.9, rpm / 100.0], "cascading"
 
 
-def _col(rows: list[dict], name: str) -> np.ndarray:
-    return np.array([np.nan if r[name] is None else r[name] for r in rows], dtype=float)
+def _predict(jobs):  # noqa: ANN001, ANN202
+    return [_Predicted(j.rpm) for j in jobs]
+
+
+# AUTO acts within seconds in the smoke run: a bed at MI ~0.9 counts as segregated, the
+# what-if study is a stand-in (the real one is tested in tests/sim), a cheap calibration,
+# at most 15 rpm (the plant stays cheap to simulate).
+QUICK_AUTO = {
+    "supervisor": {"seg_level": 0.97, "clear_level": 0.98, "detect_dwell_s": 2.0, "prediction_wait_s": 20.0,
+                   "min_change_interval_s": 60.0, "max_rpm": 15.0},
+    "calibrate_kwargs": {"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+    "whatif_study": _predict,
+}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait(pred, timeout_s: float, what: str) -> None:  # noqa: ANN001
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
 
 
 @pytest.fixture(scope="module")
-def auto_and_off(tmp_path_factory) -> dict[str, tuple[dict, Path]]:
-    """The same Case C demo start (seed 0, 5 rpm) run in AUTO and in OFF, side by side."""
+def auto_and_off(tmp_path_factory) -> dict[str, Path]:
+    """Short demo runs (Case C, seed 0, 5 rpm) in AUTO (tuned to act at once) and OFF."""
     base = tmp_path_factory.mktemp("auto_vs_off")
-    procs = {}
-    for mode in ("auto", "off"):
-        procs[mode] = _drumtwin(
-            "--no-dashboard", "--duration", str(DURATION_S), "--speed", str(SPEED), "--case", "C",
-            "--seed", "0", "--mode", mode, "--json", "--log", str(base / mode),
-        )
-    out = {}
-    for mode, p in procs.items():
-        stdout, stderr = p.communicate(timeout=400)
-        assert p.returncode == 0, stderr[-2000:]
-        out[mode] = (json.loads(stdout), base / mode)
-    return out
+    for mode, extra, duration in (("auto", QUICK_AUTO, 24.0), ("off", {}, 12.0)):
+        cfg = RunConfig(dashboard=False, duration_s=duration, speed=SPEED, case="C", seed=0, mode=mode,
+                        log_dir=base / mode, extra=extra).resolved()
+        run_live(cfg, progress=False)
+    return {"auto": base / "auto", "off": base / "off"}
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(500)
-def test_auto_detects_segregation_and_moves_the_mill_over_serial(auto_and_off) -> None:
-    summary, run_dir = auto_and_off["auto"]
-    assert set(summary) >= {"final_trend_mi", "final_rpm", "decisions", "faults", "log_dir"}
-    rows, events = read_frames(run_dir), read_events(run_dir)
-    meta = read_metadata(run_dir)
-    assert meta["config"]["mode"] == "auto" and meta["calibration"]["friction"] > 0
-    moves = [e for e in events if e["kind"] == "decision" and e["action"] == "set_rpm"]
-    assert moves, f"no rpm decision in {[e['kind'] for e in events]}"
-    first = moves[0]
-    assert "segregation" in first["reason"] and first["rpm"] > 5.0
-    t_dec = first["t_s"]
-    t, trend, rpm_act, rpm_set = (_col(rows, c) for c in ("t_s", "trend_mi", "rpm_actual", "rpm_setpoint"))
-    # segregation developed before the decision: the trend started mixed and fell
-    seg_level = supervisor_config(RunConfig()).seg_level
-    assert np.nanmean(trend[t < 5]) > seg_level
-    assert np.nanmin(trend[(t > 5) & (t <= t_dec)]) < seg_level
-    # the emulator's motor (read back over the pty) follows the decision
-    assert np.nanmax(rpm_act[t < t_dec - 1]) < 5.5
-    target = max(e["target_rpm"] or e["rpm"] for e in moves)
-    assert np.nanmax(rpm_act) > 0.9 * target
-    assert np.nanmax(rpm_set) == pytest.approx(target, abs=0.05)
-    assert summary["final_rpm"] > 10.0 and summary["decisions"] >= 1
+@pytest.mark.timeout(180)
+def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_off) -> None:
+    auto, off = auto_and_off["auto"], auto_and_off["off"]
+    ev_auto, ev_off = read_events(auto), read_events(off)
+    sent = [e for e in ev_auto if e["kind"] == "mill_command" and e["command"] == "set_rpm"]
+    assert sent, [e["kind"] for e in ev_auto]
+    rows = read_frames(auto)
+    assert max(r["rpm_setpoint"] for r in rows if r["rpm_setpoint"] is not None) > 5.5  # read back from the board
+    moves = [e for e in ev_auto if e["kind"] == "decision" and e["decision"] == "move"]
+    assert moves and "segregation" in moves[0]["reason"] and "twin predicts" in moves[0]["reason"]
+    assert moves[0]["target_rpm"] == 15.0
+    assert any(e["kind"] == "whatif" and e["reason"] == "AUTO" for e in ev_auto)
+    # OFF: not one command on the line, the board keeps its 5 rpm
+    assert [e for e in ev_off if e["kind"].startswith("mill_command")] == []
+    assert not any(e["kind"] == "decision" for e in ev_off)
+    rows_off = read_frames(off)
+    assert {r["rpm_setpoint"] for r in rows_off if r["rpm_setpoint"] is not None} == {5.0}
+    assert read_metadata(off)["summary"]["decisions"] == 0
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(500)
-def test_auto_ends_clearly_more_mixed_than_off(auto_and_off) -> None:
-    (auto, auto_dir), (off, off_dir) = auto_and_off["auto"], auto_and_off["off"]
-    assert off["decisions"] == 0 and off["final_rpm"] == pytest.approx(5.0, abs=0.1)
-    # compare once the lever has acted: from 30 s after AUTO's first move to the end
-    t_move = min(e["t_s"] for e in read_events(auto_dir) if e["kind"] == "decision" and e["decision"] == "move")
-    tail = {}
-    for name, d in (("auto", auto_dir), ("off", off_dir)):
-        rows = read_frames(d)
-        t, trend = _col(rows, "t_s"), _col(rows, "trend_mi")
-        tail[name] = float(np.nanmean(trend[t > t_move + 30]))
-    assert tail["auto"] > tail["off"] + 0.04, tail
-    assert auto["final_trend_mi"] > off["final_trend_mi"] + 0.04
-
-
-@pytest.mark.slow
 def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
-    """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from the two run logs."""
-    (_, auto_dir), (_, off_dir) = auto_and_off["auto"], auto_and_off["off"]
+    """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from two run logs."""
     png = tmp_path / "auto-vs-off.png"
-    p = subprocess.run([*DRUMTWIN, "compare", f"AUTO={auto_dir}", f"OFF={off_dir}", "--plot", str(png)],
-                       capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
-    assert "AUTO" in p.stdout and "OFF" in p.stdout
+    r = cli("compare", f"AUTO={auto_and_off['auto']}", f"OFF={auto_and_off['off']}", "--plot", png)
+    assert r.code == 0, r.err
+    assert "AUTO" in r.out and "OFF" in r.out
     assert png.stat().st_size > 20_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    bad = subprocess.run([*DRUMTWIN, "compare", str(tmp_path), "--plot", str(png)], capture_output=True, text=True)
-    assert bad.returncode == 2 and "not a run log dir" in bad.stderr and "Traceback" not in bad.stderr
+    assert_one_line_error(cli("compare", tmp_path, "--plot", png), "not a run log dir")
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(300)
-def test_faults_safe_state_alarm_and_recovery(tmp_path: Path) -> None:
-    """Unplug the mill: fault, safe state, recovery on replug. Stop the camera: alarm, no
-    controller moves, recovery. Every fault is an event."""
-    cfg = RunConfig(dashboard=False, duration_s=400, speed=SPEED, mode="auto", log_dir=tmp_path / "run").resolved()
+def _video(path: Path, n: int = 30, size: int = 64) -> Path:
+    """A short synthetic video (grey noise: the meter finds no valid MI in it)."""
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (size, size))
+    rng = np.random.default_rng(0)
+    for _ in range(n):
+        vw.write(rng.integers(90, 110, (size, size, 3), dtype=np.uint8))
+    vw.release()
+    return path
+
+
+@pytest.fixture
+def tcp_mill():
+    """The mill emulator on a TCP port, its watchdog short; the drive was running and
+    its watchdog has stopped it (fault WDOG) before the run connects."""
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
+    port = emu.open_tcp(0)
+    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
+    _wait(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
+    try:
+        yield emu, f"socket://127.0.0.1:{port}"
+    finally:
+        emu.close()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("mode", ["off", "auto"])
+def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mode: str) -> None:
+    """Defect 1: `run --video V --mill URL --mode off` started a stopped mill on connecting."""
+    emu, url = tcp_mill
+    video = _video(tmp_path / "v.avi")
+    cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=3.0, mode=mode, log_dir=tmp_path / "run").resolved()
+    run_live(cfg, progress=False)
+    m = emu.motor
+    assert not m.running and m.fault == "WDOG" and m.setpoint_rpm == 13.0
+    assert not any(a.cmd in ("RUN", "SET") for a in emu.applied)
+    events = read_events(tmp_path / "run")
+    assert any(e["kind"] == "mill_synced" and e["running"] is False for e in events)
+    assert not any(e["kind"] in ("mill_restart", "mill_command") for e in events)
+    if mode == "auto":  # no valid MI and then the video ends: safe at once, nothing sent
+        assert any(e["kind"] == "decision" and e["safe"] for e in events)
+
+
+@pytest.mark.timeout(60)
+def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path) -> None:
+    _, url = tcp_mill
+    video = _video(tmp_path / "v.avi", n=20)
+    p = subprocess.run(
+        [*DRUMTWIN, "run", "--video", str(video), "--mill", url, "--duration", "2", "--mode", "off",
+         "--port", str(_free_port()), "--json", "--log", str(tmp_path / "run")],
+        capture_output=True, text=True, timeout=50,
+    )
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "dashboard on" in p.stderr  # the banner went to stderr
+    lines = p.stdout.strip().splitlines()
+    assert len(lines) == 1, p.stdout
+    assert json.loads(lines[0])["log_dir"] == str(tmp_path / "run")
+
+
+def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:
+    video = _video(tmp_path / "v.avi", n=2)
+    for args, needle in (
+        (("--seed", -1), "--seed"),
+        (("--speed", "nan"), "--speed"),
+        (("--speed", "inf"), "--speed"),
+        (("--speed", 0), "--speed"),
+        (("--duration", "inf"), "--duration"),
+        (("--duration", -5), "--duration"),
+        (("--port", 0), "--port"),
+        (("--port", 70000), "--port"),
+        (("--mode", "turbo"), "--mode"),
+        (("--case", "Z"), "--case"),
+    ):
+        assert_one_line_error(cli("run", "--no-dashboard", *args), needle)
+    log = tmp_path / "never"
+    r = cli("run", "--video", video, "--mill", "/dev/nonexistent-mill", "--no-dashboard", "--log", log)
+    assert_one_line_error(r, "/dev/nonexistent-mill")
+    assert not log.exists()  # refused at start, before any log or thread
+
+
+@pytest.mark.timeout(240)
+def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
+    """Unplug the mill: fault and safe state; the board's watchdog stops the drive and it
+    stays stopped when the link returns (nothing restarts it); the operator starts it.
+    Stop the camera: alarm and safe state together, no rpm moves; recovery."""
+    cfg = RunConfig(dashboard=False, duration_s=600, speed=SPEED, mode="auto", log_dir=tmp_path / "run").resolved()
     report: dict = {}
 
     def script(loop, plant, dash) -> None:  # noqa: ANN001
-        def wait(pred, timeout_s: float, what: str) -> None:
-            end = time.monotonic() + timeout_s
-            while time.monotonic() < end:
-                if pred():
-                    return
-                time.sleep(0.05)
-            raise AssertionError(f"timed out waiting for {what}")
-
         def run() -> None:
             try:
-                wait(lambda: loop.mill_view.connected and loop.n_frames > 20, 30, "a running loop")
+                mill = loop.mill_box.get
+                _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
                 plant.emulator.disconnect()
-                wait(lambda: not loop.mill_view.connected, 10, "the loop to see the link down")
-                wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+                _wait(lambda: not mill().connected, 10, "the loop to see the link down")
+                _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
                 report["alarm_link"] = list(loop.state.alarms)
-                time.sleep(plant.config.watchdog_s + 0.7)  # the board's watchdog stops the drive
-                report["motor_after_unplug"] = plant.emulator.motor
+                _wait(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
                 plant.emulator.reconnect()
-                wait(lambda: loop.mill_view.connected, 20, "the link to come back")
-                wait(lambda: plant.emulator.motor.running, 10, "the drive to restart")
-                wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
-                decisions_before = loop.n_decisions
+                _wait(lambda: mill().connected, 20, "the link to come back")
+                time.sleep(1.0)
+                report["motor_after_reconnect"] = plant.emulator.motor
+                loop.start_mill()  # the operator
+                _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
+                _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
                 t_pause = loop.now_s()
                 plant.camera_paused.set()
-                wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
-                report["alarm_camera"] = list(loop.state.alarms)
-                wait(lambda: loop.supervisor.safe, 20, "the safe state without vision")
-                time.sleep(2.0)
-                report["setpoint_during_pause"] = plant.emulator.motor.setpoint_rpm
-                report["pause"] = (t_pause, loop.now_s(), decisions_before)
+                _wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
+                report["safe_with_alarm"] = loop.supervisor.safe
+                time.sleep(1.0)
+                report["pause"] = (t_pause, loop.now_s())
                 plant.camera_paused.clear()
-                wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
-                wait(lambda: not loop.supervisor.safe, 30, "recovery once frames are back")
+                _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
             except BaseException as exc:  # noqa: BLE001
                 report["error"] = exc
             finally:
@@ -167,25 +236,25 @@ def test_faults_safe_state_alarm_and_recovery(tmp_path: Path) -> None:
     events = read_events(tmp_path / "run")
     faults = {e["fault"] for e in events if e["kind"] == "fault"}
     recovered = {e["fault"] for e in events if e["kind"] == "recovered"}
-    assert {"mill_link", "camera_stopped"} <= faults and {"mill_link", "camera_stopped"} <= recovered
+    assert {"mill_link", "camera_stopped", "vision_lost"} <= faults and {"mill_link", "camera_stopped"} <= recovered
     assert any("mill link" in a for a in report["alarm_link"])
-    assert any("camera" in a for a in report["alarm_camera"])
+    m = report["motor_after_reconnect"]
+    assert not m.running and m.fault == "WDOG"  # reconnecting restarted nothing
+    starts = [e for e in events if e["kind"] == "mill_command" and e["command"] == "start"]
+    assert len(starts) == 1 and starts[0]["source"] == "operator"
     safe = [e for e in events if e["kind"] == "decision" and e["safe"]]
     assert any("mill link lost" in e["reason"] for e in safe)
-    assert any("no valid MI" in e["reason"] for e in safe)
-    assert sum(e["kind"] == "decision" and e["decision"] == "recover" for e in events) >= 2
-    assert report["motor_after_unplug"].fault == "WDOG"  # the board stopped itself
-    assert any(e["kind"] == "mill_restart" for e in events)
-    # no controller move while the camera was stopped
-    t0, t1, _ = report["pause"]
-    moves = [e for e in events if e["kind"] == "decision" and e["action"] == "set_rpm" and t0 <= e["t_s"] <= t1]
-    assert moves == []
-    assert report["setpoint_during_pause"] == pytest.approx(5.0)
+    assert any("no valid MI" in e["reason"] for e in safe) and report["safe_with_alarm"]
+    t0, t1 = report["pause"]
+    assert not [e for e in events if e["kind"] == "mill_command" and e["command"] == "set_rpm" and t0 <= e["t_s"] <= t1]
 
 
 @pytest.mark.timeout(120)
 def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
-    proc = _drumtwin("--no-dashboard", "--speed", "2", "--mode", "off", "--log", str(tmp_path / "run"))
+    proc = subprocess.Popen(
+        [*DRUMTWIN, "run", "--no-dashboard", "--speed", "2", "--mode", "off", "--log", str(tmp_path / "run")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     try:
         csv = tmp_path / "run" / "frames.csv"
         end = time.monotonic() + 60
@@ -203,14 +272,6 @@ def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     frames = [int(r["frame"]) for r in rows]
     assert frames == sorted(frames) and all(math.isfinite(r["t_s"]) for r in rows)
     assert kill_wall - rows[-1]["wall_s"] < 1.0
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.mark.browser
@@ -256,8 +317,9 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         drag_slider_to(page, 0.35)
         wait_until(lambda: abs(slider_value(page) - 5.0) > 5, 10, "the slider to move")
         wanted = slider_value(page)
+        clamp = loop.supervisor.supervisor.config.clamp
         wait_until(
-            lambda: abs(plant.emulator.motor.setpoint_rpm - loop.supervisor.config.clamp(wanted)) < 0.05,
+            lambda: abs(plant.emulator.motor.setpoint_rpm - clamp(wanted)) < 0.05,
             30,
             f"the emulator's setpoint to reach {wanted} rpm",
         )

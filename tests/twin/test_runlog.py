@@ -170,3 +170,47 @@ def test_cli_refuses_an_existing_log_dir(tmp_path: Path) -> None:
     r = cli("run", "--log", tmp_path / "run", "--no-dashboard", "--duration", "1")
     assert_one_line_error(r, "--log", "already holds")
     assert len(read_frames(tmp_path / "run")) == 1
+
+
+_STUDY = textwrap.dedent(
+    """
+    import os
+    from multiprocessing import forkserver, util
+    from sim.whatif import WhatIfJob, make_pool, run_study
+    pool = make_pool(2)
+    assert sorted(f.result() for f in [pool.submit(abs, -i) for i in range(4)]) == [0, 1, 2, 3]
+    pids = list(pool._processes) + [forkserver._forkserver._forkserver_pid]
+    print(" ".join(map(str, pids)), util.get_temp_dir(), flush=True)
+    run_study([WhatIfJob(rpm=5.0 + i, duration_s=600.0, sample_s=1.0) for i in range(2)], pool=pool)
+    """
+)
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")  # a zombie is dead
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.timeout(60)
+def test_whatif_workers_die_with_a_killed_parent_and_leave_no_temp_files() -> None:
+    proc = subprocess.Popen([sys.executable, "-c", _STUDY], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        *pids, tmp = proc.stdout.readline().split()
+        workers = [int(p) for p in pids]
+        assert len(workers) == 3 and Path(tmp).is_dir()  # two workers and the fork server
+        time.sleep(0.5)  # the study is running
+        assert not any(_gone(p) for p in workers)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not (all(_gone(p) for p in workers) and not Path(tmp).exists()):
+            time.sleep(0.1)
+        assert [p for p in workers if not _gone(p)] == []
+        assert not Path(tmp).exists()  # the fork server's socket directory is removed
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -5,6 +5,12 @@ import pytest
 
 from tests.vision import helpers as H
 from vision.colours import DEFAULT_CLASSES, ColourClass, classify
+
+# HSV classes for the synthetic particle renders (blue and white)
+PAINTED = (
+    ColourClass("blue", (((95, 90, 30), (130, 255, 255)),)),
+    ColourClass("white", (((0, 0, 120), (179, 60, 255)),)),
+)
 from vision.errors import VisionError
 from vision.meter import Meter
 from vision.roi import DrumROI, detect_drum, roi_mask
@@ -52,9 +58,44 @@ def test_bad_frames_are_flagged_not_raised():
     m = Meter(roi=H.roi_for())
     assert m.measure(np.zeros((480, 640), np.uint8)).flags[0].startswith("bad_frame")
     assert m.measure(H.half_disks()).valid
-    r = m.measure(H.half_disks(800, 600))
-    assert not r.valid and r.flags[0].startswith("size_changed")
     assert m.measure(H.half_disks()).valid  # the stream goes on
+
+
+def test_roi_detected_per_frame_size_and_on_demand():
+    m = Meter()
+    r1 = m.measure(H.half_disks())
+    r2 = m.measure(H.half_disks(800, 600))
+    r3 = m.measure(H.half_disks())
+    assert r1.valid and r2.valid and r3.valid
+    assert abs(r2.roi.cx_px - 400) < 4 and abs(r2.roi.r_px - 0.45 * 600) < 0.05 * 270
+    assert abs(r1.roi.cx_px - 320) < 4 and r3.roi == r1.roi
+    assert r1.mi < 0.05 and r2.mi < 0.05
+    m.redetect()
+    assert m.roi is None
+    assert m.measure(H.half_disks()).roi == r1.roi
+
+
+def test_validity_relative_to_roi_and_running_median():
+    import cv2
+
+    m = Meter(roi=H.roi_for())
+    for _ in range(6):
+        assert m.measure(H.half_disks()).valid
+    # blue shrinks to a sliver (1% of the drum): still above min_share, but a collapse
+    img = H.blank()
+    cv2.ellipse(img, (320, 240), (216, 216), 0, 90, 270, H.RED, -1)
+    cv2.circle(img, (420, 240), 20, H.BLUE, -1)
+    r = m.measure(img)
+    assert not r.valid and "collapsed:blue" in r.flags and math.isnan(r.mi)
+    assert r.cls("blue").roi_share == pytest.approx(np.pi * 20**2 / (np.pi * 216**2), rel=0.1)
+    # a fresh meter has no history: the same frame is valid (the class is not tiny)
+    assert Meter(roi=H.roi_for()).measure(img).valid
+    # a tiny class (below 0.5% of the drum) is few_pixels, whatever its absolute count
+    img2 = H.blank()
+    cv2.ellipse(img2, (320, 240), (216, 216), 0, 90, 270, H.RED, -1)
+    cv2.circle(img2, (420, 240), 10, H.BLUE, -1)
+    r2 = Meter(roi=H.roi_for(), min_pixels=1).measure(img2)
+    assert "few_pixels:blue" in r2.flags and r2.cls("blue").n_px > 250
 
 
 def test_mi_linear_relative_to_first_valid_frame():
@@ -86,8 +127,28 @@ def test_slope_on_tilted_beds(angle, fill):
     img, roi = H.tilted_bed(angle, fill)
     r = Meter(roi=roi).measure(img)
     assert r.slope_deg == pytest.approx(angle, abs=1.0)
+    assert r.slope_axis_deg == pytest.approx(angle, abs=1.0)  # flat surface: both agree
+    assert abs(r.surface_curvature) < 0.02
     bed = classify(img, DEFAULT_CLASSES, roi_mask(roi, img.shape[:2])) > 0
     assert bed_slope_deg(bed, roi) == pytest.approx(angle, abs=0.5)
+
+
+@pytest.mark.parametrize("angle", [20.0, 35.0, 50.0, -30.0])
+@pytest.mark.parametrize("s_shape", [0.0, 0.12])
+def test_free_surface_of_particle_beds(angle, s_shape):
+    """Shaded particle beds, flat and S-shaped: the central-chord angle within 1 deg."""
+    from vision.synthetic import particle_drum
+
+    sc = particle_drum((480, 360), mix=0.5, slope_deg=angle, s_shape=s_shape, seed=int(angle), fill=0.45)
+    m = Meter(PAINTED, roi=sc.roi)
+    r = m.measure(sc.image)
+    assert r.slope_deg == pytest.approx(sc.surface_deg, abs=1.0), (r.slope_deg, sc.surface_deg)
+    if s_shape > 0:
+        assert r.surface_curvature > 0.05  # the S-shape is seen
+        # the principal axis is flatter than the free surface of an S-shaped bed
+        assert abs(r.slope_axis_deg) < abs(r.slope_deg) - 1.0
+    else:
+        assert abs(r.surface_curvature) < 0.04
 
 
 def test_slope_dark_bed():
@@ -95,7 +156,18 @@ def test_slope_dark_bed():
     # a light drum with a dark bed has no colour classes: slope still measured
     r = Meter(roi=roi, bed="dark").measure(img)
     assert r.slope_deg == pytest.approx(25.0, abs=1.0)
+    assert r.slope_axis_deg == pytest.approx(25.0, abs=1.0)
     assert not r.valid
+
+
+def test_slope_dark_s_shaped_backlit_bed():
+    from vision.synthetic import particle_drum
+
+    sc = particle_drum((480, 360), ((25, 25, 25), (40, 40, 40)), mix=1.0, slope_deg=40, s_shape=0.12, seed=2,
+                       background_bgr=(235, 235, 235), highlight=0.0)
+    r = Meter(roi=sc.roi, bed="dark").measure(sc.image)
+    assert r.slope_deg == pytest.approx(sc.surface_deg, abs=1.0)
+    assert abs(r.slope_axis_deg) < abs(r.slope_deg) - 1.0
 
 
 def test_red_wraps_hue_zero_and_defaults_catch_real_world_colours():

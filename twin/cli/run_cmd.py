@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import math
+import os
 import platform
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -42,19 +46,18 @@ def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
 def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, ANN201
     """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
 
-    ``on_started(loop, plant, dashboard)`` is called once everything runs (tests use it
-    to inject faults). Ctrl-C / SIGTERM end the run cleanly.
+    The mill link is opened first: a URL that cannot be opened raises ``ConnectionError``
+    before anything else starts (the CLI exits 2). ``on_started(loop, plant, dashboard)``
+    is called once everything runs (tests use it to inject faults). Ctrl-C / SIGTERM end
+    the run cleanly.
     """
     from twin.clock import RunClock
     from twin.demo import DemoPlant, PlantConfig
-    from twin.loop import LiveLoop
+    from twin.loop import LiveLoop, open_mill
     from twin.runlog import RunLog
     from twin.state import LiveState
 
     clock = RunClock(cfg.speed)
-    runlog = RunLog(cfg.log_dir)
-    runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    plant = None
     classes = None
     roi = None
     if cfg.meter_config is not None:
@@ -62,27 +65,34 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
 
         mc = load_config(cfg.meter_config)
         classes, roi = mc.classes, mc.roi
-    if cfg.demo:
-        plant = DemoPlant(
-            PlantConfig(case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px),
-            clock,
-        )
-        frames, mill_url, roi = plant.frames(), plant.url, plant.roi
-        runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
-    else:
-        from vision.sources import open_source
-
-        if cfg.video is not None:
-            frames = _paced(open_source(str(cfg.video)), clock)
-        else:
-            frames = open_source(cfg.camera)
-        mill_url = cfg.mill
-    state = LiveState()
+    plant = None
+    mill = None
+    runlog = None
     loop = None
     dash = None
+    summary = None
     t_wall = time.monotonic()
     try:
-        loop = LiveLoop(cfg, frames, mill_url, runlog, state, clock=clock, roi=roi, classes=classes)
+        if cfg.demo:
+            plant = DemoPlant(
+                PlantConfig(case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px),
+                clock,
+            )
+            frames, mill_url, roi = plant.frames(), plant.url, plant.roi
+        else:
+            from vision.sources import open_source
+
+            mill_url = cfg.mill
+            frames = None
+        mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
+        if frames is None:
+            frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
+        runlog = RunLog(cfg.log_dir)
+        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+        if plant is not None:
+            runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
+        state = LiveState()
+        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes)
         if cfg.dashboard:
             from twin.dashboard import Dashboard
 
@@ -91,21 +101,26 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
             ).start()
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
+        clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
         loop.start()
         if on_started is not None:
             on_started(loop, plant, dash)
         _wait(loop, cfg, progress)
     finally:
+        clock.stop.set()
         if loop is not None:
-            loop.stop()
+            loop.stop()  # joins the workers, closes the what-if pool and the mill link
+        elif mill is not None:
+            mill.close()
         if dash is not None:
             dash.stop()
         if plant is not None:
             plant.close()
-        summary = loop.summary(time.monotonic() - t_wall) if loop is not None else None
-        if summary is not None:
+        if loop is not None:
+            summary = loop.summary(time.monotonic() - t_wall)
             runlog.set_metadata(summary=asdict(summary))
-        runlog.close()
+        if runlog is not None:
+            runlog.close()
     return summary
 
 
@@ -127,12 +142,36 @@ def _wait(loop, cfg, progress: bool) -> None:  # noqa: ANN001
         ) as bar:
             task = bar.add_task("run", total=cfg.duration_s, mi="–", rpm="–")
             while not stop.is_set() and loop.now_s() < cfg.duration_s:
-                est = loop.last_estimate
+                est = loop.frames_box.get().estimate
                 mi = f"{est.level:.3f}" if est is not None and est.valid else "–"
-                bar.update(task, completed=min(loop.now_s(), cfg.duration_s), mi=mi, rpm=f"{loop.mill_view.actual_rpm:.1f}")
+                rpm = loop.mill_box.get().actual_rpm
+                bar.update(task, completed=min(loop.now_s(), cfg.duration_s), mi=mi, rpm=f"{rpm:.1f}")
                 stop.wait(0.2)
     except KeyboardInterrupt:
         console_err.print("stopping…")
+
+
+@contextlib.contextmanager
+def stdout_to_stderr() -> Iterator[None]:
+    """Send everything printed to stdout (by us, viser, workers, child processes) to
+    stderr while the block runs, so ``--json`` stdout carries only the JSON."""
+    saved_fd = None
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (in-process tests)
+        fd = None
+    if fd is not None:
+        sys.stdout.flush()
+        saved_fd = os.dup(fd)
+        os.dup2(sys.stderr.fileno(), fd)
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        if saved_fd is not None and fd is not None:
+            sys.stdout.flush()
+            os.dup2(saved_fd, fd)
+            os.close(saved_fd)
 
 
 @app.command("run")
@@ -167,7 +206,11 @@ def run(
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
             host=host, control_token=control_token, scheduler=scheduler,
         ).resolved()
-        summary = run_live(cfg, progress=not json_out)
+        if json_out:
+            with stdout_to_stderr():
+                summary = run_live(cfg, progress=False)
+        else:
+            summary = run_live(cfg, progress=True)
     except OSError as exc:
         if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
             raise

@@ -32,7 +32,8 @@ class Bed(str, Enum):
 
 BASE_COLUMNS = ("frame", "t_s", "mi", "mi_sigmoid", "mi_linear", "d_px", "dsigma_px", "slope_deg", "valid")
 CLASS_COLUMNS = ("cx", "cy", "sigma", "frac")
-EXTRA_COLUMNS = ("concentration", "mi_avg", "flags", "source")
+EXTRA_COLUMNS = ("concentration", "mi_avg", "slope_axis_deg", "surface_curvature", "roi_cx_px", "roi_cy_px",
+                 "roi_r_px", "flags", "source")
 
 
 def csv_columns(class_names: list[str]) -> list[str]:
@@ -43,8 +44,26 @@ def csv_columns(class_names: list[str]) -> list[str]:
     return cols + list(EXTRA_COLUMNS)
 
 
-def _num(x: float, digits: int = 6) -> str:
+def _num(x: float | None, digits: int = 6) -> str:
     return "" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _check_number(option: str, value: float, lo: float, hi: float) -> None:
+    """A one-line error naming ``option`` unless ``lo <= value <= hi`` (and finite)."""
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise VisionError(f"{option} must be within {lo:g}..{hi:g}, got {value:g}")
+
+
+def _warn(lines: tuple[str, ...] | list[str]) -> None:
+    for ln in lines:
+        console_err.print(f"warning: {ln}", highlight=False, markup=False)
+
+
+def _no_default_pixels_error() -> VisionError:
+    return VisionError(
+        "no pixels of the default red/blue classes in the drum: these particles need their own colours; run "
+        "`drumtwin classes suggest FRAMES... --preview preview.png > mixer.toml` and pass --config mixer.toml"
+    )
 
 
 @app.command("mi")
@@ -71,7 +90,11 @@ def mi_cmd(
     from vision.roi import parse_roi
     from vision.sources import open_source, source_kind
 
+    _check_number("--window", window, 1, 1_000_000)
+    _check_number("--fps", fps, 1e-3, 10_000)
+    _check_number("--max-frames", max_frames, 0, 10**12)
     cfg = load_config(config)
+    _warn(cfg.warnings)
     manual_roi = parse_roi(roi) if roi else None
     meter = cfg.make_meter(roi=manual_roi, bed=bed.value if bed else None)
     baseline = None
@@ -99,11 +122,11 @@ def mi_cmd(
     if max_frames > 0 and (total is None or total > max_frames):
         total = max_frames
 
-    names = [c.name for c in cfg.classes]
+    names = [c.name for c in meter.classes]
     cols = csv_columns(names)
     fh = open(csv_out, "w", newline="") if csv_out else sys.stdout
     writer = csv.writer(fh)
-    writer.writerow(cols)
+    header_written = False
     ma = MovingAverage(window)
     ts: list[float] = []
     mis: list[float] = []
@@ -111,6 +134,7 @@ def mi_cmd(
     vw = None
     vw_size = None
     n_valid = 0
+    n_good = 0
     n = 0
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -121,9 +145,17 @@ def mi_cmd(
             task = progress.add_task("frames", total=total)
             for fr in frames:
                 if fr.error:
+                    if kind == "image":
+                        raise VisionError(fr.error)
                     reading = meter._invalid(f"bad_frame:{fr.error}")
                 else:
                     reading = meter.measure(fr.image)
+                    n_good += 1
+                    if cfg.is_default and n_good == 1 and any(f.startswith("few_pixels") for f in reading.flags):
+                        raise _no_default_pixels_error()
+                if not header_written:
+                    writer.writerow(cols)
+                    header_written = True
                 mi_val = reading.mi
                 mi_sig, mi_lin, d, ds = reading.mi_sigmoid, reading.mi_linear, reading.d_px, reading.dsigma_px
                 flags = list(reading.flags)
@@ -137,7 +169,11 @@ def mi_cmd(
                        _num(reading.slope_deg, 5), int(valid)]
                 for st in reading.classes:
                     row += [_num(st.cx_px), _num(st.cy_px), _num(st.sigma_px), _num(st.frac)]
-                row += [_num(reading.concentration), _num(avg), ";".join(flags), fr.name]
+                r_roi = reading.roi
+                row += [_num(reading.concentration), _num(avg), _num(reading.slope_axis_deg, 5),
+                        _num(reading.surface_curvature, 4)]
+                row += [_num(r_roi.cx_px, 7), _num(r_roi.cy_px, 7), _num(r_roi.r_px, 7)] if r_roi else ["", "", ""]
+                row += [";".join(flags), fr.name]
                 writer.writerow(row)
                 ts.append(fr.t_s)
                 mis.append(mi_val)
@@ -168,6 +204,8 @@ def mi_cmd(
             fh.flush()
     if n == 0:
         raise VisionError("the source gave no frames")
+    if n_good == 0:
+        raise VisionError(f"none of the {n} frames could be read (corrupt or not images)")
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
     console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
@@ -192,28 +230,84 @@ def _plot(path: Path, ts: list[float], mis: list[float], avgs: list[float], meth
     plt.close(fig)
 
 
+def _pick_frames(source: list[str], n_frames: int) -> list:
+    """Up to ``n_frames`` readable frames spread evenly over the source (sources.Frame list)."""
+    from vision.sources import _image_paths, open_source, read_image, source_kind
+
+    spec = source if len(source) > 1 else source[0]
+    kind = source_kind(spec)
+    if kind in ("folder", "images", "image"):
+        from pathlib import Path as _P
+
+        paths = [_P(str(spec))] if kind == "image" else _image_paths(spec)
+        if kind == "image" and not paths[0].exists():
+            raise FileNotFoundError(f"no such file: {paths[0]}")
+        idx = sorted({round(i * (len(paths) - 1) / max(n_frames - 1, 1)) for i in range(min(n_frames, len(paths)))})
+        out = []
+        for i in idx:
+            img, err = read_image(paths[i])
+            if err:
+                if kind == "image":
+                    raise VisionError(err)
+                continue
+            out.append((paths[i].name, img))
+        return out
+    total = 0
+    if kind == "video":
+        import cv2
+
+        cap = cv2.VideoCapture(str(spec))
+        total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        cap.release()
+    step = max(1, total // n_frames) if total > 0 else 10
+    out = []
+    for fr in open_source(spec, reconnect=False):
+        if fr.index % step == 0 and not fr.error:
+            out.append((fr.name or str(fr.index), fr.image))
+        if len(out) >= n_frames:
+            break
+    return out
+
+
 @classes_app.command("suggest")
 def suggest_cmd(
-    image: Path = typer.Argument(..., help="A frame with both particle kinds visible."),
-    k: int = typer.Option(2, "--k", help="Number of particle classes."),
+    source: list[str] = typer.Argument(..., help="Frames with both particle kinds: images, a folder, a video."),
+    k: int = typer.Option(2, "--k", help="Number of particle classes (2..6)."),
     roi: Optional[str] = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
+    n_frames: int = typer.Option(12, "--frames", help="Frames to learn from, spread over the source (1..500)."),
+    preview: Optional[Path] = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
 ) -> None:
-    """Cluster the particle pixels inside the drum and print a ready TOML config."""
+    """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml
     from vision.roi import detect_drum, parse_roi
-    from vision.sources import read_image
-    from vision.suggest import suggest_classes
+    from vision.suggest import class_preview, suggest_classes
 
-    img, err = read_image(image)
-    if err:
-        raise VisionError(err)
-    if img.ndim != 3:
-        raise VisionError(f"{image.name} is a grayscale image; colour classes need a colour frame")
-    r = parse_roi(roi) if roi else detect_drum(img)
-    cfg = suggest_classes(img, r, k=k)
-    comment = (f"suggested by `drumtwin classes suggest {image.name}`; drum found at "
-               f"cx={r.cx_px:.1f} cy={r.cy_px:.1f} r={r.r_px:.1f} px.\n"
-               "Check the names and ranges; the first two classes give the MI.")
+    _check_number("--k", k, 2, 6)
+    _check_number("--frames", n_frames, 1, 500)
+    if preview is not None and not preview.parent.exists():
+        raise VisionError(f"--preview folder does not exist: {preview.parent}")
+    if preview is not None and preview.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise VisionError(f"--preview must be a .png or .jpg file, got {preview.name}")
+    manual = parse_roi(roi) if roi else None
+    picked = _pick_frames(source, n_frames)
+    if not picked:
+        raise VisionError("no readable frames in the source")
+    for name, img in picked:
+        if img.ndim != 3:
+            raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
+    frames = [img for _, img in picked]
+    cfg = suggest_classes(frames, manual, k=k)
+    r0 = manual or detect_drum(frames[0])
+    names = ", ".join(c.name for c in cfg.counted)
+    comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
+               f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
+               "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
+    if preview is not None:
+        import cv2
+
+        if not cv2.imwrite(str(preview), class_preview(frames[0], cfg.classes, r0)):
+            raise VisionError(f"cannot write {preview}")
+        console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False)
     sys.stdout.write(config_to_toml(cfg, comment))
 
 
@@ -225,6 +319,7 @@ def bench_vision(
     """Frames/s of the centroid, GLCM and Lacey pipelines on the same frames (one thread)."""
     from vision.bench import run_vision_bench
 
+    _check_number("--seconds", seconds, 0.01, 600)
     res = run_vision_bench(seconds=seconds, log=lambda s: console_err.print(s, highlight=False))
     if json_out:
         print_json(res)

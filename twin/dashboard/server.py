@@ -4,19 +4,25 @@ Display elements (images, plots, numbers) are shared by all viewers and pushed b
 one update thread from ``LiveState.snapshot()``: it polls at twice ``update_hz`` so
 no image published at ``update_hz`` is missed, and redraws the plots at a quarter of
 that poll rate (uPlot redraws cost the browser more than images); it never touches
-the loop's threads. Controls are built per viewer (per viser client): when the
-server binds beyond loopback a viewer must enter the control token before its
-controls are enabled, so remote viewers without it are read-only. Every control
-callback re-checks that its viewer is authorised.
+the loop's threads. Controls are built per viewer (per viser client), one viewer at a
+time (a lock: viser's shared folder context admits one builder), so every viewer gets
+them and EMERGENCY STOP however many connect at once. When the server binds beyond
+loopback a viewer must enter the control token before its controls are enabled, so
+remote viewers without it are read-only; token attempts are rate-limited and failures
+are reported as events. Every control callback re-checks that its viewer is authorised.
+
+Security (see ``twin.dashboard.guard``): websocket handshakes from a foreign ``Origin``
+are refused, every response forbids framing, and viser's share-URL tunnel is disabled
+(no button, and the server ignores a viewer's request for one).
 """
 
 from __future__ import annotations
 
-import hmac
+import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,12 +30,16 @@ import cv2
 import numpy as np
 import viser
 
+from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, install_handshake_guard, origin_allowed, tokens_match
 from twin.dashboard.scene import TwinScene
 from twin.state import Controls, LiveState, Snapshot, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
 RPM_MAX = 70.0
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
+_log = logging.getLogger("drumtwin.dashboard")
+EventSink = Callable[[str, dict[str, Any]], None]
+"""``on_event(kind, fields)``: where the dashboard reports security events (e.g. the run log)."""
 _WHATIF_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
 
@@ -121,6 +131,7 @@ class _ClientControls:
     mode: Any = None
     rpm: Any = None
     status: Any = None
+    estop: Any = None
 
 
 class Dashboard:
@@ -136,10 +147,18 @@ class Dashboard:
         control_token: str | None = None,
         update_hz: float = 12.0,
         title: str = "drumtwin",
+        on_event: EventSink | None = None,
+        unlock_policy: UnlockPolicy | None = None,
     ) -> None:
         local = host in ("127.0.0.1", "localhost", "::1")
         if not local and not control_token:
             raise ValueError(f"binding the dashboard to {host} needs a control token")
+        self._on_event = on_event
+        self._limiter = UnlockLimiter(unlock_policy)
+        self._limiter_lock = threading.Lock()
+        self._build_lock = threading.Lock()  # one viewer's controls built at a time
+        self.refused_handshakes = 0
+        self.failed_unlocks = 0
         self.state = state
         self.controls = controls
         self.host = host
@@ -154,10 +173,72 @@ class Dashboard:
         self.pushes = 0  # display updates pushed (images or plots), for the fps readout
         self._server = viser.ViserServer(host=host, port=port, label=title, verbose=False)
         self.port = int(self._server.get_port())
+        try:
+            install_handshake_guard(self.port, host, on_refused=self._refused)
+        except Exception:
+            self._server.stop()
+            raise
+        self._disable_share_tunnel()
         self._build_shared(title)
         self.scene = TwinScene(self._server)
         self._server.on_client_connect(self._on_connect)
         self._server.on_client_disconnect(self._on_disconnect)
+
+    # -- security ----------------------------------------------------------------------
+    def _event(self, kind: str, **fields: Any) -> None:
+        """Report a security event to ``on_event`` (default: the ``drumtwin.dashboard`` log)."""
+        if self._on_event is not None:
+            try:
+                self._on_event(kind, fields)
+                return
+            except Exception:  # noqa: BLE001 - a broken sink must not break the dashboard
+                _log.exception("dashboard event sink failed")
+        _log.warning("%s %s", kind, fields)
+
+    def _refused(self, origin: str | None, host: str | None) -> None:
+        self.refused_handshakes += 1
+        self._event("dashboard_refused", origin=origin, host=host)
+
+    def _disable_share_tunnel(self) -> None:
+        """No share URL: viser's tunnel would publish the dashboard on the internet."""
+        from viser import _messages
+
+        ws = self._server._websock_server  # viser 1.1 registers the share handlers here
+        for msg in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
+            if msg in ws._incoming_handlers:
+                ws.unregister_handler(msg)
+
+        def no_share(verbose: bool = True) -> None:
+            return None
+
+        self._server.request_share_url = no_share  # type: ignore[method-assign]
+
+    def _client_origin_ok(self, client: viser.ClientHandle) -> bool:
+        """Second check of a viewer's handshake headers (the guard refuses foreign Origins
+        at the door; this covers the moment before the guard was installed)."""
+        conn = self._server._websock_server._live_connections.get(client.client_id)
+        request = getattr(conn, "request", None)
+        if request is None:
+            return False
+        h = request.headers
+        return origin_allowed(h.get("Origin"), h.get("Host"), bind_host=self.host, port=self.port)
+
+    def _try_unlock(self, client_id: int, given: object) -> tuple[bool, str]:
+        """Check a token attempt under the rate limit; returns (authorised, message)."""
+        now = time.monotonic()
+        with self._limiter_lock:
+            wait = self._limiter.wait_s(client_id, now)
+            if wait > 0:
+                self._event("dashboard_unlock_limited", client=client_id, wait_s=round(wait, 1))
+                return False, f"**too many attempts: wait {math.ceil(wait)} s**"
+            ok = tokens_match(given, self._token)
+            self._limiter.attempt(client_id, now, ok)
+        if not ok:
+            self.failed_unlocks += 1
+            self._event("dashboard_unlock_failed", client=client_id)
+            return False, "**wrong token: read-only**"
+        self._event("dashboard_unlocked", client=client_id)
+        return True, "controls unlocked"
 
     # -- layout ------------------------------------------------------------------------
     def _build_shared(self, title: str) -> None:
@@ -233,6 +314,27 @@ class Dashboard:
         self._whatif_seq = -1
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        if not self._client_origin_ok(client):
+            self._event("dashboard_refused", client=client.client_id, origin="(after connect)")
+            self._close(client)
+            return
+        with self._build_lock:  # viser's shared folder context admits one builder at a time
+            try:
+                self._build_client_controls(client)
+            except Exception:  # noqa: BLE001 - a viewer that left mid-build
+                _log.exception("building the controls of viewer %s failed", client.client_id)
+
+    def _close(self, client: viser.ClientHandle) -> None:
+        """Drop one viewer's websocket (viser reconnects it; the guard refuses it then)."""
+        ws = self._server._websock_server
+        conn = ws._live_connections.get(client.client_id)
+        loop = ws._background_event_loop
+        if conn is not None and loop is not None:
+            import asyncio
+
+            asyncio.run_coroutine_threadsafe(conn.close(), loop)
+
+    def _build_client_controls(self, client: viser.ClientHandle) -> None:
         cc = _ClientControls(authorised=not self._token_required)
         with self._clients_lock:
             self._clients[client.client_id] = cc
@@ -246,12 +348,12 @@ class Dashboard:
 
                 @unlock.on_click
                 def _(event: viser.GuiEvent) -> None:
-                    ok = bool(self._token) and hmac.compare_digest(str(token.value), str(self._token))
+                    ok, message = self._try_unlock(client.client_id, token.value)
                     cc.authorised = ok
                     for h in cc.handles:
                         h.disabled = not ok
                     self._sync_rpm_enabled(cc, str(self.state.numbers.get("mode", "off")))
-                    cc.status.content = "controls unlocked" if ok else "**wrong token: read-only**"
+                    cc.status.content = message
 
             cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
             cc.mode = gui.add_dropdown(
@@ -280,6 +382,7 @@ class Dashboard:
             )
             run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1)
         cc.handles = [cc.mode, start, stop, estop, recal, reseed, rpms, dur, run]
+        cc.estop = estop
 
         def guarded(fn):
             def cb(event: viser.GuiEvent) -> None:
@@ -334,6 +437,13 @@ class Dashboard:
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._clients_lock:
             self._clients.pop(client.client_id, None)
+        with self._limiter_lock:
+            self._limiter.forget(client.client_id)
+
+    def viewers_with_estop(self) -> int:
+        """How many connected viewers have their controls (with EMERGENCY STOP) built."""
+        with self._clients_lock:
+            return sum(1 for cc in self._clients.values() if cc.estop is not None)
 
     # -- updates ---------------------------------------------------------------------
     def start(self) -> Dashboard:

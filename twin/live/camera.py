@@ -97,20 +97,26 @@ class CameraWorker:
         self.fps = Rate(monotonic=monotonic)
 
     def run(self, stop: threading.Event) -> None:
+        """Until the source ends or fails (then ``CameraInfo.ended``: vision is lost now)."""
+        try:
+            self._run(stop)
+        finally:
+            if not stop.is_set():
+                self.box.set(replace(self.box.get(), ended=True))
+
+    def _run(self, stop: threading.Event) -> None:
         n = 0
         for frame in self.frames:
             if stop.is_set():
                 return
+            wall = self._monotonic()  # when the frame arrived
             reading = self.meter.measure(frame.image)
             n += 1
-            wall = self._monotonic()
             self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
             self.fps.tick()
             put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
-            if self._overlay_cadence is not None and self.overlay is not None and self._overlay_cadence.due(wall):
+            if self._overlay_cadence is not None and self.overlay is not None and self._overlay_cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
-        if not stop.is_set():
-            self.box.set(replace(self.box.get(), ended=True))
 
 
 class ProcessWorker:

@@ -165,9 +165,10 @@ SupervisorCommand = SetMode | SetManualRpm
 class RunView:
     """What a worker may read: run time and the newest snapshots (never the loop itself).
 
-    Run time is the newest camera frame's time plus the run time since it arrived (so time
-    still passes for the supervisor when the camera stops); before the first frame it is
-    the run clock since ``start``. It never goes backwards.
+    Run time is the newest camera frame's time plus the run time since it arrived (so
+    time still passes for the supervisor when the camera stops); it never goes backwards
+    once frames come. Before the first frame it is ``clock_now()`` (the run clock), which
+    the first frame's time then replaces.
     """
 
     def __init__(
@@ -178,22 +179,21 @@ class RunView:
         mill: Latest[MillSnapshot],
         twin: Latest[TwinInfo],
         mode: Latest[str],
+        clock_now: Callable[[], float],
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.speed = float(speed)
         self._camera, self._frames, self._mill, self._twin, self._mode = camera, frames, mill, twin, mode
+        self._clock_now = clock_now
         self._monotonic = monotonic
-        self._start = monotonic()
         self._lock = threading.Lock()
-        self._last = 0.0
+        self._last = -math.inf
 
     def now_s(self) -> float:
         cam = self._camera.get()
-        wall = self._monotonic()
         if cam.t_s is None:
-            t = (wall - self._start) * self.speed
-        else:
-            t = cam.t_s + (wall - cam.wall_s) * self.speed
+            return self._clock_now()
+        t = cam.t_s + (self._monotonic() - cam.wall_s) * self.speed
         with self._lock:
             self._last = max(self._last, t)
             return self._last

@@ -146,7 +146,10 @@ class SupervisorWorker:
         cam, frames = self.view.camera(), self.view.frames()
         if cam.ended:
             self.sink.fault("camera_ended", "the camera source ended", now)
-        if cam.t_s is not None:
+        if cam.t_s is None:
+            if now > c.vision_timeout_s:
+                self.sink.fault("camera_stopped", f"camera stopped: no frame yet after {now:.0f} s", now)
+        else:
             silent = now - cam.t_s
             if c.vision_lost(now, cam.t_s):
                 self.sink.fault("camera_stopped", f"camera stopped: no frame for {silent:.0f} s", now)

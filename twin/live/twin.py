@@ -43,6 +43,10 @@ class TwinSettings:
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
 
+class _Stopped(Exception):
+    """The run is stopping: abandon a calibration between its evaluations."""
+
+
 class TwinWorker:
     """The twin thread's state and work (see module doc)."""
 
@@ -72,6 +76,7 @@ class TwinWorker:
         self._state: Any = None
         self._mi = math.nan
         self._slope = math.nan
+        self._stop = threading.Event()
 
     # -- any thread ------------------------------------------------------------------------
     def request(self, kind: str) -> None:
@@ -97,6 +102,17 @@ class TwinWorker:
                 return
 
     def run(self, stop: threading.Event) -> None:
+        self._stop = stop
+        try:
+            self._run(stop)
+        except _Stopped:
+            return
+
+    def _check_stop(self, *_: object) -> None:
+        if self._stop.is_set():
+            raise _Stopped
+
+    def _run(self, stop: threading.Event) -> None:
         view = self.view
         while not stop.is_set():
             self._drain_slopes()
@@ -159,6 +175,8 @@ class TwinWorker:
         t = self.view.frames().t_s
         try:
             self._fit(t)
+        except _Stopped:
+            raise
         except Exception as exc:  # the twin runs on with its current friction
             self.sink.fault("calibration", f"calibration failed: {exc}", t)
             self.sink.numbers(twin_state="running (uncalibrated)")
@@ -175,7 +193,7 @@ class TwinWorker:
         rpm = self._rpm_now()
         self.sink.numbers(twin_state="calibrating")
         t0 = time.monotonic()
-        cal = calibrate(target, rpm, **dict(self.settings.calibrate_kwargs))
+        cal = calibrate(target, rpm, progress=self._check_stop, **dict(self.settings.calibrate_kwargs))
         self.calibration = cal
         self.sink.event(
             "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,

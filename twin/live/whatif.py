@@ -2,7 +2,7 @@
 
 This is the application's predictor (the supervisor itself only asks): ``request`` takes
 the supervisor's :class:`PredictionRequest` (a newer one supersedes one not started
-yet), ``poll`` hands a finished :class:`PredictionResult` back once. ``submit`` starts an
+yet; it waits for the twin's first state), ``poll`` hands a finished :class:`PredictionResult` back once. ``submit`` starts an
 operator study. One thread serves both, one study at a time, from the twin's newest
 state (:class:`TwinInfo`); the studies themselves run in a local process pool
 (``sim.whatif.make_pool``) or on a Dask cluster (``--scheduler``), so they never compete
@@ -55,6 +55,7 @@ class WhatIfWorker:
         self.workers = max(1, int(workers))
         self._study_fn = study
         self._pool: Executor | None = None
+        self._closed = False
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._pending_pred: PredictionRequest | None = None
@@ -104,8 +105,16 @@ class WhatIfWorker:
 
     def serve_once(self) -> bool:
         """Run the next pending study (a prediction first); False when none was pending."""
+        twin_ready = self.view.twin().state is not None
         with self._lock:
             pred, study = self._pending_pred, self._pending_study
+            if not twin_ready:  # nothing to start a study from yet: keep them waiting
+                pred = None
+                if study is not None:
+                    self._pending_study = None
+                    self.sink.event("whatif_error", self.view.now_s(), reason=study.reason,
+                                    error="the twin is not running yet")
+                    return False
             if pred is not None:
                 self._pending_pred = None
             elif study is not None:
@@ -132,6 +141,8 @@ class WhatIfWorker:
                 self._busy = False
 
     def _get_pool(self) -> Executor:
+        if self._closed:
+            raise RuntimeError("the what-if worker is closed")
         if self._pool is None:
             from sim.whatif import make_pool
 
@@ -187,10 +198,14 @@ class WhatIfWorker:
         return preds
 
     def close(self) -> None:
-        """Shut the worker processes down (a running study is abandoned)."""
+        """Shut the worker processes down (a running study is abandoned: it fails at once)."""
+        self._closed = True
         pool, self._pool = self._pool, None
         if pool is None:
             return
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in list((getattr(pool, "_processes", None) or {}).values()):
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
+        for p in procs:
             p.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            p.join(timeout=2.0)

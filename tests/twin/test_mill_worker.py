@@ -1,0 +1,200 @@
+"""The mill worker's safety rules, on a fake link (milliseconds, no threads)."""
+
+from __future__ import annotations
+
+import pytest
+
+from control.errors import MillRefused
+from control.protocol import MillStatus
+from twin.live.mill import MillWorker
+from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
+
+
+class FakeLink:
+    """A board behind a link that can be unplugged and can refuse commands."""
+
+    url = "fake://mill"
+
+    def __init__(self, status: MillStatus) -> None:
+        self.board = status
+        self.up = True
+        self.refuse: dict[str, str] = {}  # command -> NAK reason
+        self.sent: list[tuple[str, float | None]] = []
+        self.polls = 0
+
+    def _check(self, cmd: str) -> None:
+        if not self.up:
+            raise TimeoutError("no answer")
+        if cmd in self.refuse:
+            raise MillRefused(cmd, self.refuse[cmd])
+
+    def set_rpm(self, rpm: float) -> None:
+        self._check("set_rpm")
+        self.sent.append(("set_rpm", rpm))
+        self.board = MillStatus(rpm, self.board.actual_rpm, self.board.running, self.board.fault)
+
+    def start(self) -> None:
+        self._check("start")
+        self.sent.append(("start", None))
+        self.board = MillStatus(self.board.setpoint_rpm, self.board.actual_rpm, True, None)
+
+    def stop(self) -> None:
+        self._check("stop")
+        self.sent.append(("stop", None))
+        self.board = MillStatus(self.board.setpoint_rpm, self.board.actual_rpm, False, self.board.fault)
+
+    def heartbeat(self) -> MillStatus:
+        self._check("heartbeat")
+        self.polls += 1
+        return self.board
+
+    def close(self) -> None:
+        pass
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.events: list[tuple[str, dict]] = []
+        self.faults: set[str] = set()
+
+    def event(self, kind: str, t_s: float, **data) -> None:
+        self.events.append((kind, data))
+
+    def fault(self, key: str, message: str, t_s: float, **data) -> None:
+        self.faults.add(key)
+        self.events.append(("fault", {"fault": key, "message": message}))
+
+    def clear_fault(self, key: str, message: str, t_s: float, **data) -> None:
+        if key in self.faults:
+            self.faults.discard(key)
+            self.events.append(("recovered", {"fault": key}))
+
+    def numbers(self, **values) -> None:
+        pass
+
+    def metadata(self, **data) -> None:
+        pass
+
+    def kinds(self, kind: str) -> list[dict]:
+        return [d for k, d in self.events if k == kind]
+
+
+def make(status: MillStatus) -> tuple[MillWorker, FakeLink, Sink, Latest[MillSnapshot]]:
+    link, sink, box = FakeLink(status), Sink(), Latest(MillSnapshot())
+    return MillWorker(link, sink, box, now_s=lambda: 0.0), link, sink, box
+
+
+STOPPED_WDOG = MillStatus(13.0, 0.0, False, "WDOG")
+RUNNING = MillStatus(5.0, 5.0, True, None)
+
+
+def test_connecting_reads_and_never_restarts_a_stopped_mill() -> None:
+    """Defect 1: the first connection started a stopped mill (and cleared a watchdog trip)."""
+    w, link, sink, box = make(STOPPED_WDOG)
+    for _ in range(20):
+        w.cycle()
+    assert link.sent == [] and link.polls == 20  # only reads (heartbeats), no command
+    snap = box.get()
+    assert snap.connected and snap.epoch == 1 and snap.status == STOPPED_WDOG
+    assert snap.state == "fault WDOG" and "mill_fault" in sink.faults
+    assert not link.board.running and link.board.fault == "WDOG"
+
+
+def test_a_watchdog_trip_after_a_link_loss_stays_stopped_until_commanded() -> None:
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    link.up = False
+    w.cycle()
+    assert not box.get().connected and "mill_link" in sink.faults
+    link.board = STOPPED_WDOG  # the board's watchdog stopped the drive meanwhile
+    link.up = True
+    for _ in range(5):
+        w.cycle()
+    assert box.get().connected and box.get().epoch == 2 and "mill_link" not in sink.faults
+    assert link.sent == [] and not link.board.running
+    assert sink.kinds("mill_synced")[-1]["running"] is False
+    w.submit(StartMill(epoch=2))  # the operator starts it: now it runs
+    w.cycle()
+    assert link.sent == [("start", None)] and link.board.running
+
+
+def test_commands_decided_before_a_reread_are_dropped_not_resent() -> None:
+    """Defect 5: the oldest failed set-rpm was re-sent after the link came back."""
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    w.submit(SetRpm(9.0, epoch=1))
+    w.cycle()
+    assert link.sent == [("set_rpm", 9.0)]
+    link.up = False
+    w.submit(SetRpm(13.0, epoch=1))  # fails on the dead link
+    w.cycle()
+    w.submit(SetRpm(17.0, epoch=1))  # queued while the link is down
+    w.submit(StartMill(epoch=1))
+    w.cycle()
+    link.up = True
+    w.cycle()  # read first: epoch 2
+    w.cycle()
+    assert link.sent == [("set_rpm", 9.0)]  # nothing decided on the old board state went out
+    dropped = [d["command"] for d in sink.kinds("mill_command_dropped")]
+    assert dropped.count("set_rpm") == 2 and "start" in dropped
+    w.submit(SetRpm(11.0, epoch=box.get().epoch))  # decided on the re-read board
+    w.cycle()
+    assert link.sent[-1] == ("set_rpm", 11.0)
+
+
+def test_newest_set_rpm_supersedes_older_pending_ones() -> None:
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    for rpm in (6.0, 7.0, 8.0):
+        w.submit(SetRpm(rpm, epoch=1))
+    w.cycle()
+    assert link.sent == [("set_rpm", 8.0)]
+    assert [d["rpm"] for d in sink.kinds("mill_command_dropped")] == [6.0, 7.0]
+
+
+def test_a_failed_stop_is_kept_and_sent_once_the_link_is_back() -> None:
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    link.up = False
+    w.submit(StopMill())
+    w.cycle()
+    link.up = True
+    w.cycle()  # re-read
+    w.cycle()
+    assert link.sent == [("stop", None)] and not link.board.running
+
+
+def test_a_refusal_is_an_event_the_command_is_dropped_and_the_link_stays_up() -> None:
+    """Defect 6: a NAK was treated as a lost link and re-queued forever."""
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    link.refuse["start"] = "FAULT"
+    w.submit(StartMill(epoch=1))
+    for _ in range(10):
+        w.cycle()
+    refused = sink.kinds("mill_refused")
+    assert len(refused) == 1 and refused[0]["command"] == "start" and refused[0]["reason"] == "FAULT"
+    assert box.get().connected and "mill_link" not in sink.faults
+    assert box.get().epoch == 2  # the board is re-read: the supervisor resyncs to it
+    assert link.sent == []
+
+
+def test_emergency_stop_drops_pending_commands_and_stops() -> None:
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    w.submit(SetRpm(30.0, epoch=1))
+    w.submit(StartMill(epoch=1))
+    w.submit(StopMill(source="emergency_stop", urgent=True))
+    w.cycle()
+    assert link.sent == [("stop", None)]
+    assert {d["command"] for d in sink.kinds("mill_command_dropped")} == {"set_rpm", "start"}
+
+
+@pytest.mark.parametrize("status", [RUNNING, STOPPED_WDOG])
+def test_the_worker_polls_with_heartbeats_only(status: MillStatus) -> None:
+    """The run controls the motor: its one poller feeds the watchdog (HB) and reads the
+    status from the answer; no other request goes out unless commanded."""
+    w, link, sink, box = make(status)
+    for _ in range(3):
+        w.cycle()
+    assert link.polls == 3 and link.sent == [] and box.get().status == status

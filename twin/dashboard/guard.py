@@ -1,0 +1,196 @@
+"""The dashboard's front door: who may open its websocket, what its pages may be framed
+by, how control-token unlocks are compared and rate-limited.
+
+Threat model: a hostile web page open in the operator's browser (any tab) can make the
+browser open a websocket to ``ws://127.0.0.1:8080``; the browser then sends the
+*page's* ``Origin``. So the websocket handshake is refused (HTTP 403) unless its
+``Origin`` is the dashboard's own, i.e. the same scheme/host/port as the ``Host`` the
+browser connected to; a missing or ``null`` Origin is refused too (browsers always send
+one; a script must send the dashboard's). On a loopback bind the ``Host`` must also be a
+loopback name (``127.0.0.1``, ``localhost``, ``[::1]``), which defeats DNS rebinding (an
+attacker's name re-pointed at 127.0.0.1 has the attacker's name as ``Host``).
+
+Decision: the default 127.0.0.1 dashboard still authorises every client that gets
+through this door without a token. A client that passes is either the operator's own
+browser tab on the dashboard's origin or a local process, which could talk to the mill
+in other ways anyway; the hostile page is stopped by the Origin check, not by a token.
+A dashboard bound beyond loopback needs the control token for every control.
+
+Every HTTP response (the page, its scripts, the refused handshake) carries
+``X-Frame-Options: DENY`` and ``Content-Security-Policy: frame-ancestors 'none'`` so the
+dashboard cannot be framed for click-jacking.
+
+viser 1.1 serves its page and websocket with the ``websockets`` library and offers no
+hook for the handshake, so :func:`install_handshake_guard` wraps the running
+``websockets`` server's ``process_request``/``process_response`` (read on every new
+connection) and refuses to start when it cannot find it (fail closed).
+"""
+
+from __future__ import annotations
+
+import gc
+import hashlib
+import hmac
+import http
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlsplit
+
+from twin.errors import TwinError
+
+LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+FRAME_HEADERS: tuple[tuple[str, str], ...] = (
+    ("X-Frame-Options", "DENY"),
+    ("Content-Security-Policy", "frame-ancestors 'none'"),
+    ("X-Content-Type-Options", "nosniff"),
+    ("Referrer-Policy", "no-referrer"),
+)
+
+
+def is_loopback(host: str) -> bool:
+    """True for a loopback bind address or host name (``127.0.0.1``, ``localhost``, ``::1``)."""
+    return host.strip("[]").lower() in LOOPBACK_HOSTS
+
+
+def _host_port(authority: str) -> tuple[str, int | None] | None:
+    """``"host:port"`` / ``"[::1]:8080"`` -> (host, port), None when malformed."""
+    try:
+        parts = urlsplit("//" + authority)
+        return (parts.hostname or "").lower(), parts.port
+    except ValueError:
+        return None
+
+
+def origin_allowed(origin: str | None, host_header: str | None, *, bind_host: str, port: int) -> bool:
+    """May a browser page from ``origin`` open the dashboard's websocket?
+
+    True only when ``origin`` is ``http://<Host header>`` (same origin, the dashboard's
+    own page), the Host names our ``port``, and, on a loopback bind, the Host is a
+    loopback name (no DNS rebinding). Pure: the handshake hook calls it per request.
+    """
+    if not origin or not host_header or origin == "null":
+        return False
+    o = urlsplit(origin)
+    if o.scheme not in ("http", "https") or o.path not in ("", "/") or o.query or o.fragment:
+        return False
+    try:
+        o_host, o_port = (o.hostname or "").lower(), o.port
+    except ValueError:
+        return False
+    hp = _host_port(host_header)
+    if hp is None or not o_host:
+        return False
+    h_host, h_port = hp
+    default = 443 if o.scheme == "https" else 80
+    if (o_host, o_port or default) != (h_host, h_port or default):
+        return False
+    if (h_port or default) != port:
+        return False
+    return not is_loopback(bind_host) or is_loopback(h_host)
+
+
+def tokens_match(given: object, expected: str | None) -> bool:
+    """Constant-time token compare that is safe for any input (any unicode, any length,
+    non-strings): both sides are UTF-8 encoded and hashed, then ``hmac.compare_digest``."""
+    if not expected:
+        return False
+    try:
+        g = str(given).encode("utf-8", "surrogatepass")
+    except Exception:  # noqa: BLE001 - an object whose str() fails is simply no match
+        return False
+    e = expected.encode("utf-8", "surrogatepass")
+    return hmac.compare_digest(hashlib.sha256(g).digest(), hashlib.sha256(e).digest())
+
+
+@dataclass(frozen=True)
+class UnlockPolicy:
+    """Limits on token guessing: one attempt per ``per_client_s`` per viewer, and at most
+    ``max_failures`` failed attempts over all viewers within ``window_s`` (then every
+    attempt waits, so opening many viewers does not help)."""
+
+    per_client_s: float = 1.0
+    max_failures: int = 5
+    window_s: float = 60.0
+
+
+class UnlockLimiter:
+    """Rate limiter of control-token attempts (pure: the caller passes the time, s)."""
+
+    def __init__(self, policy: UnlockPolicy | None = None) -> None:
+        self.policy = policy or UnlockPolicy()
+        self._last_try: dict[int, float] = {}
+        self._failures: deque[float] = deque()
+
+    def wait_s(self, client_id: int, now_s: float) -> float:
+        """Seconds ``client_id`` must wait before its next attempt (0: may try now)."""
+        p = self.policy
+        while self._failures and now_s - self._failures[0] >= p.window_s:
+            self._failures.popleft()
+        wait = 0.0
+        last = self._last_try.get(client_id)
+        if last is not None:
+            wait = max(wait, p.per_client_s - (now_s - last))
+        if len(self._failures) >= p.max_failures:
+            wait = max(wait, p.window_s - (now_s - self._failures[0]))
+        return max(0.0, wait)
+
+    def attempt(self, client_id: int, now_s: float, ok: bool) -> None:
+        """Record an attempt that was allowed (``wait_s`` was 0) and its outcome."""
+        self._last_try[client_id] = now_s
+        if not ok:
+            self._failures.append(now_s)
+
+    def forget(self, client_id: int) -> None:
+        """A viewer left (its per-client slot is dropped; global failures stay)."""
+        self._last_try.pop(client_id, None)
+
+
+def _find_ws_server(port: int) -> Any:
+    """The ``websockets.asyncio.server.Server`` listening on ``port`` in this process."""
+    from websockets.asyncio.server import Server
+
+    for obj in gc.get_objects():
+        if type(obj) is Server:
+            try:
+                socks = obj.server.sockets
+            except (AttributeError, RuntimeError):
+                continue
+            if any(s.getsockname()[1] == port for s in socks):
+                return obj
+    return None
+
+
+def install_handshake_guard(
+    port: int,
+    bind_host: str,
+    on_refused: Callable[[str | None, str | None], None] | None = None,
+) -> None:
+    """Wrap the handshake of the websockets server on ``port``: refuse foreign Origins
+    (403) and add :data:`FRAME_HEADERS` to every response. Raises TwinError when the
+    server cannot be found (the dashboard then does not start without its guard)."""
+    server = _find_ws_server(port)
+    if server is None:
+        raise TwinError(f"dashboard: cannot guard the websocket on port {port} (viser changed?)")
+    inner_request = server.process_request
+    inner_response = server.process_response
+
+    def process_request(connection: Any, request: Any) -> Any:
+        if request.headers.get("Upgrade", "").lower() == "websocket":
+            origin, host = request.headers.get("Origin"), request.headers.get("Host")
+            if not origin_allowed(origin, host, bind_host=bind_host, port=port):
+                if on_refused is not None:
+                    on_refused(origin, host)
+                return connection.respond(http.HTTPStatus.FORBIDDEN, "websocket origin not allowed\n")
+        return inner_request(connection, request) if inner_request is not None else None
+
+    def process_response(connection: Any, request: Any, response: Any) -> Any:
+        if inner_response is not None:
+            response = inner_response(connection, request, response) or response
+        for name, value in FRAME_HEADERS:
+            response.headers[name] = value
+        return response
+
+    server.process_request = process_request
+    server.process_response = process_response
