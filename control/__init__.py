@@ -6,17 +6,18 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
     ``MITrend(config: TrendConfig | None = None)``;
     ``.update(t_s, mi, rpm) -> TrendEstimate(t_s, level, rate, level_sd, rate_sd, lo95, hi95,
     accepted, reinit, ripple, nis, rejections)``; ``config_from_window(mi) -> TrendConfig``;
-    ``moving_average(x, window=150)`` (the paper's baseline).
+    ``MovingAverage(window=150).update(x)`` and ``moving_average(x, window=150)``: the
+    paper's baseline, the project's one moving average (NaN samples skipped).
 ``control.supervisor``
-    ``Supervisor(config=None, predictor=None, mode=Mode.OFF)``;
-    ``.step(now_s, SupervisorInputs(...)) -> Decision | None``; ``.set_mode(mode, now_s)``;
-    ``.set_manual_rpm(rpm)``; ``.offer_predictions(PredictionResult)``;
-    ``.prediction_request(now_s) -> PredictionRequest | None``; ``.events``.
-    ``Predictor = Callable[[Sequence[float], float], Mapping[float, float]]``; wrap a slow
-    one in ``AsyncPredictor(predictor)`` so ``step`` never blocks.
+    ``Supervisor(config=None, mode=Mode.OFF)``, pure:
+    ``.step(now_s, SupervisorInputs(...), predictions=None) -> StepResult(decision, request)``
+    (``request``: a ``PredictionRequest`` the application answers later with a
+    ``PredictionResult`` passed to a following step); ``.set_mode(mode, now_s)``;
+    ``.set_manual_rpm(rpm)``; ``.events``. ``SupervisorConfig(critical_rpm=...)``: the
+    application hands in the drum's critical speed (``sim.recipe.DrumSpec.critical_rpm``).
 ``control.driver``
     ``MillClient(url, *, timeout_s=0.2, retries=5, heartbeat_s=0.25, ...)``:
-    ``.set_rpm(rpm)``, ``.start()``, ``.stop()``, ``.status() -> MillStatus``,
+    ``.set_rpm(rpm)``, ``.start()``, ``.stop()``, ``.status() -> MillStatus``, ``.heartbeat()``,
     ``.connected``, ``.last_status``, ``.close()``.
 ``control.emulator``
     ``MillEmulator(DeviceConfig(...), Faults(...))``: ``.open_pty() -> path``,

@@ -34,9 +34,10 @@ __all__ = ["MillClient", "MillStatus"]
 try:  # termios errors are not OSErrors; a closed pty can raise them
     import termios
 
-    _LINK_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
+    _LINK_ERRORS: tuple[type[Exception], ...] = (serial.SerialException, OSError, termios.error)
 except ImportError:  # pragma: no cover - windows
     _LINK_ERRORS = (serial.SerialException, OSError)
+_OPEN_ERRORS: tuple[type[Exception], ...] = (*_LINK_ERRORS, ValueError, NotImplementedError)
 
 
 class MillClient:
@@ -174,7 +175,7 @@ class MillClient:
             # a fixed short read timeout: changing it per read would re-configure the port
             # (tcsetattr; a whole settings negotiation on rfc2217://)
             port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=self._poll_s, **kw)
-        except (*_LINK_ERRORS, ValueError, NotImplementedError) as exc:
+        except _OPEN_ERRORS as exc:
             self._next_open_s = now + self._backoff
             self._backoff = min(self.backoff_max_s, self._backoff * 2)
             self._connected = False
@@ -191,7 +192,7 @@ class MillClient:
         if self._port is not None:
             try:
                 self._port.close()
-            except Exception:  # noqa: BLE001 - closing a broken port may fail any way
+            except Exception:
                 pass
         self._port = None
         self._connected = False
@@ -242,9 +243,11 @@ class MillClient:
                 return reply
             self._connected = False
             if self._port is None:
-                msg = last_problem if last_problem.startswith(("cannot open", "mill link")) else f"mill link {self.url} down: {last_problem}"
-                raise ConnectionError(msg)
-            raise TimeoutError(f"no valid answer from the mill at {self.url} to {cmd} after {retries + 1} tries ({last_problem})")
+                own = last_problem.startswith(("cannot open", "mill link"))
+                raise ConnectionError(last_problem if own else f"mill link {self.url} down: {last_problem}")
+            raise TimeoutError(
+                f"no valid answer from the mill at {self.url} to {cmd} after {retries + 1} tries ({last_problem})"
+            )
 
     def _mark_ok(self) -> None:
         self._connected = True
@@ -289,5 +292,5 @@ class MillClient:
                 self.heartbeat(retries=min(self.retries, 2), wait_s=0.0)  # never sleeps on a dead link
             except (ControlError, ConnectionError, TimeoutError):
                 pass
-            except Exception as exc:  # noqa: BLE001 - the heartbeat thread must not die
+            except Exception as exc:
                 self.last_error = f"heartbeat: {exc}"

@@ -27,6 +27,7 @@ import tty
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from control import protocol as p
 from control.device import Applied, DeviceConfig, MillDevice
@@ -332,8 +333,8 @@ class MillEmulator:
             out.append(b)
         return bytes(out)
 
-    def _read_fds(self) -> list[object]:
-        fds: list[object] = []
+    def _read_fds(self) -> list[Any]:
+        fds: list[Any] = []
         if self._master is not None:
             fds.append(self._master)
         if self._listener is not None:

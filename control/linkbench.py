@@ -16,7 +16,7 @@ import numpy as np
 from control.driver import MillClient
 from control.emulator import MillEmulator
 
-__all__ = ["LinkTiming", "time_link", "run_link_bench"]
+__all__ = ["LinkTiming", "run_link_bench", "time_link"]
 
 
 @dataclass(frozen=True)

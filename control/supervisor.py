@@ -65,25 +65,26 @@ import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from typing import NamedTuple
 
 from control.errors import ControlError
 from control.trend import TrendEstimate
 
-class Mode(str, Enum):
+
+class Mode(StrEnum):
     OFF = "off"
     MANUAL = "manual"
     AUTO = "auto"
 
 
-class SafeAction(str, Enum):
+class SafeAction(StrEnum):
     HOLD = "hold"
     RAMP = "ramp"
     STOP = "stop"
 
 
-class Action(str, Enum):
+class Action(StrEnum):
     """What the application should do with a decision."""
 
     NONE = "none"  #: nothing to send (mode change, hold, recovery): log it
@@ -440,7 +441,8 @@ class Supervisor:
                 self.target_rpm = self.commanded_rpm
                 why, self.safe_reason = self.safe_reason, ""
                 self.detector.reset()
-                return self._emit(now_s, Action.NONE, "recover", f"faults cleared for {self.config.recover_s:g} s (was: {why})")
+                why_txt = f"faults cleared for {self.config.recover_s:g} s (was: {why})"
+                return self._emit(now_s, Action.NONE, "recover", why_txt)
             return self._ramp_step(now_s, "safe")
 
         if self._mode is Mode.MANUAL:
@@ -453,7 +455,9 @@ class Supervisor:
     def _resync(self, inputs: SupervisorInputs) -> None:
         """Take the board's state as ours (see "Board resync" in the module doc)."""
         first = inputs.actual_rpm if inputs.mill_running else inputs.setpoint_rpm
-        board = first if first is not None else (inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm)
+        if first is None:
+            first = inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm
+        board = first
         if board is None or not math.isfinite(board):
             return
         self._epoch = inputs.mill_epoch
@@ -541,7 +545,8 @@ class Supervisor:
             return None
         c = self.config
         return self._emit(
-            now_s, Action.SET_RPM, kind, f"ramp {nxt:g} rpm toward {self.target_rpm:g} (<= {c.max_rate_rpm_per_s:g} rpm/s)",
+            now_s, Action.SET_RPM, kind,
+            f"ramp {nxt:g} rpm toward {self.target_rpm:g} (<= {c.max_rate_rpm_per_s:g} rpm/s)",
             rpm=nxt, target_rpm=self.target_rpm,
         )
 
@@ -591,7 +596,9 @@ class Supervisor:
             now_s, target, "move", f"segregation ({why}); no predictions -> fallback rule {current:g} -> {target:g} rpm"
         )
 
-    def _choose(self, now_s: float, current: float, preds: PredictionResult, why: str, inputs: SupervisorInputs) -> Decision:
+    def _choose(
+        self, now_s: float, current: float, preds: PredictionResult, why: str, inputs: SupervisorInputs
+    ) -> Decision:
         c = self.config
         lo, hi = c.rpm_limits
         scores: dict[float, float] = {}
@@ -608,12 +615,16 @@ class Supervisor:
             stay = -math.inf
         self._last_eval_s = now_s
         if not scores:
-            return self._emit(now_s, Action.NONE, "hold", f"segregation ({why}); predictions empty or out of limits", predictions=preds.predictions)
+            return self._emit(
+                now_s, Action.NONE, "hold", f"segregation ({why}); predictions empty or out of limits",
+                predictions=preds.predictions,
+            )
         best = max(scores, key=lambda r: (scores[r], -abs(r - current)))
         if abs(best - current) < 1e-6 or scores[best] - stay < c.min_gain:
             return self._emit(
                 now_s, Action.NONE, "hold",
-                f"segregation ({why}); best {best:g} rpm gains {scores[best] - stay:+.3f} < {c.min_gain} -> stay at {current:g}",
+                f"segregation ({why}); best {best:g} rpm gains {scores[best] - stay:+.3f} < {c.min_gain} "
+                f"-> stay at {current:g}",
                 predictions=preds.predictions, scores=scores,
             )
         return self._start_move(

@@ -196,7 +196,9 @@ class MITrend:
                         self.n_reinit += 1
         return self.estimate(t_s, accepted=accepted, reinit=reinit, nis=nis)
 
-    def estimate(self, t_s: float, *, accepted: bool = False, reinit: bool = False, nis: float = math.nan) -> TrendEstimate:
+    def estimate(
+        self, t_s: float, *, accepted: bool = False, reinit: bool = False, nis: float = math.nan
+    ) -> TrendEstimate:
         """The current estimate (NaN fields before the first valid MI)."""
         if not self._init:
             n = math.nan
@@ -205,7 +207,8 @@ class MITrend:
         lvl, rate = float(x[0]), float(x[1])
         lsd, rsd = math.sqrt(max(P[0, 0], 0.0)), math.sqrt(max(P[1, 1], 0.0))
         return TrendEstimate(
-            t_s, lvl, rate, lsd, rsd, lvl - Z95 * lsd, lvl + Z95 * lsd, accepted, reinit, float(x[2]), nis, self.rejections
+            t_s, lvl, rate, lsd, rsd, lvl - Z95 * lsd, lvl + Z95 * lsd, accepted, reinit, float(x[2]), nis,
+            self.rejections,
         )
 
 

@@ -98,8 +98,10 @@ def surface_profile(particles: Particles, drum: DrumSpec, step_m: float | None =
     return xs, np.where(np.isfinite(top), top, np.nan)
 
 
-def _tukey_line(px: np.ndarray, py: np.ndarray, base: np.ndarray, floor: float) -> tuple[float, float, float, float]:
-    """Robust (Tukey-weighted) orthogonal line through the points with ``base`` weight: (mx, my, ux, uy)."""
+def _tukey_line(
+    px: np.ndarray, py: np.ndarray, base: np.ndarray, floor: float
+) -> tuple[float, float, float, float, np.ndarray]:
+    """Robust (Tukey-weighted) orthogonal line through the ``base`` points: (mx, my, ux, uy, weights)."""
     w = base.astype(float)
     mx = my = 0.0
     ux, uy = 1.0, 0.0
@@ -116,7 +118,7 @@ def _tukey_line(px: np.ndarray, py: np.ndarray, base: np.ndarray, floor: float) 
         scale = 1.4826 * float(np.median(np.abs(resid[base])))
         t = resid / (_TUKEY_C * max(scale, floor))
         w = np.where(base & (np.abs(t) < 1.0), (1.0 - t * t) ** 2, 0.0)
-    return mx, my, ux, uy
+    return mx, my, ux, uy, w
 
 
 def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
@@ -126,7 +128,8 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     boundary instead of an occupancy grid: columns whose bed reaches the drum wall above
     have no free surface; a robust orthogonal line through all surface points, then
     through those within ``CHORD_HALF_R * R`` (along the line) of the midpoint of their
-    extent, gives the angle; a cubic ``v(u)`` through all surface points (``u`` uphill,
+    extent, gives the angle; a cubic ``v(u)`` through the surface points that the robust
+    line over all of them kept (``u`` uphill,
     ``v`` out of the bed, in units of R, centred on that midpoint) gives
     ``curvature = -c3``.
     """
@@ -137,18 +140,18 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     big_r = drum.radius_m
     r_min = float(particles.r_m.min())
     wall_top = np.sqrt(np.maximum(big_r * big_r - xs * xs, 0.0))
-    ok = np.isfinite(top) & (top < wall_top - 2.0 * r_min)  # the bed reaches the wall above: no surface
+    ok = np.isfinite(top) & (top < wall_top - 4.0 * r_min)  # the bed reaches the wall above: no surface
     if ok.sum() < 5:
         return nan
     px, py = xs[ok], top[ok]
     floor = 0.5 * r_min
-    mx, my, ux, uy = _tukey_line(px, py, np.ones(px.size, dtype=bool), floor)
+    mx, my, ux, uy, w_all = _tukey_line(px, py, np.ones(px.size, dtype=bool), floor)
     u = (px - mx) * ux + (py - my) * uy
     mid = 0.5 * (float(u.min()) + float(u.max()))
     chord = np.abs(u - mid) <= CHORD_HALF_R * big_r
     if chord.sum() < 4:
         return nan
-    mx, my, ux, uy = _tukey_line(px, py, chord, floor)
+    mx, my, ux, uy, _ = _tukey_line(px, py, chord, floor)
     if ux < 0:
         ux, uy = -ux, -uy
     ang = math.degrees(math.atan2(uy, ux))  # y up: positive rises to the right
@@ -158,8 +161,9 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     u = u - 0.5 * (float(u.min()) + float(u.max()))
     x_mid = float(mx)  # centre of the chord fit
     curv = float("nan")
-    if px.size >= 6:
-        c3 = np.polyfit(u, v, 3)[0]  # highest power first
+    inl = w_all > 0  # the cubic skips what the robust line over all points rejected
+    if inl.sum() >= 6:
+        c3 = np.polyfit(u[inl], v[inl], 3)[0]  # highest power first
         curv = float(-c3)
     return FreeSurface(ang, curv, x_mid, int(px.size))
 

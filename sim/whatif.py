@@ -342,7 +342,7 @@ def _die_with_parent(parent_pid: int, leftover_dir: str | None) -> None:
     import threading
 
     try:
-        pidfd: int | None = os.pidfd_open(parent_pid)  # type: ignore[attr-defined]
+        pidfd: int | None = os.pidfd_open(parent_pid)
     except (AttributeError, OSError):
         pidfd = None
 

@@ -87,7 +87,9 @@ class RunConfig:
             if not (math.isfinite(value) and value > 0):
                 raise TwinError(f"{name} must be a number > 0, got {value}")
         if self.frame_px < 32 or self.whatif_workers < 1:
-            raise TwinError(f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}")
+            raise TwinError(
+                f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}"
+            )
         if self.mill is not None and not self.mill.strip():
             raise TwinError("--mill must not be empty")
         if self.camera is not None and self.video is not None:

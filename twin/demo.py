@@ -60,9 +60,7 @@ class DemoPlant:
         )
         self.emulator = MillEmulator(DeviceConfig(watchdog_s=config.watchdog_s, motor=motor), seed=config.seed)
         self.url = self.emulator.open_pty()
-        # the mill is running at the start speed when the demo begins (as a real one would be)
-        start = float(config.start_rpm)
-        self.emulator.set_motor(setpoint_rpm=start, actual_rpm=start, running=True)
+        self.emulator.set_motor(setpoint_rpm=float(config.start_rpm), actual_rpm=0.0, running=False)
         self.sim = DrumSim(
             case=config.case,
             seed=config.seed + PLANT_SEED_OFFSET,
@@ -73,6 +71,13 @@ class DemoPlant:
         self.renderer = Renderer(self.sim.drum, config.size_px, realism=_realism(config))
         self.camera_paused = threading.Event()
         self.frames_rendered = 0
+
+    def start_drive(self) -> None:
+        """The operator's front panel: the drive runs at the start speed when the demo
+        begins (as a real one would be). Call it right before the loop starts: the board's
+        watchdog stops a running drive that no host feeds."""
+        start = float(self.config.start_rpm)
+        self.emulator.set_motor(setpoint_rpm=start, actual_rpm=start, running=True)
 
     @property
     def roi(self):
@@ -114,4 +119,4 @@ def _realism(config: PlantConfig) -> Realism | None:
     return Realism(seed=config.seed) if config.realism else None
 
 
-__all__ = ["DemoPlant", "PlantConfig", "PLANT_FRICTION", "PLANT_ROLLING"]
+__all__ = ["PLANT_FRICTION", "PLANT_ROLLING", "DemoPlant", "PlantConfig"]

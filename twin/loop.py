@@ -111,7 +111,7 @@ class LiveLoop:
         self.state = state or LiveState()
         self.mill_link = mill
         self.events = RunEvents(runlog, self.state)
-        meter = Meter(roi=roi, **({} if classes is None else {"classes": tuple(classes)}))
+        meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
         # snapshots (one writer each)
         self.camera_box: Latest[CameraInfo] = Latest(CameraInfo())
         self.frames_box: Latest[FrameInfo] = Latest(FrameInfo())
@@ -119,7 +119,8 @@ class LiveLoop:
         self.twin_box: Latest[TwinInfo] = Latest(TwinInfo())
         self.mode_box: Latest[str] = Latest(config.mode)
         self.view = RunView(
-            self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box, self.clock.now_s
+            self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box,
+            self.clock.now_s,
         )
         readings: queue.Queue[CameraReading] = queue.Queue(maxsize=512)
         slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
@@ -308,7 +309,8 @@ def supervisor_config(config: RunConfig) -> SupervisorConfig:
     the critical speed comes from the twin's drum (``sim.recipe``: the one formula)."""
     from sim.recipe import PAPER_DRUM
 
-    return SupervisorConfig(**{"critical_rpm": PAPER_DRUM.critical_rpm, **LOOP_SUPERVISOR, **config.extra.get("supervisor", {})})
+    overrides = config.extra.get("supervisor", {})
+    return SupervisorConfig(**{"critical_rpm": PAPER_DRUM.critical_rpm, **LOOP_SUPERVISOR, **overrides})
 
 
 def _overlay(image: Any, reading: Any) -> Any:

@@ -286,7 +286,7 @@ def read_frames(path: Path | str) -> list[dict[str, Any]]:
     for cells in reader:
         if len(cells) != len(header):
             continue
-        rows.append({h: _parse(c) for h, c in zip(header, cells)})
+        rows.append({h: _parse(c) for h, c in zip(header, cells, strict=True)})
     return rows
 
 

@@ -53,7 +53,7 @@ class FrameRow:
         return asdict(self)
 
 
-FRAME_ROW_COLUMNS: tuple[str, ...] = ("t_s", "wall_s") + tuple(f.name for f in fields(FrameRow))[1:]
+FRAME_ROW_COLUMNS: tuple[str, ...] = ("t_s", "wall_s", *tuple(f.name for f in fields(FrameRow))[1:])
 
 # Plot series (x is run time ``t_s``); each is a ring buffer of ``HISTORY_LEN`` points.
 SERIES: tuple[str, ...] = (

@@ -55,7 +55,8 @@ class Reading:
     valid frame), ``d_px``, ``dsigma_px``, ``concentration`` = n_1 / (n_1 + n_2).
     ``slope_deg`` = angle of the bed's free surface over the central chord,
     ``surface_curvature`` = its S-shape, ``slope_axis_deg`` = the bed's principal axis
-    (see ``vision.slope``). ``roi`` = the drum region used for this frame. ``valid`` is
+    (see ``vision.slope``); ``surface_mid_px`` = a point of the fitted surface line.
+    ``roi`` = the drum region used for this frame. ``valid`` is
     False when ``mi`` is NaN; ``flags`` say why (``few_pixels:blue``, ``collapsed:blue``,
     ``bad_frame:...``).
     """
@@ -73,6 +74,7 @@ class Reading:
     roi: DrumROI | None
     slope_axis_deg: float = _NAN
     surface_curvature: float = _NAN
+    surface_mid_px: tuple[float, float] = (_NAN, _NAN)
 
     def cls(self, name: str) -> ClassStats:
         """The stats of the class called ``name``."""
@@ -193,7 +195,7 @@ class Meter:
         area = cell_areas(inside, s, shift)
         full = float(((1 << shift) + s - 1) // s) ** 2
         g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
-                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 3, np.float64))
+                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64))
         self._geoms[shape_hw] = g
         return g
 
@@ -261,13 +263,14 @@ class Meter:
         axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)
         if m00 >= min_bed:
             surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.box[:2], g.shift, roi.r_px, g.work)
-            slope, curv = surf.slope_deg, surf.curvature
+            slope, curv, mid = surf.slope_deg, surf.curvature, surf.mid_px
         else:
             slope = curv = _NAN
+            mid = (_NAN, _NAN)
         valid = math.isfinite(mix.mi)
         return Reading(
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
-            tuple(flags), tuple(stats), roi, axis, curv,
+            tuple(flags), tuple(stats), roi, axis, curv, mid,
         )
 
 

@@ -20,9 +20,10 @@ def _fmt(x: float, spec: str = ".3f") -> str:
 def draw_overlay(
     image_bgr: np.ndarray, reading: Reading, classes: tuple[ColourClass, ...] | None = None, *, mi_avg: float | None = None
 ) -> np.ndarray:
-    """A copy of the frame with the ROI, each class's centroid (cross) and spread (circle of
-    radius sigma), and a panel with MI, eq. 3, d, dsigma, slope, concentration (and the moving
-    average ``mi_avg`` if given). Colours come from ``classes`` (display_bgr) when given."""
+    """A copy of the frame with the ROI, the fitted free surface over its central chord (line),
+    each class's centroid (cross) and spread (circle of radius sigma), and a panel with MI,
+    eq. 3, d, dsigma, slope (and the principal-axis angle), S-shape, concentration (and the
+    moving average ``mi_avg`` if given). Colours come from ``classes`` (display_bgr)."""
     img = np.asarray(image_bgr)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
@@ -39,6 +40,15 @@ def draw_overlay(
             p0 = (int(roi.cx_px - roi.half_w_px), int(roi.cy_px - roi.half_h_px))
             p1 = (int(roi.cx_px + roi.half_w_px), int(roi.cy_px + roi.half_h_px))
             cv2.rectangle(out, p0, p1, (0, 255, 255), th, cv2.LINE_AA)
+    mx, my = reading.surface_mid_px
+    if math.isfinite(reading.slope_deg) and math.isfinite(mx) and math.isfinite(my) and roi is not None:
+        a = math.radians(reading.slope_deg)
+        half = 0.5 * roi.r_px  # the central chord the angle is fitted over
+        dx, dy = half * math.cos(a), -half * math.sin(a)
+        p0 = (int(round(mx - dx)), int(round(my - dy)))
+        p1 = (int(round(mx + dx)), int(round(my + dy)))
+        for colour, t in (((0, 0, 0), th + 2), ((0, 220, 255), th)):
+            cv2.line(out, p0, p1, colour, t, cv2.LINE_AA)
     colours = {c.name: c.display_bgr for c in classes} if classes else {}
     for k, st in enumerate(reading.classes):
         if not (math.isfinite(st.cx_px) and math.isfinite(st.cy_px)):
@@ -56,7 +66,8 @@ def draw_overlay(
         lines.append(f"MI avg {_fmt(mi_avg)}")
     lines += [
         f"d {_fmt(reading.d_px, '.1f')} px  dsigma {_fmt(reading.dsigma_px, '.1f')} px",
-        f"slope {_fmt(reading.slope_deg, '.1f')} deg  conc {_fmt(reading.concentration, '.2f')}",
+        f"slope {_fmt(reading.slope_deg, '.1f')} deg (axis {_fmt(reading.slope_axis_deg, '.1f')})  "
+        f"S {_fmt(reading.surface_curvature, '.2f')}  conc {_fmt(reading.concentration, '.2f')}",
     ]
     if not reading.valid:
         lines.append("INVALID " + " ".join(reading.flags)[:60])

@@ -3,7 +3,7 @@
 Free surface (``slope_deg``): the bed is counted into square cells (the meter's one pass
 fills an occupancy grid; :func:`bed_surface` does it from a mask). For each column of
 cells, scanning up from the drum wall, the bed's upper boundary is where the cell fill
-drops below half the bed's interior fill (gaps of up to two cells are holes in the bed,
+drops below half the bed's interior fill (gaps of up to four cells are holes in the bed,
 not its surface; a column whose bed reaches the wall above has no free surface), with a
 sub-cell position from the fill of the boundary cells. A robust (Tukey-weighted,
 orthogonal) line through those points over the central chord -- +-0.5 R along the
@@ -46,6 +46,8 @@ class SurfaceFit:
     slope_deg: float
     curvature: float
     n_points: int
+    mid_px: tuple[float, float] = (_NAN, _NAN)
+    """A point of the fitted central line (its weighted centre), image px."""
 
 
 def slope_from_moments(
@@ -87,8 +89,8 @@ def _fold(ang: float) -> float:
 
 
 def occupancy_shift(r_px: float, step: int = 1) -> int:
-    """log2 of the occupancy cell size (px): cells of about R / 40, at least 2 grid pixels."""
-    cell = max(2.0 * step, r_px / 40.0)
+    """log2 of the occupancy cell size (px): cells of about R / 24, at least 2 grid pixels."""
+    cell = max(2.0 * step, r_px / 24.0)
     return max(1, int(round(math.log2(cell))))
 
 
@@ -109,6 +111,8 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     res[0] = np.nan
     res[1] = np.nan
     res[2] = 0.0
+    res[3] = np.nan
+    res[4] = np.nan
     # interior fill of the bed: the 85th percentile of the fill of well-covered cells (histogram)
     hist = np.zeros(129, np.int64)
     nv = 0
@@ -165,7 +169,7 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
                 gap = 0
             else:
                 gap += 1
-                if gap > 2:
+                if gap > 4:
                     break
             i -= 1
         if it <= top + 1:
@@ -226,6 +230,8 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
         ang -= 180.0
     res[0] = ang
     res[2] = npts
+    res[3] = mx
+    res[4] = my
     # shape: cubic v(u) over all points; u uphill, v out of the bed (up), in units of R
     if ux < 0:
         ux = -ux
@@ -272,15 +278,15 @@ def surface_from_occupancy(
     """Free surface from bed pixels per cell ``occ`` and ROI pixels per cell ``area``.
 
     ``full_area`` = grid pixels of a whole cell; cells of ``2^shift`` px from ``origin_xy``;
-    ``r_px`` = drum radius. ``work`` (float64, >= 2 x columns + 3) avoids allocations.
+    ``r_px`` = drum radius. ``work`` (float64, >= 2 x columns + 5) avoids allocations.
     """
     rows, cols = area.shape
-    if work is None or work.shape[0] < 2 * cols + 3:
-        work = np.empty(2 * cols + 3, np.float64)
-    res = work[2 * cols: 2 * cols + 3]
+    if work is None or work.shape[0] < 2 * cols + 5:
+        work = np.empty(2 * cols + 5, np.float64)
+    res = work[2 * cols: 2 * cols + 5]
     _surface_fn()(occ[:rows, :cols], area, float(full_area), float(origin_xy[0]), float(origin_xy[1]),
                   float(1 << shift), float(r_px), work[:cols], work[cols: 2 * cols], res)
-    return SurfaceFit(float(res[0]), float(res[1]), int(res[2]))
+    return SurfaceFit(float(res[0]), float(res[1]), int(res[2]), (float(res[3]), float(res[4])))
 
 
 def bed_surface(bed_mask: np.ndarray, roi: DrumROI) -> SurfaceFit:

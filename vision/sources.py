@@ -75,6 +75,8 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, str | None]:
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
         return _EMPTY, f"cannot decode image {p.name} (corrupt or not an image)"
+    if _truncated(data):
+        return _EMPTY, f"cannot decode image {p.name} (truncated file)"
     if img.dtype == np.uint16:
         img = (img >> 8).astype(np.uint8)
     elif img.dtype != np.uint8:
@@ -84,6 +86,18 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, str | None]:
     elif img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     return img, None
+
+
+def _truncated(data: np.ndarray) -> bool:
+    """A JPEG without its end marker or a PNG without its IEND chunk (OpenCV decodes what
+    is there and fills the rest, so a cut-off file would look like a real frame)."""
+    head = data[:8].tobytes()
+    tail = data[-64:].tobytes().rstrip(b"\x00\r\n ")
+    if head[:2] == b"\xff\xd8":
+        return not tail.endswith(b"\xff\xd9")
+    if head == b"\x89PNG\r\n\x1a\n":
+        return b"IEND" not in tail
+    return False
 
 
 def _image_paths(spec) -> list[Path]:

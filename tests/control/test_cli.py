@@ -25,7 +25,7 @@ def cli(capsys, *args: str) -> tuple[int, str, str]:
 
 @pytest.mark.timeout(60)
 def test_bench_trend_json(capsys):
-    code, out, err = cli(capsys, "bench", "trend", "--json", "--sequences", "2")
+    code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2")
     assert code == 0
     d = json.loads(out)
     assert set(d) == {"kalman_rmse", "ma_rmse", "kalman_lag_s", "ma_lag_s"}
@@ -53,7 +53,8 @@ def test_mill_commands_against_emulator(capsys):
     with MillEmulator(DeviceConfig(watchdog_s=0.0)) as emu:
         emu.open_tcp(0)
         code, out, _ = cli(capsys, "mill", emu.url, "status", "--json")
-        assert code == 0 and json.loads(out) == {"setpoint_rpm": 0.0, "actual_rpm": 0.0, "running": False, "fault": None}
+        assert code == 0
+        assert json.loads(out) == {"setpoint_rpm": 0.0, "actual_rpm": 0.0, "running": False, "fault": None}
         code, out, _ = cli(capsys, "mill", emu.url, "set-rpm", "14.5", "--json")
         assert code == 0 and json.loads(out)["setpoint_rpm"] == 14.5 and emu.motor.setpoint_rpm == 14.5
         code, out, _ = cli(capsys, "mill", emu.url, "start")

@@ -18,6 +18,7 @@ from control.errors import ControlError, MillRefused
 from control.motor import MotorConfig
 
 FAST_MOTOR = MotorConfig(max_rpm=60.0, accel_rpm_per_s=40.0, tau_s=0.2)
+QUICK_MOTOR = MotorConfig(max_rpm=60.0, accel_rpm_per_s=200.0, tau_s=0.05)  # settles in ~0.3 s
 
 
 def wait_for(cond, timeout_s: float, period_s: float = 0.02) -> bool:
@@ -47,7 +48,7 @@ def make_emulator(kind: str, **kw) -> MillEmulator:
 
 @pytest.mark.timeout(30)
 def test_set_rpm_converges_start_stop(kind):
-    with make_emulator(kind) as emu, MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.1) as c:
+    with make_emulator(kind, config=DeviceConfig(watchdog_s=2.0, motor=QUICK_MOTOR)) as emu, MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.1) as c:
         st = c.status()
         assert st == p.MillStatus(0.0, 0.0, False, None) and c.connected
         c.set_rpm(15.0)
@@ -241,7 +242,9 @@ def test_fault_spec_parsing():
     f = Faults.parse("corrupt=0.05, drop=0.01,delay=0.02,disconnect=10:1.5")
     assert f == Faults(drop_p=0.01, corrupt_p=0.05, delay_s=0.02, disconnect_every_s=10.0, disconnect_for_s=1.5)
     assert Faults.parse("") == Faults()
-    for bad in ("corrupt=2", "drop=x", "melt=1", "delay=-1", "delay=nan", "corrupt=nan", "disconnect=inf:1", "disconnect=5:0"):
+    bad_specs = ("corrupt=2", "drop=x", "melt=1", "delay=-1", "delay=nan", "corrupt=nan",
+                 "disconnect=inf:1", "disconnect=5:0")
+    for bad in bad_specs:
         with pytest.raises(ControlError):
             Faults.parse(bad)
 
@@ -276,7 +279,7 @@ def test_client_is_thread_safe(kind):
                     c.set_rpm(k * 10 + j * 0.25)
                     st = c.status()
                     assert isinstance(st.actual_rpm, float)
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:
                 errors.append(exc)
 
         threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
@@ -349,7 +352,7 @@ class Rfc2217Server:
                     data = self.ser.read(self.ser.in_waiting or 1)
                     if data:
                         self.write(b"".join(self.manager.escape(data)))
-                except Exception:  # noqa: BLE001 - test server shutting down
+                except Exception:
                     return
 
         threading.Thread(target=reader, daemon=True).start()
@@ -367,7 +370,7 @@ class Rfc2217Server:
         for x in (self.conn, self.srv, self.ser):
             try:
                 x.close()
-            except Exception:  # noqa: BLE001
+            except Exception:
                 pass
 
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -39,7 +41,7 @@ def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, pre
     while t < t1 - 1e-9:
         lv = level(t) if callable(level) else level
         rt = rate(t) if callable(rate) else rate
-        kw = dict(setpoint_rpm=5.0, actual_rpm=5.0, last_valid_mi_s=t, twin_updated_s=t)
+        kw: dict[str, Any] = dict(setpoint_rpm=5.0, actual_rpm=5.0, last_valid_mi_s=t, twin_updated_s=t)
         kw.update(inp)
         inputs = SupervisorInputs(trend=est(t, lv, rt), radial_factor=radial, **kw)
         d, req = sup.step(t, inputs)
@@ -58,8 +60,10 @@ def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, pre
 
 
 def cfg(**kw) -> SupervisorConfig:
-    base = dict(detect_dwell_s=5.0, clear_dwell_s=5.0, min_change_interval_s=30.0, max_rate_rpm_per_s=100.0,
-                prediction_wait_s=0.0)  # no answer to a request: fall back at once
+    base: dict[str, Any] = dict(
+        detect_dwell_s=5.0, clear_dwell_s=5.0, min_change_interval_s=30.0, max_rate_rpm_per_s=100.0,
+        prediction_wait_s=0.0,  # no answer to a request: fall back at once
+    )
     base.update(kw)
     return SupervisorConfig(**base)
 
@@ -84,7 +88,8 @@ def test_control_has_no_critical_speed_formula_of_its_own():
 
 def test_no_action_when_well_mixed():
     sup = Supervisor(cfg(), mode=Mode.AUTO)
-    ds = run(sup, 0, 300, level=lambda t: 0.8 + 0.05 * math.sin(t), radial=0.9, predictor=lambda r, h: {x: 0.9 for x in r})
+    ds = run(sup, 0, 300, level=lambda t: 0.8 + 0.05 * math.sin(t), radial=0.9,
+             predictor=lambda r, h: dict.fromkeys(r, 0.9))
     assert ds == [] and not sup.detector.segregated
 
 
@@ -158,8 +163,8 @@ def test_rate_limit_ramps_the_setpoint():
     ramps = [d for d in ds if d.kind == "ramp"]
     rpms = [ds[0].rpm] + [d.rpm for d in ramps]
     times = [ds[0].t_s] + [d.t_s for d in ramps]
-    assert all(b - a <= 2.0 + 1e-9 for a, b in zip(rpms, rpms[1:]))
-    assert all(tb - ta >= 1.0 - 1e-9 for ta, tb in zip(times, times[1:]))
+    assert all(b - a <= 2.0 + 1e-9 for a, b in itertools.pairwise(rpms))
+    assert all(tb - ta >= 1.0 - 1e-9 for ta, tb in itertools.pairwise(times))
     assert rpms[-1] == sup.config.rpm_limits[1]
 
 
@@ -281,7 +286,7 @@ def test_after_a_link_loss_it_resyncs_to_the_board_and_ramps_from_its_actual_rpm
     rpms = [d.rpm for d in ds if d.rpm is not None]
     assert sup.commanded_rpm is not None
     assert rpms and rpms[0] <= 17.0 + 4.0  # from the board's actual, inside the rate limit
-    assert all(b - a <= 4.0 + 1e-9 for a, b in zip([17.0, *rpms], rpms))
+    assert all(b - a <= 4.0 + 1e-9 for a, b in zip([17.0, *rpms], rpms, strict=False))
 
 
 def test_resync_takes_the_setpoint_of_a_stopped_board_and_works_in_off_too():

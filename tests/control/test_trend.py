@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
 from control.errors import ControlError
-from control.trend import MITrend, TrendConfig, config_from_window, estimate_meas_sd, moving_average
+from control.trend import (
+    MITrend,
+    MovingAverage,
+    TrendConfig,
+    config_from_window,
+    estimate_meas_sd,
+    moving_average,
+)
 from control.trendbench import TrendSequence, run_trend_bench, score_sequence, synthetic_sequence, t63_s
 
 
@@ -36,7 +44,7 @@ def test_nan_predicts_only_and_uncertainty_grows():
     gap = feed(tr, 10.0, 60, math.nan)
     assert not any(e.accepted for e in gap)
     sds = [e.level_sd for e in gap]
-    assert all(b > a for a, b in zip(sds, sds[1:]))  # predict only: sd grows monotonically
+    assert all(b > a for a, b in itertools.pairwise(sds))  # predict only: sd grows monotonically
     assert gap[-1].level == pytest.approx(before.level + before.rate * (gap[-1].t_s - before.t_s), abs=1e-6)
     assert gap[-1].hi95 - gap[-1].lo95 > before.hi95 - before.lo95
 
@@ -124,9 +132,27 @@ def test_noise_estimated_from_a_window():
 
 
 def test_moving_average_reference():
+    """The one moving average: the last ``window`` finite samples; NaN skipped, not counted."""
     x = np.array([1.0, 2.0, np.nan, 4.0, 5.0])
-    np.testing.assert_allclose(moving_average(x, 2), [1.0, 1.5, 2.0, 4.0, 4.5])
+    np.testing.assert_allclose(moving_average(x, 2), [1.0, 1.5, 1.5, 3.0, 4.5])
     assert np.isnan(moving_average([np.nan, np.nan], 3)).all()
+    np.testing.assert_allclose(moving_average([np.nan, 2.0, np.inf, 4.0], 150), [np.nan, 2.0, 2.0, 3.0])
+    with pytest.raises(ControlError):
+        moving_average(x, 0)
+
+
+def test_streaming_and_array_moving_averages_agree():
+    rng = np.random.default_rng(1)
+    x = rng.random(600)
+    x[rng.random(600) < 0.2] = np.nan
+    ma = MovingAverage(150)
+    stream = np.array([ma.update(v) for v in x])
+    np.testing.assert_allclose(stream, moving_average(x, 150), rtol=1e-12)
+    assert ma.value == pytest.approx(np.mean(x[np.isfinite(x)][-150:]))
+    ma.reset()
+    assert math.isnan(ma.value) and ma.update(math.nan) != ma.update(math.nan)  # NaN before any sample
+    with pytest.raises(ControlError):
+        MovingAverage(0)
 
 
 def test_t63_and_lag_definition_on_a_known_delay():
@@ -145,3 +171,17 @@ def test_kalman_beats_the_150_sample_moving_average():
     assert res.kalman_rmse < res.ma_rmse
     assert res.kalman_lag_s < res.ma_lag_s
     assert set(res.as_dict()) == {"kalman_rmse", "ma_rmse", "kalman_lag_s", "ma_lag_s"}
+
+
+def test_one_moving_average_in_the_project():
+    """control.trend holds the only moving average (vision.smoothing disagreed on NaN)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    defs = [
+        p.relative_to(root).as_posix()
+        for pkg in ("vision", "sim", "control", "twin")
+        for p in (root / pkg).rglob("*.py")
+        if "class MovingAverage" in p.read_text() or "def moving_average" in p.read_text()
+    ]
+    assert defs == ["control/trend.py"]

@@ -1,4 +1,4 @@
-"""``drumtwin sim``, ``calibrate``, ``whatif`` and ``bench twin`` from the command line."""
+"""``drumtwin sim``, ``calibrate``, ``whatif`` and ``bench twin``: outputs and one-line errors (in-process)."""
 
 from __future__ import annotations
 
@@ -11,126 +11,165 @@ from pathlib import Path
 import cv2
 import pytest
 
+from tests.cli import assert_one_line_error, cli
+
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 
 
-def run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    """The real console script in a subprocess (end to end)."""
-    return subprocess.run([str(DRUMTWIN), *args], capture_output=True, text=True, timeout=timeout)
-
-
-def run_here(capsys, *args: str) -> tuple[int, str, str]:
-    """The same entry point in this process (fast): exit code, stdout, stderr."""
-    from twin.cli import main
-
-    try:
-        main(list(args))
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 @pytest.mark.timeout(240)
-def test_sim_writes_csv_video_and_json_summary(tmp_path):
+def test_sim_writes_csv_video_and_json_summary_with_the_contact_numbers(tmp_path):
     out_csv = tmp_path / "mi.csv"
     out_mp4 = tmp_path / "run.mp4"
-    r = run("sim", "--case", "A", "--rpm", "5", "--duration", "6", "--fps", "5", "--csv", str(out_csv),
-            "--video", str(out_mp4), "--json")
-    assert r.returncode == 0, r.stderr
-    summary = json.loads(r.stdout)
-    assert summary["mi_start"] < 0.3
-    assert summary["mi_end"] > summary["mi_start"]
-    assert 0 < summary["slope_deg"] < 60
+    r = cli("sim", "--case", "A", "--rpm", "5", "--duration", "3", "--fps", "5", "--csv", out_csv,
+            "--video", out_mp4, "--dt-ms", "1", "--json")
+    assert r.code == 0, r.err
+    s = json.loads(r.out)
+    assert s["mi_start"] < 0.3
+    assert s["mi_end"] > s["mi_start"]
+    assert s["dt_ms"] == 1.0 and s["default_dt_ms"] == 0.5
+    assert 0 < s["slope_deg"] < 60  # free surface after min(5 s, half the run)
+    assert 0 <= s["overlap_p99_r"] <= 0.2 and 0 <= s["wall_max_mm"] <= 4.0
+    assert s["regime"] in ("rolling", "cascading", "cataracting") and s["froude"] > 0
     rows = list(csv.DictReader(out_csv.open()))
-    assert len(rows) == 31
-    assert {"t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "slope_deg"} <= set(rows[0])
+    assert len(rows) == 16
+    assert {"t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "slope_deg", "slope_deg_particles"} <= set(rows[0])
     assert abs(float(rows[-1]["mi"]) - float(rows[-1]["mi_particles"])) < 0.05
     cap = cv2.VideoCapture(str(out_mp4))
-    assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 31
+    assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 16
     cap.release()
 
 
 @pytest.mark.timeout(240)
-def test_sim_with_realism_still_measures(capsys):
-    code, out, err = run_here(capsys, "sim", "--case", "C", "--rpm", "10", "--duration", "2", "--fps", "10",
-                              "--realism", "--json")
-    assert code == 0, err
-    s = json.loads(out)
+def test_sim_with_realism_still_measures_at_the_default_step():
+    r = cli("sim", "--case", "C", "--rpm", "10", "--duration", "1", "--fps", "10", "--realism", "--json")
+    assert r.code == 0, r.err
+    s = json.loads(r.out)
     assert s["mi_start"] > 0.8
+    assert s["dt_ms"] == 0.5
 
 
 @pytest.mark.timeout(240)
-def test_whatif_json_csv_and_plot(tmp_path, capsys):
+def test_whatif_json_csv_and_plot(tmp_path):
     png = tmp_path / "w.png"
     out_csv = tmp_path / "w.csv"
-    code, stdout, err = run_here(capsys, "whatif", "--rpm", "5,20", "--duration", "3", "--workers", "2",
-                                 "--csv", str(out_csv), "--plot", str(png), "--json")
-    assert code == 0, err
-    out = json.loads(stdout)
-    assert [e["rpm"] for e in out["rpm"]] == [5.0, 20.0]
-    assert [e["regime"] for e in out["rpm"]] == ["rolling", "cascading"]
+    r = cli("whatif", "--rpm", "5,40", "--duration", "1.5", "--workers", "1", "--csv", out_csv, "--plot", png,
+            "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    assert [e["rpm"] for e in out["rpm"]] == [5.0, 40.0]
     for e in out["rpm"]:
         assert 0 <= e["plateau_mi"] <= 1 and e["plateau_mi_sd"] >= 0 and e["t_plateau_s"] >= 0
+        assert e["regime"] in ("rolling", "cascading", "cataracting") and 0 <= e["airborne"] <= 1
+    assert out["rpm"][1]["froude"] > out["rpm"][0]["froude"]
     assert cv2.imread(str(png)) is not None
-    assert len(out_csv.read_text().splitlines()) == 1 + 2 * 7
+    assert len(out_csv.read_text().splitlines()) == 1 + 2 * 4
 
 
 @pytest.mark.timeout(240)
-def test_calibrate_from_a_slope_and_from_frames(tmp_path, capsys):
-    code, stdout, err = run_here(capsys, "calibrate", "--slope-deg", "18", "--rpm", "5", "--json")
-    assert code == 0, err
-    out = json.loads(stdout)
-    assert out["slope_deg"] == 18.0
-    assert abs(out["twin_slope_deg"] - 18.0) <= 1.5
-    assert {"friction", "rolling", "residual_deg"} <= set(out)
+def test_calibrate_from_a_slope_and_from_frames(tmp_path):
+    quick = ("--spin-up-s", "1", "--window-s", "1.5", "--max-evals", "7")
+    r = cli("calibrate", "--slope-deg", "25", "--rpm", "10", "--json", *quick)
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    assert out["slope_deg"] == 25.0
+    assert abs(out["twin_slope_deg"] - 25.0) <= 1.5
+    assert out["range_deg"][0] < 25.0 < out["range_deg"][1]
+    assert {"friction", "rolling", "residual_deg", "path"} <= set(out)
     # a folder of rendered frames as the measured source
     from sim.drum import DrumSim
     from sim.render import Renderer
 
-    sim = DrumSim(rpm=5.0, friction=0.15)
+    sim = DrumSim(rpm=10.0, friction=0.5, rolling=0.3)
     ren = Renderer(sim, 360)
-    sim.advance(4.0)
-    for i in range(8):
-        sim.advance(0.5)
+    sim.advance(2.0)
+    for i in range(6):
+        sim.advance(0.25)
         cv2.imwrite(str(tmp_path / f"f{i:02d}.png"), ren.render(sim.particles()))
-    code, stdout, err = run_here(capsys, "calibrate", str(tmp_path), "--rpm", "5", "--json")
-    assert code == 0, err
-    out = json.loads(stdout)
-    assert out["frames"] == 8
+    r = cli("calibrate", tmp_path, "--rpm", "10", "--json", *quick)
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    assert out["frames"] == 6
     assert abs(out["twin_slope_deg"] - out["slope_deg"]) <= 1.5
 
 
-@pytest.mark.timeout(120)
+def _truncated_jpeg(real_drum_dir: Path, tmp_path: Path) -> Path:
+    """The first third of a real frame's JPEG bytes."""
+    data = sorted((real_drum_dir / "images").glob("*.jpg"))[0].read_bytes()
+    path = tmp_path / "TRUNCATED.jpg"
+    path.write_bytes(data[: len(data) // 3])
+    return path
+
+
 @pytest.mark.parametrize(
-    "args, needle",
+    "args, needles",
     [
-        (("sim", "--rpm", "90", "--duration", "1"), "77.2"),
-        (("sim", "--case", "Q", "--duration", "1"), "case"),
-        (("whatif", "--rpm", "5,x"), "--rpm"),
-        (("whatif", "--rpm", "5", "--duration", "1", "--scheduler", "tcp://127.0.0.1:9"), "no Dask scheduler"),
-        (("calibrate", "--rpm", "5"), "SOURCE or --slope-deg"),
-        (("calibrate", "/nonexistent/video.mp4", "--rpm", "5"), "no such file"),
+        (("sim", "--rpm", "90", "--duration", "1"), ("77.2",)),
+        (("sim", "--case", "Q", "--duration", "1"), ("case",)),
+        (("sim", "--duration", "1e307", "--fps", "240"), ("--duration", "3600")),
+        (("sim", "--duration", "nan"), ("--duration",)),
+        (("sim", "--duration", "inf"), ("--duration",)),
+        (("sim", "--duration", "-1"), ("--duration",)),
+        (("sim", "--duration", "1", "--fps", "0"), ("--fps", "240")),
+        (("sim", "--duration", "1", "--fps", "nan"), ("--fps",)),
+        (("sim", "--duration", "1", "--seed", "-1"), ("--seed", "2**32")),
+        (("sim", "--duration", "1", "--seed", str(2**32)), ("--seed", "2**32")),
+        (("sim", "--duration", "1", "--dt-ms", "0"), ("--dt-ms", "20")),
+        (("sim", "--duration", "1", "--dt-ms", "inf"), ("--dt-ms",)),
+        (("sim", "--duration", "1", "--friction", "nan"), ("--friction",)),
+        (("sim", "--duration", "1", "--rolling", "-0.1"), ("--rolling",)),
+        (("sim", "--duration", "1", "--size", "0"), ("--size",)),
+        (("whatif", "--rpm", "5,x"), ("--rpm",)),
+        (("whatif", "--rpm", "5,90"), ("77.2",)),
+        (("whatif", "--seeds", "100000000"), ("--seeds", "1000")),
+        (("whatif", "--rpm", "5", "--seeds", "0"), ("--seeds",)),
+        (("whatif", "--rpm", "5", "--duration", "inf"), ("--duration",)),
+        (("whatif", "--rpm", "5", "--duration", "1", "--sample-s", "0"), ("--sample-s",)),
+        (("whatif", "--rpm", "5", "--duration", "1", "--workers", "0"), ("--workers",)),
+        (("whatif", "--rpm", "5", "--duration", "1", "--fill", "2"), ("--fill",)),
+        (("whatif", "--rpm", "5", "--duration", "1", "--scheduler", "tcp://127.0.0.1:9"), ("no Dask scheduler",)),
+        (("calibrate", "--rpm", "5"), ("SOURCE or --slope-deg",)),
+        (("calibrate", "/nonexistent/video.mp4", "--rpm", "5"), ("no such file",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--seed", "-1"), ("--seed", "2**32")),
+        (("calibrate", "--slope-deg", "nan", "--rpm", "5"), ("--slope-deg",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "0"), ("--rpm",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "nan"), ("rpm",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--max-evals", "1"), ("--max-evals",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--window-s", "0"), ("--window-s",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--curvature", "inf"), ("--curvature",)),
+        (("bench", "twin", "--duration", "1e9"), ("--duration", "600")),
+        (("bench", "twin", "--duration", "nan"), ("--duration",)),
     ],
 )
-def test_bad_input_is_one_line_and_exit_2(args, needle, capsys):
-    code, out, err = run_here(capsys, *args)
-    assert code == 2
-    assert needle in " ".join(err.split())
-    assert "Traceback" not in err and out == ""
+def test_bad_input_is_one_line_and_exit_2(args, needles):
+    r = cli(*args)
+    assert_one_line_error(r, *needles)
+    assert r.out == ""
+
+
+def test_a_truncated_image_is_one_line_and_exit_2(real_drum_dir, tmp_path):
+    r = cli("calibrate", _truncated_jpeg(real_drum_dir, tmp_path), "--rpm", "5")
+    assert_one_line_error(r)
+
+
+@pytest.mark.timeout(120)
+def test_a_target_outside_the_reachable_range_is_exit_2_with_the_range():
+    r = cli("calibrate", "--slope-deg", "75", "--rpm", "10", "--spin-up-s", "0.5", "--window-s", "0.5")
+    line = assert_one_line_error(r, "reachable range", "10 rpm")
+    assert "75.0 deg" in line
 
 
 def test_bad_input_through_the_console_script():
-    r = run("sim", "--rpm", "90", "--duration", "1")
+    r = subprocess.run([str(DRUMTWIN), "sim", "--rpm", "90", "--duration", "1"], capture_output=True, text=True,
+                       timeout=120)
     assert r.returncode == 2 and "77.2" in " ".join(r.stderr.split()) and "Traceback" not in r.stderr
 
 
 @pytest.mark.timeout(240)
-def test_bench_twin_prints_the_four_real_time_factors(capsys):
-    code, stdout, err = run_here(capsys, "bench", "twin", "--duration", "0.05", "--json")
-    assert code == 0, err
-    out = json.loads(stdout)
+def test_bench_twin_prints_the_real_time_factors_and_the_step():
+    r = cli("bench", "twin", "--duration", "0.02", "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
     for k in ("rtf_paper_5rpm", "rtf_paper_30rpm", "rtf_4x", "rtf_16x"):
         assert out[k] > 0
     assert out["n_4x"] == 4 * out["n_paper_5rpm"]
+    assert out["dt_ms"] == 0.5 and out["cost_exponent_16x"] > 0

@@ -12,32 +12,43 @@ import numpy as np
 import pytest
 
 from sim.errors import SimError
-from sim.whatif import WhatIfJob, froude, regime, run_study, summarize
+from sim.whatif import WhatIfJob, flow_regime, froude, froude_regime, regime, run_study, summarize
 
 DASK = Path(sys.executable).with_name("dask")
 
 
 def test_regimes_by_froude_number():
     assert froude(5.0) == pytest.approx((5 * 2 * np.pi / 60) ** 2 * 0.15 / 9.81)
-    assert [regime(r) for r in (0.5, 5.0, 20.0, 40.0, 77.0)] == [
+    assert [froude_regime(r) for r in (0.5, 5.0, 20.0, 40.0, 77.0)] == [
         "slumping", "rolling", "cascading", "cataracting", "cataracting"]
-    assert regime(80.0) == "centrifuging"
+    assert froude_regime(80.0) == "centrifuging" == regime(80.0)
+
+
+def test_regime_from_a_synthetic_flow():
+    # flat surface, nothing flying: rolling; S-shaped surface: cascading; disks in flight: cataracting
+    assert flow_regime(0.0, 0.0) == "rolling"
+    assert flow_regime(0.01, 0.2) == "cascading"
+    assert flow_regime(0.2, 0.2) == "cataracting"
+    assert flow_regime(0.2, float("nan")) == "cataracting"
+    assert flow_regime(float("nan"), 0.0) == "unknown"
 
 
 @pytest.mark.timeout(120)
 def test_local_pool_gives_the_same_results_as_in_process_and_branches_from_a_state():
     from sim.drum import DrumSim
 
-    jobs = [WhatIfJob(rpm=r, duration_s=3.0, seed=1, sample_s=0.5) for r in (5.0, 30.0)]
+    jobs = [WhatIfJob(rpm=r, duration_s=2.0, seed=1, sample_s=0.5) for r in (5.0, 30.0)]
     one = run_study(jobs, workers=1)
     two = run_study(jobs, workers=2)
     for a, b in zip(one, two):
         assert np.array_equal(a.mi, b.mi)
-        assert a.t_s[-1] == pytest.approx(3.0)
+        assert a.t_s[-1] == pytest.approx(2.0)
+        assert a.airborne.shape == a.mi.shape and np.all((a.airborne[1:] >= 0) & (a.airborne[1:] <= 1))
     assert one[1].rpm_actual[-1] == pytest.approx(30.0)
     summ = summarize(one)
     assert [e["rpm"] for e in summ] == [5.0, 30.0]
-    assert {"plateau_mi", "plateau_mi_sd", "t_plateau_s", "regime"} <= set(summ[0])
+    assert {"plateau_mi", "plateau_mi_sd", "t_plateau_s", "regime", "froude", "airborne", "curvature"} <= set(summ[0])
+    assert summ[0]["regime"] in ("rolling", "cascading", "cataracting") and summ[0]["froude_regime"] == "rolling"
     # branching from "now": the what-if starts at the live twin's state and ramps
     sim = DrumSim(rpm=5.0, case="A")
     sim.advance(1.0)
@@ -106,7 +117,7 @@ def test_study_on_a_real_dask_scheduler_and_worker():
              "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with Client(addr, timeout="30s", set_as_default=False) as c:
             c.wait_for_workers(1, timeout=90)
-        jobs = [WhatIfJob(rpm=r, duration_s=2.0, seed=0, sample_s=0.5) for r in (5.0, 20.0)]
+        jobs = [WhatIfJob(rpm=r, duration_s=1.0, seed=0, sample_s=0.5) for r in (5.0, 20.0)]
         seen = []
         remote = run_study(jobs, scheduler=addr, progress=lambda d, t: seen.append((d, t)))
         local = run_study(jobs, workers=1)

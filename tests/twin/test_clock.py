@@ -22,3 +22,17 @@ def test_cadence_drops_missed_ticks_after_a_stall_and_restarts() -> None:
     assert c.due(2.0)
     with pytest.raises(ValueError):
         Cadence(0.0)
+
+
+def test_run_clock_restarts_at_zero_and_scales_wall_time() -> None:
+    import time
+
+    from twin.clock import RunClock
+
+    c = RunClock(speed=4.0)
+    time.sleep(0.5)
+    assert c.now_s() >= 2.0
+    c.restart()
+    assert 0.0 <= c.now_s() < 1.0 and c.wall_s(4.0) == 1.0
+    with pytest.raises(ValueError):
+        RunClock(speed=0.0)

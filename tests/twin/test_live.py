@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -40,7 +41,7 @@ class _Predicted:
         self.t_s, self.mi, self.regime = [0.0, 1.0], [0.9, rpm / 100.0], "cascading"
 
 
-def _predict(jobs):  # noqa: ANN001, ANN202
+def _predict(jobs):
     return [_Predicted(j.rpm) for j in jobs]
 
 
@@ -61,7 +62,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _wait(pred, timeout_s: float, what: str) -> None:  # noqa: ANN001
+def _wait(pred, timeout_s: float, what: str) -> None:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         if pred():
@@ -74,10 +75,25 @@ def _wait(pred, timeout_s: float, what: str) -> None:  # noqa: ANN001
 def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     """Short demo runs (Case C, seed 0, 5 rpm) in AUTO (tuned to act at once) and OFF."""
     base = tmp_path_factory.mktemp("auto_vs_off")
-    for mode, extra, duration in (("auto", QUICK_AUTO, 24.0), ("off", {}, 12.0)):
+
+    def until_the_board_reads_15_rpm(loop, plant, dash) -> None:
+        def watch() -> None:
+            while not loop.stop_event.is_set():
+                if loop.mill_box.get().setpoint_rpm >= 15.0:
+                    loop.stop_event.wait(1.0)
+                    loop.stop_event.set()
+                time.sleep(0.1)
+
+        threading.Thread(target=watch, daemon=True).start()
+
+    runs: tuple[tuple[str, dict, float, Any], ...] = (
+        ("auto", QUICK_AUTO, 80.0, until_the_board_reads_15_rpm),
+        ("off", {}, 8.0, None),
+    )
+    for mode, extra, duration, hook in runs:
         cfg = RunConfig(dashboard=False, duration_s=duration, speed=SPEED, case="C", seed=0, mode=mode,
                         log_dir=base / mode, extra=extra).resolved()
-        run_live(cfg, progress=False)
+        run_live(cfg, progress=False, on_started=hook)
     return {"auto": base / "auto", "off": base / "off"}
 
 
@@ -113,7 +129,7 @@ def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
 
 def _video(path: Path, n: int = 30, size: int = 64) -> Path:
     """A short synthetic video (grey noise: the meter finds no valid MI in it)."""
-    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (size, size))
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (size, size))
     rng = np.random.default_rng(0)
     for _ in range(n):
         vw.write(rng.integers(90, 110, (size, size, 3), dtype=np.uint8))
@@ -141,8 +157,11 @@ def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mo
     """Defect 1: `run --video V --mill URL --mode off` started a stopped mill on connecting."""
     emu, url = tcp_mill
     video = _video(tmp_path / "v.avi")
-    cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=3.0, mode=mode, log_dir=tmp_path / "run").resolved()
+    cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=3.0, mode=mode,
+                    log_dir=tmp_path / "run").resolved()
     run_live(cfg, progress=False)
+    left = [t.name for t in threading.enumerate() if t.name.startswith(("drumtwin-", "mill-heartbeat"))]
+    assert left == []  # the root joined every worker; the mill client has no thread of its own
     m = emu.motor
     assert not m.running and m.fault == "WDOG" and m.setpoint_rpm == 13.0
     assert not any(a.cmd in ("RUN", "SET") for a in emu.applied)
@@ -198,7 +217,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     cfg = RunConfig(dashboard=False, duration_s=600, speed=SPEED, mode="auto", log_dir=tmp_path / "run").resolved()
     report: dict = {}
 
-    def script(loop, plant, dash) -> None:  # noqa: ANN001
+    def script(loop, plant, dash) -> None:
         def run() -> None:
             try:
                 mill = loop.mill_box.get
@@ -223,7 +242,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
                 report["pause"] = (t_pause, loop.now_s())
                 plant.camera_paused.clear()
                 _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
-            except BaseException as exc:  # noqa: BLE001
+            except BaseException as exc:
                 report["error"] = exc
             finally:
                 loop.stop_event.set()
@@ -280,7 +299,14 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     """Chromium opens the live demo's dashboard: camera image and plots update; MANUAL and
     the rpm slider move the emulator's setpoint through the real serial driver."""
     from tests.twin.dashboard_helpers import (
-        IMG, choose_mode, drag_slider_to, image_srcs, plot_pixels, slider_enabled, slider_value, wait_until,
+        IMG,
+        choose_mode,
+        drag_slider_to,
+        image_srcs,
+        plot_pixels,
+        slider_enabled,
+        slider_value,
+        wait_until,
     )
 
     cfg = RunConfig(
@@ -289,7 +315,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     started: dict = {}
     done = threading.Event()
 
-    def on_started(loop, plant, dash) -> None:  # noqa: ANN001
+    def on_started(loop, plant, dash) -> None:
         started.update(loop=loop, plant=plant, dash=dash)
 
     def runner() -> None:

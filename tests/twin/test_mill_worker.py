@@ -143,7 +143,7 @@ def test_commands_decided_before_a_reread_are_dropped_not_resent() -> None:
 
 
 def test_newest_set_rpm_supersedes_older_pending_ones() -> None:
-    w, link, sink, box = make(RUNNING)
+    w, link, sink, _box = make(RUNNING)
     w.cycle()
     for rpm in (6.0, 7.0, 8.0):
         w.submit(SetRpm(rpm, epoch=1))
@@ -153,7 +153,7 @@ def test_newest_set_rpm_supersedes_older_pending_ones() -> None:
 
 
 def test_a_failed_stop_is_kept_and_sent_once_the_link_is_back() -> None:
-    w, link, sink, box = make(RUNNING)
+    w, link, _sink, _box = make(RUNNING)
     w.cycle()
     link.up = False
     w.submit(StopMill())
@@ -180,7 +180,7 @@ def test_a_refusal_is_an_event_the_command_is_dropped_and_the_link_stays_up() ->
 
 
 def test_emergency_stop_drops_pending_commands_and_stops() -> None:
-    w, link, sink, box = make(RUNNING)
+    w, link, sink, _box = make(RUNNING)
     w.cycle()
     w.submit(SetRpm(30.0, epoch=1))
     w.submit(StartMill(epoch=1))
@@ -194,7 +194,7 @@ def test_emergency_stop_drops_pending_commands_and_stops() -> None:
 def test_the_worker_polls_with_heartbeats_only(status: MillStatus) -> None:
     """The run controls the motor: its one poller feeds the watchdog (HB) and reads the
     status from the answer; no other request goes out unless commanded."""
-    w, link, sink, box = make(status)
+    w, link, _sink, box = make(status)
     for _ in range(3):
         w.cycle()
     assert link.polls == 3 and link.sent == [] and box.get().status == status

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli import assert_one_line_error, cli
 from twin.config import RunConfig
 from twin.errors import TwinError
-from tests.cli import assert_one_line_error, cli
 from twin.runlog import (
     FRAME_COLUMNS,
     RunLog,

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import math
 import queue
+from collections.abc import Mapping
 from dataclasses import fields, replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ import pytest
 from control.protocol import MillStatus
 from control.supervisor import Mode, PredictionRequest, PredictionResult, Supervisor, SupervisorConfig
 from control.trend import MITrend, TrendEstimate
-from tests.twin.test_mill_worker import Sink
+from tests.twin.test_mill_worker import FakeLink, Sink
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker, put_dropping_oldest
 from twin.live.records import (
     CameraInfo,
@@ -136,7 +138,7 @@ def test_vision_lost_alarm_and_safe_state_come_together() -> None:
 def test_camera_end_means_safe_at_once() -> None:
     b = Boxes()
     b.mill_at(5.0)
-    w, sink, sent = sup_worker(b, Mode.AUTO)
+    w, sink, _sent = sup_worker(b, Mode.AUTO)
     advance(b, w, 0, 4)
     b.camera.set(replace(b.camera.get(), ended=True))
     w.tick(b.view.now_s())
@@ -162,7 +164,7 @@ def test_moving_the_rpm_slider_never_clears_camera_alarms() -> None:
 def test_decisions_carry_the_mill_epoch_they_were_made_on() -> None:
     b = Boxes("manual")
     b.mill_at(5.0, epoch=3)
-    w, sink, sent = sup_worker(b, Mode.MANUAL)
+    w, _sink, sent = sup_worker(b, Mode.MANUAL)
     advance(b, w, 0, 1)
     w.handle(SetManualRpm(15.0))
     assert sent == [SetRpm(15.0, 3)]
@@ -186,7 +188,7 @@ def test_requests_go_to_the_application_and_results_come_back() -> None:
 def test_mode_commands_and_bad_ones() -> None:
     b = Boxes("off")
     b.mill_at(5.0)
-    w, sink, sent = sup_worker(b, Mode.OFF)
+    w, sink, _sent = sup_worker(b, Mode.OFF)
     w.handle(SetMode("manual"))
     assert b.mode.get() == "manual" and sink.kinds("decision")[0]["decision"] == "mode"
     w.handle(SetMode("turbo"))
@@ -222,7 +224,7 @@ def _reading(mi: float, valid: bool = True, slope: float = 30.0):
 def test_process_worker_rows_trend_moving_average_and_slopes() -> None:
     b = Boxes("auto")
     b.mill_at(5.0)
-    rows: list[dict] = []
+    rows: list[Mapping[str, Any]] = []
     slopes: queue.SimpleQueue = queue.SimpleQueue()
     state = LiveState()
     pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, state, slopes, ma_window=2)
@@ -294,11 +296,9 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
     from twin.loop import LiveLoop
     from twin.runlog import RunLog
 
-    class Link:
-        url = "fake://"
-
-        def close(self) -> None:
-            pass
+    class Link(FakeLink):
+        def __init__(self) -> None:
+            super().__init__(MillStatus(5.0, 5.0, True, None))
 
     cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run").resolved()
     with RunLog(tmp_path / "run") as log:

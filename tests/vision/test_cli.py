@@ -1,39 +1,25 @@
-"""``drumtwin mi``, ``classes suggest`` and ``bench vision`` through the real console script."""
+"""``drumtwin mi``, ``classes suggest`` and ``bench vision``, run in-process (tests/cli.py)."""
 
 import csv
 import io
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+from tests.cli import assert_one_line_error, cli
 from tests.vision import helpers as H
 from twin.cli.vision_cmds import csv_columns
 from vision.config import parse_config
 
 REPO = Path(__file__).resolve().parents[2]
-EXE = str(Path(sys.executable).parent / "drumtwin")
 CONFIG = REPO / "configs" / "pmma-blue-white.toml"
 
 
-def run(*args, timeout=120):
-    env = dict(os.environ)
-    env.pop("DRUMTWIN_DEBUG", None)
-    env["COLUMNS"] = "400"  # rich wraps at 80 columns when not on a terminal
-    return subprocess.run([EXE, *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env)
-
-
-def one_line_error(p):
-    assert p.returncode == 2, (p.returncode, p.stderr)
-    assert "Traceback" not in p.stderr and "Traceback" not in p.stdout
-    lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error:"), p.stderr
-    return lines[0]
+def rows_of(text: str) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(text)))
 
 
 @pytest.fixture(scope="module")
@@ -46,20 +32,24 @@ def frames_dir(tmp_path_factory):
     return d
 
 
-@pytest.mark.timeout(120)
 def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
     out, png, mp4 = tmp_path / "mi.csv", tmp_path / "mi.png", tmp_path / "ov.mp4"
-    p = run("mi", frames_dir, "--csv", out, "--plot", png, "--overlay-video", mp4)
-    assert p.returncode == 0, p.stderr
+    r = cli("mi", frames_dir, "--csv", out, "--plot", png, "--overlay-video", mp4)
+    assert r.code == 0, r.err
     rows = list(csv.DictReader(out.open()))
     header = next(csv.reader(out.open()))
     assert header == csv_columns(["red", "blue"])
     assert header[:9] == ["frame", "t_s", "mi", "mi_sigmoid", "mi_linear", "d_px", "dsigma_px", "slope_deg", "valid"]
     assert header[9:17] == ["cx_red", "cy_red", "sigma_red", "frac_red", "cx_blue", "cy_blue", "sigma_blue", "frac_blue"]
+    for col in ("slope_axis_deg", "surface_curvature", "roi_cx_px", "roi_cy_px", "roi_r_px"):
+        assert col in header
     assert len(rows) == 5 and all(r["valid"] == "1" for r in rows)
     mis = [float(r["mi"]) for r in rows]
     assert mis[0] < 0.1 and mis[-1] > 0.8
     assert float(rows[0]["mi_linear"]) == pytest.approx(0.0)
+    for row in rows:  # drum_frame draws its drum at the centre, radius 0.46 x 480
+        assert abs(float(row["roi_cx_px"]) - 320) < 4 and abs(float(row["roi_r_px"]) - 0.46 * 480) < 0.05 * 220
+        assert float(row["slope_deg"]) == pytest.approx(float(row["slope_axis_deg"]), abs=6)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     cap = cv2.VideoCapture(str(mp4))
     n = 0
@@ -72,12 +62,11 @@ def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
     assert n == 5
 
 
-@pytest.mark.timeout(120)
 @pytest.mark.parametrize("method", ["lacey", "glcm"])
 def test_mi_baseline_methods(frames_dir, method):
-    p = run("mi", frames_dir, "--method", method)
-    assert p.returncode == 0, p.stderr
-    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    r = cli("mi", frames_dir, "--method", method)
+    assert r.code == 0, r.err
+    rows = rows_of(r.out)
     assert len(rows) == 5
     vals = [float(r["mi"]) for r in rows]
     assert all(np.isfinite(vals))
@@ -85,37 +74,17 @@ def test_mi_baseline_methods(frames_dir, method):
         assert vals[0] < 0.5 < vals[-1]
 
 
-@pytest.mark.timeout(60)
 def test_mi_real_frames_with_config_and_manual_roi(real_drum_dir):
-    p = run("mi", real_drum_dir / "images" / "0002.jpg", real_drum_dir / "images" / "0097.jpg",
+    r = cli("mi", real_drum_dir / "images" / "0002.jpg", real_drum_dir / "images" / "0097.jpg",
             "--config", CONFIG, "--roi", "320.3,319.2,312")
-    assert p.returncode == 0, p.stderr
-    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert r.code == 0, r.err
+    rows = rows_of(r.out)
     assert [r["source"] for r in rows] == ["0002.jpg", "0097.jpg"]
     assert "cx_white" in rows[0] and float(rows[0]["mi"]) < float(rows[1]["mi"]) - 0.3
+    assert rows[0]["roi_cx_px"] == "320.3" and rows[0]["roi_r_px"] == "312"
 
 
-@pytest.mark.timeout(60)
-def test_bad_inputs_one_line_errors(tmp_path):
-    assert "no such" in one_line_error(run("mi", tmp_path / "missing.png"))
-    bad_cfg = tmp_path / "bad.toml"
-    bad_cfg.write_text((CONFIG.read_text()).replace("min_pixels = 200", "min_pixels = 200\nwobble = 1"))
-    assert "unknown key" in one_line_error(run("mi", tmp_path, "--config", bad_cfg))
-    inv = tmp_path / "inv.toml"
-    inv.write_text(CONFIG.read_text().replace("[[100, 120, 70], [135, 255, 255]]", "[[135, 120, 70], [100, 255, 255]]"))
-    assert "inverted" in one_line_error(run("mi", tmp_path, "--config", inv))
-    assert "--roi" in one_line_error(run("mi", tmp_path, "--roi", "1,2"))
-    vid = tmp_path / "junk.mp4"
-    vid.write_bytes(b"junk" * 100)
-    assert "cannot open video" in one_line_error(run("mi", vid))
-    cv2.imwrite(str(tmp_path / "black.png"), np.zeros((100, 100, 3), np.uint8))
-    assert "drum" in one_line_error(run("mi", tmp_path / "black.png"))
-    p = run("mi", "7")  # no camera 7 here: one line, and no CSV header before it
-    assert "cannot open camera 7" in one_line_error(p) and p.stdout == ""
-
-
-@pytest.mark.timeout(60)
-def test_bad_frames_become_flagged_rows(tmp_path):
+def test_bad_frames_become_flagged_rows_and_new_sizes_get_their_drum(tmp_path):
     d = tmp_path / "seq"
     d.mkdir()
     cv2.imwrite(str(d / "a.png"), H.half_disks())
@@ -123,48 +92,131 @@ def test_bad_frames_become_flagged_rows(tmp_path):
     cv2.imwrite(str(d / "c.png"), cv2.cvtColor(H.half_disks(), cv2.COLOR_BGR2GRAY))
     cv2.imwrite(str(d / "d.png"), H.half_disks(800, 600))
     cv2.imwrite(str(d / "e.png"), H.fine_mix())
-    p = run("mi", d)
-    assert p.returncode == 0, p.stderr
-    assert "Traceback" not in p.stderr
-    rows = list(csv.DictReader(io.StringIO(p.stdout)))
-    assert [r["valid"] for r in rows] == ["1", "0", "0", "0", "1"]
+    r = cli("mi", d)
+    assert r.code == 0, r.err
+    rows = rows_of(r.out)
+    assert [r["valid"] for r in rows] == ["1", "0", "0", "1", "1"]
     assert "decode" in rows[1]["flags"]
     assert "3-channel" in rows[2]["flags"]
-    assert "size_changed" in rows[3]["flags"]
     assert rows[1]["mi"] == "" and float(rows[4]["mi"]) > 0.9
+    # the 800x600 frame has its own drum, and says which circle was used
+    assert abs(float(rows[3]["roi_cx_px"]) - 400) < 4 and abs(float(rows[0]["roi_cx_px"]) - 320) < 4
+    assert float(rows[3]["mi"]) < 0.05
 
 
-@pytest.mark.timeout(120)
-def test_classes_suggest_separates_real_frames(real_drum_dir, tmp_path):
-    p = run("classes", "suggest", real_drum_dir / "images" / "0002.jpg")
-    assert p.returncode == 0, p.stderr
-    cfg = parse_config(p.stdout)
-    names = [c.name for c in cfg.classes]
-    assert sorted(names) == ["blue", "white"]
+def test_classes_suggest_folder_with_preview_then_mi(real_drum_dir, tmp_path):
+    prev = tmp_path / "preview.png"
+    r = cli("classes", "suggest", real_drum_dir / "images", "--frames", 6, "--preview", prev)
+    assert r.code == 0, r.err
+    cfg = parse_config(r.out)
+    assert [c.name for c in cfg.counted] == ["blue", "white"]
+    img = cv2.imread(str(prev))
+    assert img is not None and img.shape == (640, 1280, 3)
     path = tmp_path / "s.toml"
-    path.write_text(p.stdout)
-    out = run("mi", real_drum_dir / "images", "--config", path)
-    assert out.returncode == 0, out.stderr
-    rows = {r["source"]: r for r in csv.DictReader(io.StringIO(out.stdout))}
+    path.write_text(r.out)
+    out = cli("mi", real_drum_dir / "images", "--config", path)
+    assert out.code == 0, out.err
+    rows = {r["source"]: r for r in rows_of(out.out)}
     a = np.loadtxt(real_drum_dir / "labels" / "0097.txt", ndmin=2)
-    r = rows["0097.jpg"]
-    err = np.hypot(float(r["cx_blue"]) - a[:, 1].mean() * 640, float(r["cy_blue"]) - a[:, 2].mean() * 640)
+    row = rows["0097.jpg"]
+    err = np.hypot(float(row["cx_blue"]) - a[:, 1].mean() * 640, float(row["cy_blue"]) - a[:, 2].mean() * 640)
     assert err < 0.03 * 312
     assert float(rows["0002.jpg"]["mi"]) < min(float(r["mi"]) for k, r in rows.items() if k >= "0013") - 0.2
-    assert "error" in one_line_error(run("classes", "suggest", tmp_path / "none.jpg"))
 
 
-@pytest.mark.timeout(120)
+def test_no_config_and_no_default_colours_says_run_classes_suggest(tmp_path):
+    img = np.full((480, 640, 3), 150, np.uint8)  # a grey backlit photo of a drum
+    cv2.circle(img, (320, 240), 210, (40, 40, 40), 4)
+    cv2.ellipse(img, (320, 240), (200, 200), 0, 20, 160, (90, 90, 90), -1)
+    p = tmp_path / "grey.png"
+    cv2.imwrite(str(p), img)
+    assert_one_line_error(cli("mi", p), "classes suggest", "--config")
+
+
+@pytest.fixture(scope="module")
+def junk(tmp_path_factory):
+    d = tmp_path_factory.mktemp("junk")
+    (d / "random.png").write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    good = (REPO / "tests" / "data" / "real-drum-pmma" / "images" / "0002.jpg").read_bytes()
+    (d / "truncated.jpg").write_bytes(good[: len(good) // 3])
+    return d
+
+
+def _cfg(tmp_path, old, new):
+    text = CONFIG.read_text()
+    assert old in text
+    p = tmp_path / "c.toml"
+    p.write_text(text.replace(old, new, 1))
+    return p
+
+
+def test_mi_one_line_errors(tmp_path, junk, real_drum_dir):
+    img = real_drum_dir / "images" / "0002.jpg"
+    assert "no such" in assert_one_line_error(cli("mi", tmp_path / "missing.png"))
+    assert_one_line_error(cli("mi", img, "--window", 0), "--window")
+    assert_one_line_error(cli("mi", img, "--window", -5), "--window")
+    for bad in ("0", "-1", "nan", "inf"):
+        assert_one_line_error(cli("mi", img, "--fps", bad), "--fps")
+    assert_one_line_error(cli("mi", img, "--max-frames", -1), "--max-frames")
+    assert_one_line_error(cli("mi", img, "--roi", "1,2"), "--roi")
+    assert_one_line_error(cli("mi", img, "--roi", "320,320,nan"), "roi")
+    assert_one_line_error(cli("mi", junk / "random.png"), "decode")
+    assert_one_line_error(cli("mi", junk / "truncated.jpg"), "truncated.jpg")
+    assert_one_line_error(cli("mi", junk), "none of the 2 frames")
+    assert "unknown key" in assert_one_line_error(
+        cli("mi", img, "--config", _cfg(tmp_path, "min_pixels = 200", "min_pixels = 200\nwobble = 1")))
+    assert_one_line_error(cli("mi", img, "--config", _cfg(
+        tmp_path, "[[100, 120, 70], [135, 255, 255]]", "[[135, 120, 70], [100, 255, 255]]")), "inverted")
+    assert_one_line_error(cli("mi", img, "--config", _cfg(
+        tmp_path, "display_bgr = [255, 60, 0]", 'display_bgr = [999, -1, "x"]')), "display_bgr")
+    assert_one_line_error(cli("mi", img, "--config", _cfg(
+        tmp_path, "[[100, 120, 70], [135, 255, 255]]", "[[100, 120, 70], [135, inf, 255]]")), "HSV range")
+    assert_one_line_error(cli("mi", img, "--config", _cfg(
+        tmp_path, "min_pixels = 200", 'min_pixels = 200\nroi = [320, 320, 300]\nroi_kind = "rect"\n'
+        "half_w_px = nan\nhalf_h_px = 100")), "half_w_px")
+    for key, val in (("min_share", "nan"), ("min_share", "-0.1"), ("collapse_ratio", "inf"), ("stride", "0"),
+                     ("dark_v_max", "300"), ("min_pixels", "0")):
+        assert_one_line_error(cli("mi", img, "--config", _cfg(
+            tmp_path, "min_pixels = 200", f"min_pixels = 200\n{key} = {val}".replace("min_pixels = 200\nmin_pixels", "min_pixels"))),
+            key)
+    vid = tmp_path / "junk.mp4"
+    vid.write_bytes(b"junk" * 100)
+    assert "cannot open video" in assert_one_line_error(cli("mi", vid))
+    cv2.imwrite(str(tmp_path / "black.png"), np.zeros((100, 100, 3), np.uint8))
+    assert "drum" in assert_one_line_error(cli("mi", tmp_path / "black.png"))
+    r = cli("mi", "7")  # no camera 7 here: one line, and no CSV header before it
+    assert "cannot open camera 7" in assert_one_line_error(r) and r.out == ""
+
+
+def test_classes_suggest_and_bench_one_line_errors(tmp_path, junk, real_drum_dir):
+    img = real_drum_dir / "images" / "0002.jpg"
+    assert_one_line_error(cli("classes", "suggest", tmp_path / "none.jpg"), "no such")
+    for k in (1, 7, -2):
+        assert_one_line_error(cli("classes", "suggest", img, "--k", k), "--k")
+    for n in (0, -1, 501):
+        assert_one_line_error(cli("classes", "suggest", img, "--frames", n), "--frames")
+    assert_one_line_error(cli("classes", "suggest", img, "--preview", tmp_path / "no" / "p.png"), "--preview")
+    assert_one_line_error(cli("classes", "suggest", img, "--preview", tmp_path / "p.txt"), "--preview")
+    assert_one_line_error(cli("classes", "suggest", img, "--roi", "1,2,inf"), "roi")
+    assert_one_line_error(cli("classes", "suggest", junk / "random.png"), "decode")
+    assert_one_line_error(cli("classes", "suggest", junk), "no readable frames")
+    gray = tmp_path / "gray.png"
+    cv2.imwrite(str(gray), np.zeros((64, 64), np.uint8))
+    assert_one_line_error(cli("classes", "suggest", gray), "grayscale")
+    for s in ("0", "-1", "nan", "inf"):
+        assert_one_line_error(cli("bench", "vision", "--seconds", s), "--seconds")
+
+
 def test_bench_vision_json():
-    p = run("bench", "vision", "--json", "--seconds", "0.1")
-    assert p.returncode == 0, p.stderr
-    res = json.loads(p.stdout)
+    r = cli("bench", "vision", "--json", "--seconds", "0.02")
+    assert r.code == 0, r.err
+    res = json.loads(r.out)
     for k in ("centroid_fps", "glcm_fps", "lacey_fps", "centroid_fps_1080p"):
         assert res[k] > 0
 
 
 def test_help_lists_commands():
-    p = run("--help")
-    assert p.returncode == 0
+    r = cli("--help")
+    assert r.code == 0
     for cmd in ("mi", "classes", "bench"):
-        assert cmd in p.stdout
+        assert cmd in r.out

@@ -163,3 +163,90 @@ def test_shipped_configs_load():
     assert load_config(repo / "configs" / "example.toml").classes == DEFAULT_CLASSES
     cfg = load_config(repo / "configs" / "pmma-blue-white.toml")
     assert [c.name for c in cfg.classes] == ["blue", "white"]
+
+
+LEARNED = """
+[meter]
+min_share = 0.01
+
+[[classes]]
+name = "teal"
+max_distance = 4.5
+lab_mean = [[80.0, -12.0, -4.0]]
+lab_cov = [[40.0, 0.0, 0.0, 4.0, 0.0, 4.0]]
+lab_weight = [0.2]
+
+[[classes]]
+name = "white"
+lab_mean = [[85.0, 0.0, 0.0], [50.0, 0.0, 0.0]]
+lab_cov = [[30.0, 0.0, 0.0, 2.0, 0.0, 2.0], [100.0, 0.0, 0.0, 2.0, 0.0, 2.0]]
+lab_weight = [0.2, 0.1]
+
+[[classes]]
+name = "background"
+reject = true
+lab_mean = [[3.0, 0.0, 0.0]]
+lab_cov = [[10.0, 0.0, 0.0, 2.0, 0.0, 2.0]]
+"""
+
+
+def test_learned_config_roundtrip_and_classification():
+    from vision.colours import classify
+
+    cfg = parse_config(LEARNED)
+    assert [c.name for c in cfg.counted] == ["teal", "white"] and cfg.classes[2].reject
+    assert parse_config(config_to_toml(cfg)).classes == cfg.classes
+    # teal, white, shaded white, black background, far-away red: by the model, never by brightness
+    swatch = np.array([[[215, 210, 180], [235, 235, 235], [120, 120, 120], [5, 5, 5], [0, 0, 220]]], np.uint8)
+    assert classify(swatch, cfg.classes).tolist() == [[1, 2, 2, 0, 0]]
+    m = cfg.make_meter(roi=H.roi_for())
+    assert [c.name for c in m.classes] == ["teal", "white"] and m.min_share == 0.01
+
+
+@pytest.mark.parametrize(
+    "old, new, match",
+    [
+        ("lab_mean = [[80.0, -12.0, -4.0]]", "lab_mean = [[nan, -12.0, -4.0]]", "finite"),
+        ("lab_mean = [[80.0, -12.0, -4.0]]", "lab_mean = [[80.0, -12.0]]", "lab_mean"),
+        ("lab_cov = [[40.0, 0.0, 0.0, 4.0, 0.0, 4.0]]", "lab_cov = [[40.0, 0.0, 0.0, -4.0, 0.0, 4.0]]", "positive definite"),
+        ("lab_weight = [0.2]\n", "lab_weight = [0.2, 0.3]\n", "one entry per component"),
+        ("max_distance = 4.5", "max_distance = inf", "max_distance"),
+        ("max_distance = 4.5", "max_distance = -1", "max_distance"),
+        ("min_share = 0.01", "min_share = nan", "min_share"),
+        ("min_share = 0.01", "min_share = 2", "min_share"),
+        ("min_share = 0.01", "collapse_ratio = -0.5", "collapse_ratio"),
+        ("min_share = 0.01", "history = 0", "history"),
+        ('name = "teal"\n', 'name = "teal"\nhsv = [[[0, 0, 0], [10, 255, 255]]]\n', "not both"),
+        ("reject = true", "reject = 3", "reject"),
+    ],
+)
+def test_bad_learned_configs(old, new, match):
+    assert old in LEARNED
+    with pytest.raises(VisionError, match=match):
+        parse_config(LEARNED.replace(old, new, 1))
+
+
+@pytest.mark.parametrize(
+    "old, new, match",
+    [
+        ("display_bgr = [255, 255, 255]", 'display_bgr = [999, -1, "x"]', "display_bgr"),
+        ("[[0, 0, 160], [179, 50, 255]]", "[[0, 0, 160], [179, 50, inf]]", "HSV range"),
+        ("[[0, 0, 160], [179, 50, 255]]", "[[0, 0, 160.5], [179, 50, 255]]", "HSV range"),
+        ("roi = [320, 240, 200]", "roi = [320, nan, 200]", "roi"),
+        ("roi = [320, 240, 200]", 'roi = [320, 240, 200]\nroi_kind = "rect"\nhalf_w_px = nan', "half_w_px"),
+        ("roi = [320, 240, 200]", 'roi = [320, 240, 200]\nroi_kind = "rect"\nhalf_w_px = -3', "half_w_px"),
+        ("roi = [320, 240, 200]", "roi = [320, 240, -5]", "radius"),
+        ('name = "teal"\n', 'name = "teal"\nreject = true\n', "reject"),
+    ],
+)
+def test_bad_hsv_configs_name_the_key(old, new, match):
+    assert old in GOOD
+    with pytest.raises(VisionError, match=match):
+        parse_config(GOOD.replace(old, new, 1))
+
+
+def test_overlapping_hsv_ranges_warn():
+    overlapping = GOOD.replace("[[0, 0, 160], [179, 50, 255]]", "[[0, 0, 160], [179, 120, 255]]")
+    cfg = parse_config(overlapping)
+    assert len(cfg.warnings) == 1 and "overlap" in cfg.warnings[0] and "'teal' wins" in cfg.warnings[0]
+    assert parse_config(GOOD).warnings == ()

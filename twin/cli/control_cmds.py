@@ -5,7 +5,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 from rich.progress import Progress
@@ -131,16 +131,18 @@ def mill_stop(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
 @app.command("mill-emulator")
 def mill_emulator(
     pty: bool = typer.Option(False, "--pty", help="Serve on a pseudo-terminal (default)."),
-    tcp: Optional[int] = typer.Option(None, "--tcp", help="Serve on this TCP port instead (0: any free port)."),
+    tcp: int | None = typer.Option(None, "--tcp", help="Serve on this TCP port instead (0: any free port)."),
     host: str = typer.Option("127.0.0.1", "--host", help="TCP address to listen on."),
-    link: Optional[str] = typer.Option(None, "--link", help="Path of the stable symlink to the pty slave."),
+    link: str | None = typer.Option(None, "--link", help="Path of the stable symlink to the pty slave."),
     faults: str = typer.Option("", "--faults", help="e.g. 'corrupt=0.05,drop=0.01,delay=0.02,disconnect=10:1'."),
-    watchdog_s: float = typer.Option(1.0, "--watchdog", help="Stop the motor after this long without a valid frame (s; 0 disables it)."),
+    watchdog_s: float = typer.Option(
+        1.0, "--watchdog", help="Stop the motor after this long without HB/SET/RUN/STP (s; 0 disables it)."
+    ),
     max_rpm: float = typer.Option(60.0, "--max-rpm", help="Top speed of the drive (rpm)."),
     accel: float = typer.Option(10.0, "--accel", help="Acceleration limit (rpm/s)."),
     tau_s: float = typer.Option(0.5, "--tau", help="Speed-loop time constant (s)."),
-    duration_s: Optional[float] = typer.Option(None, "--duration", help="Exit after this many seconds (default: Ctrl-C)."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the fault injection."),
+    duration_s: float | None = typer.Option(None, "--duration", help="Exit after this many seconds (default: Ctrl-C)."),
+    seed: int | None = typer.Option(None, "--seed", help="Seed of the fault injection."),
 ) -> None:
     """Run the motor-board emulator on a pty (prints its path) or a TCP port."""
     if pty and tcp is not None:
@@ -184,7 +186,7 @@ def mill_emulator(
         emu.close()
 
 
-TREND_SOURCES: dict[str, "SequenceSource"] = {}
+TREND_SOURCES: dict[str, SequenceSource] = {}
 """Extra MI sequence sources for ``bench trend --source NAME`` (seed -> TrendSequence), e.g. a
 twin-generated one (truth = particle MI, measured = vision MI of rendered frames).
 ``synthetic`` is built in (truth + noise + rotation ripple + outliers + dropouts)."""
@@ -193,7 +195,9 @@ twin-generated one (truth = particle MI, measured = vision MI of rendered frames
 @bench_app.command("trend")
 def bench_trend(
     as_json: bool = JSON_OPT,
-    source: str = typer.Option("synthetic", "--source", help="Sequence source: synthetic, or one registered in TREND_SOURCES."),
+    source: str = typer.Option(
+        "synthetic", "--source", help="Sequence source: synthetic, or one registered in TREND_SOURCES."
+    ),
     sequences: int = typer.Option(8, "--sequences", help="Number of synthetic sequences (seeds 0..N-1)."),
     fps: float = typer.Option(30.0, "--fps", help="Frame rate of the MI stream."),
     noise_sd: float = typer.Option(0.04, "--noise", help="Measurement noise sd (MI)."),
@@ -209,7 +213,7 @@ def bench_trend(
     check_number("--noise", noise_sd, at_least=0.0, at_most=1.0)
     check_number("--ripple", ripple, at_least=0.0, at_most=1.0)
     if source == "synthetic":
-        make: "SequenceSource" = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
+        make: SequenceSource = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
     elif source in TREND_SOURCES:
         make = TREND_SOURCES[source]
     else:
@@ -249,7 +253,7 @@ def bench_link(
     console.print(t)
 
 
-def print_trend_result(res: "TrendBenchResult", as_json: bool) -> None:
+def print_trend_result(res: TrendBenchResult, as_json: bool) -> None:
     """Print a trend benchmark result as a table or one JSON object (reused by twin)."""
     if as_json:
         print_json(res.as_dict())

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import platform
 import signal
@@ -43,7 +42,7 @@ def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
         yield f
 
 
-def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, ANN201
+def run_live(cfg, *, progress: bool = True, on_started=None):
     """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
 
     The mill link is opened first: a URL that cannot be opened raises ``ConnectionError``
@@ -75,7 +74,9 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
     try:
         if cfg.demo:
             plant = DemoPlant(
-                PlantConfig(case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px),
+                PlantConfig(
+                    case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px
+                ),
                 clock,
             )
             frames, mill_url, roi = plant.frames(), plant.url, plant.roi
@@ -88,7 +89,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
         if frames is None:
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
         runlog = RunLog(cfg.log_dir)
-        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+        started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()
@@ -102,6 +104,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
         clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
+        if plant is not None:
+            plant.start_drive()
         loop.start()
         if on_started is not None:
             on_started(loop, plant, dash)
@@ -116,15 +120,15 @@ def run_live(cfg, *, progress: bool = True, on_started=None):  # noqa: ANN001, A
             dash.stop()
         if plant is not None:
             plant.close()
-        if loop is not None:
-            summary = loop.summary(time.monotonic() - t_wall)
-            runlog.set_metadata(summary=asdict(summary))
         if runlog is not None:
+            if loop is not None:
+                summary = loop.summary(time.monotonic() - t_wall)
+                runlog.set_metadata(summary=asdict(summary))
             runlog.close()
     return summary
 
 
-def _wait(loop, cfg, progress: bool) -> None:  # noqa: ANN001
+def _wait(loop, cfg, progress: bool) -> None:
     """Block until the duration is over, Ctrl-C or SIGTERM."""
     stop = loop.stop_event
     if threading.current_thread() is threading.main_thread():
@@ -189,7 +193,9 @@ def run(
     seed: int = typer.Option(0, "--seed", help="Seed of the demo plant and twin."),
     port: int = typer.Option(8080, "--port", help="Dashboard port."),
     host: str = typer.Option("127.0.0.1", "--host", help="Dashboard address (beyond loopback needs a control token)."),
-    control_token: str = typer.Option(None, "--control-token", help="Token that unlocks the controls (or $DRUMTWIN_CONTROL_TOKEN)."),
+    control_token: str = typer.Option(
+        None, "--control-token", help="Token that unlocks the controls (or $DRUMTWIN_CONTROL_TOKEN)."
+    ),
     scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address for what-if studies."),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary at the end (stdout)."),
 ) -> None:
@@ -240,7 +246,9 @@ def run(
 
 @app.command("compare")
 def compare(
-    runs: list[str] = typer.Argument(..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name is the label)."),
+    runs: list[str] = typer.Argument(
+        ..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name is the label)."
+    ),
     plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
     title: str = typer.Option("", "--title", help="Plot title."),
 ) -> None:

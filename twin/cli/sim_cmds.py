@@ -215,6 +215,8 @@ def calibrate_cmd(
     config: Optional[Path] = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path (2..40)"),
+    spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
+    window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
@@ -231,6 +233,8 @@ def calibrate_cmd(
     check_rpm(rpm, PAPER_DRUM)
     check_number("--rpm", rpm, 0.0, PAPER_DRUM.critical_rpm, lo_open=True)
     check_number("--max-evals", max_evals, 2, 40, integer=True)
+    check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
+    check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
@@ -246,7 +250,7 @@ def calibrate_cmd(
     with _progress("calibrate") as prog:
         task = prog.add_task("calibrate", total=None)
         cal = calibrate(target, rpm, target_curvature=target_curv, seed=seed, max_evals=max_evals,
-                        progress=lambda d, t: prog.update(task, completed=d, total=t))
+                        spin_up_s=spin_up_s, window_s=window_s, progress=lambda d, t: prog.update(task, completed=d, total=t))
     out = {"slope_deg": target, "twin_slope_deg": cal.twin_slope_deg, "friction": cal.friction,
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
@@ -388,6 +392,12 @@ def bench_twin(
             counts[name.replace("rtf_", "n_")] = len(sim.particles())
             prog.advance(task)
     out.update(counts)
+    from sim.drum import DEFAULT_DT_S
+
+    out["dt_ms"] = DEFAULT_DT_S * 1e3
+    # total cost per simulated second grows as N^k from the paper bed to the 16x bed
+    out["cost_exponent_16x"] = math.log(out["rtf_paper_5rpm"] / out["rtf_16x"]) / math.log(
+        counts["n_16x"] / counts["n_paper_5rpm"])
     if as_json:
         print_json(out)
     else:

@@ -9,13 +9,14 @@ with the 3D scene rendering beside it.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from twin.errors import TwinError
 
-__all__ = ["DashboardRate", "measure_dashboard_rate", "CHROMIUM", "IMG_SELECTOR"]
+__all__ = ["CHROMIUM", "IMG_SELECTOR", "DashboardRate", "check_bench_args", "measure_dashboard_rate"]
 
 CHROMIUM = Path("/usr/bin/chromium")
 IMG_SELECTOR = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
@@ -30,6 +31,23 @@ _COUNT_JS = """([sel, ms]) => new Promise(resolve => {
   });
   setTimeout(() => { obs.forEach(o => o.disconnect()); resolve(counts); }, ms);
 })"""
+
+
+def check_bench_args(seconds: float, warmup_s: float, speed: float, port: int) -> None:
+    """Validate ``drumtwin bench dashboard``'s options before anything starts (TwinError,
+    one line naming the option): finite seconds in (0, 3600], warm-up in [0, 600], speed
+    in (0, 100], port in 1..65535."""
+    for name, value, lo_open, lo, hi in (
+        ("--seconds", seconds, True, 0.0, 3600.0),
+        ("--warmup", warmup_s, False, 0.0, 600.0),
+        ("--speed", speed, True, 0.0, 100.0),
+    ):
+        v = float(value)
+        if not (math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi):
+            rng = f"{'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
+            raise TwinError(f"{name} must be a finite number {rng} (got {value})")
+    if not 1 <= int(port) <= 65535:
+        raise TwinError(f"--port must be in 1..65535 (got {port})")
 
 
 @dataclass(frozen=True)
@@ -71,5 +89,5 @@ def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15
                 browser.close()
     except PlaywrightError as exc:
         raise TwinError(f"bench dashboard: the browser failed: {str(exc).splitlines()[0]}") from exc
-    counts = list(counts) + [0, 0]
+    counts = [*counts, 0, 0]
     return DashboardRate(camera_hz=counts[0] / seconds, twin_hz=counts[1] / seconds, seconds=seconds)

@@ -70,8 +70,9 @@ class TwinScene:
             for k in np.unique(cls).tolist():
                 sel = cls == k
                 rgb = np.array(palette[k % len(palette)][::-1], np.uint8)
+                # viser draws 2 x point_size across: the mean radius gives the mean diameter
                 self._clouds[k] = self._scene.add_point_cloud(
-                    f"/twin/particles/{k}", pos[sel], rgb, point_size=float(r_m[sel].mean()),  # viser draws 2 x point_size across
+                    f"/twin/particles/{k}", pos[sel], rgb, point_size=float(r_m[sel].mean()),
                     point_shape="circle", point_shading="flat", precision="float32",
                 )
             self._cls = cls.copy()

@@ -38,6 +38,7 @@ MODE_LABELS = ("OFF", "MANUAL", "AUTO")
 RPM_MAX = 70.0
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
 _log = logging.getLogger("drumtwin.dashboard")
+EVENT_THROTTLE_S = 5.0  # noisy security events (refused handshakes, limited unlocks): at most one per 5 s
 EventSink = Callable[[str, dict[str, Any]], None]
 """``on_event(kind, fields)``: where the dashboard reports security events (e.g. the run log)."""
 _WHATIF_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -50,7 +51,8 @@ def _rgb(image_bgr: np.ndarray) -> np.ndarray:
     """RGB copy for viser, scaled to ``DISPLAY_PX`` wide (small demo frames are enlarged)."""
     h, w = image_bgr.shape[:2]
     if w != DISPLAY_PX and w > 0:
-        image_bgr = cv2.resize(image_bgr, (DISPLAY_PX, max(1, round(h * DISPLAY_PX / w))), interpolation=cv2.INTER_LINEAR)
+        size = (DISPLAY_PX, max(1, round(h * DISPLAY_PX / w)))
+        image_bgr = cv2.resize(image_bgr, size, interpolation=cv2.INTER_LINEAR)
     return np.ascontiguousarray(image_bgr[..., ::-1])
 
 
@@ -159,6 +161,7 @@ class Dashboard:
         self._build_lock = threading.Lock()  # one viewer's controls built at a time
         self.refused_handshakes = 0
         self.failed_unlocks = 0
+        self._throttle: dict[str, tuple[float, int]] = {}  # kind -> (last reported, suppressed since)
         self.state = state
         self.controls = controls
         self.host = host
@@ -191,13 +194,25 @@ class Dashboard:
             try:
                 self._on_event(kind, fields)
                 return
-            except Exception:  # noqa: BLE001 - a broken sink must not break the dashboard
+            except Exception:
                 _log.exception("dashboard event sink failed")
         _log.warning("%s %s", kind, fields)
 
+    def _event_throttled(self, kind: str, **fields: Any) -> None:
+        """Like ``_event``, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
+        can retry a refused handshake in a loop); ``suppressed`` counts the ones not sent."""
+        now = time.monotonic()
+        with self._limiter_lock:
+            last, suppressed = self._throttle.get(kind, (-math.inf, 0))
+            if now - last < EVENT_THROTTLE_S:
+                self._throttle[kind] = (last, suppressed + 1)
+                return
+            self._throttle[kind] = (now, 0)
+        self._event(kind, suppressed=suppressed, **fields)
+
     def _refused(self, origin: str | None, host: str | None) -> None:
         self.refused_handshakes += 1
-        self._event("dashboard_refused", origin=origin, host=host)
+        self._event_throttled("dashboard_refused", origin=origin, host=host)
 
     def _disable_share_tunnel(self) -> None:
         """No share URL: viser's tunnel would publish the dashboard on the internet."""
@@ -228,11 +243,12 @@ class Dashboard:
         now = time.monotonic()
         with self._limiter_lock:
             wait = self._limiter.wait_s(client_id, now)
-            if wait > 0:
-                self._event("dashboard_unlock_limited", client=client_id, wait_s=round(wait, 1))
-                return False, f"**too many attempts: wait {math.ceil(wait)} s**"
-            ok = tokens_match(given, self._token)
-            self._limiter.attempt(client_id, now, ok)
+            ok = wait <= 0 and tokens_match(given, self._token)
+            if wait <= 0:
+                self._limiter.attempt(client_id, now, ok)
+        if wait > 0:
+            self._event_throttled("dashboard_unlock_limited", client=client_id, wait_s=round(wait, 1))
+            return False, f"**too many attempts: wait {math.ceil(wait)} s**"
         if not ok:
             self.failed_unlocks += 1
             self._event("dashboard_unlock_failed", client=client_id)
@@ -321,7 +337,7 @@ class Dashboard:
         with self._build_lock:  # viser's shared folder context admits one builder at a time
             try:
                 self._build_client_controls(client)
-            except Exception:  # noqa: BLE001 - a viewer that left mid-build
+            except Exception:
                 _log.exception("building the controls of viewer %s failed", client.client_id)
 
     def _close(self, client: viser.ClientHandle) -> None:
@@ -526,10 +542,11 @@ class Dashboard:
             return
         # one x axis for all curves: the union of the time grids, each curve interpolated
         t = np.unique(np.concatenate([np.asarray(x, float) for x in w.t_s]))
-        ys = tuple(np.interp(t, np.asarray(x, float), np.asarray(y, float)) for x, y in zip(w.t_s, w.mi))
-        series = ({"label": "t s"},) + tuple(
-            {"label": f"{r:g} rpm", "stroke": _WHATIF_COLOURS[i % len(_WHATIF_COLOURS)], "width": 2}
-            for i, r in enumerate(w.rpms)
+        ys = tuple(np.interp(t, np.asarray(x, float), np.asarray(y, float)) for x, y in zip(w.t_s, w.mi, strict=True))
+        series: tuple[Any, ...] = (
+            {"label": "t s"},
+            *({"label": f"{r:g} rpm", "stroke": _WHATIF_COLOURS[i % len(_WHATIF_COLOURS)], "width": 2}
+              for i, r in enumerate(w.rpms)),
         )
         with self._server.atomic():
             self._whatif_plot.series = series
@@ -538,10 +555,10 @@ class Dashboard:
                 "x": {"time": False, "auto": False, "range": (float(t[0]), float(max(t[-1], t[0] + 1.0)))},
                 "y": {"auto": False, "range": (0.0, 1.0)},
             }
-            self._whatif_plot.data = (t,) + ys
+            self._whatif_plot.data = (t, *ys)
         lines = ["| rpm | plateau MI | regime |", "|---:|---:|---|"]
         lines += [
-            f"| {r:g} | {_fmt(p)} | {g} |" for r, p, g in zip(w.rpms, w.plateau_mi, w.regime)
+            f"| {r:g} | {_fmt(p)} | {g} |" for r, p, g in zip(w.rpms, w.plateau_mi, w.regime, strict=True)
         ]
         self._whatif_table.content = "\n".join(lines)
 

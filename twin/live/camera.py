@@ -115,7 +115,8 @@ class CameraWorker:
             self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
             self.fps.tick()
             put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
-            if self._overlay_cadence is not None and self.overlay is not None and self._overlay_cadence.due(self._monotonic()):
+            cadence = self._overlay_cadence
+            if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
 
 

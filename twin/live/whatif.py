@@ -1,9 +1,9 @@
 """The what-if worker: twin studies in the background, for AUTO and for the operator.
 
 This is the application's predictor (the supervisor itself only asks): ``request`` takes
-the supervisor's :class:`PredictionRequest` (a newer one supersedes one not started
-yet; it waits for the twin's first state), ``poll`` hands a finished :class:`PredictionResult` back once. ``submit`` starts an
-operator study. One thread serves both, one study at a time, from the twin's newest
+the supervisor's :class:`PredictionRequest` (a newer one supersedes one not started yet;
+it waits for the twin's first state), ``poll`` hands a finished :class:`PredictionResult`
+back once. ``submit`` starts an operator study. One thread serves both, one study at a time, from the twin's newest
 state (:class:`TwinInfo`); the studies themselves run in a local process pool
 (``sim.whatif.make_pool``) or on a Dask cluster (``--scheduler``), so they never compete
 with the loop for the GIL.
@@ -126,14 +126,14 @@ class WhatIfWorker:
             if pred is not None:
                 try:
                     preds = self._study(pred.rpms, pred.horizon_s, "AUTO")
-                except Exception:  # noqa: BLE001 - logged in _study; the supervisor falls back
+                except Exception:
                     return True
                 with self._lock:
                     self._result = PredictionResult(pred.t_s, pred.horizon_s, preds)
             elif study is not None:
                 try:
                     self._study(study.rpms, study.duration_s, study.reason)
-                except Exception:  # noqa: BLE001 - logged in _study
+                except Exception:
                     pass
             return True
         finally:
@@ -167,7 +167,8 @@ class WhatIfWorker:
             self.sink.event("whatif_error", t_req, reason=reason, error="the twin is not running yet")
             raise RuntimeError("the twin is not running yet")
         self._seq += 1
-        self.state.set_whatif(WhatIfView(status=f"running {len(rpms)} rpm x {duration_s:g} s ({reason})", seq=self._seq))
+        status = f"running {len(rpms)} rpm x {duration_s:g} s ({reason})"
+        self.state.set_whatif(WhatIfView(status=status, seq=self._seq))
         t0 = time.monotonic()
         jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state) for r in rpms]
         try:
@@ -177,7 +178,7 @@ class WhatIfWorker:
             self.state.set_whatif(WhatIfView(status=f"error: {exc}", seq=self._seq))
             self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
             raise
-        preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results)}
+        preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results, strict=False)}
         self._seq += 1
         t_done = self.view.now_s()
         self.state.set_whatif(
