@@ -3,10 +3,14 @@
 Imports ``vision`` (to measure its own frames) and nothing else of drumtwin.
 
 - ``sim.recipe``: ``DrumSpec``, ``ParticleSpec``, ``Recipe``, ``PAPER_RECIPE``, ``slice_2d``
-- ``sim.drum``: ``DrumSim`` (step/advance/set_rpm/particles/snapshot/restore), ``SimState``
+- ``sim.drum``: ``DrumSim`` (advance/step/set_rpm/particles/snapshot/restore/stats), ``SimState``,
+  ``ContactStats``; one fixed internal step (``DEFAULT_DT_S``), paper materials as defaults
+- ``sim.contacts``: the compiled per-step contact pass (rolling friction, overlap statistics)
 - ``sim.render``: ``Renderer``, ``Realism`` (synthetic camera)
-- ``sim.measure``: ``particle_mi``, ``particle_slope_deg``, ``twin_meter``
-- ``sim.calibrate``: ``calibrate`` -> ``Calibration``
-- ``sim.whatif``: ``WhatIfJob``, ``run_study``, ``summarize``, ``regime``
-- ``sim.validation``: regenerates docs/validation.md's plots
+- ``sim.measure``: ``particle_mi``, ``free_surface`` / ``particle_slope_deg`` (free surface),
+  ``particle_axis_deg`` (principal axis), ``twin_meter``
+- ``sim.calibrate``: ``calibrate`` -> ``Calibration`` (sliding + rolling friction, reachable range)
+- ``sim.whatif``: ``WhatIfJob``, ``run_study``, ``summarize``, ``flow_regime``, ``froude``
+- ``sim.errors``: ``SimError``, ``check_number``, ``check_seed``
+- ``sim.validation``: regenerates docs/validation.md's numbers and plots
 """

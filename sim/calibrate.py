@@ -222,7 +222,8 @@ def calibrate(
 
     path, (f, r, s) = min(candidates, key=score)
     return Calibration(
-        friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s), residual_deg=float(sign * (s - target_mag)),
+        friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s),
+        residual_deg=float(sign * (s - target_mag)),
         target_slope_deg=target, rpm=rpm, evaluations=len(history), history=tuple(history),
         range_deg=(float(lo_b), float(hi_b)), twin_curvature=float(curv[(f, r)]),
         target_curvature=None if target_curvature is None else float(target_curvature), path=path,

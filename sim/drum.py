@@ -181,7 +181,9 @@ def _check_params(p: SimParams) -> None:
         raise SimError(f"solver iterations must be in [1, 200] (got {p.iterations})")
 
 
-def _place(classes: list[DiskClass], case: str, radius_m: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _place(
+    classes: list[DiskClass], case: str, radius_m: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Centres (n, 2) and class indices by random sequential addition at ``_SHRINK`` size."""
     radii = np.concatenate([np.full(c.count, c.radius_m) for c in classes])
     cls = np.concatenate([np.full(c.count, k, dtype=np.int64) for k, c in enumerate(classes)])
@@ -364,7 +366,7 @@ class DrumSim:
         n_grow = 40
         for j in range(n_grow):
             scale = _SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow
-            for s, r in zip(self._shapes, self._r):
+            for s, r in zip(self._shapes, self._r, strict=False):
                 s.unsafe_set_radius(float(r * scale))
             space.step(h)
         space.gravity = (0.0, -G_M_S2)
@@ -400,7 +402,8 @@ class DrumSim:
 
     def set_friction(self, mu: float, rolling: float | None = None) -> None:
         """Change sliding friction (and rolling friction) at run time."""
-        params = replace(self.params, friction=float(mu), rolling=self.params.rolling if rolling is None else float(rolling))
+        rolling = self.params.rolling if rolling is None else float(rolling)
+        params = replace(self.params, friction=float(mu), rolling=rolling)
         _check_params(params)
         self.params = params
         self._apply_params()
@@ -446,7 +449,8 @@ class DrumSim:
         for _ in range(n):
             if self._rpm_actual != self._rpm_target:
                 diff = self._rpm_target - self._rpm_actual
-                self._set_rpm_actual(self._rpm_target if abs(diff) <= accel else self._rpm_actual + math.copysign(accel, diff))
+                step_rpm = diff if abs(diff) <= accel else math.copysign(accel, diff)
+                self._set_rpm_actual(self._rpm_actual + step_rpm)
             space.step(h)
             self._drum_angle_rad += self._omega_wall * h
             self._after_step()
@@ -589,7 +593,7 @@ class DrumSim:
         self._build(state)
 
     @classmethod
-    def from_state(cls, state: SimState) -> "DrumSim":
+    def from_state(cls, state: SimState) -> DrumSim:
         """A new twin that continues from ``state``."""
         sim = cls.__new__(cls)
         sim._build(state)
@@ -598,10 +602,10 @@ class DrumSim:
 
 __all__ = [
     "CASES",
-    "ContactStats",
     "DEFAULT_DT_S",
     "DEFAULT_FRICTION",
     "DEFAULT_ROLLING",
+    "ContactStats",
     "DrumSim",
     "Particles",
     "SimParams",

@@ -137,7 +137,7 @@ def slice_2d(recipe: Recipe, drum: DrumSpec) -> list[DiskClass]:
     total = sum(vols)
     area_m2 = recipe.fill * PACKING_2D * math.pi * drum.radius_m**2
     out = []
-    for p, v in zip(recipe.particles, vols):
+    for p, v in zip(recipe.particles, vols, strict=False):
         r = p.diameter_m / 2.0
         n = int(round(v / total * area_m2 / (math.pi * r * r))) if total > 0 else 0
         if p.count > 0 and n == 0:
@@ -159,14 +159,14 @@ def with_fill(recipe: Recipe, fill: float) -> Recipe:
 
 __all__ = [
     "BLUE_BGR",
-    "DiskClass",
-    "DrumSpec",
     "G_M_S2",
     "PACKING_2D",
     "PAPER_DRUM",
     "PAPER_RECIPE",
-    "ParticleSpec",
     "RED_BGR",
+    "DiskClass",
+    "DrumSpec",
+    "ParticleSpec",
     "Recipe",
     "recipe_fill_3d",
     "slice_2d",

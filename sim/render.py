@@ -48,7 +48,9 @@ class Realism:
 class Renderer:
     """Front view of a drum to ``size_px`` images (int = square, or (width, height))."""
 
-    def __init__(self, drum: DrumSpec | DrumSim, size_px: int | tuple[int, int] = 480, realism: Realism | None = None) -> None:
+    def __init__(
+        self, drum: DrumSpec | DrumSim, size_px: int | tuple[int, int] = 480, realism: Realism | None = None
+    ) -> None:
         spec = drum.drum if isinstance(drum, DrumSim) else drum
         if not isinstance(spec, DrumSpec):
             raise SimError(f"Renderer needs a DrumSpec or DrumSim (got {type(drum).__name__})")
@@ -110,7 +112,7 @@ class Renderer:
         ys = np.rint((self.cy_px - particles.y_m * self.px_per_m) * (1 << _SHIFT)).astype(np.int64)
         rs = np.maximum(np.rint(particles.r_m * scale).astype(np.int64), 1 << _SHIFT)
         colours = [tuple(int(v) for v in c) for c in particles.class_bgr] or [(0, 0, 220), (220, 60, 0)]
-        for x, y, r, k in zip(xs.tolist(), ys.tolist(), rs.tolist(), particles.cls.tolist()):
+        for x, y, r, k in zip(xs.tolist(), ys.tolist(), rs.tolist(), particles.cls.tolist(), strict=False):
             cv2.circle(img, (x, y), r, colours[k % len(colours)], -1, cv2.LINE_8, _SHIFT)
         out = img.copy()
         if self.realism is None:

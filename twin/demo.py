@@ -40,7 +40,7 @@ class PlantConfig:
     friction: float = PLANT_FRICTION
     rolling: float = PLANT_ROLLING
     realism: bool = True
-    watchdog_s: float = 3.0  # emulator watchdog, wall seconds (covers the loop's start-up on a busy machine)
+    watchdog_s: float = 5.0  # emulator watchdog, wall seconds (a busy machine may stall the loop for seconds)
 
 
 class DemoPlant:
@@ -74,8 +74,8 @@ class DemoPlant:
 
     def start_drive(self) -> None:
         """The operator's front panel: the drive runs at the start speed when the demo
-        begins (as a real one would be). Call it right before the loop starts: the board's
-        watchdog stops a running drive that no host feeds."""
+        begins (as a real one would be). Call it once the loop's mill worker is connected:
+        the board's watchdog stops a running drive that no host feeds."""
         start = float(self.config.start_rpm)
         self.emulator.set_motor(setpoint_rpm=start, actual_rpm=start, running=True)
 

@@ -35,7 +35,6 @@ from control.supervisor import Mode, Supervisor, SupervisorConfig
 from control.trend import MITrend, TrendConfig
 from twin.clock import RunClock
 from twin.config import RunConfig
-from twin.errors import TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.records import (
@@ -263,13 +262,23 @@ class LiveLoop:
         self.twin.request("reseed")
 
     def run_whatif(self, rpms: Sequence[float], duration_s: float) -> None:
-        rpm_list = [float(r) for r in rpms]
-        if not rpm_list or not all(math.isfinite(r) and r >= 0 for r in rpm_list):
-            raise TwinError(f"what-if rpms must be numbers >= 0, got {list(rpms)}")
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            raise TwinError(f"what-if duration must be > 0 s, got {duration_s}")
-        self.events.event("operator", self.now_s(), action="whatif", rpms=rpm_list, duration_s=duration_s)
-        self.whatif.submit(rpm_list, duration_s, reason="operator")
+        """Queue an operator study (bad input is an ``operator_rejected`` event, never an
+        exception in the dashboard's callback)."""
+        t = self.now_s()
+        try:
+            rpm_list = [float(r) for r in rpms]
+            duration = float(duration_s)
+        except (TypeError, ValueError):
+            rpm_list, duration = [], math.nan
+        if not rpm_list or not all(math.isfinite(r) and r >= 0 for r in rpm_list) or not (
+            math.isfinite(duration) and duration > 0
+        ):
+            error = f"bad what-if: rpms {rpms}, {duration_s} s"
+            self.events.event("operator_rejected", t, action="whatif", error=error)
+            return
+        self.events.event("operator", t, action="whatif", rpms=rpm_list, duration_s=duration)
+        if not self.whatif.submit(rpm_list, duration, reason="operator"):
+            self.events.event("operator_rejected", t, action="whatif", error="a study is already running")
 
 
 # Supervisor settings of the live loop. The camera MI of a well-mixed bed is ~0.93-0.95;

@@ -392,9 +392,17 @@ def _every_bgr() -> np.ndarray:
 
 
 @lru_cache(maxsize=1)
-def _every_lab8() -> np.ndarray:
-    """OpenCV 8-bit CIELAB of every BGR colour, (2^24, 3) uint8 (48 MB, built once)."""
-    return cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2Lab).reshape(-1, 3)
+def _every_lab8() -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV 8-bit CIELAB of every BGR colour as the distinct Lab values (n, 3) uint8
+    (about 2.1 M) and, per BGR colour, the index of its Lab value (2^24 int32); built once."""
+    lab = cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2Lab).reshape(-1, 3)
+    key = (lab[:, 0].astype(np.int32) << 16) | (lab[:, 1].astype(np.int32) << 8) | lab[:, 2]
+    used = np.zeros(1 << 24, np.bool_)
+    used[key] = True
+    index = np.cumsum(used, dtype=np.int32) - 1
+    values = np.nonzero(used)[0].astype(np.int32)
+    uniq = np.stack([(values >> 16) & 255, (values >> 8) & 255, values & 255], axis=1).astype(np.uint8)
+    return uniq, index[key]
 
 
 def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, out):  # pragma: no cover - compiled
@@ -446,10 +454,11 @@ def _lab_lut(classes: tuple[ColourClass, ...]) -> np.ndarray:
         import numba  # imported here: the CLI starts fast when no table is built
 
         _lab_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_lab_lut_py)
-    out = np.zeros(1 << 24, np.uint8)
-    _lab_kernel(_every_lab8(), np.array(means, np.float64), np.array(precs, np.float64), np.array(offsets, np.float64),
-                np.array(max_d2, np.float64), np.array(labels, np.uint8), out)
-    return out
+    uniq, inverse = _every_lab8()
+    per_lab = np.zeros(uniq.shape[0], np.uint8)
+    _lab_kernel(uniq, np.array(means, np.float64), np.array(precs, np.float64), np.array(offsets, np.float64),
+                np.array(max_d2, np.float64), np.array(labels, np.uint8), per_lab)
+    return np.take(per_lab, inverse)
 
 
 @lru_cache(maxsize=8)

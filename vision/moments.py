@@ -40,13 +40,35 @@ class ClassTables:
     n_classes: int
 
 
+def _coarse_py(fine, out):  # pragma: no cover - compiled
+    """out[bin] = the class of a 4x4x4 BGR bin when all its colours agree, else 255."""
+    for b in range(64):
+        for g in range(64):
+            for r in range(64):
+                first = fine[((b * 4) << 16) | ((g * 4) << 8) | (r * 4)]
+                same = True
+                for db in range(4):
+                    for dg in range(4):
+                        base = (((b * 4 + db) << 16) | ((g * 4 + dg) << 8)) + r * 4
+                        for dr in range(4):
+                            if fine[base + dr] != first:
+                                same = False
+                out[(b << 12) | (g << 6) | r] = first if same else _AMBIGUOUS
+
+
+_coarse_kernel = None
+
+
 @lru_cache(maxsize=8)
 def _tables(classes: tuple[ColourClass, ...]) -> ClassTables:
+    global _coarse_kernel
     fine = class_lut(classes)
-    bins = fine.reshape(64, 4, 64, 4, 64, 4)
-    lo = bins.min(axis=(1, 3, 5))
-    hi = bins.max(axis=(1, 3, 5))
-    coarse = np.where(lo == hi, lo, _AMBIGUOUS).astype(np.uint8).ravel()
+    if _coarse_kernel is None:
+        import numba
+
+        _coarse_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_coarse_py)
+    coarse = np.empty(1 << 18, np.uint8)
+    _coarse_kernel(fine, coarse)
     return ClassTables(coarse, fine, len(counted_classes(classes)))
 
 

@@ -13,7 +13,8 @@
    first until ``k`` groups remain. So a white particle in shadow stays white, while white
    and pale teal, or dark and light green, stay apart. A particle component joined more
    closely to the background than to any other particle component (gaps, shadows) joins
-   the background.
+   the background, and so does a member of a class far darker (L below half) than the
+   class's main component (the gaps between particles, deep shadows).
 5. Each class keeps its Gaussians; the background is one reject class. The meter's
    lookup table assigns every colour to its most likely component, and counts it only
    within ``max_distance`` sigmas of a particle class.
@@ -42,6 +43,7 @@ MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
 
 _L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
+_SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main lightness is shadow/gap
 _COV_FLOOR = (4.0, 1.0, 1.0)  # variance floor (L, a, b): JPEG noise, frames not seen
 _HUE_NAMES = ((8, "red"), (20, "orange"), (33, "yellow"), (78, "green"), (95, "teal"), (130, "blue"),
               (155, "purple"), (170, "magenta"), (180, "red"))
@@ -211,6 +213,12 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
         _, a, b = best
         groups[a] = groups[a] + groups[b]
         del groups[b]
+    for g in groups:  # gaps and shadows in the bed: a member far darker than the class's main colour
+        main = max(g, key=lambda j: counts[j])
+        for j in list(g):
+            if j != main and mu[j, 0] < _SHADOW_L_RATIO * mu[main, 0]:
+                g.remove(j)
+                background.append(j)
     total = counts.sum()
     named = []
     for g in groups:
@@ -288,19 +296,20 @@ def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: Dr
     out = np.hstack([left, right])
     fs = max(0.4, min(h, w) / 900.0)
     lh = int(30 * fs) + 6
-    y = lh
     inside = _mask_in_box(roi, (0, 0, w, h))
     n_in = max(int(inside.sum()), 1)
-    for i, c in enumerate(counted):
-        share = float(((labels == i + 1) & inside).sum()) / n_in
-        text = f"{c.name}  {100 * share:.1f}% of drum"
+    lines = [(f"{c.name}  {100 * float(((labels == i + 1) & inside).sum()) / n_in:.1f}% of drum", c.display_bgr)
+             for i, c in enumerate(counted)]
+    lines.append(("grey: no class (background, rim, glare, shadow)", None))
+    width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, fs, 1)[0][0] for t, _ in lines) + lh + 20
+    panel = out[0: lh * len(lines) + 10, w: min(2 * w, w + width)]
+    panel[...] = (panel * 0.3).astype(np.uint8)
+    y = lh
+    for text, colour in lines:
         x = w + 10
-        cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), c.display_bgr, -1)
-        cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), (255, 255, 255), 1)
-        cv2.putText(out, text, (x + lh, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs, (0, 0, 0), 3, cv2.LINE_AA)
+        if colour is not None:
+            cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), colour, -1)
+            cv2.rectangle(out, (x, y - lh + 8), (x + lh - 8, y), (255, 255, 255), 1)
         cv2.putText(out, text, (x + lh, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs, (255, 255, 255), 1, cv2.LINE_AA)
         y += lh
-    text = "grey: no class (background, rim, glare, shadow)"
-    cv2.putText(out, text, (w + 10, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs * 0.8, (0, 0, 0), 3, cv2.LINE_AA)
-    cv2.putText(out, text, (w + 10, y - 4), cv2.FONT_HERSHEY_SIMPLEX, fs * 0.8, (220, 220, 220), 1, cv2.LINE_AA)
     return out

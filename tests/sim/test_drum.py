@@ -20,7 +20,7 @@ def test_same_seed_same_result_and_other_seed_differs():
     b = DrumSim(case="C", seed=3, rpm=10.0)
     c = DrumSim(case="C", seed=4, rpm=10.0)
     for s in (a, b, c):
-        s.advance(1.0)
+        s.advance(0.5)
     assert np.array_equal(_arrays(a), _arrays(b))
     assert not np.allclose(_arrays(a), _arrays(c))
 
@@ -30,17 +30,17 @@ def test_snapshot_restore_is_repeatable_and_branches_from_now():
     sim.advance(0.5)
     sim.advance(0.0003)  # leave part of a step in the accumulator: the snapshot carries it
     state = sim.snapshot()
-    sim.advance(1.0)
+    sim.advance(0.5)
     first = _arrays(sim)
     t_first = sim.t_s
     sim.restore(state)
     assert sim.t_s == pytest.approx(0.5003)
     assert np.allclose(_arrays(sim)[:, :2], state.pos_m)
-    sim.advance(1.0)
+    sim.advance(0.5)
     assert sim.t_s == pytest.approx(t_first)
     second = _arrays(sim)
     branch = DrumSim.from_state(state)
-    branch.advance(1.0)
+    branch.advance(0.5)
     assert np.array_equal(second, _arrays(branch))  # restore and from_state agree exactly
     # the snapshot's own future is the same as any branch from it
     assert np.array_equal(first, second)

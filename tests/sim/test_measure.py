@@ -16,7 +16,7 @@ from sim.render import Realism, Renderer
 @pytest.fixture(scope="module")
 def running_sim():
     sim = DrumSim(case="A", seed=0, rpm=5.0)
-    sim.advance(5.0)
+    sim.advance(3.0)
     return sim
 
 

@@ -37,12 +37,12 @@ def test_regime_from_a_synthetic_flow():
 def test_local_pool_gives_the_same_results_as_in_process_and_branches_from_a_state():
     from sim.drum import DrumSim
 
-    jobs = [WhatIfJob(rpm=r, duration_s=2.0, seed=1, sample_s=0.5) for r in (5.0, 30.0)]
+    jobs = [WhatIfJob(rpm=r, duration_s=1.0, seed=1, sample_s=0.5) for r in (5.0, 30.0)]
     one = run_study(jobs, workers=1)
     two = run_study(jobs, workers=2)
-    for a, b in zip(one, two):
+    for a, b in zip(one, two, strict=False):
         assert np.array_equal(a.mi, b.mi)
-        assert a.t_s[-1] == pytest.approx(2.0)
+        assert a.t_s[-1] == pytest.approx(1.0)
         assert a.airborne.shape == a.mi.shape and np.all((a.airborne[1:] >= 0) & (a.airborne[1:] <= 1))
     assert one[1].rpm_actual[-1] == pytest.approx(30.0)
     summ = summarize(one)
@@ -51,7 +51,7 @@ def test_local_pool_gives_the_same_results_as_in_process_and_branches_from_a_sta
     assert summ[0]["regime"] in ("rolling", "cascading", "cataracting") and summ[0]["froude_regime"] == "rolling"
     # branching from "now": the what-if starts at the live twin's state and ramps
     sim = DrumSim(rpm=5.0, case="A")
-    sim.advance(1.0)
+    sim.advance(0.5)
     state = sim.snapshot()
     res = run_study([WhatIfJob(rpm=25.0, duration_s=1.0, start=state, sample_s=0.25)], workers=1)[0]
     assert res.rpm_actual[0] == pytest.approx(5.0)
@@ -117,12 +117,12 @@ def test_study_on_a_real_dask_scheduler_and_worker():
              "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with Client(addr, timeout="30s", set_as_default=False) as c:
             c.wait_for_workers(1, timeout=90)
-        jobs = [WhatIfJob(rpm=r, duration_s=1.0, seed=0, sample_s=0.5) for r in (5.0, 20.0)]
+        jobs = [WhatIfJob(rpm=r, duration_s=0.5, seed=0, sample_s=0.25) for r in (5.0, 20.0)]
         seen = []
         remote = run_study(jobs, scheduler=addr, progress=lambda d, t: seen.append((d, t)))
         local = run_study(jobs, workers=1)
         assert seen[-1] == (2, 2)
-        for a, b in zip(remote, local):
+        for a, b in zip(remote, local, strict=False):
             assert a.job.rpm == b.job.rpm
             assert np.array_equal(a.mi, b.mi)
     finally:

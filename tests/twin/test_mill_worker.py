@@ -198,3 +198,72 @@ def test_the_worker_polls_with_heartbeats_only(status: MillStatus) -> None:
     for _ in range(3):
         w.cycle()
     assert link.polls == 3 and link.sent == [] and box.get().status == status
+
+
+def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
+    """The same worker on the real driver and the emulator's board over a TCP link."""
+    import time
+
+    from control.device import DeviceConfig
+    from control.driver import MillClient
+    from control.emulator import MillEmulator
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=2)
+    port = emu.open_tcp(0)
+    try:
+        emu.set_motor(setpoint_rpm=8.0, actual_rpm=8.0, running=True)
+        deadline = time.monotonic() + 5
+        while emu.motor.fault != "WDOG" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.1, retries=1,
+                          reconnect_wait_s=0.2)
+        sink, box = Sink(), Latest(MillSnapshot())
+        w = MillWorker(link, sink, box, now_s=lambda: 0.0)
+        for _ in range(5):  # connecting: reads only, the tripped board stays stopped
+            w.cycle()
+        assert box.get().connected and box.get().fault == "WDOG" and not emu.motor.running
+        assert emu.applied == []
+        w.submit(StartMill(epoch=box.get().epoch))  # the operator
+        w.cycle()
+        assert emu.motor.running and [a.cmd for a in emu.applied] == ["RUN"]
+        w.submit(SetRpm(1000.0, epoch=box.get().epoch))  # beyond the board's range: NAK
+        snap = w.cycle()
+        assert snap.connected and snap.epoch == 2 and sink.kinds("mill_refused")[0]["reason"] == "RANGE"
+        assert "mill_link" not in sink.faults and emu.motor.setpoint_rpm == 8.0
+        emu.disconnect()
+        old_epoch = box.get().epoch
+        for _ in range(3):
+            w.cycle()
+        assert not box.get().connected and "mill_link" in sink.faults
+        w.submit(SetRpm(20.0, epoch=old_epoch))  # decided before the link came back
+        emu.reconnect()
+        deadline = time.monotonic() + 10
+        while not box.get().connected and time.monotonic() < deadline:
+            w.cycle()
+            time.sleep(0.05)
+        w.cycle()
+        assert box.get().connected and box.get().epoch == old_epoch + 1
+        assert emu.motor.setpoint_rpm == 8.0 and "SET" not in [a.cmd for a in emu.applied]
+        link.close()
+    finally:
+        emu.close()
+
+
+def test_commands_behind_a_refused_or_failed_one_are_dropped_with_an_event() -> None:
+    w, link, sink, _box = make(RUNNING)
+    w.cycle()
+    link.refuse["start"] = "FAULT"
+    w.submit(StartMill(epoch=1))
+    w.submit(SetRpm(9.0, epoch=1))
+    w.cycle()
+    assert link.sent == [] and [d["command"] for d in sink.kinds("mill_command_dropped")] == ["set_rpm"]
+    link.refuse.clear()
+    link.up = False
+    w.submit(StopMill())
+    w.submit(SetRpm(9.0, epoch=2))
+    w.cycle()
+    assert [d["command"] for d in sink.kinds("mill_command_dropped")] == ["set_rpm", "set_rpm"]
+    link.up = True
+    w.cycle()
+    w.cycle()
+    assert link.sent == [("stop", None)]  # the stop was kept for the link's return

@@ -294,7 +294,7 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
     """The dashboard's Controls put commands on the workers' queues; nothing runs."""
     from twin.config import RunConfig
     from twin.loop import LiveLoop
-    from twin.runlog import RunLog
+    from twin.runlog import RunLog, read_events
 
     class Link(FakeLink):
         def __init__(self) -> None:
@@ -311,6 +311,22 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
         assert loop.supervisor._inbox.get_nowait() == SetMode("off")
         assert loop.mill._inbox.get_nowait() == StopMill(source="emergency_stop", urgent=True)
         assert "emergency_stop" in loop.events.active()
-        with pytest.raises(ValueError, match="duration"):
-            loop.run_whatif([5.0], math.nan)
+        loop.run_whatif([5.0], math.nan)  # refused with an event, never an exception
+        loop.run_whatif([5.0, 25.0], 10.0)
+        loop.run_whatif([5.0], 10.0)  # one study at a time: refused
+        ev = [e for e in read_events(tmp_path / "run") if e["kind"] in ("operator", "operator_rejected")]
+        assert [e["kind"] for e in ev if e.get("action") == "whatif"] == [
+            "operator_rejected", "operator", "operator", "operator_rejected",
+        ]
         assert loop._threads == []  # only start() starts threads
+
+
+def test_default_log_dirs_never_collide(tmp_path) -> None:
+    import os
+
+    from twin.config import default_log_dir
+
+    a = default_log_dir(tmp_path)
+    a.mkdir()
+    b = default_log_dir(tmp_path)
+    assert a != b and str(os.getpid()) in a.name and not b.exists()

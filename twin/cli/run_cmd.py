@@ -104,9 +104,12 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
         clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
-        if plant is not None:
-            plant.start_drive()
         loop.start()
+        if plant is not None:  # the demo's drive runs once the loop feeds the board's watchdog
+            end = time.monotonic() + 20.0
+            while not loop.mill_box.get().connected and time.monotonic() < end and not clock.stop.is_set():
+                time.sleep(0.01)
+            plant.start_drive()
         if on_started is not None:
             on_started(loop, plant, dash)
         _wait(loop, cfg, progress)

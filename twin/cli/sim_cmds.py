@@ -6,7 +6,6 @@ import csv
 import math
 import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import typer
@@ -14,7 +13,8 @@ import typer
 from sim.errors import SimError
 from twin.cli.app import app, bench_app, console, console_err, print_json
 
-SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "mi_sigmoid_particles", "slope_deg", "slope_deg_particles", "valid")
+SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "mi_sigmoid_particles", "slope_deg",
+               "slope_deg_particles", "valid")
 
 
 def _progress(label: str):
@@ -54,12 +54,12 @@ def sim_cmd(
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     fps: float = typer.Option(10.0, "--fps", help="frames rendered and measured per simulated second"),
     size: int = typer.Option(480, "--size", help="rendered frame size, px"),
-    csv_out: Optional[Path] = typer.Option(None, "--csv", help="write the MI curve here"),
-    video: Optional[Path] = typer.Option(None, "--video", help="write the rendered frames as MP4"),
+    csv_out: Path | None = typer.Option(None, "--csv", help="write the MI curve here"),
+    video: Path | None = typer.Option(None, "--video", help="write the rendered frames as MP4"),
     realism: bool = typer.Option(False, "--realism", help="camera noise, blur, glare, drift, JPEG, drops"),
-    friction: Optional[float] = typer.Option(None, "--friction", help="sliding friction (paper: 0.25)"),
-    rolling: Optional[float] = typer.Option(None, "--rolling", help="rolling friction (paper: 0.1)"),
-    dt_ms: Optional[float] = typer.Option(None, "--dt-ms", help="internal time step, ms (default: the converged step)"),
+    friction: float | None = typer.Option(None, "--friction", help="sliding friction (paper: 0.25)"),
+    rolling: float | None = typer.Option(None, "--rolling", help="rolling friction (paper: 0.1)"),
+    dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step, ms (default: the converged step)"),
     as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
 ) -> None:
     """Run the twin and measure MI over time (vision meter on rendered frames + particle level)."""
@@ -190,7 +190,10 @@ def _measure_source_surface(source: str, max_frames: int, bed: str | None = None
     n = 0
     for frame in open_source(source, loop=False, reconnect=False):
         n += 1
-        rd = meter.measure(frame.image)
+        img = frame.image
+        if img is None or getattr(img, "size", 0) == 0 or img.ndim != 3 or min(img.shape[:2]) < 16:
+            raise SimError(f"frame {n} of {source} could not be decoded (truncated or not an image)")
+        rd = meter.measure(img)
         if math.isfinite(rd.slope_deg):
             vals.append(rd.slope_deg)
             c = getattr(rd, "surface_curvature", None)
@@ -205,18 +208,19 @@ def _measure_source_surface(source: str, max_frames: int, bed: str | None = None
 
 @app.command("calibrate")
 def calibrate_cmd(
-    source: Optional[str] = typer.Argument(None, help="frames to measure the slope in (video, folder, image, camera)"),
+    source: str | None = typer.Argument(None, help="frames to measure the slope in (video, folder, image, camera)"),
     rpm: float = typer.Option(..., "--rpm", help="drum speed of the source, rpm"),
-    slope_deg: Optional[float] = typer.Option(None, "--slope-deg", help="target slope instead of a source, deg"),
-    curvature: Optional[float] = typer.Option(None, "--curvature",
-                                              help="target free-surface S-shape (default: measured, if the meter gives it)"),
+    slope_deg: float | None = typer.Option(None, "--slope-deg", help="target slope instead of a source, deg"),
+    curvature: float | None = typer.Option(None, "--curvature",
+                                           help="target free-surface S-shape (default: measured, if given)"),
     max_frames: int = typer.Option(300, "--max-frames", help="frames of SOURCE to measure"),
-    bed: Optional[str] = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
-    config: Optional[Path] = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
+    bed: str | None = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
+    config: Path | None = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path (2..40)"),
     spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
+    dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
@@ -235,6 +239,7 @@ def calibrate_cmd(
     check_number("--max-evals", max_evals, 2, 40, integer=True)
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
+    sim_kw = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
@@ -250,7 +255,8 @@ def calibrate_cmd(
     with _progress("calibrate") as prog:
         task = prog.add_task("calibrate", total=None)
         cal = calibrate(target, rpm, target_curvature=target_curv, seed=seed, max_evals=max_evals,
-                        spin_up_s=spin_up_s, window_s=window_s, progress=lambda d, t: prog.update(task, completed=d, total=t))
+                        spin_up_s=spin_up_s, window_s=window_s, **sim_kw,
+                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     out = {"slope_deg": target, "twin_slope_deg": cal.twin_slope_deg, "friction": cal.friction,
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
@@ -271,19 +277,18 @@ def whatif_cmd(
     duration: float = typer.Option(60.0, "--duration", help="simulated seconds per run"),
     case: str = typer.Option("C", "--case"),
     seeds: int = typer.Option(1, "--seeds", help=f"seeds per rpm (0..K-1), at most {MAX_SEEDS}"),
-    fill: Optional[float] = typer.Option(None, "--fill", help="filling degree (default: the recipe's 0.5)"),
-    workers: Optional[int] = typer.Option(None, "--workers", help="local processes (default: all cores)"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler, tcp://HOST:PORT"),
+    fill: float | None = typer.Option(None, "--fill", help="filling degree (default: the recipe's 0.5)"),
+    workers: int | None = typer.Option(None, "--workers", help="local processes (default: all cores)"),
+    scheduler: str | None = typer.Option(None, "--scheduler", help="Dask scheduler, tcp://HOST:PORT"),
     sample_s: float = typer.Option(0.5, "--sample-s", help="MI sample interval, s"),
-    csv_out: Optional[Path] = typer.Option(None, "--csv", help="write all MI curves here"),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="PNG of MI against time per rpm"),
+    csv_out: Path | None = typer.Option(None, "--csv", help="write all MI curves here"),
+    plot: Path | None = typer.Option(None, "--plot", help="PNG of MI against time per rpm"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Run the twin for several rpm values and report the plateau MI and regime of each."""
-    from sim.whatif import WhatIfJob, run_study, summarize
-
     from sim.drum import PAPER_DRUM, check_rpm
     from sim.errors import check_number
+    from sim.whatif import WhatIfJob, run_study, summarize
 
     rpms = _parse_list(rpm, "--rpm")
     for r in rpms:
@@ -384,7 +389,7 @@ def bench_twin(
     with _progress("bench twin") as prog:
         task = prog.add_task("bench", total=len(cases))
         for name, drum, rpm in cases:
-            sim = DrumSim(drum, PAPER_RECIPE, case="C", seed=0, rpm=rpm)
+            sim = DrumSim(drum, PAPER_RECIPE, case="C", seed=0, rpm=rpm, settle_s=0.3)
             sim.advance(min(1.0, duration))  # warm up past the start transient
             t0 = time.perf_counter()
             sim.advance(duration)
@@ -410,5 +415,6 @@ def bench_twin(
             n = counts[name.replace("rtf_", "n_")]
             rtf = out[name]
             bed = "paper" if name.startswith("rtf_paper") else name[4:] + " particles"
-            table.add_row(f"{bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}", f"{1e6 / (rtf * n):.0f}")
+            table.add_row(f"{bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}",
+                          f"{1e6 / (rtf * n):.0f}")
         console.print(table)

@@ -98,17 +98,21 @@ class MillWorker:
         snap = self.box.get()
         self._take_commands()
         if snap.connected:
-            for cmd in self._due(snap.epoch):
+            due = self._due(snap.epoch)
+            for i, cmd in enumerate(due):
                 try:
                     self._send(cmd)
                 except MillRefused as exc:
                     self.sink.event("mill_refused", self.now_s(), reason=exc.reason, **_describe(cmd))
+                    for rest in due[i + 1 :]:
+                        self._drop(rest, "an earlier command was refused: the board is read again first")
                     return self._poll(snap, new_epoch=True)
                 except (OSError, ControlError) as exc:  # TimeoutError, ConnectionError, serial errors
-                    if isinstance(cmd, StopMill) and self._run is None:
-                        self._run = cmd  # a stop is always safe: try again once the link is back
-                    else:
-                        self._drop(cmd, f"link lost: {exc}")
+                    for failed in due[i:]:
+                        if isinstance(failed, StopMill) and self._run is None:
+                            self._run = failed  # a stop is always safe: try again once the link is back
+                        else:
+                            self._drop(failed, f"link lost: {exc}")
                     return self._lost(snap, exc)
                 self.sink.event("mill_command", self.now_s(), **_describe(cmd))
         return self._poll(snap, new_epoch=not snap.connected)
