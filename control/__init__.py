@@ -18,7 +18,11 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
 ``control.driver``
     ``MillClient(url, *, timeout_s=0.2, retries=5, heartbeat_s=0.25, ...)``:
     ``.set_rpm(rpm)``, ``.start()``, ``.stop()``, ``.status() -> MillStatus``, ``.heartbeat()``,
-    ``.connected``, ``.last_status``, ``.close()``.
+    ``.connected``, ``.last_status``, ``.close()``. A NAK raises ``control.errors.MillRefused``
+    (``.command``, ``.reason``: the link is fine, the command was not applied); a lost link
+    ``TimeoutError``/``ConnectionError``. ``heartbeat()`` (HB) feeds the board's watchdog and is
+    for the host that controls the motor; ``status()`` (STA) is for everybody else. Each client
+    starts its sequence numbers at a random value.
 ``control.emulator``
     ``MillEmulator(DeviceConfig(...), Faults(...))``: ``.open_pty() -> path``,
     ``.open_tcp(port) -> port``, ``.url``, ``.motor`` (thread-safe ``MotorState``),

@@ -50,6 +50,7 @@ class FreeSurface:
     curvature: float
     x_mid_m: float
     n_columns: int
+    y_mid_m: float = float("nan")  # a point of the surface line (x_mid_m, y_mid_m), m
 
 
 def class_moments(particles: Particles, k: int) -> tuple[tuple[float, float], float, float]:
@@ -133,7 +134,7 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     ``v`` out of the bed, in units of R, centred on that midpoint) gives
     ``curvature = -c3``.
     """
-    nan = FreeSurface(float("nan"), float("nan"), float("nan"), 0)
+    nan = FreeSurface(float("nan"), float("nan"), float("nan"), 0, float("nan"))
     xs, top = surface_profile(particles, drum)
     if xs.size == 0:
         return nan
@@ -165,7 +166,7 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     if inl.sum() >= 6:
         c3 = np.polyfit(u[inl], v[inl], 3)[0]  # highest power first
         curv = float(-c3)
-    return FreeSurface(ang, curv, x_mid, int(px.size))
+    return FreeSurface(ang, curv, x_mid, int(px.size), float(my))
 
 
 def particle_slope_deg(particles: Particles, drum: DrumSpec) -> float:

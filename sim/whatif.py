@@ -66,8 +66,8 @@ def froude_regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
 
 
 # Flow-based regime thresholds (docs/validation.md, section "regime from the flow")
-AIRBORNE_CATARACTING = 0.05  # mean fraction of disks in free flight
-CURVATURE_CASCADING = 0.03  # mean S-shape of the free surface (sim.measure.FreeSurface.curvature)
+AIRBORNE_CATARACTING = 0.15  # mean fraction of disks without any contact (in free flight)
+CURVATURE_CASCADING = 0.06  # mean S-shape of the free surface (sim.measure.FreeSurface.curvature)
 
 
 def flow_regime(airborne: float, curvature: float) -> str:

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from twin.errors import TwinError
+from twin.runlog import default_run_dir
 
 MODES = ("off", "manual", "auto")
 CASES = ("A", "B", "C")
@@ -110,7 +110,7 @@ class RunConfig:
                 f"binding the dashboard to {self.host} needs a control token "
                 f"(--control-token or ${TOKEN_ENV})"
             )
-        log_dir = self.log_dir or default_log_dir()
+        log_dir = self.log_dir or default_run_dir()
         return replace(self, mode=mode, case=case, control_token=token, log_dir=Path(log_dir))
 
     def to_metadata(self) -> dict:
@@ -120,15 +120,3 @@ class RunConfig:
         d = to_jsonable(self)
         d["control_token"] = "***" if self.control_token else None
         return d
-
-
-def default_log_dir(root: Path | str = "runs") -> Path:
-    """A run log directory no other run uses: ``root/<YYYYmmdd-HHMMSS>-<pid>`` (two
-    processes started in the same second differ by pid; a second run of this process in
-    the same second gets ``-2``, ``-3``, ...)."""
-    base = Path(root) / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
-    path, n = base, 1
-    while path.exists():
-        n += 1
-        path = base.with_name(f"{base.name}-{n}")
-    return path

@@ -1,5 +1,7 @@
 """The live state the loop publishes and the dashboard reads: latest frames, plot
-histories, the numbers panel and what-if results, behind one lock.
+histories, the numbers panel and what-if results, behind one lock; and the
+:class:`FrameRow`, one processed frame, whose fields are the run log's CSV columns and
+whose :data:`SERIES` are the dashboard's plots.
 
 Writers (loop threads) call ``publish_*``; readers take ``snapshot()``, a consistent
 copy they can use without holding the lock. Nothing here blocks for long: a slow

@@ -17,10 +17,12 @@ from vision.lacey import LaceyMeter
 from vision.meter import Meter
 from vision.synthetic import drum_frame
 
-__all__ = ["run_vision_bench", "frames_per_second"]
+__all__ = ["frames_per_second", "run_vision_bench"]
 
 
-def frames_per_second(fn: Callable[[np.ndarray], object], frames: list[np.ndarray], seconds: float, min_calls: int = 3) -> float:
+def frames_per_second(
+    fn: Callable[[np.ndarray], object], frames: list[np.ndarray], seconds: float, min_calls: int = 3
+) -> float:
     """Calls of ``fn`` per second over ``frames`` (cycled) for about ``seconds`` s."""
     fn(frames[0])  # warm-up: geometry, buffers
     n = 0

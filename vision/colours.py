@@ -30,9 +30,20 @@ import numpy as np
 from vision.errors import VisionError
 
 __all__ = [
-    "HSVRange", "LabComponent", "ColourClass", "DEFAULT_CLASSES", "Classifier", "classify", "MAX_RANGES",
-    "counted_classes", "is_learned", "overlapping_classes", "check_class_set", "class_lut", "lut_labels",
+    "DEFAULT_CLASSES",
+    "MAX_RANGES",
+    "Classifier",
+    "ColourClass",
+    "HSVRange",
+    "LabComponent",
     "bgr_to_lab",
+    "check_class_set",
+    "class_lut",
+    "classify",
+    "counted_classes",
+    "is_learned",
+    "lut_labels",
+    "overlapping_classes",
 ]
 
 HSVRange = tuple[tuple[int, int, int], tuple[int, int, int]]
@@ -115,8 +126,11 @@ class ColourClass:
         if not all(isinstance(c, LabComponent) for c in lab):
             raise VisionError(f"colour class {name!r}: lab must be LabComponent values")
         dist = self.max_distance
-        if isinstance(dist, bool) or not isinstance(dist, (int, float)) or not math.isfinite(dist) or not 0.5 <= dist <= 50:
-            raise VisionError(f"colour class {name!r}: max_distance must be a number within 0.5..50 (sigmas), got {dist!r}")
+        number = not isinstance(dist, bool) and isinstance(dist, (int, float))
+        if not number or not math.isfinite(dist) or not 0.5 <= dist <= 50:
+            raise VisionError(
+                f"colour class {name!r}: max_distance must be a number within 0.5..50 (sigmas), got {dist!r}"
+            )
         if self.reject and not lab:
             raise VisionError(f"colour class {name!r}: only learned (lab) classes can be reject classes")
         object.__setattr__(self, "lab", lab)
@@ -160,7 +174,7 @@ def _check_range(name: str, rng) -> HSVRange:
                 f"colour class {name!r}: inverted {_CHANNEL_NAME[i]} range {lo[i]}..{hi[i]} "
                 "(for red, which wraps around hue 0, give two ranges)"
             )
-    return (lo, hi)  # type: ignore[return-value]
+    return (lo, hi)
 
 
 def is_learned(classes: Sequence[ColourClass]) -> bool:
@@ -396,7 +410,8 @@ def _every_lab8() -> tuple[np.ndarray, np.ndarray]:
     """OpenCV 8-bit CIELAB of every BGR colour as the distinct Lab values (n, 3) uint8
     (about 2.1 M) and, per BGR colour, the index of its Lab value (2^24 int32); built once."""
     lab = cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2Lab).reshape(-1, 3)
-    key = (lab[:, 0].astype(np.int32) << 16) | (lab[:, 1].astype(np.int32) << 8) | lab[:, 2]
+    lab32 = lab.astype(np.int32)
+    key = (lab32[:, 0] << 16) | (lab32[:, 1] << 8) | lab32[:, 2]
     used = np.zeros(1 << 24, np.bool_)
     used[key] = True
     index = np.cumsum(used, dtype=np.int32) - 1

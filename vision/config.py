@@ -36,10 +36,10 @@ from vision.colours import (
     overlapping_classes,
 )
 from vision.errors import VisionError
-from vision.meter import BED_MODES, Meter, check_meter_numbers
+from vision.meter import BED_MODES, Meter
 from vision.roi import DrumROI
 
-__all__ = ["MeterConfig", "load_config", "parse_config", "config_to_toml"]
+__all__ = ["MeterConfig", "config_to_toml", "load_config", "parse_config"]
 
 _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
                "roi_kind", "half_w_px", "half_h_px"}
@@ -152,8 +152,8 @@ def _parse_class(w: str, c: dict) -> ColourClass:
         if not len(means) == len(covs) == len(weights):
             raise VisionError(f"{w}: lab_mean, lab_cov and lab_weight need one entry per component")
         try:
-            comps = tuple(LabComponent(tuple(m), tuple(cv), wt) for m, cv, wt in zip(means, covs, weights))  # type: ignore[arg-type]
-            return ColourClass(c["name"], display_bgr=tuple(bgr), lab=comps, max_distance=max_d, reject=reject)  # type: ignore[arg-type]
+            comps = tuple(LabComponent(tuple(m), tuple(cv), wt) for m, cv, wt in zip(means, covs, weights, strict=True))  # type: ignore[arg-type]
+            return ColourClass(c["name"], display_bgr=tuple(bgr), lab=comps, max_distance=max_d, reject=reject)
         except VisionError as exc:
             raise VisionError(f"{w}: {exc}") from None
     if "hsv" not in c or not isinstance(c["hsv"], list) or not c["hsv"]:
@@ -161,7 +161,7 @@ def _parse_class(w: str, c: dict) -> ColourClass:
     if reject:
         raise VisionError(f"{w}: reject = true needs a learned class (lab_mean/lab_cov)")
     try:
-        return ColourClass(c["name"], tuple(c["hsv"]), tuple(bgr))  # type: ignore[arg-type]
+        return ColourClass(c["name"], tuple(c["hsv"]), tuple(bgr))
     except VisionError as exc:
         raise VisionError(f"{w}: {exc}") from None
 
@@ -180,7 +180,9 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         raise VisionError(f"config {source}: [meter] must be a table")
     unknown = set(meter) - _METER_KEYS
     if unknown:
-        raise VisionError(f"config {source}: unknown key(s) {sorted(unknown)} in [meter] (allowed: {sorted(_METER_KEYS)})")
+        raise VisionError(
+            f"config {source}: unknown key(s) {sorted(unknown)} in [meter] (allowed: {sorted(_METER_KEYS)})"
+        )
     where = f"config {source} [meter]"
     bed = meter.get("bed", "color")
     if bed not in BED_MODES:

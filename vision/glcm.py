@@ -17,7 +17,7 @@ import numpy as np
 from vision.errors import VisionError
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
-__all__ = ["GLCMResult", "GLCMMeter"]
+__all__ = ["GLCMMeter", "GLCMResult"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,7 +16,7 @@ import numpy as np
 from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, class_lut, counted_classes, lut_labels
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
-__all__ = ["LaceyResult", "LaceyMeter", "lacey_from_labels"]
+__all__ = ["LaceyMeter", "LaceyResult", "lacey_from_labels"]
 
 
 @dataclass(frozen=True, slots=True)

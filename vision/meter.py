@@ -23,7 +23,7 @@ from vision.moments import class_tables, frame_moments, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
-__all__ = ["ClassStats", "Reading", "Meter", "BED_MODES", "check_meter_numbers"]
+__all__ = ["BED_MODES", "ClassStats", "Meter", "Reading", "check_meter_numbers"]
 
 BED_MODES = ("color", "dark")
 _NAN = float("nan")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MixingIndices", "sigmoid_f", "characteristic_distance", "mixing_indices"]
+__all__ = ["MixingIndices", "characteristic_distance", "mixing_indices", "sigmoid_f"]
 
 
 @dataclass(frozen=True, slots=True)

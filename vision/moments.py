@@ -4,7 +4,8 @@ A class set (HSV boxes or a learned CIELAB model) is compiled once into lookup t
 a 6-bit table (64^3 bins, 256 KB, stays in cache) answers for every bin whose 64 colours
 all fall in the same class, and a full 24-bit table (16 MB) answers the few pixels whose
 bin straddles a class boundary. Both come from ``vision.colours.class_lut``, which runs the
-classifier itself on every BGR colour, so the result is exact, pixel for pixel. A compiled (numba) loop then visits the ROI's pixels row
+classifier itself on every BGR colour, so the result is exact, pixel for pixel. A compiled
+(numba) loop then visits the ROI's pixels row
 span by row span and sums, per class, n, x, y, x^2, y^2 and xy (integers, exact), plus
 the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
 """
@@ -19,7 +20,7 @@ import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
-__all__ = ["ClassTables", "class_tables", "row_spans", "frame_moments", "MOMENT_FIELDS"]
+__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -91,7 +92,9 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first.astype(np.int64), last.astype(np.int64)
 
 
-def _kernel_py(img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark):  # pragma: no cover - compiled
+def _kernel_py(  # pragma: no cover - compiled
+    img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
+):
     """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
 
     ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the

@@ -18,7 +18,11 @@ def _fmt(x: float, spec: str = ".3f") -> str:
 
 
 def draw_overlay(
-    image_bgr: np.ndarray, reading: Reading, classes: tuple[ColourClass, ...] | None = None, *, mi_avg: float | None = None
+    image_bgr: np.ndarray,
+    reading: Reading,
+    classes: tuple[ColourClass, ...] | None = None,
+    *,
+    mi_avg: float | None = None,
 ) -> np.ndarray:
     """A copy of the frame with the ROI, the fitted free surface over its central chord (line),
     each class's centroid (cross) and spread (circle of radius sigma), and a panel with MI,

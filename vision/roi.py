@@ -14,7 +14,7 @@ import numpy as np
 
 from vision.errors import VisionError
 
-__all__ = ["DrumROI", "roi_mask", "roi_bbox", "detect_drum", "parse_roi"]
+__all__ = ["DrumROI", "detect_drum", "parse_roi", "roi_bbox", "roi_mask"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,7 +49,7 @@ class DrumROI:
             object.__setattr__(self, "half_w_px", float(hw))
             object.__setattr__(self, "half_h_px", float(hh))
 
-    def scaled(self, factor: float) -> "DrumROI":
+    def scaled(self, factor: float) -> DrumROI:
         """The same ROI in an image scaled by ``factor``."""
         f = float(factor)
         return DrumROI(

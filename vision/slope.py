@@ -31,8 +31,15 @@ import numpy as np
 
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
-__all__ = ["SurfaceFit", "bed_slope_deg", "bed_surface", "slope_from_moments", "surface_from_occupancy",
-           "occupancy_shift", "cell_areas"]
+__all__ = [
+    "SurfaceFit",
+    "bed_slope_deg",
+    "bed_surface",
+    "cell_areas",
+    "occupancy_shift",
+    "slope_from_moments",
+    "surface_from_occupancy",
+]
 
 _NAN = float("nan")
 CENTRAL_HALF_CHORD = 0.5
@@ -136,8 +143,6 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
             break
     tau = 0.5 * rho
     # per column: ROI span (top..bot) and the fill smoothed over the neighbouring columns
-    colsum = np.zeros(rows)
-    colarea = np.zeros(rows)
     fcol = np.zeros(rows)
     npts = 0
     for j in range(cols):

@@ -24,7 +24,7 @@ from vision.errors import VisionError
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
 
-__all__ = ["Frame", "open_source", "IMAGE_EXTENSIONS", "read_image", "source_kind"]
+__all__ = ["IMAGE_EXTENSIONS", "Frame", "open_source", "read_image", "source_kind"]
 
 IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 _URL_PREFIXES = ("rtsp://", "rtsps://", "http://", "https://", "udp://", "tcp://", "rtmp://")
@@ -113,7 +113,9 @@ def _image_paths(spec) -> list[Path]:
                 paths.append(p)
         return sorted(paths, key=lambda q: q.name)
     p = Path(str(spec))
-    files = sorted((q for q in p.iterdir() if q.is_file() and q.suffix.lower() in IMAGE_EXTENSIONS), key=lambda q: q.name)
+    files = sorted(
+        (q for q in p.iterdir() if q.is_file() and q.suffix.lower() in IMAGE_EXTENSIONS), key=lambda q: q.name
+    )
     if not files:
         raise VisionError(f"folder {p} has no images ({', '.join(IMAGE_EXTENSIONS)})")
     return files

@@ -11,9 +11,9 @@
    segment between their means) are one material seen under different shading, two
    separated by a valley are two materials; single linkage merges the shallowest valleys
    first until ``k`` groups remain. So a white particle in shadow stays white, while white
-   and pale teal, or dark and light green, stay apart. A particle component joined more
-   closely to the background than to any other particle component (gaps, shadows) joins
-   the background, and so does a member of a class far darker (L below half) than the
+   and pale teal, or dark and light green, stay apart. A particle component darker than,
+   and joined more closely to the background than to, its nearest particle component
+   (gaps, shadows) joins the background, and so does a member of a class far darker (L below half) than the
    class's main component (the gaps between particles, deep shadows).
 5. Each class keeps its Gaussians; the background is one reject class. The meter's
    lookup table assigns every colour to its most likely component, and counts it only
@@ -36,8 +36,15 @@ from vision.config import MeterConfig
 from vision.errors import VisionError
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
-__all__ = ["suggest_classes", "colour_name", "class_preview", "sample_drum_pixels", "fit_colour_model",
-           "DrumSamples", "MAX_DISTANCE"]
+__all__ = [
+    "MAX_DISTANCE",
+    "DrumSamples",
+    "class_preview",
+    "colour_name",
+    "fit_colour_model",
+    "sample_drum_pixels",
+    "suggest_classes",
+]
 
 MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
@@ -76,7 +83,7 @@ def sample_drum_pixels(
     """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum."""
     rng = np.random.default_rng(seed)
     labs, heights = [], []
-    for img, roi in zip(frames, rois):
+    for img, roi in zip(frames, rois, strict=True):
         box = roi_bbox(roi, img.shape[:2])
         x0, y0, x1, y1 = box
         inner = DrumROI(roi.cx_px, roi.cy_px, roi.r_px * r_max, roi.kind,
@@ -95,13 +102,13 @@ def sample_drum_pixels(
     return DrumSamples(np.concatenate(labs).astype(np.float64), np.concatenate(heights))
 
 
-def _em(x: np.ndarray, n: int, seed: int, iters: int = 80) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _em(x: np.ndarray, n: int, seed: int, iters: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Gaussian mixture by EM (full covariances) from a seeded k-means start.
 
     Returns weights (n,), means (n, 3), covariances (n, 3, 3), hard labels (N,)."""
     cv2.setRNGSeed(seed)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.1)
-    _, lbl, _ = cv2.kmeans(x.astype(np.float32), n, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+    _, lbl, _ = cv2.kmeans(x.astype(np.float32), n, None, crit, 3, cv2.KMEANS_PP_CENTERS)  # type: ignore[call-overload]
     resp = np.zeros((x.shape[0], n))
     resp[np.arange(x.shape[0]), lbl.ravel()] = 1.0
     floor = np.diag([1e-2, 1e-2, 1e-2])
@@ -195,8 +202,9 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
         biggest = max(counts[i] for i in particles)
         for j in particles:
             to_bg = max(ridge[j, b] for b in background)
-            to_others = max(ridge[j, i] for i in particles if i != j)
-            if to_bg > to_others and counts[j] < biggest:
+            near = max((i for i in particles if i != j), key=lambda i: ridge[j, i])
+            # darker than its nearest particle colour and closer to the background: a gap or shadow
+            if to_bg > ridge[j, near] and mu[j, 0] < mu[near, 0] and counts[j] < biggest:
                 background.append(j)
             else:
                 keep.append(j)
@@ -298,8 +306,10 @@ def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: Dr
     lh = int(30 * fs) + 6
     inside = _mask_in_box(roi, (0, 0, w, h))
     n_in = max(int(inside.sum()), 1)
-    lines = [(f"{c.name}  {100 * float(((labels == i + 1) & inside).sum()) / n_in:.1f}% of drum", c.display_bgr)
-             for i, c in enumerate(counted)]
+    lines: list[tuple[str, tuple[int, int, int] | None]] = [
+        (f"{c.name}  {100 * float(((labels == i + 1) & inside).sum()) / n_in:.1f}% of drum", c.display_bgr)
+        for i, c in enumerate(counted)
+    ]
     lines.append(("grey: no class (background, rim, glare, shadow)", None))
     width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, fs, 1)[0][0] for t, _ in lines) + lh + 20
     panel = out[0: lh * len(lines) + 10, w: min(2 * w, w + width)]

@@ -10,7 +10,7 @@ import numpy as np
 
 from vision.roi import DrumROI
 
-__all__ = ["RED_BGR", "BLUE_BGR", "drum_frame", "DrumScene", "particle_drum", "perturb", "PERTURBATIONS"]
+__all__ = ["BLUE_BGR", "PERTURBATIONS", "RED_BGR", "DrumScene", "drum_frame", "particle_drum", "perturb"]
 
 RED_BGR = (0, 0, 220)
 BLUE_BGR = (220, 60, 0)
@@ -66,7 +66,8 @@ def drum_frame(
             along = dx * math.cos(a) - dy * math.sin(a)
             seg_red = along < 0
             red = seg_red if rng.random() > mix else rng.random() < 0.5
-            cv2.circle(img, (int(round(x)), int(round(y))), int(round(pr)), RED_BGR if red else BLUE_BGR, -1, cv2.LINE_AA)
+            colour = RED_BGR if red else BLUE_BGR
+            cv2.circle(img, (int(round(x)), int(round(y))), int(round(pr)), colour, -1, cv2.LINE_AA)
     return img
 
 
@@ -180,7 +181,8 @@ def _draw_particle(img: np.ndarray, lab: np.ndarray, x: float, y: float, pr: flo
     alpha = np.clip(pr + 0.5 - d, 0.0, 1.0)[..., None]
     rho2 = np.minimum(d / pr, 1.0) ** 2
     shade = (1.0 - shading * rho2)[..., None]
-    spot = highlight * np.exp(-((px - x + 0.35 * pr) ** 2 + (py - y + 0.35 * pr) ** 2) / (2 * (0.2 * pr) ** 2))[..., None]
+    r2 = (px - x + 0.35 * pr) ** 2 + (py - y + 0.35 * pr) ** 2
+    spot = highlight * np.exp(-r2 / (2 * (0.2 * pr) ** 2))[..., None]
     col = colour * shade
     col = col + spot * (255.0 - col)
     patch = img[y0:y1, x0:x1]
@@ -213,8 +215,8 @@ def perturb(image_bgr: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray
     if kind == "noise":
         return np.clip(img + rng.normal(0, 8.0, img.shape), 0, 255).astype(np.uint8), ident
     if kind == "jpeg30":
-        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 30])
-        return cv2.imdecode(buf, cv2.IMREAD_COLOR), ident
+        _, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 30])
+        return np.asarray(cv2.imdecode(buf, cv2.IMREAD_COLOR)), ident
     if kind == "glare":
         out = img.astype(np.float32)
         ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
@@ -228,6 +230,6 @@ def perturb(image_bgr: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray
         m = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), 10.0, 1.0)
         return cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), m
     if kind == "half":
-        out = cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
-        return out, np.array([[0.5, 0.0, -0.25], [0.0, 0.5, -0.25]])
+        half = np.asarray(cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA))
+        return half, np.array([[0.5, 0.0, -0.25], [0.0, 0.5, -0.25]])
     raise ValueError(f"unknown perturbation {kind!r}; one of {PERTURBATIONS}")

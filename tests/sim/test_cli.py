@@ -72,7 +72,7 @@ def test_calibrate_from_frames(tmp_path):
     from sim.drum import DrumSim
     from sim.render import Renderer
 
-    sim = DrumSim(rpm=10.0, friction=0.5, rolling=0.3)
+    sim = DrumSim(rpm=10.0, friction=0.2, rolling=0.1)
     ren = Renderer(sim, 360)
     sim.advance(2.0)
     for i in range(6):

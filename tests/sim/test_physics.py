@@ -25,7 +25,7 @@ def _curve(case: str, seed: int, duration_s: float, rpm: float = 5.0, every_s: f
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_case_c_at_5_rpm_segregates_radially_small_core_large_periphery():
-    eq4, eq3, sim = _curve("C", 0, 20.0)
+    eq4, eq3, sim = _curve("C", 0, 16.0)
     assert eq4[:2].mean() > 0.85
     assert eq4[-6:].mean() < eq4[:2].mean() - 0.05
     assert eq4[-6:].mean() < eq3[-6:].mean()  # eq. 4 sees what eq. 3 misses

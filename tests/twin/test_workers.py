@@ -319,14 +319,3 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
             "operator_rejected", "operator", "operator", "operator_rejected",
         ]
         assert loop._threads == []  # only start() starts threads
-
-
-def test_default_log_dirs_never_collide(tmp_path) -> None:
-    import os
-
-    from twin.config import default_log_dir
-
-    a = default_log_dir(tmp_path)
-    a.mkdir()
-    b = default_log_dir(tmp_path)
-    assert a != b and str(os.getpid()) in a.name and not b.exists()

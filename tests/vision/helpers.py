@@ -56,7 +56,9 @@ def core_ring(w: int = 640, h: int = 480, core_frac: float = 0.7071) -> np.ndarr
     return img
 
 
-def tilted_bed(angle_deg: float, fill: float = 0.5, w: int = 640, h: int = 480, dark: bool = False) -> tuple[np.ndarray, DrumROI]:
+def tilted_bed(
+    angle_deg: float, fill: float = 0.5, w: int = 640, h: int = 480, dark: bool = False
+) -> tuple[np.ndarray, DrumROI]:
     """A circular-segment bed whose flat free surface is at ``angle_deg`` (positive rises to
     the right), half red half blue along the surface; or a dark bed on a light drum."""
     roi = roi_for(w, h)

@@ -40,7 +40,8 @@ def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
     header = next(csv.reader(out.open()))
     assert header == csv_columns(["red", "blue"])
     assert header[:9] == ["frame", "t_s", "mi", "mi_sigmoid", "mi_linear", "d_px", "dsigma_px", "slope_deg", "valid"]
-    assert header[9:17] == ["cx_red", "cy_red", "sigma_red", "frac_red", "cx_blue", "cy_blue", "sigma_blue", "frac_blue"]
+    assert header[9:17] == ["cx_red", "cy_red", "sigma_red", "frac_red",
+                            "cx_blue", "cy_blue", "sigma_blue", "frac_blue"]
     for col in ("slope_axis_deg", "surface_curvature", "roi_cx_px", "roi_cy_px", "roi_r_px"):
         assert col in header
     assert len(rows) == 5 and all(r["valid"] == "1" for r in rows)
@@ -177,9 +178,8 @@ def test_mi_one_line_errors(tmp_path, junk, real_drum_dir):
         "half_w_px = nan\nhalf_h_px = 100")), "half_w_px")
     for key, val in (("min_share", "nan"), ("min_share", "-0.1"), ("collapse_ratio", "inf"), ("stride", "0"),
                      ("dark_v_max", "300"), ("min_pixels", "0")):
-        assert_one_line_error(cli("mi", img, "--config", _cfg(
-            tmp_path, "min_pixels = 200", f"min_pixels = 200\n{key} = {val}".replace("min_pixels = 200\nmin_pixels", "min_pixels"))),
-            key)
+        new = f"{key} = {val}" if key == "min_pixels" else f"min_pixels = 200\n{key} = {val}"
+        assert_one_line_error(cli("mi", img, "--config", _cfg(tmp_path, "min_pixels = 200", new)), key)
     vid = tmp_path / "junk.mp4"
     vid.write_bytes(b"junk" * 100)
     assert "cannot open video" in assert_one_line_error(cli("mi", vid))

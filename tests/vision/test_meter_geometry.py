@@ -5,16 +5,16 @@ import pytest
 
 from tests.vision import helpers as H
 from vision.colours import DEFAULT_CLASSES, ColourClass, classify
+from vision.errors import VisionError
+from vision.meter import Meter
+from vision.roi import DrumROI, detect_drum, roi_mask
+from vision.slope import bed_slope_deg
 
 # HSV classes for the synthetic particle renders (blue and white)
 PAINTED = (
     ColourClass("blue", (((95, 90, 30), (130, 255, 255)),)),
     ColourClass("white", (((0, 0, 120), (179, 60, 255)),)),
 )
-from vision.errors import VisionError
-from vision.meter import Meter
-from vision.roi import DrumROI, detect_drum, roi_mask
-from vision.slope import bed_slope_deg
 
 
 def test_two_half_disks_mi_near_zero():
@@ -115,7 +115,7 @@ def test_stride_decimation_accuracy(stride):
         roi = Meter().measure(img).roi
         full = Meter(roi=roi).measure(img)
         dec = Meter(roi=roi, stride=stride).measure(img)
-        for a, b in zip(full.classes, dec.classes):
+        for a, b in zip(full.classes, dec.classes, strict=True):
             assert abs(a.cx_px - b.cx_px) < 0.005 * roi.r_px and abs(a.cy_px - b.cy_px) < 0.005 * roi.r_px
             assert b.sigma_px == pytest.approx(a.sigma_px, rel=0.01)
         assert dec.mi == pytest.approx(full.mi, abs=0.02)
@@ -186,7 +186,8 @@ def test_slope_dark_s_shaped_backlit_bed():
 def test_red_wraps_hue_zero_and_defaults_catch_real_world_colours():
     import cv2
 
-    swatch = np.array([[[0, 0, 220], [30, 20, 200], [60, 0, 190], [220, 60, 0], [200, 110, 40], [160, 40, 30], [128, 128, 128]]], np.uint8)
+    swatch = np.array([[[0, 0, 220], [30, 20, 200], [60, 0, 190], [220, 60, 0], [200, 110, 40], [160, 40, 30],
+                        [128, 128, 128]]], np.uint8)
     lab = classify(swatch, DEFAULT_CLASSES)
     assert lab.tolist() == [[1, 1, 1, 2, 2, 2, 0]]
     hsv = cv2.cvtColor(swatch, cv2.COLOR_BGR2HSV)

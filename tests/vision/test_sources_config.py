@@ -1,4 +1,3 @@
-import time
 from pathlib import Path
 
 import cv2
@@ -208,7 +207,8 @@ def test_learned_config_roundtrip_and_classification():
     [
         ("lab_mean = [[80.0, -12.0, -4.0]]", "lab_mean = [[nan, -12.0, -4.0]]", "finite"),
         ("lab_mean = [[80.0, -12.0, -4.0]]", "lab_mean = [[80.0, -12.0]]", "lab_mean"),
-        ("lab_cov = [[40.0, 0.0, 0.0, 4.0, 0.0, 4.0]]", "lab_cov = [[40.0, 0.0, 0.0, -4.0, 0.0, 4.0]]", "positive definite"),
+        ("lab_cov = [[40.0, 0.0, 0.0, 4.0, 0.0, 4.0]]", "lab_cov = [[40.0, 0.0, 0.0, -4.0, 0.0, 4.0]]",
+         "positive definite"),
         ("lab_weight = [0.2]\n", "lab_weight = [0.2, 0.3]\n", "one entry per component"),
         ("max_distance = 4.5", "max_distance = inf", "max_distance"),
         ("max_distance = 4.5", "max_distance = -1", "max_distance"),

@@ -54,7 +54,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     from twin.demo import DemoPlant, PlantConfig
     from twin.loop import LiveLoop, open_mill
     from twin.runlog import RunLog
-    from twin.state import LiveState
+    from twin.state import FRAME_ROW_COLUMNS, LiveState
 
     clock = RunClock(cfg.speed)
     classes = None
@@ -75,7 +75,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if cfg.demo:
             plant = DemoPlant(
                 PlantConfig(
-                    case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px
+                    case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px,
+                    **cfg.extra.get("plant", {}),  # tests: e.g. a shorter board watchdog
                 ),
                 clock,
             )
@@ -88,7 +89,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
         if frames is None:
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
-        runlog = RunLog(cfg.log_dir)
+        runlog = RunLog(cfg.log_dir, columns=FRAME_ROW_COLUMNS)  # the frame row defines the CSV
         started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
         if plant is not None:
@@ -98,8 +99,10 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if cfg.dashboard:
             from twin.dashboard import Dashboard
 
+            events, now_s = loop.events, loop.now_s
             dash = Dashboard(
-                state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token, update_hz=cfg.dashboard_hz
+                state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
+                update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
             ).start()
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
@@ -302,10 +305,9 @@ def bench_dashboard(
     import sys
     import tempfile
 
-    from twin.dashboard.ratebench import measure_dashboard_rate
+    from twin.dashboard.ratebench import check_bench_args, measure_dashboard_rate
 
-    if not (seconds > 0) or warmup < 0 or not (speed > 0):
-        raise TwinError("--seconds and --speed must be > 0 and --warmup >= 0")
+    check_bench_args(seconds, warmup, speed, port)
     budget = warmup + seconds + 90.0
     with tempfile.TemporaryDirectory(prefix="drumtwin-bench-dash-") as tmp:
         cmd = [sys.executable, "-c", "from twin.cli import main; main()", "run", "--port", str(port),

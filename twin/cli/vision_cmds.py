@@ -5,10 +5,8 @@ from __future__ import annotations
 import csv
 import math
 import sys
-import time
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -19,13 +17,13 @@ classes_app = typer.Typer(help="Colour classes: suggest a TOML config from a fra
 app.add_typer(classes_app, name="classes")
 
 
-class Method(str, Enum):
+class Method(StrEnum):
     centroid = "centroid"
     lacey = "lacey"
     glcm = "glcm"
 
 
-class Bed(str, Enum):
+class Bed(StrEnum):
     color = "color"
     dark = "dark"
 
@@ -69,13 +67,15 @@ def _no_default_pixels_error() -> VisionError:
 @app.command("mi")
 def mi_cmd(
     source: list[str] = typer.Argument(..., help="Camera index (0), video file, stream URL, image folder or images."),
-    config: Optional[Path] = typer.Option(None, "--config", help="TOML config (colour classes, ROI, bed)."),
-    method: Method = typer.Option(Method.centroid, "--method", help="Mixing index: centroid (paper eq. 4), lacey, glcm."),
-    csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write one row per frame here (default: stdout)."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="PNG of MI and its moving average against time."),
-    overlay_video: Optional[Path] = typer.Option(None, "--overlay-video", help="MP4 with the monitoring overlay."),
-    roi: Optional[str] = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
-    bed: Optional[Bed] = typer.Option(None, "--bed", help="Bed for the slope angle: color (classes) or dark (backlit)."),
+    config: Path | None = typer.Option(None, "--config", help="TOML config (colour classes, ROI, bed)."),
+    method: Method = typer.Option(
+        Method.centroid, "--method", help="Mixing index: centroid (paper eq. 4), lacey, glcm."
+    ),
+    csv_out: Path | None = typer.Option(None, "--csv", help="Write one row per frame here (default: stdout)."),
+    plot: Path | None = typer.Option(None, "--plot", help="PNG of MI and its moving average against time."),
+    overlay_video: Path | None = typer.Option(None, "--overlay-video", help="MP4 with the monitoring overlay."),
+    roi: str | None = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
+    bed: Bed | None = typer.Option(None, "--bed", help="Bed for the slope angle: color (classes) or dark (backlit)."),
     fps: float = typer.Option(30.0, "--fps", help="Frame rate assumed for image sequences (timestamps)."),
     max_frames: int = typer.Option(0, "--max-frames", help="Stop after this many frames (0 = all)."),
     window: int = typer.Option(150, "--window", help="Moving-average window (samples)."),
@@ -273,9 +273,9 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
 def suggest_cmd(
     source: list[str] = typer.Argument(..., help="Frames with both particle kinds: images, a folder, a video."),
     k: int = typer.Option(2, "--k", help="Number of particle classes (2..6)."),
-    roi: Optional[str] = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
+    roi: str | None = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
     n_frames: int = typer.Option(12, "--frames", help="Frames to learn from, spread over the source (1..500)."),
-    preview: Optional[Path] = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
+    preview: Path | None = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
 ) -> None:
     """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml

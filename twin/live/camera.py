@@ -110,9 +110,12 @@ class CameraWorker:
             if stop.is_set():
                 return
             wall = self._monotonic()  # when the frame arrived
-            reading = self.meter.measure(frame.image)
             n += 1
-            self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
+            roi = self.box.get().roi
+            self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, roi, n, False))  # it came (alarms)
+            reading = self.meter.measure(frame.image)
+            if reading.roi is not roi:
+                self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
             self.fps.tick()
             put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
             cadence = self._overlay_cadence
