@@ -135,7 +135,7 @@ class LiveLoop:
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
-                classes=tuple(meter.colour_classes if hasattr(meter, "colour_classes") else meter.classes),
+                classes=tuple(meter.colour_classes),
                 calibrate_kwargs=config.extra.get("calibrate_kwargs", {}),
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
