@@ -328,7 +328,7 @@ class DrumSim:
         if self._cls.size >= _HASH_ABOVE:  # large beds: the spatial hash beats the bounding-box tree
             space.use_spatial_hash(2.5 * r_max, 10 * self._cls.size)
         self._rpm_target = st.rpm_target
-        self._rpm_actual = None
+        self._rpm_actual = math.nan  # unset: the next _set_rpm_actual always applies
         self._apply_params()
         self._set_rpm_actual(st.rpm_actual)
         self._buf = pymunk.batch.Buffer()
@@ -351,9 +351,9 @@ class DrumSim:
         for s in self._shapes:
             s.friction = mu_p
             s.elasticity = e
-        for s in self._wall_shapes:
-            s.friction = (mu_w / mu_p) if mu_p > 0 else 0.0
-            s.elasticity = e
+        for seg in self._wall_shapes:
+            seg.friction = (mu_w / mu_p) if mu_p > 0 else 0.0
+            seg.elasticity = e
         self._space.iterations = p.iterations
         self._space.collision_bias = p.bias
 

@@ -71,7 +71,9 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
         if d0 is None:
             d0 = m.d_px
             m = particle_mi(p, PAPER_DRUM, d0)
-        rd = meter.measure(r.render(p))
+        frame = r.render(p)
+        assert frame is not None  # a renderer without realism never drops a frame
+        rd = meter.measure(frame)
         out["t"].append(sim.t_s)
         out["mi"].append(m.mi)
         out["mi_sig"].append(m.mi_sigmoid)

@@ -107,12 +107,28 @@ def roi_mask(roi: DrumROI, shape_hw: tuple[int, int]) -> np.ndarray:
     return out
 
 
-def _refine_circle(gray: np.ndarray, cx: float, cy: float, r: float) -> tuple[float, float, float]:
+def _edge_points(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    edges = cv2.Canny(cv2.GaussianBlur(gray, (5, 5), 0), 20, 60)
+    return np.nonzero(edges)
+
+
+def _rim_coverage(pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: float) -> int:
+    """Degrees of the circle (0..360) with an edge pixel within 1.5% of its radius (a rim
+    is a whole circle; the edge of a bed or a particle only an arc)."""
+    ys, xs = pts
+    rr = np.hypot(xs - cx, ys - cy)
+    near = np.abs(rr - r) <= max(1.5, 0.015 * r)
+    ang = (np.degrees(np.arctan2(ys[near] - cy, xs[near] - cx)) + 180.0).astype(np.int64) % 360
+    return int(np.unique(ang).size)
+
+
+def _refine_circle(
+    pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: float
+) -> tuple[float, float, float]:
     """Least-squares circle (Kasa, Tukey-reweighted) through the rim: per degree of angle, the
     outermost edge pixel within 6% (then 3%) of the coarse circle, so the edges of particles
     lying against the wall inside do not pull the circle in."""
-    edges = cv2.Canny(cv2.GaussianBlur(gray, (5, 5), 0), 20, 60)
-    ys_all, xs_all = np.nonzero(edges)
+    ys_all, xs_all = pts
     for band in (0.06, 0.03):
         rr = np.hypot(xs_all - cx, ys_all - cy)
         sel = np.abs(rr - r) < band * r
@@ -154,8 +170,9 @@ def _refine_circle(gray: np.ndarray, cx: float, cy: float, r: float) -> tuple[fl
 def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     """Find the drum circle in a front-view frame (px of the original image).
 
-    Hough transform on a copy downscaled to <= 400 px, then a least-squares circle fit
-    on the rim's outer edge. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
+    Hough transform on a copy downscaled to <= 400 px (at three vote thresholds), a
+    least-squares circle fit on the rim's outer edge for each candidate, and the candidate
+    with the most complete rim wins. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
     Raises ``VisionError`` when no circle is found (pass ``--roi cx,cy,r`` then).
     """
     img = np.asarray(image_bgr)
@@ -172,16 +189,22 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     small = cv2.resize(gray, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1.0 else gray.copy()
     small = cv2.medianBlur(small, 5)
     sh, sw = small.shape
-    circles = None
+    pts = _edge_points(gray)
+    best: tuple[int, tuple[float, float, float]] | None = None
     for acc in (30, 20, 12):
         circles = cv2.HoughCircles(
             small, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
             minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
         )
-        if circles is not None:
+        if circles is None:
+            continue
+        fit = _refine_circle(pts, *(float(v) / s for v in circles[0][0][:3]))
+        cover = _rim_coverage(pts, *fit)
+        if best is None or cover > best[0]:
+            best = (cover, fit)
+        if cover >= 300:  # a (nearly) whole rim: done; in a small frame the strongest circle can be the bed's edge
             break
-    if circles is None:
+    if best is None:
         raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")
-    cx, cy, r = (float(v) / s for v in circles[0][0][:3])
-    cx, cy, r = _refine_circle(gray, cx, cy, r)
+    cx, cy, r = best[1]
     return DrumROI(float(cx), float(cy), float(r * (1.0 - inset)))

@@ -200,8 +200,9 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
     if background and len(particles) > k:
         keep = []
         biggest = max(counts[i] for i in particles)
+        top_cap = list(background)  # the background seen above the bed (not the comps moved there below)
         for j in particles:
-            to_bg = max(ridge[j, b] for b in background)
+            to_bg = max(ridge[j, b] for b in top_cap)
             near = max((i for i in particles if i != j), key=lambda i: ridge[j, i])
             # darker than its nearest particle colour and closer to the background: a gap or shadow
             if to_bg > ridge[j, near] and mu[j, 0] < mu[near, 0] and counts[j] < biggest:

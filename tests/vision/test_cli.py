@@ -221,3 +221,18 @@ def test_help_lists_commands():
     assert r.code == 0
     for cmd in ("mi", "classes", "bench"):
         assert cmd in r.out
+
+
+def test_classes_suggest_from_a_video(tmp_path):
+    from vision.synthetic import particle_drum
+
+    path = tmp_path / "clip.mp4"
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10, (320, 240))
+    for i, mix in enumerate([0.0, 0.3, 0.6, 1.0]):
+        vw.write(particle_drum((320, 240), ((30, 30, 210), (200, 70, 10)), mix=mix, seed=i,
+                               particle_r_frac=0.05).image)
+    vw.release()
+    r = cli("classes", "suggest", path, "--frames", 3)
+    assert r.code == 0, r.err
+    assert [c.name for c in parse_config(r.out).counted] == ["blue", "red"]
+    assert "from 3 frame(s)" in r.out

@@ -29,7 +29,6 @@ PAIRS = {
 }
 NOT_YET = {
     ("darkgreen-lightgreen", "noise"), ("darkgreen-lightgreen", "jpeg30"), ("darkgreen-lightgreen", "glare"),
-    ("blue-white", "half"),
 }
 
 
