@@ -155,9 +155,9 @@ def score_sequence(
         raise ControlError("trend sequence needs >= 2 s before the step and after it")
     a, b = float(np.mean(seq.truth[pre])), float(np.mean(seq.truth[post]))
     t_truth = t63_s(t, seq.truth, seq.step_t_s, a, b)
-    return SequenceScore(
-        seq.name, rmse(k), rmse(ma), t63_s(t, k, seq.step_t_s, a, b) - t_truth, t63_s(t, ma, seq.step_t_s, a, b) - t_truth
-    )
+    lag_k = t63_s(t, k, seq.step_t_s, a, b) - t_truth
+    lag_ma = t63_s(t, ma, seq.step_t_s, a, b) - t_truth
+    return SequenceScore(seq.name, rmse(k), rmse(ma), lag_k, lag_ma)
 
 
 def run_trend_bench(

@@ -82,6 +82,22 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
     return {k: np.asarray(v, float) for k, v in out.items()}
 
 
+def snapshots(case: str, times_s: tuple[float, ...], path: Path, seed: int = 0) -> None:
+    """Rendered frames of one run side by side, labelled with case and time."""
+    import cv2
+
+    sim = DrumSim(case=case, seed=seed, rpm=5.0)
+    r = Renderer(sim, 300)
+    imgs = []
+    for t in times_s:
+        sim.advance(t - sim.t_s)
+        img = r.render(sim.particles())
+        assert img is not None
+        cv2.putText(img, f"{case} t={t:g}s", (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+        imgs.append(img)
+    cv2.imwrite(str(path), np.hstack(imgs))
+
+
 def cases(out_dir: Path, seeds=(0, 1), duration_s: float = 60.0, last_s: float = 20.0) -> dict:
     """Paper Fig. 5/6 through the same meter: cases A, B, C at 5 rpm, means over the last ``last_s``."""
     plt = _plt()
@@ -110,6 +126,8 @@ def cases(out_dir: Path, seeds=(0, 1), duration_s: float = 60.0, last_s: float =
     fig.tight_layout()
     fig.savefig(out_dir / "validation-cases.png", dpi=110)
     plt.close(fig)
+    snapshots("C", (0.0, 20.0, 40.0, duration_s), out_dir / "validation-snapshots-C.png")
+    snapshots("A", (0.0, 10.0, 30.0, duration_s), out_dir / "validation-snapshots-A.png")
     return summary
 
 
@@ -240,4 +258,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["SECTIONS", "branch", "calibration", "case_curves", "cases", "convergence", "main", "plateau", "slope_run",
-           "transfer"]
+           "snapshots", "transfer"]

@@ -10,6 +10,11 @@ import numpy as np
 from twin.runlog import read_events, read_frames
 
 
+def _series(rows: list[dict], name: str) -> np.ndarray:
+    """One column of run-log rows as floats (None -> NaN)."""
+    return np.array([np.nan if r[name] is None else r[name] for r in rows], dtype=float)
+
+
 def plot_runs(runs: Mapping[str, Path | str], out_png: Path | str, title: str = "") -> Path:
     """MI (raw, faint) and Kalman trend (bold) against run time for each labelled run dir,
     with the rpm actually reached below and the AUTO decisions marked; writes ``out_png``."""
@@ -26,13 +31,10 @@ def plot_runs(runs: Mapping[str, Path | str], out_png: Path | str, title: str = 
         rows = read_frames(run_dir)
         col = colours[i % len(colours)]
 
-        def series(name: str) -> np.ndarray:
-            return np.array([np.nan if r[name] is None else r[name] for r in rows], dtype=float)
-
-        t = series("t_s")
-        ax.plot(t, series("mi"), color=col, alpha=0.18, lw=0.8)
-        ax.plot(t, series("trend_mi"), color=col, lw=2.2, label=f"{label}: Kalman trend (raw MI faint)")
-        ax2.plot(t, series("rpm_actual"), color=col, lw=2, label=label)
+        t = _series(rows, "t_s")
+        ax.plot(t, _series(rows, "mi"), color=col, alpha=0.18, lw=0.8)
+        ax.plot(t, _series(rows, "trend_mi"), color=col, lw=2.2, label=f"{label}: Kalman trend (raw MI faint)")
+        ax2.plot(t, _series(rows, "rpm_actual"), color=col, lw=2, label=label)
         moves = [e for e in read_events(run_dir) if e["kind"] == "decision" and e.get("decision") == "move"]
         for e in moves:
             ax.axvline(e["t_s"], color=col, ls="--", lw=1)

@@ -48,7 +48,10 @@ def make_emulator(kind: str, **kw) -> MillEmulator:
 
 @pytest.mark.timeout(30)
 def test_set_rpm_converges_start_stop(kind):
-    with make_emulator(kind, config=DeviceConfig(watchdog_s=2.0, motor=QUICK_MOTOR)) as emu, MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.1) as c:
+    with (
+        make_emulator(kind, config=DeviceConfig(watchdog_s=2.0, motor=QUICK_MOTOR)) as emu,
+        MillClient(emu.url, timeout_s=0.2, heartbeat_s=0.1) as c,
+    ):
         st = c.status()
         assert st == p.MillStatus(0.0, 0.0, False, None) and c.connected
         c.set_rpm(15.0)

@@ -16,7 +16,7 @@ def label_map_of(sim: DrumSim, roi: DrumROI, size: int) -> np.ndarray:
     p = sim.particles()
     lab = np.zeros((size, size), np.uint8)
     s = roi.r_px / sim.drum.radius_m
-    for x, y, r, k in zip(p.x_m, p.y_m, p.r_m, p.cls):
+    for x, y, r, k in zip(p.x_m, p.y_m, p.r_m, p.cls, strict=True):
         cv2.circle(lab, (int(roi.cx_px + x * s), int(roi.cy_px - y * s)), max(1, int(r * s)), int(k) + 1, -1)
     return lab
 

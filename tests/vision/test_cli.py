@@ -236,3 +236,15 @@ def test_classes_suggest_from_a_video(tmp_path):
     assert r.code == 0, r.err
     assert [c.name for c in parse_config(r.out).counted] == ["blue", "red"]
     assert "from 3 frame(s)" in r.out
+
+
+def test_mi_dark_bed_without_classes_still_gives_the_slope(tmp_path):
+    img, _ = H.tilted_bed(25.0, 0.4, dark=True)
+    cv2.circle(img, (320, 240), 220, (20, 20, 20), 4)  # the drum's rim for detection
+    p = tmp_path / "backlit.png"
+    cv2.imwrite(str(p), img)
+    r = cli("mi", p, "--bed", "dark", "--roi", "320,240,216")
+    assert r.code == 0, r.err
+    row = rows_of(r.out)[0]
+    assert row["valid"] == "0" and "few_pixels" in row["flags"]
+    assert float(row["slope_deg"]) == pytest.approx(25.0, abs=1.0)

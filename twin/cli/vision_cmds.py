@@ -151,7 +151,8 @@ def mi_cmd(
                 else:
                     reading = meter.measure(fr.image)
                     n_good += 1
-                    if cfg.is_default and n_good == 1 and any(f.startswith("few_pixels") for f in reading.flags):
+                    if (cfg.is_default and meter.bed == "color" and n_good == 1
+                            and any(f.startswith("few_pixels") for f in reading.flags)):
                         raise _no_default_pixels_error()
                 if not header_written:
                     writer.writerow(cols)
