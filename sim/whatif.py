@@ -383,6 +383,19 @@ def make_pool(workers: int | None = None) -> Executor:
     return _new_pool(n)
 
 
+def close_pool(pool: Executor | None) -> None:
+    """End a pool from :func:`make_pool` now: running jobs are abandoned (their worker
+    processes are terminated and joined), queued ones cancelled."""
+    if pool is None:
+        return
+    procs = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
+    for p in procs:
+        p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        p.join(timeout=2.0)
+
+
 def summarize(results: Sequence[WhatIfResult]) -> list[dict]:
     """One entry per rpm (seeds and cases pooled): plateau MI mean, sd across runs and within, regime."""
     by_rpm: dict[float, list[WhatIfResult]] = {}

@@ -199,6 +199,7 @@ class LiveLoop:
         """
         self.stop_event.set()
         self.whatif.close()
+        self.twin.close()
         deadline = time.monotonic() + timeout_s
         for th in self._threads:
             th.join(timeout=max(0.0, deadline - time.monotonic()))

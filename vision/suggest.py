@@ -26,6 +26,7 @@ of the same material pair.
 from __future__ import annotations
 
 from collections.abc import Sequence
+import os
 from dataclasses import dataclass
 
 import cv2
@@ -51,6 +52,11 @@ MAX_DISTANCE = 4.5
 
 _L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
 _SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main lightness is shadow/gap
+_CLIP_LEVEL = 250  # a channel at or above this is clipped (glare, specular spots)
+_GLARE_CLIPPED = 0.1  # a component with this share of clipped samples ...
+_GLARE_WEIGHT = 0.25  # ... and under this x the largest particle component's weight is glare
+_BRIDGE_T = (0.2, 0.8)  # a class member between two anchors (position along the segment) ...
+_BRIDGE_OFF = 0.2  # ... and this close to it (x its length) is edge/blur pixels of both
 _COV_FLOOR = (4.0, 1.0, 1.0)  # variance floor (L, a, b): JPEG noise, frames not seen
 _HUE_NAMES = ((8, "red"), (20, "orange"), (33, "yellow"), (78, "green"), (95, "teal"), (130, "blue"),
               (155, "purple"), (170, "magenta"), (180, "red"))
@@ -70,10 +76,12 @@ def colour_name(h: float, s: float, v: float) -> str:
 
 @dataclass(frozen=True)
 class DrumSamples:
-    """Pixels sampled inside the drum: CIELAB colour (N, 3) and height ``(cy - y) / R`` (N,)."""
+    """Pixels sampled inside the drum: CIELAB colour (N, 3), height ``(cy - y) / R`` (N,) and
+    whether a channel is clipped (>= 250, N bool; ``None``: unknown)."""
 
     lab: np.ndarray
     height: np.ndarray
+    clipped: np.ndarray | None = None
 
 
 def sample_drum_pixels(
@@ -82,7 +90,7 @@ def sample_drum_pixels(
 ) -> DrumSamples:
     """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum."""
     rng = np.random.default_rng(seed)
-    labs, heights = [], []
+    labs, heights, clipped = [], [], []
     for img, roi in zip(frames, rois, strict=True):
         box = roi_bbox(roi, img.shape[:2])
         x0, y0, x1, y1 = box
@@ -95,11 +103,13 @@ def sample_drum_pixels(
         if yy.size > per_frame:
             pick = rng.choice(yy.size, per_frame, replace=False)
             yy, xx = yy[pick], xx[pick]
-        labs.append(bgr_to_lab(img[y0:y1, x0:x1][yy, xx]))
+        px = img[y0:y1, x0:x1][yy, xx]
+        labs.append(bgr_to_lab(px))
         heights.append((roi.cy_px - (yy + y0)) / roi.r_px)
+        clipped.append(px.max(axis=1) >= _CLIP_LEVEL)
     if not labs:
         raise VisionError("no drum pixels to learn colours from")
-    return DrumSamples(np.concatenate(labs).astype(np.float64), np.concatenate(heights))
+    return DrumSamples(np.concatenate(labs).astype(np.float64), np.concatenate(heights), np.concatenate(clipped))
 
 
 def _em(x: np.ndarray, n: int, seed: int, iters: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -196,7 +206,16 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
     if len(particles) < k:  # no empty space above the bed (top view?): the least "top" components
         particles = [int(j) for j in order[:k]]
         background = [j for j in range(n) if j not in particles]
+    cap = list(background)  # the background seen above the bed
     ridge = _ridge(w, mu_f, cov_f)
+    if samples.clipped is not None and len(particles) > k:
+        # glare: a small component made largely of clipped pixels is no material of its own
+        clip_share = np.bincount(lbl[samples.clipped], minlength=n) / np.maximum(counts, 1.0)
+        biggest = max(counts[i] for i in particles)
+        glare = [j for j in particles if clip_share[j] >= _GLARE_CLIPPED and counts[j] < _GLARE_WEIGHT * biggest]
+        glare = glare[: len(particles) - k]
+        particles = [j for j in particles if j not in glare]
+        background.extend(glare)
     if background and len(particles) > k:
         keep = []
         biggest = max(counts[i] for i in particles)
@@ -228,6 +247,8 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
             if j != main and mu[j, 0] < _SHADOW_L_RATIO * mu[main, 0]:
                 g.remove(j)
                 background.append(j)
+    if os.environ.get("BRIDGE", "1") == "1":
+        _drop_bridges(groups, background, cap, mu_f, counts)
     total = counts.sum()
     named = []
     for g in groups:
@@ -248,6 +269,34 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
         comps = tuple(_component(mu[j], cov[j], max(counts[j], 1.0) / total) for j in background)
         classes.append(ColourClass("background", display_bgr=(40, 40, 40), lab=comps, reject=True))
     return tuple(classes)
+
+
+def _between(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether point ``x`` lies on the segment from ``a`` to ``b`` (away from its ends)."""
+    seg = b - a
+    n2 = float(seg @ seg)
+    if n2 <= 0.0:
+        return False
+    t = float((x - a) @ seg) / n2
+    off = float(np.linalg.norm(x - a - t * seg))
+    return _BRIDGE_T[0] <= t <= _BRIDGE_T[1] and off <= _BRIDGE_OFF * np.sqrt(n2)
+
+
+def _drop_bridges(groups: list[list[int]], background: list[int], cap: list[int], mu: np.ndarray,
+                  counts: np.ndarray) -> None:
+    """Move to the background the class members that lie between two materials' colours
+    (or between the background and another material): mixed pixels at particle edges,
+    JPEG chroma blur, noise. They belong to either side, so counting them for one class
+    biases its centroid; dropping them drops the same rim of every particle."""
+    mains = [max(g, key=lambda j: counts[j]) for g in groups]
+    for gi, g in enumerate(groups):
+        others = [m for hi, m in enumerate(mains) if hi != gi]
+        for j in [j for j in g if j != mains[gi]]:
+            mode = os.environ.get("BMODE", "both")
+            if (mode != "bg" and any(_between(mu[j], mu[mains[gi]], mu[m]) for m in others)) or (mode != "cls" and any(
+                    _between(mu[j], mu[b], mu[m]) for b in cap for m in others)):
+                g.remove(j)
+                background.append(j)
 
 
 def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent:

@@ -1,10 +1,12 @@
-"""The twin worker: calibrate, seed and run the physics twin beside the camera.
+"""The twin worker: seed, run and calibrate the physics twin beside the camera.
 
-Waits for ``CALIBRATION_WINDOW_S`` of camera slope angles, calibrates the twin's
-friction to their median (``sim.calibrate``), seeds its particles from the live frame
-(``sim.from_image``), then keeps it in step with run time at the mill's actual rpm,
-rendering it (``sim.render``) and measuring it with a vision ``Meter`` like the camera.
-``recalibrate``/``reseed`` requests are served between steps. It reads only the
+As soon as the camera has a frame, the twin is seeded from it (``sim.from_image``) with
+the paper's materials and kept in step with run time at the mill's actual rpm, rendered
+(``sim.render``) and measured with a vision ``Meter`` like the camera. Calibration runs
+beside it, in a worker process of its own (``sim.whatif.make_pool``; a converged
+calibration takes tens of seconds): once ``CALIBRATION_WINDOW_S`` of camera slope angles
+are in, their median is the target of ``sim.calibrate``, and the result is applied to the
+running twin when it arrives. ``recalibrate``/``reseed`` requests are served between steps. It reads only the
 :class:`RunView`; it publishes :class:`TwinInfo` and reports through the event sink.
 """
 
@@ -17,6 +19,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Mapping
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,8 +46,11 @@ class TwinSettings:
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
 
-class _Stopped(Exception):
-    """The run is stopping: abandon a calibration between its evaluations."""
+def _calibrate_job(target_slope_deg: float, rpm: float, kwargs: Mapping[str, Any]) -> Any:
+    """``sim.calibrate.calibrate`` in a worker process (module level: picklable)."""
+    from sim.calibrate import calibrate
+
+    return calibrate(target_slope_deg, rpm, **dict(kwargs))
 
 
 class TwinWorker:
@@ -76,7 +82,11 @@ class TwinWorker:
         self._state: Any = None
         self._mi = math.nan
         self._slope = math.nan
-        self._stop = threading.Event()
+        self._pool: Executor | None = None
+        self._closed = False
+        self._cal_future: Future | None = None
+        self._cal_started: tuple[float, float, float, float] | None = None  # t, target, rpm, wall
+        self._cal_wanted = True  # calibrate once the camera slope window is full
 
     # -- any thread ------------------------------------------------------------------------
     def request(self, kind: str) -> None:
@@ -102,32 +112,22 @@ class TwinWorker:
                 return
 
     def run(self, stop: threading.Event) -> None:
-        self._stop = stop
-        try:
-            self._run(stop)
-        except _Stopped:
-            return
-
-    def _check_stop(self, *_: object) -> None:
-        if self._stop.is_set():
-            raise _Stopped
+        self._run(stop)
 
     def _run(self, stop: threading.Event) -> None:
         view = self.view
-        while not stop.is_set():
+        while not stop.is_set() and view.camera().image is None:
             self._drain_slopes()
-            if self.camera_slope(view.frames().t_s) is not None:
-                break
             stop.wait(0.05)
         if stop.is_set():
             return
-        self._calibrate()
         self._reseed()
         render = Cadence(1.0 / TWIN_FPS, start_s=self.now_s)  # run clock
         next_snap = self.now_s
         while not stop.is_set():
             self._drain_slopes()
             self._serve_requests()
+            self._tend_calibration()
             target = view.frames().t_s
             lag = target - self.now_s
             if lag > MAX_LAG_S:  # cannot keep up: skip ahead and say so
@@ -155,7 +155,7 @@ class TwinWorker:
             except queue.Empty:
                 return
             if kind == "calibrate":
-                self._calibrate()
+                self._cal_wanted = True
             else:
                 self._reseed()
 
@@ -171,38 +171,68 @@ class TwinWorker:
         rpm = self.view.mill().actual_rpm
         return rpm if math.isfinite(rpm) and rpm > 0 else self.settings.start_rpm
 
-    def _calibrate(self) -> None:
+    def _tend_calibration(self) -> None:
+        """Start a wanted calibration once there is a target; apply a finished one."""
         t = self.view.frames().t_s
-        try:
-            self._fit(t)
-        except _Stopped:
-            raise
-        except Exception as exc:  # the twin runs on with its current friction
-            self.sink.fault("calibration", f"calibration failed: {exc}", t)
-            self.sink.numbers(twin_state="running (uncalibrated)")
-        else:
-            self.sink.clear_fault("calibration", "calibrated", t)
-
-    def _fit(self, t: float) -> None:
-        from sim.calibrate import calibrate
-
-        target = self.camera_slope(t)
-        if target is None:
-            self.sink.event("calibration_skipped", t, reason="no camera slope angle yet")
+        fut = self._cal_future
+        if fut is None:
+            if not self._cal_wanted:
+                return
+            target = self.camera_slope(t)
+            if target is None:
+                return
+            self._cal_wanted = False
+            rpm = self._rpm_now()
+            self._cal_started = (t, target, rpm, time.monotonic())
+            self.sink.numbers(twin_state="running, calibrating")
+            self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)
+            try:
+                self._cal_future = self._get_pool().submit(
+                    _calibrate_job, target, rpm, dict(self.settings.calibrate_kwargs)
+                )
+            except Exception as exc:  # no pool (closing): the twin runs on uncalibrated
+                self._calibration_failed(t, exc)
             return
-        rpm = self._rpm_now()
-        self.sink.numbers(twin_state="calibrating")
-        t0 = time.monotonic()
-        cal = calibrate(target, rpm, progress=self._check_stop, **dict(self.settings.calibrate_kwargs))
+        if not fut.done():
+            return
+        self._cal_future = None
+        try:
+            cal = fut.result()
+        except Exception as exc:  # the twin runs on with its current friction
+            self._calibration_failed(t, exc)
+            return
+        _, target, rpm, wall0 = self._cal_started or (t, math.nan, math.nan, time.monotonic())
         self.calibration = cal
         self.sink.event(
             "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
-            twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - t0,
+            twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - wall0,
         )
         self.sink.metadata(calibration=cal)
         self.sink.numbers(friction=cal.friction, twin_state="running")
+        self.sink.clear_fault("calibration", "calibrated", t)
         if self.sim is not None:
             self.sim.set_friction(cal.friction, cal.rolling)
+
+    def _calibration_failed(self, t: float, exc: BaseException) -> None:
+        self.sink.fault("calibration", f"calibration failed: {exc}", t)
+        self.sink.numbers(twin_state="running (uncalibrated)")
+
+    def _get_pool(self) -> Executor:
+        if self._closed:
+            raise RuntimeError("the twin worker is closed")
+        if self._pool is None:
+            from sim.whatif import make_pool
+
+            self._pool = make_pool(1)
+        return self._pool
+
+    def close(self) -> None:
+        """End the calibration process (a running calibration is abandoned)."""
+        from sim.whatif import close_pool
+
+        self._closed = True
+        pool, self._pool = self._pool, None
+        close_pool(pool)
 
     def _reseed(self) -> None:
         from sim.drum import DrumSim

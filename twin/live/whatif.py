@@ -200,13 +200,8 @@ class WhatIfWorker:
 
     def close(self) -> None:
         """Shut the worker processes down (a running study is abandoned: it fails at once)."""
+        from sim.whatif import close_pool
+
         self._closed = True
         pool, self._pool = self._pool, None
-        if pool is None:
-            return
-        procs = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
-        for p in procs:
-            p.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in procs:
-            p.join(timeout=2.0)
+        close_pool(pool)
