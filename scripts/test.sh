@@ -1,6 +1,12 @@
 #!/usr/bin/env bash
-# The whole test suite, from a clean clone: sets up .venv, then runs pytest.
+# The whole test suite, from a clean clone: sets up .venv, lints (ruff), type-checks
+# (mypy), then runs pytest. Arguments go to pytest (e.g. -m "not slow and not browser").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/bootstrap.sh
+echo "== ruff check" >&2
+.venv/bin/ruff check .
+echo "== mypy" >&2
+.venv/bin/mypy
+echo "== pytest" >&2
 exec .venv/bin/python -m pytest "$@"

@@ -142,7 +142,8 @@ def slice_2d(recipe: Recipe, drum: DrumSpec) -> list[DiskClass]:
         n = int(round(v / total * area_m2 / (math.pi * r * r))) if total > 0 else 0
         if p.count > 0 and n == 0:
             n = 1
-        out.append(DiskClass(p.name, r, n, p.density_kg_m3, tuple(int(c) for c in p.colour_bgr)))
+        b, g, rr = (int(c) for c in p.colour_bgr)
+        out.append(DiskClass(p.name, r, n, p.density_kg_m3, (b, g, rr)))
     return out
 
 

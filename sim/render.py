@@ -138,8 +138,8 @@ class Renderer:
         self._noise = [self._rng.normal(0.0, rz.noise_sd, size=(h, w, 3)).astype(np.float32)
                        for _ in range(8)] if rz.noise_sd > 0 else []
         d = rz.perspective * w / 2
-        src = np.float32([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]])
-        dst = np.float32([[d, 0], [w - 1 - d, 0], [w - 1, h - 1], [0, h - 1]])
+        src = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.float32)
+        dst = np.array([[d, 0], [w - 1 - d, 0], [w - 1, h - 1], [0, h - 1]], np.float32)
         self._warp = cv2.getPerspectiveTransform(src, dst) if rz.perspective > 0 else None
 
     def _degrade(self, img: np.ndarray, t_s: float) -> np.ndarray | None:
@@ -166,8 +166,9 @@ class Renderer:
         out = f.astype(np.uint8)
         if rz.jpeg_quality > 0:
             ok, enc = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(rz.jpeg_quality)])
-            if ok:
-                out = cv2.imdecode(enc, cv2.IMREAD_COLOR)
+            dec = cv2.imdecode(enc, cv2.IMREAD_COLOR) if ok else None
+            if dec is not None:
+                out = np.asarray(dec, np.uint8)
         return out
 
 

@@ -420,9 +420,8 @@ def _every_lab8() -> tuple[np.ndarray, np.ndarray]:
     return uniq, index[key]
 
 
-def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, n_labels, margin, out):  # pragma: no cover - compiled
+def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, out):  # pragma: no cover - compiled
     n_comp = means.shape[0]
-    per_label = np.empty(n_labels + 1)
     for i in range(lab8.shape[0]):
         x0 = lab8[i, 0] * (100.0 / 255.0)
         x1 = lab8[i, 1] - 128.0
@@ -430,8 +429,6 @@ def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, n_labels, margin, o
         best = 1e30
         best_j = 0
         best_d2 = 0.0
-        for m in range(n_labels + 1):
-            per_label[m] = 1e30
         for j in range(n_comp):
             d0 = x0 - means[j, 0]
             d1 = x1 - means[j, 1]
@@ -440,21 +437,11 @@ def _lab_lut_py(lab8, means, precs, offsets, max_d2, labels, n_labels, margin, o
             q = (p[0] * d0 * d0 + p[3] * d1 * d1 + p[5] * d2 * d2
                  + 2.0 * (p[1] * d0 * d1 + p[2] * d0 * d2 + p[4] * d1 * d2))
             sc = q + offsets[j]
-            if sc < per_label[labels[j]]:
-                per_label[labels[j]] = sc
             if sc < best:
                 best = sc
                 best_j = j
                 best_d2 = q
-        won = labels[best_j]
-        if won == 0 or best_d2 > max_d2[best_j]:
-            out[i] = 0
-            continue
-        runner = 1e30
-        for m in range(1, n_labels + 1):
-            if m != won and per_label[m] < runner:
-                runner = per_label[m]
-        out[i] = won if runner - best >= margin else 0
+        out[i] = labels[best_j] if best_d2 <= max_d2[best_j] else 0
 
 
 _lab_kernel = None
@@ -484,9 +471,8 @@ def _lab_lut(classes: tuple[ColourClass, ...]) -> np.ndarray:
         _lab_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_lab_lut_py)
     uniq, inverse = _every_lab8()
     per_lab = np.zeros(uniq.shape[0], np.uint8)
-    import os
     _lab_kernel(uniq, np.array(means, np.float64), np.array(precs, np.float64), np.array(offsets, np.float64),
-                np.array(max_d2, np.float64), np.array(labels, np.int64), k, float(os.environ.get("AMB", "0")), per_lab)
+                np.array(max_d2, np.float64), np.array(labels, np.uint8), per_lab)
     return np.take(per_lab, inverse)
 
 

@@ -69,9 +69,9 @@ def lacey_from_labels(
     particle = a | b
     idx = np.flatnonzero(particle.ravel())
     shuffled = rng.permutation(labels.ravel()[idx])
-    ra = np.zeros(labels.size, dtype=bool)
-    ra[idx[shuffled == 1]] = True
-    ra = ra.reshape(labels.shape)
+    ra_flat = np.zeros(labels.size, dtype=bool)
+    ra_flat[idx[shuffled == 1]] = True
+    ra = ra_flat.reshape(labels.shape)
     rb = particle & ~ra
     rna, rnb = _cell_counts(ra, rb, cell_px)
     sr = _weighted_var(rna[keep], rnb[keep], p)

@@ -41,8 +41,9 @@ def draw_overlay(
         if roi.kind == "circle":
             cv2.circle(out, c, int(round(roi.r_px)), (0, 255, 255), th, cv2.LINE_AA)
         else:
-            p0 = (int(roi.cx_px - roi.half_w_px), int(roi.cy_px - roi.half_h_px))
-            p1 = (int(roi.cx_px + roi.half_w_px), int(roi.cy_px + roi.half_h_px))
+            hw, hh = float(roi.half_w_px or 0.0), float(roi.half_h_px or 0.0)
+            p0 = (int(roi.cx_px - hw), int(roi.cy_px - hh))
+            p1 = (int(roi.cx_px + hw), int(roi.cy_px + hh))
             cv2.rectangle(out, p0, p1, (0, 255, 255), th, cv2.LINE_AA)
     mx, my = reading.surface_mid_px
     if math.isfinite(reading.slope_deg) and math.isfinite(mx) and math.isfinite(my) and roi is not None:

@@ -109,7 +109,8 @@ def roi_mask(roi: DrumROI, shape_hw: tuple[int, int]) -> np.ndarray:
 
 def _edge_points(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     edges = cv2.Canny(cv2.GaussianBlur(gray, (5, 5), 0), 20, 60)
-    return np.nonzero(edges)
+    ys, xs = np.nonzero(edges)
+    return ys, xs
 
 
 def _rim_coverage(pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: float) -> int:

@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -78,7 +79,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, str | None]:
     if _truncated(data):
         return _EMPTY, f"cannot decode image {p.name} (truncated file)"
     if img.dtype == np.uint16:
-        img = (img >> 8).astype(np.uint8)
+        img = (np.asarray(img, np.uint16) >> 8).astype(np.uint8)
     elif img.dtype != np.uint8:
         return _EMPTY, f"unsupported image depth {img.dtype} in {p.name}"
     if img.ndim == 3 and img.shape[2] == 4:
@@ -129,7 +130,7 @@ def open_source(
     fps: float = 30.0,
     reconnect_tries: int = 10,
     backoff_s: tuple[float, float] = (0.5, 8.0),
-    capture_factory: Callable[[object], object] | None = None,
+    capture_factory: Callable[[object], Any] | None = None,
     sleep: Callable[[float], None] = time.sleep,
 ) -> Iterator[Frame]:
     """Yield ``Frame`` objects from ``spec``.

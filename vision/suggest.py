@@ -26,7 +26,6 @@ of the same material pair.
 from __future__ import annotations
 
 from collections.abc import Sequence
-import os
 from dataclasses import dataclass
 
 import cv2
@@ -55,8 +54,8 @@ _SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main ligh
 _CLIP_LEVEL = 250  # a channel at or above this is clipped (glare, specular spots)
 _GLARE_CLIPPED = 0.1  # a component with this share of clipped samples ...
 _GLARE_WEIGHT = 0.25  # ... and under this x the largest particle component's weight is glare
-_BRIDGE_T = (0.2, 0.8)  # a class member between two anchors (position along the segment) ...
-_BRIDGE_OFF = 0.2  # ... and this close to it (x its length) is edge/blur pixels of both
+_BRIDGE_T = (0.2, 0.8)  # a class member between the background and another class (position on the segment) ...
+_BRIDGE_OFF = 0.2  # ... and this close to the segment (x its length) is mixed edge pixels of both
 _COV_FLOOR = (4.0, 1.0, 1.0)  # variance floor (L, a, b): JPEG noise, frames not seen
 _HUE_NAMES = ((8, "red"), (20, "orange"), (33, "yellow"), (78, "green"), (95, "teal"), (130, "blue"),
               (155, "purple"), (170, "magenta"), (180, "red"))
@@ -247,8 +246,7 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
             if j != main and mu[j, 0] < _SHADOW_L_RATIO * mu[main, 0]:
                 g.remove(j)
                 background.append(j)
-    if os.environ.get("BRIDGE", "1") == "1":
-        _drop_bridges(groups, background, cap, mu_f, counts)
+    _drop_bridges(groups, background, cap, mu_f, counts)
     total = counts.sum()
     named = []
     for g in groups:
@@ -284,17 +282,17 @@ def _between(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
 
 def _drop_bridges(groups: list[list[int]], background: list[int], cap: list[int], mu: np.ndarray,
                   counts: np.ndarray) -> None:
-    """Move to the background the class members that lie between two materials' colours
-    (or between the background and another material): mixed pixels at particle edges,
-    JPEG chroma blur, noise. They belong to either side, so counting them for one class
-    biases its centroid; dropping them drops the same rim of every particle."""
+    """Move to the background the class members (not a class's main component) that lie
+    between the background and *another* class's main colour (in the fit space, lightness
+    down-weighted): the mixed pixels at particle edges and in the gaps, which, with noise
+    or blur, belong to either material. Counting them for one class pulls its centroid
+    towards the other class's particles; dropping them drops the same rim of every
+    particle, which leaves centroids where they are."""
     mains = [max(g, key=lambda j: counts[j]) for g in groups]
     for gi, g in enumerate(groups):
         others = [m for hi, m in enumerate(mains) if hi != gi]
         for j in [j for j in g if j != mains[gi]]:
-            mode = os.environ.get("BMODE", "both")
-            if (mode != "bg" and any(_between(mu[j], mu[mains[gi]], mu[m]) for m in others)) or (mode != "cls" and any(
-                    _between(mu[j], mu[b], mu[m]) for b in cap for m in others)):
+            if any(_between(mu[j], mu[b], mu[m]) for b in cap for m in others):
                 g.remove(j)
                 background.append(j)
 

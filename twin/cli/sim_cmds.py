@@ -6,6 +6,7 @@ import csv
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import typer
@@ -88,7 +89,7 @@ def sim_cmd(
     writer = None
     if video is not None:
         video.parent.mkdir(parents=True, exist_ok=True)
-        writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), float(min(fps, 60.0)),
+        writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"mp4v"), float(min(fps, 60.0)),
                                  (renderer.width_px, renderer.height_px))
         if not writer.isOpened():
             raise SimError(f"cannot write video {video}")
@@ -239,7 +240,7 @@ def calibrate_cmd(
     check_number("--max-evals", max_evals, 2, 40, integer=True)
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
-    sim_kw = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
+    sim_kw: dict[str, Any] = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
@@ -317,10 +318,10 @@ def whatif_cmd(
         with open(csv_out, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["rpm", "case", "seed", "t_s", "mi", "mi_sigmoid", "slope_deg", "rpm_actual"])
-            for r in results:
-                for i in range(r.t_s.size):
-                    w.writerow([r.job.rpm, r.job.case, r.job.seed, f"{r.t_s[i]:.4f}", f"{r.mi[i]:.5f}",
-                                f"{r.mi_sigmoid[i]:.5f}", f"{r.slope_deg[i]:.3f}", f"{r.rpm_actual[i]:.3f}"])
+            for res in results:
+                for i in range(res.t_s.size):
+                    w.writerow([res.job.rpm, res.job.case, res.job.seed, f"{res.t_s[i]:.4f}", f"{res.mi[i]:.5f}",
+                                f"{res.mi_sigmoid[i]:.5f}", f"{res.slope_deg[i]:.3f}", f"{res.rpm_actual[i]:.3f}"])
     if plot is not None:
         _plot_whatif(results, plot)
     summary = summarize(results)

@@ -7,11 +7,16 @@ import math
 import sys
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from twin.cli.app import app, bench_app, console, console_err, print_json
 from vision.errors import VisionError
+
+if TYPE_CHECKING:
+    from vision.glcm import GLCMMeter
+    from vision.lacey import LaceyMeter
 
 classes_app = typer.Typer(help="Colour classes: suggest a TOML config from a frame.")
 app.add_typer(classes_app, name="classes")
@@ -97,7 +102,7 @@ def mi_cmd(
     _warn(cfg.warnings)
     manual_roi = parse_roi(roi) if roi else None
     meter = cfg.make_meter(roi=manual_roi, bed=bed.value if bed else None)
-    baseline = None
+    baseline: LaceyMeter | GLCMMeter | None = None
     if method is Method.lacey:
         from vision.lacey import LaceyMeter
 
@@ -187,7 +192,7 @@ def mi_cmd(
                                       cfg.classes, mi_avg=avg)
                     if vw is None:
                         vw_size = (ov.shape[1] // 2 * 2, ov.shape[0] // 2 * 2)
-                        vw = cv2.VideoWriter(str(overlay_video), cv2.VideoWriter_fourcc(*"mp4v"), fps, vw_size)
+                        vw = cv2.VideoWriter(str(overlay_video), cv2.VideoWriter.fourcc(*"mp4v"), fps, vw_size)
                         if not vw.isOpened():
                             raise VisionError(f"cannot write video {overlay_video}")
                     if (ov.shape[1], ov.shape[0]) != vw_size:
