@@ -333,10 +333,13 @@ class Classifier:
                     for t in htests[2:]:
                         cv2.bitwise_or(hue, run(t), dst=hue)
                 b = base(stest, vtest)
-                if hue is None and b is None:
-                    g[...] = 255
-                elif hue is None or b is None:
-                    np.copyto(g, hue if b is None else b)
+                if b is None:
+                    if hue is None:
+                        g[...] = 255
+                    else:
+                        np.copyto(g, hue)
+                elif hue is None:
+                    np.copyto(g, b)
                 else:
                     cv2.bitwise_and(hue, b, dst=g)
                 if g is not out:

@@ -5,7 +5,10 @@
 2. Fit a Gaussian mixture (EM, full covariances, ``k + 3`` components, k-means start) to
    their CIELAB colours with lightness down-weighted.
 3. Components over-represented in the top cap of the drum (the empty part above the
-   bed) are background: the drum's back wall, rim, reflections.
+   bed) are background: the drum's back wall, rim, reflections. So is glare: a small
+   component (under 0.25x the largest particle component) with 10% or more clipped
+   samples (a channel >= 250) is no material of its own, as long as ``k`` particle
+   components remain.
 4. The other components are grouped into ``k`` classes by continuity of the fitted
    density: two components joined by a ridge (no valley in the mixture's density on the
    segment between their means) are one material seen under different shading, two
@@ -15,6 +18,9 @@
    and joined more closely to the background than to, its nearest particle component
    (gaps, shadows) joins the background, and so does a member of a class far darker (L below half) than the
    class's main component (the gaps between particles, deep shadows).
+   Last, a class member (not its main component) that lies between the background's
+   colour and another class's main colour is dropped to the background: mixed edge and
+   gap pixels, which noise or blur make either material's (see ``_drop_bridges``).
 5. Each class keeps its Gaussians; the background is one reject class. The meter's
    lookup table assigns every colour to its most likely component, and counts it only
    within ``max_distance`` sigmas of a particle class.
