@@ -32,7 +32,7 @@ from typing import Protocol
 
 from control.errors import ControlError, MillRefused
 from control.protocol import MillStatus
-from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill
+from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill, drain
 
 MILL_POLL_S = 0.1  # wall seconds between polls
 
@@ -118,11 +118,7 @@ class MillWorker:
         return self._poll(snap, new_epoch=not snap.connected)
 
     def _take_commands(self) -> None:
-        while True:
-            try:
-                cmd = self._inbox.get_nowait()
-            except queue.Empty:
-                return
+        for cmd in drain(self._inbox):
             if isinstance(cmd, SetRpm):
                 if self._rpm is not None:
                     self._drop(self._rpm, "superseded by a newer set-rpm")

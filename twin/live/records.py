@@ -10,9 +10,10 @@ the owning worker's queue.
 from __future__ import annotations
 
 import math
+import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -40,6 +41,15 @@ class Latest(Generic[T]):
     def set(self, value: T) -> None:
         with self._lock:
             self._value = value
+
+
+def drain(q: queue.Queue[T] | queue.SimpleQueue[T]) -> Iterator[T]:
+    """Every item waiting in ``q`` now, oldest first, without blocking."""
+    while True:
+        try:
+            yield q.get_nowait()
+        except queue.Empty:
+            return
 
 
 # -- snapshots --------------------------------------------------------------------------------

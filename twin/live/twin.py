@@ -25,7 +25,7 @@ from typing import Any
 
 from twin.clock import Cadence
 from twin.live.camera import Rate
-from twin.live.records import EventSink, Latest, RunView, TwinInfo
+from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
 from twin.state import LiveState
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
@@ -105,11 +105,7 @@ class TwinWorker:
         self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state))
 
     def _drain_slopes(self) -> None:
-        while True:
-            try:
-                self._slopes.append(self.slopes.get_nowait())
-            except queue.Empty:
-                return
+        self._slopes.extend(drain(self.slopes))
 
     def run(self, stop: threading.Event) -> None:
         self._run(stop)
@@ -149,11 +145,7 @@ class TwinWorker:
             self._publish(self.now_s)
 
     def _serve_requests(self) -> None:
-        while True:
-            try:
-                kind = self._requests.get_nowait()
-            except queue.Empty:
-                return
+        for kind in drain(self._requests):
             if kind == "calibrate":
                 self._cal_wanted = True
             else:
@@ -201,7 +193,8 @@ class TwinWorker:
         except Exception as exc:  # the twin runs on with its current friction
             self._calibration_failed(t, exc)
             return
-        _, target, rpm, wall0 = self._cal_started or (t, math.nan, math.nan, time.monotonic())
+        assert self._cal_started is not None  # set together with the future
+        _, target, rpm, wall0 = self._cal_started
         self.calibration = cal
         self.sink.event(
             "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
