@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite, from a clean clone: sets up .venv, lints (ruff), type-checks
-# (mypy), then runs pytest. Arguments go to pytest (e.g. -m "not slow and not browser").
+# (mypy), then runs pytest on two workers (pytest-xdist). Arguments go to pytest (e.g. -m "not slow and not browser").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/bootstrap.sh
@@ -9,4 +9,5 @@ echo "== ruff check" >&2
 echo "== mypy" >&2
 .venv/bin/mypy
 echo "== pytest" >&2
-exec .venv/bin/python -m pytest "$@"
+# two workers on the two cores; the whole-loop tests share one (xdist_group "live")
+exec .venv/bin/python -m pytest -n 2 --dist loadgroup "$@"

@@ -102,19 +102,20 @@ def test_study_on_a_real_dask_scheduler_and_worker():
     addr = f"tcp://127.0.0.1:{port}"
     procs = []
     try:
+        # scheduler and worker start together: the worker retries until the scheduler listens
         procs.append(subprocess.Popen(
             [str(DASK), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        procs.append(subprocess.Popen(
+            [str(DASK), "worker", addr, "--nthreads", "1", "--no-nanny", "--no-dashboard",
+             "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=1).close()
                 break
             except OSError:
-                time.sleep(0.3)
-        procs.append(subprocess.Popen(
-            [str(DASK), "worker", addr, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
-             "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                time.sleep(0.1)
         with Client(addr, timeout="30s", set_as_default=False) as c:
             c.wait_for_workers(1, timeout=90)
         jobs = [WhatIfJob(rpm=r, duration_s=0.5, seed=0, sample_s=0.25) for r in (5.0, 20.0)]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -19,18 +18,28 @@ CHROMIUM_ARGS = [
 ]
 
 
-@pytest.fixture
-def page(tmp_path: Path) -> Iterator[object]:
-    """A fresh chromium page (1600x1000); fails (never skips) when chromium is missing."""
+@pytest.fixture(scope="session")
+def browser() -> Iterator[object]:
+    """One headless chromium for the session; fails (never skips) when chromium is missing."""
     from playwright.sync_api import sync_playwright
 
     if not CHROMIUM.exists():
         raise FileNotFoundError(f"{CHROMIUM} missing: install Debian's chromium (apt-get install chromium)")
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
         try:
-            pg = browser.new_page(viewport={"width": 1600, "height": 1000})
-            pg.set_default_timeout(20_000)
-            yield pg
+            yield b
         finally:
-            browser.close()
+            b.close()
+
+
+@pytest.fixture
+def page(browser) -> Iterator[object]:
+    """A fresh page (1600x1000, its own browser context) in the session's chromium."""
+    ctx = browser.new_context(viewport={"width": 1600, "height": 1000})
+    try:
+        pg = ctx.new_page()
+        pg.set_default_timeout(20_000)
+        yield pg
+    finally:
+        ctx.close()

@@ -142,6 +142,7 @@ def test_scene_geometry() -> None:
 
 
 @pytest.mark.browser
+@pytest.mark.xdist_group("live")  # beside the live runs, not in parallel with them
 @pytest.mark.timeout(120)
 def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     """One chromium for the whole browser check: the local dashboard (updates and
