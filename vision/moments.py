@@ -92,102 +92,144 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first.astype(np.int64), last.astype(np.int64)
 
 
-def _kernel_py(  # pragma: no cover - compiled
-    img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
-):
-    """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+def _make_kernel(erode: bool):
+    """The moments kernel, with or without the one-pixel class erosion (``erode`` is a
+    compile-time constant of the closure, so the plain kernel carries none of its code)."""
 
-    ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
-    class pixels, or the dark pixels when ``occ_dark``."""
-    out[:, :] = 0
-    occ[:, :] = 0
-    hist = np.zeros((n_classes + 1, 3), np.int64)
-    for i in range(first.shape[0]):
-        a = first[i]
-        b = last[i]
-        if b <= a:
-            continue
-        y = y0 + i * step
-        row = img[y]
-        orow = occ[(i * step) >> occ_shift]
-        n1 = 0
-        sx1 = 0
-        sxx1 = 0
-        n2 = 0
-        sx2 = 0
-        sxx2 = 0
-        nd = 0
-        sxd = 0
-        sxxd = 0
-        hist[:, :] = 0
-        xa = x0 + a * step
-        xb = x0 + b * step
-        for x in range(xa, xb, step):
-            bb = np.int64(row[x, 0])
-            gg = np.int64(row[x, 1])
-            rr = np.int64(row[x, 2])
-            c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
-            if c == 255:
-                c = fine[(bb << 16) | (gg << 8) | rr]
-            if c == 0:
+    def kernel(  # pragma: no cover - compiled
+        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
+    ):
+        """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+
+        ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
+        classified pixels (before any erosion), or the dark pixels when ``occ_dark``. With
+        ``erode``, each grid row is first classified into a label row (three kept, zero
+        outside the spans) and a pixel counts for its class only when its four grid
+        neighbours have the same class."""
+        out[:, :] = 0
+        occ[:, :] = 0
+        hist = np.zeros((n_classes + 1, 3), np.int64)
+        nrows = first.shape[0]
+        width = 0
+        for i in range(nrows):
+            width = max(width, last[i])
+        lbuf = np.zeros((3, width + 2), np.uint8)
+        for i in range(-1 if erode else 0, nrows):
+            if erode:
+                # classify grid row i + 1 into its label row (the erosion needs the row below)
+                k = i + 1
+                dst = lbuf[k % 3]
+                if k >= 3:  # the slot held row k - 3: clear its span
+                    for j in range(first[k - 3], last[k - 3]):
+                        dst[j + 1] = 0
+                if k < nrows and last[k] > first[k]:
+                    krow = img[y0 + k * step]
+                    for j in range(first[k], last[k]):
+                        x = x0 + j * step
+                        bb = np.int64(krow[x, 0])
+                        gg = np.int64(krow[x, 1])
+                        rr = np.int64(krow[x, 2])
+                        c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
+                        if c == 255:
+                            c = fine[(bb << 16) | (gg << 8) | rr]
+                        dst[j + 1] = c
+                if i < 0:
+                    continue
+            a = first[i]
+            b = last[i]
+            if b <= a:
                 continue
-            if not occ_dark:
-                orow[(x - x0) >> occ_shift] += 1
-            if c == 1:
-                n1 += 1
-                sx1 += x
-                sxx1 += x * x
-            elif c == 2:
-                n2 += 1
-                sx2 += x
-                sxx2 += x * x
-            else:
-                hist[c, 0] += 1
-                hist[c, 1] += x
-                hist[c, 2] += x * x
-        if dark_v_max >= 0:  # a second pass, only for a backlit (dark) bed
-            for x in range(xa, xb, step):
-                if row[x, 0] <= dark_v_max and row[x, 1] <= dark_v_max and row[x, 2] <= dark_v_max:
-                    nd += 1
-                    sxd += x
-                    sxxd += x * x
-                    if occ_dark:
-                        orow[(x - x0) >> occ_shift] += 1
-        hist[1, 0] += n1
-        hist[1, 1] += sx1
-        hist[1, 2] += sxx1
-        if n_classes >= 2:
-            hist[2, 0] += n2
-            hist[2, 1] += sx2
-            hist[2, 2] += sxx2
-        for k in range(1, n_classes + 1):
-            n = hist[k, 0]
-            if n:
-                out[k - 1, 0] += n
-                out[k - 1, 1] += hist[k, 1]
-                out[k - 1, 2] += n * y
-                out[k - 1, 3] += hist[k, 2]
-                out[k - 1, 4] += n * y * y
-                out[k - 1, 5] += hist[k, 1] * y
-        if nd:
-            out[n_classes, 0] += nd
-            out[n_classes, 1] += sxd
-            out[n_classes, 2] += nd * y
-            out[n_classes, 3] += sxxd
-            out[n_classes, 4] += nd * y * y
-            out[n_classes, 5] += sxd * y
+            y = y0 + i * step
+            row = img[y]
+            orow = occ[(i * step) >> occ_shift]
+            n1 = 0
+            sx1 = 0
+            sxx1 = 0
+            n2 = 0
+            sx2 = 0
+            sxx2 = 0
+            hist[:, :] = 0
+            if erode:
+                cur = lbuf[i % 3]
+                dn = lbuf[(i + 1) % 3]
+                up = lbuf[(i + 2) % 3]  # row i - 1 (zeros for i = 0)
+            for j in range(a, b):
+                x = x0 + j * step
+                if erode:
+                    c = cur[j + 1]
+                else:
+                    bb = np.int64(row[x, 0])
+                    gg = np.int64(row[x, 1])
+                    rr = np.int64(row[x, 2])
+                    c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
+                    if c == 255:
+                        c = fine[(bb << 16) | (gg << 8) | rr]
+                if c == 0:
+                    continue
+                if not occ_dark:
+                    orow[(x - x0) >> occ_shift] += 1
+                if erode and (cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c):
+                    continue
+                if c == 1:
+                    n1 += 1
+                    sx1 += x
+                    sxx1 += x * x
+                elif c == 2:
+                    n2 += 1
+                    sx2 += x
+                    sxx2 += x * x
+                else:
+                    hist[c, 0] += 1
+                    hist[c, 1] += x
+                    hist[c, 2] += x * x
+            nd = 0
+            sxd = 0
+            sxxd = 0
+            if dark_v_max >= 0:  # a second pass, only for a backlit (dark) bed
+                for x in range(x0 + a * step, x0 + b * step, step):
+                    if row[x, 0] <= dark_v_max and row[x, 1] <= dark_v_max and row[x, 2] <= dark_v_max:
+                        nd += 1
+                        sxd += x
+                        sxxd += x * x
+                        if occ_dark:
+                            orow[(x - x0) >> occ_shift] += 1
+            hist[1, 0] += n1
+            hist[1, 1] += sx1
+            hist[1, 2] += sxx1
+            if n_classes >= 2:
+                hist[2, 0] += n2
+                hist[2, 1] += sx2
+                hist[2, 2] += sxx2
+            for kk in range(1, n_classes + 1):
+                n = hist[kk, 0]
+                if n:
+                    out[kk - 1, 0] += n
+                    out[kk - 1, 1] += hist[kk, 1]
+                    out[kk - 1, 2] += n * y
+                    out[kk - 1, 3] += hist[kk, 2]
+                    out[kk - 1, 4] += n * y * y
+                    out[kk - 1, 5] += hist[kk, 1] * y
+            if nd:
+                out[n_classes, 0] += nd
+                out[n_classes, 1] += sxd
+                out[n_classes, 2] += nd * y
+                out[n_classes, 3] += sxxd
+                out[n_classes, 4] += nd * y * y
+                out[n_classes, 5] += sxd * y
+
+    return kernel
 
 
-_kernel = None
+_kernels: dict[bool, object] = {}
 
 
-def _compiled():
-    global _kernel
-    if _kernel is None:
+def _compiled(erode: bool = False):
+    k = _kernels.get(erode)
+    if k is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
-        _kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_kernel_py)
-    return _kernel
+        k = _kernels[erode] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(erode))
+    return k
 
 
 def frame_moments(
@@ -201,6 +243,7 @@ def frame_moments(
     out: np.ndarray | None = None,
     occupancy: np.ndarray | None = None,
     occ_shift: int = 3,
+    erode: bool = False,
 ) -> np.ndarray:
     """Moments of every class (and of dark pixels) over the ROI's row spans.
 
@@ -209,9 +252,13 @@ def frame_moments(
     Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
     in original image px: row k is class k+1, the last row the dark pixels.
 
-    ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``)
-    receives the bed pixels per square cell of ``2^occ_shift`` px, counted from ``origin_xy``:
-    the class pixels, or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
+    ``erode``: a pixel counts for its class only when its four grid neighbours (left,
+    right, up, down) are of the same class -- a one-pixel erosion of every class map,
+    which drops the thin rims and gaps that chroma blur (JPEG) or anti-aliasing give
+    the wrong class. ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x
+    ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
+    ``2^occ_shift`` px, counted from ``origin_xy``: the classified pixels (before the
+    erosion), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
     if out is None:
         out = np.empty((tables.n_classes + 1, 6), np.int64)
@@ -220,6 +267,6 @@ def frame_moments(
         rows = (len(first) * step >> occ_shift) + 1
         cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
-    _compiled()(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
-                tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
+    _compiled(bool(erode))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
+                           tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
     return out
