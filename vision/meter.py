@@ -269,7 +269,8 @@ class Meter:
             mix = mixing_indices((a.cx_px, a.cy_px), (b.cx_px, b.cy_px), a.sigma_px, b.sigma_px, roi.r_px, self._d0)
         n12 = ns[0] + ns[1]
         conc = ns[0] / n12 if n12 > 0 else _NAN
-        bed = rows[k] if self.bed == "dark" else [sum(c) for c in zip(*rows[:k])]  # exclusive classes: moments add
+        # the classes are exclusive: their moments add up to the bed's
+        bed = rows[k] if self.bed == "dark" else [sum(c) for c in zip(*rows[:k], strict=True)]
         m00, m10, m01, m20, m02, m11 = (float(v) for v in bed)
         min_bed = max(1.0, self.min_pixels / area, self.min_share * g.roi_px)
         axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)

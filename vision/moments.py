@@ -20,7 +20,7 @@ import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
-__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "row_spans"]
+__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "erode_labels", "frame_moments", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -90,6 +90,16 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     first = np.where(any_, m.argmax(axis=1), 0)
     last = np.where(any_, m.shape[1] - m[:, ::-1].argmax(axis=1), 0)
     return first.astype(np.int64), last.astype(np.int64)
+
+
+def erode_labels(labels: np.ndarray) -> np.ndarray:
+    """The one-pixel class erosion of ``frame_moments(..., erode=True)`` on a label map
+    (H, W; 0 = no class): a pixel keeps its class only when its four neighbours have the
+    same one (pixels off the map count as 0). Returns a new array."""
+    lab = np.asarray(labels)
+    p = np.pad(lab, 1)
+    keep = (p[1:-1, :-2] == lab) & (p[1:-1, 2:] == lab) & (p[:-2, 1:-1] == lab) & (p[2:, 1:-1] == lab)
+    return np.where(keep, lab, 0).astype(lab.dtype)
 
 
 def _make_kernel(erode: bool):
