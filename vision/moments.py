@@ -152,46 +152,64 @@ def _make_kernel(erode: bool):
             y = y0 + i * step
             row = img[y]
             orow = occ[(i * step) >> occ_shift]
-            n1 = 0
-            sx1 = 0
-            sxx1 = 0
-            n2 = 0
-            sx2 = 0
-            sxx2 = 0
             hist[:, :] = 0
             if erode:
                 cur = lbuf[i % 3]
                 dn = lbuf[(i + 1) % 3]
                 up = lbuf[(i + 2) % 3]  # row i - 1 (zeros for i = 0)
+            # runs of one class: a run's n, sum x and sum x^2 in closed form at its end;
+            # bed pixels per occupancy cell from a running count, added at each cell boundary
+            rc = 0  # class of the current run
+            rj = a  # its first grid column
+            nbed = 0  # bed pixels so far (finished runs; every classified pixel when eroding)
+            base = 0  # ... at the start of the current cell
+            q = (a * step) >> occ_shift
+            nxt = x0 + ((q + 1) << occ_shift)
             for j in range(a, b):
                 x = x0 + j * step
+                if x >= nxt:
+                    tot = nbed if erode else nbed + (j - rj if rc > 0 else 0)
+                    if not occ_dark:
+                        orow[q] += tot - base
+                    base = tot
+                    q = (x - x0) >> occ_shift
+                    nxt = x0 + ((q + 1) << occ_shift)
                 if erode:
-                    c = cur[j + 1]
+                    c = np.int64(cur[j + 1])
+                    if c != 0:
+                        nbed += 1
+                        if cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c:
+                            c = 0
                 else:
                     bb = np.int64(row[x, 0])
                     gg = np.int64(row[x, 1])
                     rr = np.int64(row[x, 2])
-                    c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
+                    c = np.int64(coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)])
                     if c == 255:
-                        c = fine[(bb << 16) | (gg << 8) | rr]
-                if c == 0:
-                    continue
-                if not occ_dark:
-                    orow[(x - x0) >> occ_shift] += 1
-                if erode and (cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c):
-                    continue
-                if c == 1:
-                    n1 += 1
-                    sx1 += x
-                    sxx1 += x * x
-                elif c == 2:
-                    n2 += 1
-                    sx2 += x
-                    sxx2 += x * x
-                else:
-                    hist[c, 0] += 1
-                    hist[c, 1] += x
-                    hist[c, 2] += x * x
+                        c = np.int64(fine[(bb << 16) | (gg << 8) | rr])
+                if c != rc:
+                    if rc > 0:
+                        ln = j - rj
+                        xs = x0 + rj * step
+                        t2 = ln * (ln - 1)
+                        hist[rc, 0] += ln
+                        hist[rc, 1] += ln * xs + step * (t2 // 2)
+                        hist[rc, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
+                        if not erode:
+                            nbed += ln
+                    rc = c
+                    rj = j
+            if rc > 0:  # the last run (same sums as above)
+                ln = b - rj
+                xs = x0 + rj * step
+                t2 = ln * (ln - 1)
+                hist[rc, 0] += ln
+                hist[rc, 1] += ln * xs + step * (t2 // 2)
+                hist[rc, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
+                if not erode:
+                    nbed += ln
+            if not occ_dark:
+                orow[q] += nbed - base
             nd = 0
             sxd = 0
             sxxd = 0
@@ -203,13 +221,6 @@ def _make_kernel(erode: bool):
                         sxxd += x * x
                         if occ_dark:
                             orow[(x - x0) >> occ_shift] += 1
-            hist[1, 0] += n1
-            hist[1, 1] += sx1
-            hist[1, 2] += sxx1
-            if n_classes >= 2:
-                hist[2, 0] += n2
-                hist[2, 1] += sx2
-                hist[2, 2] += sxx2
             for kk in range(1, n_classes + 1):
                 n = hist[kk, 0]
                 if n:

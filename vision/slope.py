@@ -112,6 +112,17 @@ def cell_areas(inside: np.ndarray, step: int, shift: int) -> np.ndarray:
     return out
 
 
+def _col_fill_py(occ, area, full_area, i, j, cols):  # pragma: no cover - compiled
+    """Bed fill of cell row ``i`` over the columns j-1..j+1 (cells at least half in the ROI)."""
+    s = 0.0
+    a = 0.0
+    for jj in range(max(0, j - 1), min(cols, j + 2)):
+        if area[i, jj] >= 0.5 * full_area:
+            s += occ[i, jj]
+            a += area[i, jj]
+    return s / a if a > 0 else 0.0
+
+
 def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # pragma: no cover - compiled
     """Free-surface angle and S-shape from an occupancy grid; fills res = (deg, curvature, n)."""
     rows, cols = area.shape
@@ -155,20 +166,17 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
                 bot = i
         if top < 0 or bot - top < 3:
             continue
-        for i in range(top, bot + 1):
-            s = 0.0
-            a = 0.0
-            for jj in range(max(0, j - 1), min(cols, j + 2)):
-                if area[i, jj] >= 0.5 * full_area:
-                    s += occ[i, jj]
-                    a += area[i, jj]
-            fcol[i] = s / a if a > 0 else 0.0
+        # the fill is computed row by row going up from the wall, only as far as needed
+        fcol[bot] = _col_fill(occ, area, full_area, bot, j, cols)
+        fcol[bot - 1] = _col_fill(occ, area, full_area, bot - 1, j, cols)
         if fcol[bot] < tau and fcol[bot - 1] < tau:
             continue  # no bed at the bottom of this column
         it = bot if fcol[bot] >= tau else bot - 1
         gap = 0
         i = it - 1
         while i >= top:
+            if i < bot - 1:
+                fcol[i] = _col_fill(occ, area, full_area, i, j, cols)
             if fcol[i] >= tau:
                 it = i
                 gap = 0
@@ -217,6 +225,7 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
                 return
         for k in range(npts):
             base[k] = w[k]
+        th_prev = np.inf
         for _ in range(6):
             sw = 0.0
             smx = 0.0
@@ -241,6 +250,9 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
             th = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
             ux = math.cos(th)
             uy = math.sin(th)
+            if abs(th - th_prev) < 1e-9:
+                break  # converged: the weights would not change any more
+            th_prev = th
             na = 0
             for k in range(npts):
                 if base[k] > 0:
@@ -298,13 +310,15 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
 
 
 _surface_kernel = None
+_col_fill = _col_fill_py  # replaced by its compiled form before _surface_py is compiled
 
 
 def _surface_fn():
-    global _surface_kernel
+    global _surface_kernel, _col_fill
     if _surface_kernel is None:
         import numba
 
+        _col_fill = numba.njit(nogil=True, cache=True, inline="always")(_col_fill_py)
         _surface_kernel = numba.njit(nogil=True, cache=True)(_surface_py)
     return _surface_kernel
 

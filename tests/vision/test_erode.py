@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from vision.colours import DEFAULT_CLASSES, classify
+from vision.colours import DEFAULT_CLASSES, ColourClass, classify
 from vision.lacey import LaceyMeter
 from vision.meter import Meter
 from vision.moments import class_tables, erode_labels, frame_moments, row_spans
@@ -25,29 +25,39 @@ def test_erode_labels_drops_thin_structures_only():
     assert not (out == 2).any()
 
 
-@pytest.mark.parametrize("step", [1, 2, 3])
-def test_compiled_erosion_matches_the_label_map(step):
+THREE = (*DEFAULT_CLASSES, ColourClass("grey", (((0, 0, 100), (179, 40, 200)),), (150, 150, 150)))
+
+
+@pytest.mark.parametrize("erode", [False, True])
+@pytest.mark.parametrize("step, classes, dark", [(1, DEFAULT_CLASSES, -1), (2, DEFAULT_CLASSES, -1),
+                                                 (3, THREE, -1), (1, THREE, 80)])
+def test_compiled_pass_matches_the_label_map(step, classes, dark, erode):
+    """Every class's moments (runs summed in closed form) and the occupancy grid equal
+    those of the label map, eroded or not; the grid counts the bed before the erosion."""
     img = drum_frame((320, 240), mix=0.6, seed=2)
+    img[100:140, 60:260] = (120, 125, 130)  # a grey band: the third class
     roi = Meter().measure(img).roi
     box = roi_bbox(roi, img.shape[:2])
     x0, y0, x1, y1 = box
     inside = _mask_in_box(roi, box)[::step, ::step]
     first, last = row_spans(inside)
-    tables = class_tables(DEFAULT_CLASSES)
-    shape = ((inside.shape[0] * step >> 3) + 1, (inside.shape[1] * step >> 3) + 1)
-    occ_plain, occ_eroded = np.zeros(shape, np.int32), np.zeros(shape, np.int32)
-    plain = frame_moments(img, tables, (x0, y0), first, last, step, occupancy=occ_plain)
-    eroded = frame_moments(img, tables, (x0, y0), first, last, step, occupancy=occ_eroded, erode=True)
+    tables = class_tables(classes)
+    occ = np.full(((inside.shape[0] * step >> 3) + 1, (inside.shape[1] * step >> 3) + 1), 7, np.int32)
+    got = frame_moments(img, tables, (x0, y0), first, last, step, dark, occupancy=occ, erode=erode)
     sub = np.ascontiguousarray(img[y0:y1:step, x0:x1:step][: inside.shape[0], : inside.shape[1]])
-    lab = erode_labels(np.where(inside, classify(sub, DEFAULT_CLASSES), 0))
+    raw = np.where(inside, classify(sub, classes), 0)
+    lab = erode_labels(raw) if erode else raw
     ys, xs = np.mgrid[0 : lab.shape[0], 0 : lab.shape[1]]
     X, Y = x0 + xs * step, y0 + ys * step
-    for k in (1, 2):
-        m = lab == k
+    darkpx = inside & (sub.max(axis=2) <= dark)
+    for k, m in enumerate([lab == c for c in range(1, len(classes) + 1)] + [darkpx]):
         want = [m.sum(), X[m].sum(), Y[m].sum(), (X[m] ** 2).sum(), (Y[m] ** 2).sum(), (X[m] * Y[m]).sum()]
-        assert eroded[k - 1].tolist() == [int(v) for v in want]
-        assert 0.5 * plain[k - 1, 0] < eroded[k - 1, 0] < plain[k - 1, 0]
-    assert (occ_plain == occ_eroded).all()  # the free surface sees the pixels before the erosion
+        assert got[k].tolist() == [int(v) for v in want], k
+    assert (lab == 3).sum() > 100 if len(classes) == 3 else True
+    bed = darkpx if dark >= 0 else raw > 0
+    want_occ = np.zeros_like(occ)
+    np.add.at(want_occ, ((ys * step) >> 3, (xs * step) >> 3), bed.astype(np.int32))
+    assert (occ == want_occ).all()
 
 
 def test_lacey_uses_the_same_eroded_labels():
