@@ -185,6 +185,8 @@ def _make_kernel(erode: bool):
                     gg = np.int64(row[x, 1])
                     rr = np.int64(row[x, 2])
                     c = np.int64(coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)])
+                    if c == rc:
+                        continue  # the run goes on (rc is never 255: the fast path)
                     if c == 255:
                         c = np.int64(fine[(bb << 16) | (gg << 8) | rr])
                 if c != rc:
