@@ -134,10 +134,12 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     # interior fill of the bed: the 85th percentile of the fill of well-covered cells (histogram)
     hist = np.zeros(129, np.int64)
     nv = 0
+    half = 0.5 * full_area
     for i in range(rows):
         for j in range(cols):
-            if area[i, j] >= 0.5 * full_area:
-                f = occ[i, j] / area[i, j]
+            o = occ[i, j]
+            if o > 0 and area[i, j] >= half:  # (empty cells first: no division for them)
+                f = o / area[i, j]
                 if f > 0.1:
                     b = int(f * 128.0)
                     hist[b if b < 128 else 128] += 1
@@ -157,14 +159,13 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     fcol = np.zeros(rows)
     npts = 0
     for j in range(cols):
-        top = -1
-        bot = -1
-        for i in range(rows):
-            if area[i, j] >= 0.5 * full_area:
-                if top < 0:
-                    top = i
-                bot = i
-        if top < 0 or bot - top < 3:
+        top = 0  # the column's span of cells at least half in the ROI (convex: one span)
+        while top < rows and area[top, j] < half:
+            top += 1
+        bot = rows - 1
+        while bot > top and area[bot, j] < half:
+            bot -= 1
+        if top >= rows or bot - top < 3:
             continue
         # the fill is computed row by row going up from the wall, only as far as needed
         fcol[bot] = _col_fill(occ, area, full_area, bot, j, cols)
