@@ -102,6 +102,31 @@ def erode_labels(labels: np.ndarray) -> np.ndarray:
     return np.where(keep, lab, 0).astype(lab.dtype)
 
 
+def _add_run_py(hist, c, j0, j1, x0, step):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) (px x0 + j * step) to class c's row sums:
+    n, sum x, sum x^2, in closed form."""
+    ln = j1 - j0
+    xs = x0 + j0 * step
+    t2 = ln * (ln - 1)
+    hist[c, 0] += ln
+    hist[c, 1] += ln * xs + step * (t2 // 2)
+    hist[c, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
+
+
+def _add_cells_py(orow, j0, j1, step, shift, cend):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) to the occupancy cells it covers."""
+    j = j0
+    while j < j1:
+        q = (j * step) >> shift
+        je = min(cend[q], j1)
+        orow[q] += je - j
+        j = je
+
+
+_add_run = _add_run_py  # replaced by their compiled forms before a kernel is compiled
+_add_cells = _add_cells_py
+
+
 def _make_kernel(erode: bool):
     """The moments kernel, with or without the one-pixel class erosion (``erode`` is a
     compile-time constant of the closure, so the plain kernel carries none of its code)."""
@@ -124,6 +149,9 @@ def _make_kernel(erode: bool):
         for i in range(nrows):
             width = max(width, last[i])
         lbuf = np.zeros((3, width + 2), np.uint8)
+        cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
+        for q in range(occ.shape[1]):
+            cend[q] = (((q + 1) << occ_shift) + step - 1) // step
         for i in range(-1 if erode else 0, nrows):
             if erode:
                 # classify grid row i + 1 into its label row (the erosion needs the row below)
@@ -157,61 +185,48 @@ def _make_kernel(erode: bool):
                 cur = lbuf[i % 3]
                 dn = lbuf[(i + 1) % 3]
                 up = lbuf[(i + 2) % 3]  # row i - 1 (zeros for i = 0)
-            # runs of one class: a run's n, sum x and sum x^2 in closed form at its end;
-            # bed pixels per occupancy cell from a running count, added at each cell boundary
+            # runs of one class: a run's n, sum x and sum x^2 added in closed form at its end
+            # (and, without the erosion, its pixels to the occupancy cells it covers)
             rc = 0  # class of the current run
             rj = a  # its first grid column
-            nbed = 0  # bed pixels so far (finished runs; every classified pixel when eroding)
-            base = 0  # ... at the start of the current cell
-            q = (a * step) >> occ_shift
-            nxt = x0 + ((q + 1) << occ_shift)
-            for j in range(a, b):
-                x = x0 + j * step
-                if x >= nxt:
-                    tot = nbed if erode else nbed + (j - rj if rc > 0 else 0)
-                    if not occ_dark:
-                        orow[q] += tot - base
-                    base = tot
-                    q = (x - x0) >> occ_shift
-                    nxt = x0 + ((q + 1) << occ_shift)
-                if erode:
+            if erode:
+                for j in range(a, b):
                     c = np.int64(cur[j + 1])
                     if c != 0:
-                        nbed += 1
+                        if not occ_dark:  # the bed before the erosion
+                            orow[(j * step) >> occ_shift] += 1
                         if cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c:
                             c = 0
-                else:
+                    if c != rc:
+                        if rc > 0:
+                            _add_run(hist, rc, rj, j, x0, step)
+                        rc = c
+                        rj = j
+                if rc > 0:
+                    _add_run(hist, rc, rj, b, x0, step)
+            else:
+                for j in range(a, b):
+                    x = x0 + j * step
                     bb = np.int64(row[x, 0])
                     gg = np.int64(row[x, 1])
                     rr = np.int64(row[x, 2])
                     c = np.int64(coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)])
                     if c == rc:
-                        continue  # the run goes on (rc is never 255: the fast path)
+                        continue  # the run goes on (rc is never 255): the fast path
                     if c == 255:
                         c = np.int64(fine[(bb << 16) | (gg << 8) | rr])
-                if c != rc:
+                        if c == rc:
+                            continue
                     if rc > 0:
-                        ln = j - rj
-                        xs = x0 + rj * step
-                        t2 = ln * (ln - 1)
-                        hist[rc, 0] += ln
-                        hist[rc, 1] += ln * xs + step * (t2 // 2)
-                        hist[rc, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
-                        if not erode:
-                            nbed += ln
+                        _add_run(hist, rc, rj, j, x0, step)
+                        if not occ_dark:
+                            _add_cells(orow, rj, j, step, occ_shift, cend)
                     rc = c
                     rj = j
-            if rc > 0:  # the last run (same sums as above)
-                ln = b - rj
-                xs = x0 + rj * step
-                t2 = ln * (ln - 1)
-                hist[rc, 0] += ln
-                hist[rc, 1] += ln * xs + step * (t2 // 2)
-                hist[rc, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
-                if not erode:
-                    nbed += ln
-            if not occ_dark:
-                orow[q] += nbed - base
+                if rc > 0:
+                    _add_run(hist, rc, rj, b, x0, step)
+                    if not occ_dark:
+                        _add_cells(orow, rj, b, step, occ_shift, cend)
             nd = 0
             sxd = 0
             sxxd = 0
@@ -247,10 +262,13 @@ _kernels: dict[bool, object] = {}
 
 
 def _compiled(erode: bool = False):
+    global _add_run, _add_cells
     k = _kernels.get(erode)
     if k is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
+        _add_run = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_run_py)
+        _add_cells = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_cells_py)
         k = _kernels[erode] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(erode))
     return k
 
