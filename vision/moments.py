@@ -5,9 +5,13 @@ a 6-bit table (64^3 bins, 256 KB, stays in cache) answers for every bin whose 64
 all fall in the same class, and a full 24-bit table (16 MB) answers the few pixels whose
 bin straddles a class boundary. Both come from ``vision.colours.class_lut``, which runs the
 classifier itself on every BGR colour, so the result is exact, pixel for pixel. A compiled
-(numba) loop then visits the ROI's pixels row
-span by row span and sums, per class, n, x, y, x^2, y^2 and xy (integers, exact), plus
-the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
+(numba) loop then visits the ROI's pixels row span by row span and sums, per class, n,
+x, y, x^2, y^2 and xy (integers, exact), plus the same for dark pixels
+(V = max(B, G, R) <= ``dark_v_max``) for a backlit bed. Within a row it follows runs of
+one class: a pixel that continues the run costs one table look-up and one compare, and
+a run's sums (and its pixels per free-surface occupancy cell) are added in closed form
+when it ends. The optional one-pixel erosion (``erode``) classifies each row into a
+label row first and is a separate compiled kernel, so the plain one carries none of it.
 """
 
 from __future__ import annotations
