@@ -5,9 +5,13 @@ a 6-bit table (64^3 bins, 256 KB, stays in cache) answers for every bin whose 64
 all fall in the same class, and a full 24-bit table (16 MB) answers the few pixels whose
 bin straddles a class boundary. Both come from ``vision.colours.class_lut``, which runs the
 classifier itself on every BGR colour, so the result is exact, pixel for pixel. A compiled
-(numba) loop then visits the ROI's pixels row
-span by row span and sums, per class, n, x, y, x^2, y^2 and xy (integers, exact), plus
-the same for dark pixels (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed.
+(numba) loop then visits the ROI's pixels row span by row span and sums, per class, n,
+x, y, x^2, y^2 and xy (integers, exact), plus the same for dark pixels
+(V = max(B, G, R) <= ``dark_v_max``) for a backlit bed. Within a row it follows runs of
+one class: a pixel that continues the run costs one table look-up and one compare, and
+a run's sums (and its pixels per free-surface occupancy cell) are added in closed form
+when it ends. The optional one-pixel erosion (``erode``) classifies each row into a
+label row first and is a separate compiled kernel, so the plain one carries none of it.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
-__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "row_spans"]
+__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "erode_labels", "frame_moments", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -92,102 +96,185 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first.astype(np.int64), last.astype(np.int64)
 
 
-def _kernel_py(  # pragma: no cover - compiled
-    img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
-):
-    """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+def erode_labels(labels: np.ndarray) -> np.ndarray:
+    """The one-pixel class erosion of ``frame_moments(..., erode=True)`` on a label map
+    (H, W; 0 = no class): a pixel keeps its class only when its four neighbours have the
+    same one (pixels off the map count as 0). Returns a new array."""
+    lab = np.asarray(labels)
+    p = np.pad(lab, 1)
+    keep = (p[1:-1, :-2] == lab) & (p[1:-1, 2:] == lab) & (p[:-2, 1:-1] == lab) & (p[2:, 1:-1] == lab)
+    return np.where(keep, lab, 0).astype(lab.dtype)
 
-    ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
-    class pixels, or the dark pixels when ``occ_dark``."""
-    out[:, :] = 0
-    occ[:, :] = 0
-    hist = np.zeros((n_classes + 1, 3), np.int64)
-    for i in range(first.shape[0]):
-        a = first[i]
-        b = last[i]
-        if b <= a:
-            continue
-        y = y0 + i * step
-        row = img[y]
-        orow = occ[(i * step) >> occ_shift]
-        n1 = 0
-        sx1 = 0
-        sxx1 = 0
-        n2 = 0
-        sx2 = 0
-        sxx2 = 0
-        nd = 0
-        sxd = 0
-        sxxd = 0
-        hist[:, :] = 0
-        xa = x0 + a * step
-        xb = x0 + b * step
-        for x in range(xa, xb, step):
-            bb = np.int64(row[x, 0])
-            gg = np.int64(row[x, 1])
-            rr = np.int64(row[x, 2])
-            c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
-            if c == 255:
-                c = fine[(bb << 16) | (gg << 8) | rr]
-            if c == 0:
+
+def _add_run_py(hist, c, j0, j1, x0, step):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) (px x0 + j * step) to class c's row sums:
+    n, sum x, sum x^2, in closed form."""
+    ln = j1 - j0
+    xs = x0 + j0 * step
+    t2 = ln * (ln - 1)
+    hist[c, 0] += ln
+    hist[c, 1] += ln * xs + step * (t2 // 2)
+    hist[c, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
+
+
+def _add_cells_py(orow, j0, j1, step, shift, cend):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) to the occupancy cells it covers."""
+    j = j0
+    while j < j1:
+        q = (j * step) >> shift
+        je = min(cend[q], j1)
+        orow[q] += je - j
+        j = je
+
+
+_add_run = _add_run_py  # replaced by their compiled forms before a kernel is compiled
+_add_cells = _add_cells_py
+
+
+def _make_kernel(erode: bool):
+    """The moments kernel, with or without the one-pixel class erosion (``erode`` is a
+    compile-time constant of the closure, so the plain kernel carries none of its code)."""
+
+    def kernel(  # pragma: no cover - compiled
+        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
+    ):
+        """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+
+        ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
+        classified pixels (before any erosion), or the dark pixels when ``occ_dark``. With
+        ``erode``, each grid row is first classified into a label row (three kept, zero
+        outside the spans) and a pixel counts for its class only when its four grid
+        neighbours have the same class."""
+        out[:, :] = 0
+        occ[:, :] = 0
+        hist = np.zeros((n_classes + 1, 3), np.int64)
+        nrows = first.shape[0]
+        width = 0
+        for i in range(nrows):
+            width = max(width, last[i])
+        lbuf = np.zeros((3, width + 2), np.uint8)
+        cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
+        for q in range(occ.shape[1]):
+            cend[q] = (((q + 1) << occ_shift) + step - 1) // step
+        for i in range(-1 if erode else 0, nrows):
+            if erode:
+                # classify grid row i + 1 into its label row (the erosion needs the row below)
+                k = i + 1
+                dst = lbuf[k % 3]
+                if k >= 3:  # the slot held row k - 3: clear its span
+                    for j in range(first[k - 3], last[k - 3]):
+                        dst[j + 1] = 0
+                if k < nrows and last[k] > first[k]:
+                    krow = img[y0 + k * step]
+                    for j in range(first[k], last[k]):
+                        x = x0 + j * step
+                        bb = np.int64(krow[x, 0])
+                        gg = np.int64(krow[x, 1])
+                        rr = np.int64(krow[x, 2])
+                        c = coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)]
+                        if c == 255:
+                            c = fine[(bb << 16) | (gg << 8) | rr]
+                        dst[j + 1] = c
+                if i < 0:
+                    continue
+            a = first[i]
+            b = last[i]
+            if b <= a:
                 continue
-            if not occ_dark:
-                orow[(x - x0) >> occ_shift] += 1
-            if c == 1:
-                n1 += 1
-                sx1 += x
-                sxx1 += x * x
-            elif c == 2:
-                n2 += 1
-                sx2 += x
-                sxx2 += x * x
+            y = y0 + i * step
+            row = img[y]
+            orow = occ[(i * step) >> occ_shift]
+            hist[:, :] = 0
+            if erode:
+                cur = lbuf[i % 3]
+                dn = lbuf[(i + 1) % 3]
+                up = lbuf[(i + 2) % 3]  # row i - 1 (zeros for i = 0)
+            # runs of one class: a run's n, sum x and sum x^2 added in closed form at its end
+            # (and, without the erosion, its pixels to the occupancy cells it covers)
+            rc = 0  # class of the current run
+            rj = a  # its first grid column
+            if erode:
+                for j in range(a, b):
+                    c = np.int64(cur[j + 1])
+                    if c != 0:
+                        if not occ_dark:  # the bed before the erosion
+                            orow[(j * step) >> occ_shift] += 1
+                        if cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c:
+                            c = 0
+                    if c != rc:
+                        if rc > 0:
+                            _add_run(hist, rc, rj, j, x0, step)
+                        rc = c
+                        rj = j
+                if rc > 0:
+                    _add_run(hist, rc, rj, b, x0, step)
             else:
-                hist[c, 0] += 1
-                hist[c, 1] += x
-                hist[c, 2] += x * x
-        if dark_v_max >= 0:  # a second pass, only for a backlit (dark) bed
-            for x in range(xa, xb, step):
-                if row[x, 0] <= dark_v_max and row[x, 1] <= dark_v_max and row[x, 2] <= dark_v_max:
-                    nd += 1
-                    sxd += x
-                    sxxd += x * x
-                    if occ_dark:
-                        orow[(x - x0) >> occ_shift] += 1
-        hist[1, 0] += n1
-        hist[1, 1] += sx1
-        hist[1, 2] += sxx1
-        if n_classes >= 2:
-            hist[2, 0] += n2
-            hist[2, 1] += sx2
-            hist[2, 2] += sxx2
-        for k in range(1, n_classes + 1):
-            n = hist[k, 0]
-            if n:
-                out[k - 1, 0] += n
-                out[k - 1, 1] += hist[k, 1]
-                out[k - 1, 2] += n * y
-                out[k - 1, 3] += hist[k, 2]
-                out[k - 1, 4] += n * y * y
-                out[k - 1, 5] += hist[k, 1] * y
-        if nd:
-            out[n_classes, 0] += nd
-            out[n_classes, 1] += sxd
-            out[n_classes, 2] += nd * y
-            out[n_classes, 3] += sxxd
-            out[n_classes, 4] += nd * y * y
-            out[n_classes, 5] += sxd * y
+                for j in range(a, b):
+                    x = x0 + j * step
+                    bb = np.int64(row[x, 0])
+                    gg = np.int64(row[x, 1])
+                    rr = np.int64(row[x, 2])
+                    c = np.int64(coarse[((bb >> 2) << 12) | ((gg >> 2) << 6) | (rr >> 2)])
+                    if c == rc:
+                        continue  # the run goes on (rc is never 255): the fast path
+                    if c == 255:
+                        c = np.int64(fine[(bb << 16) | (gg << 8) | rr])
+                        if c == rc:
+                            continue
+                    if rc > 0:
+                        _add_run(hist, rc, rj, j, x0, step)
+                        if not occ_dark:
+                            _add_cells(orow, rj, j, step, occ_shift, cend)
+                    rc = c
+                    rj = j
+                if rc > 0:
+                    _add_run(hist, rc, rj, b, x0, step)
+                    if not occ_dark:
+                        _add_cells(orow, rj, b, step, occ_shift, cend)
+            nd = 0
+            sxd = 0
+            sxxd = 0
+            if dark_v_max >= 0:  # a second pass, only for a backlit (dark) bed
+                for x in range(x0 + a * step, x0 + b * step, step):
+                    if row[x, 0] <= dark_v_max and row[x, 1] <= dark_v_max and row[x, 2] <= dark_v_max:
+                        nd += 1
+                        sxd += x
+                        sxxd += x * x
+                        if occ_dark:
+                            orow[(x - x0) >> occ_shift] += 1
+            for kk in range(1, n_classes + 1):
+                n = hist[kk, 0]
+                if n:
+                    out[kk - 1, 0] += n
+                    out[kk - 1, 1] += hist[kk, 1]
+                    out[kk - 1, 2] += n * y
+                    out[kk - 1, 3] += hist[kk, 2]
+                    out[kk - 1, 4] += n * y * y
+                    out[kk - 1, 5] += hist[kk, 1] * y
+            if nd:
+                out[n_classes, 0] += nd
+                out[n_classes, 1] += sxd
+                out[n_classes, 2] += nd * y
+                out[n_classes, 3] += sxxd
+                out[n_classes, 4] += nd * y * y
+                out[n_classes, 5] += sxd * y
+
+    return kernel
 
 
-_kernel = None
+_kernels: dict[bool, object] = {}
 
 
-def _compiled():
-    global _kernel
-    if _kernel is None:
+def _compiled(erode: bool = False):
+    global _add_run, _add_cells
+    k = _kernels.get(erode)
+    if k is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
-        _kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_kernel_py)
-    return _kernel
+        _add_run = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_run_py)
+        _add_cells = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_cells_py)
+        k = _kernels[erode] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(erode))
+    return k
 
 
 def frame_moments(
@@ -201,6 +288,7 @@ def frame_moments(
     out: np.ndarray | None = None,
     occupancy: np.ndarray | None = None,
     occ_shift: int = 3,
+    erode: bool = False,
 ) -> np.ndarray:
     """Moments of every class (and of dark pixels) over the ROI's row spans.
 
@@ -209,9 +297,13 @@ def frame_moments(
     Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
     in original image px: row k is class k+1, the last row the dark pixels.
 
-    ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``)
-    receives the bed pixels per square cell of ``2^occ_shift`` px, counted from ``origin_xy``:
-    the class pixels, or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
+    ``erode``: a pixel counts for its class only when its four grid neighbours (left,
+    right, up, down) are of the same class -- a one-pixel erosion of every class map,
+    which drops the thin rims and gaps that chroma blur (JPEG) or anti-aliasing give
+    the wrong class. ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x
+    ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
+    ``2^occ_shift`` px, counted from ``origin_xy``: the classified pixels (before the
+    erosion), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
     if out is None:
         out = np.empty((tables.n_classes + 1, 6), np.int64)
@@ -220,6 +312,6 @@ def frame_moments(
         rows = (len(first) * step >> occ_shift) + 1
         cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
-    _compiled()(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
-                tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
+    _compiled(bool(erode))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
+                           tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
     return out

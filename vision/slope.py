@@ -112,6 +112,17 @@ def cell_areas(inside: np.ndarray, step: int, shift: int) -> np.ndarray:
     return out
 
 
+def _col_fill_py(occ, area, full_area, i, j, cols):  # pragma: no cover - compiled
+    """Bed fill of cell row ``i`` over the columns j-1..j+1 (cells at least half in the ROI)."""
+    s = 0.0
+    a = 0.0
+    for jj in range(max(0, j - 1), min(cols, j + 2)):
+        if area[i, jj] >= 0.5 * full_area:
+            s += occ[i, jj]
+            a += area[i, jj]
+    return s / a if a > 0 else 0.0
+
+
 def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # pragma: no cover - compiled
     """Free-surface angle and S-shape from an occupancy grid; fills res = (deg, curvature, n)."""
     rows, cols = area.shape
@@ -123,10 +134,12 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     # interior fill of the bed: the 85th percentile of the fill of well-covered cells (histogram)
     hist = np.zeros(129, np.int64)
     nv = 0
+    half = 0.5 * full_area
     for i in range(rows):
         for j in range(cols):
-            if area[i, j] >= 0.5 * full_area:
-                f = occ[i, j] / area[i, j]
+            o = occ[i, j]
+            if o > 0 and area[i, j] >= half:  # (empty cells first: no division for them)
+                f = o / area[i, j]
                 if f > 0.1:
                     b = int(f * 128.0)
                     hist[b if b < 128 else 128] += 1
@@ -146,29 +159,25 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     fcol = np.zeros(rows)
     npts = 0
     for j in range(cols):
-        top = -1
-        bot = -1
-        for i in range(rows):
-            if area[i, j] >= 0.5 * full_area:
-                if top < 0:
-                    top = i
-                bot = i
-        if top < 0 or bot - top < 3:
+        top = 0  # the column's span of cells at least half in the ROI (convex: one span)
+        while top < rows and area[top, j] < half:
+            top += 1
+        bot = rows - 1
+        while bot > top and area[bot, j] < half:
+            bot -= 1
+        if top >= rows or bot - top < 3:
             continue
-        for i in range(top, bot + 1):
-            s = 0.0
-            a = 0.0
-            for jj in range(max(0, j - 1), min(cols, j + 2)):
-                if area[i, jj] >= 0.5 * full_area:
-                    s += occ[i, jj]
-                    a += area[i, jj]
-            fcol[i] = s / a if a > 0 else 0.0
+        # the fill is computed row by row going up from the wall, only as far as needed
+        fcol[bot] = _col_fill(occ, area, full_area, bot, j, cols)
+        fcol[bot - 1] = _col_fill(occ, area, full_area, bot - 1, j, cols)
         if fcol[bot] < tau and fcol[bot - 1] < tau:
             continue  # no bed at the bottom of this column
         it = bot if fcol[bot] >= tau else bot - 1
         gap = 0
         i = it - 1
         while i >= top:
+            if i < bot - 1:
+                fcol[i] = _col_fill(occ, area, full_area, i, j, cols)
             if fcol[i] >= tau:
                 it = i
                 gap = 0
@@ -190,41 +199,71 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     px = pts_x[:npts]
     py = pts_y[:npts]
     w = np.ones(npts)
-    # robust orthogonal line over all points, then over the central chord
+    base = np.empty(npts)
+    ar = np.empty(npts)
+    # robust orthogonal line over all points, then over the central chord (scalar loops:
+    # no temporaries per iteration)
     ux = 1.0
     uy = 0.0
     mx = 0.0
     my = 0.0
     for stage in range(2):
         if stage == 1:
-            u = (px - mx) * ux + (py - my) * uy
-            mid = 0.5 * (u.min() + u.max())
+            umin = np.inf
+            umax = -np.inf
             for k in range(npts):
-                w[k] = 1.0 if abs(u[k] - mid) <= CENTRAL_HALF_CHORD * r_px else 0.0
-            if w.sum() < 4:
+                uk = (px[k] - mx) * ux + (py[k] - my) * uy
+                umin = min(umin, uk)
+                umax = max(umax, uk)
+            mid = 0.5 * (umin + umax)
+            nsel = 0
+            for k in range(npts):
+                uk = (px[k] - mx) * ux + (py[k] - my) * uy
+                w[k] = 1.0 if abs(uk - mid) <= CENTRAL_HALF_CHORD * r_px else 0.0
+                if w[k] > 0:
+                    nsel += 1
+            if nsel < 4:
                 return
-        base = w.copy()
+        for k in range(npts):
+            base[k] = w[k]
+        th_prev = np.inf
         for _ in range(6):
-            sw = w.sum()
+            sw = 0.0
+            smx = 0.0
+            smy = 0.0
+            for k in range(npts):
+                sw += w[k]
+                smx += w[k] * px[k]
+                smy += w[k] * py[k]
             if sw <= 0:
                 return
-            mx = (w * px).sum() / sw
-            my = (w * py).sum() / sw
-            dx = px - mx
-            dy = py - my
-            sxx = (w * dx * dx).sum()
-            syy = (w * dy * dy).sum()
-            sxy = (w * dx * dy).sum()
+            mx = smx / sw
+            my = smy / sw
+            sxx = 0.0
+            syy = 0.0
+            sxy = 0.0
+            for k in range(npts):
+                dx = px[k] - mx
+                dy = py[k] - my
+                sxx += w[k] * dx * dx
+                syy += w[k] * dy * dy
+                sxy += w[k] * dx * dy
             th = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
             ux = math.cos(th)
             uy = math.sin(th)
-            resid = -dx * uy + dy * ux
-            ar = np.abs(resid[base > 0])
-            scale = 1.4826 * np.median(ar)
+            if abs(th - th_prev) < 1e-9:
+                break  # converged: the weights would not change any more
+            th_prev = th
+            na = 0
+            for k in range(npts):
+                if base[k] > 0:
+                    ar[na] = abs(-(px[k] - mx) * uy + (py[k] - my) * ux)
+                    na += 1
+            scale = 1.4826 * np.median(ar[:na])
             lim = 4.685 * max(scale, 0.25 * cs)
             for k in range(npts):
                 if base[k] > 0:
-                    t = resid[k] / lim
+                    t = (-(px[k] - mx) * uy + (py[k] - my) * ux) / lim
                     w[k] = (1.0 - t * t) ** 2 if abs(t) < 1.0 else 0.0
                 else:
                     w[k] = 0.0
@@ -242,22 +281,29 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
         ux = -ux
         uy = -uy
     sgn = 1.0 if ang >= 0 else -1.0  # uphill is +x for a surface rising to the right
-    u = sgn * ((px - mx) * ux + (py - my) * uy) / r_px
-    v = -(-(px - mx) * uy + (py - my) * ux) / r_px  # image y is down: flip to "up"
-    mid = 0.5 * (u.min() + u.max())
-    u = u - mid
+    umin = np.inf
+    umax = -np.inf
+    for k in range(npts):
+        uk = sgn * ((px[k] - mx) * ux + (py[k] - my) * uy) / r_px
+        umin = min(umin, uk)
+        umax = max(umax, uk)
+    mid = 0.5 * (umin + umax)
     ata = np.zeros((4, 4))
     atb = np.zeros(4)
     for k in range(npts):
-        p = 1.0
-        row = np.empty(4)
+        uk = sgn * ((px[k] - mx) * ux + (py[k] - my) * uy) / r_px - mid
+        vk = -(-(px[k] - mx) * uy + (py[k] - my) * ux) / r_px  # image y is down: flip to "up"
+        pm = 1.0
         for m in range(4):
-            row[m] = p
-            p *= u[k]
-        for m in range(4):
-            atb[m] += row[m] * v[k]
-            for q in range(4):
-                ata[m, q] += row[m] * row[q]
+            atb[m] += pm * vk
+            pq = pm * pm
+            for q in range(m, 4):
+                ata[m, q] += pq
+                pq *= uk
+            pm *= uk
+    for m in range(4):
+        for q in range(m):
+            ata[m, q] = ata[q, m]
     if abs(np.linalg.det(ata)) < 1e-12:
         return
     c = np.linalg.solve(ata, atb)
@@ -265,13 +311,15 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
 
 
 _surface_kernel = None
+_col_fill = _col_fill_py  # replaced by its compiled form before _surface_py is compiled
 
 
 def _surface_fn():
-    global _surface_kernel
+    global _surface_kernel, _col_fill
     if _surface_kernel is None:
         import numba
 
+        _col_fill = numba.njit(nogil=True, cache=True, inline="always")(_col_fill_py)
         _surface_kernel = numba.njit(nogil=True, cache=True)(_surface_py)
     return _surface_kernel
 
