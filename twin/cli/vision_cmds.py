@@ -106,7 +106,7 @@ def mi_cmd(
     if method is Method.lacey:
         from vision.lacey import LaceyMeter
 
-        baseline = LaceyMeter(cfg.classes, manual_roi or cfg.roi)
+        baseline = LaceyMeter(cfg.classes, manual_roi or cfg.roi, erode=cfg.erode)
     elif method is Method.glcm:
         from vision.glcm import GLCMMeter
 
