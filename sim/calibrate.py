@@ -212,15 +212,17 @@ def calibrate(
                 hi_u, sh = u, s
         candidates.append((path, min(own, key=lambda h: abs(h[2] - target_mag))))
 
-    def score(c: tuple[str, tuple[float, float, float]]) -> float:
-        _, (f, r, s) = c
-        err = abs(s - target_mag)
-        if target_curvature is None:
-            return err
-        # slope within tolerance first; then the surface shape decides (1 deg ~ 0.01 curvature)
-        return max(err - tol_deg, 0.0) + 100.0 * abs(curv[(f, r)] - float(target_curvature))
+    def err(c: tuple[str, tuple[float, float, float]]) -> float:
+        return abs(c[1][2] - target_mag)
 
-    path, (f, r, s) = min(candidates, key=score)
+    # the slope decides first: only points within the tolerance (or the best slope found) compete;
+    # with a measured curvature the surface shape then picks among them
+    best_err = min(err(c) for c in candidates)
+    fits = [c for c in candidates if err(c) <= max(tol_deg, best_err)]
+    if target_curvature is None:
+        path, (f, r, s) = min(fits, key=err)
+    else:
+        path, (f, r, s) = min(fits, key=lambda c: abs(curv[(c[1][0], c[1][1])] - float(target_curvature)))
     return Calibration(
         friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s),
         residual_deg=float(sign * (s - target_mag)),

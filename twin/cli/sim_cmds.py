@@ -156,7 +156,7 @@ def sim_cmd(
     air_m, curv_m = mean(air[-third:]), mean(curv[-third:])
     summary = {
         "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
-        "dt_ms": sim.params.dt_s * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
+        "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
         "friction": sim.params.friction, "rolling": sim.params.rolling,
         "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
         "mi_sigmoid_end": mean(mis[-tail:]),
