@@ -113,17 +113,18 @@ def contact_time_s(stiffness_n_m: float, mass_kg: float, restitution: float) -> 
 
 
 def neighbour_slots(r_max: float, r_min: float, skin: float) -> int:
-    """Slots per disk in the neighbour list: an area bound on the disks of radius ``r_min``
-    whose centres lie within ``r_max + r_min + skin`` of a disk of radius ``r_max``, plus margin."""
+    """Neighbour-list slots per disk: half (pairs are listed once) of an area bound on the disks of
+    radius ``r_min`` whose centres lie within ``r_max + r_min + skin`` of a disk of radius ``r_max``."""
     reach = r_max + 2.0 * r_min + skin
-    return int(math.ceil(1.3 * (reach * reach - r_max * r_max) / (r_min * r_min))) + 4
+    return int(math.ceil(0.65 * (reach * reach - r_max * r_max) / (r_min * r_min))) + 2
 
 
 @njit(cache=True, error_model="numpy")
-def _rebuild(pos, rad, nb_j, nb_cnt, nb_xi, ref, skin, r_drum, r_max) -> bool:
-    """New Verlet list (j > i, sorted by j), springs carried over; False if a disk has too many neighbours."""
+def _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max) -> bool:
+    """New Verlet list (compressed rows: pairs j > i of disk i at ``nb_start[i]:nb_start[i + 1]``,
+    sorted by j), springs carried over; False if the list does not fit its arrays."""
     n = pos.shape[0]
-    kmax = nb_j.shape[1]
+    cap = nb_j.size
     cs = 2.0 * r_max + skin
     # cells over the disks' bounding box (inside the drum; capped so a stray disk cannot blow it up)
     lo_x = hi_x = pos[0, 0]
@@ -149,13 +150,12 @@ def _rebuild(pos, rad, nb_j, nb_cnt, nb_xi, ref, skin, r_drum, r_max) -> bool:
         c = b * ncx + a
         nxt[i] = head[c]
         head[c] = i
-    new_j = np.empty((n, kmax), dtype=np.int64)
-    new_xi = np.zeros((n, kmax))
-    new_cnt = np.zeros(n, dtype=np.int64)
+    starts = np.empty(n + 1, dtype=np.int64)
+    total = 0
     for i in range(n):
         xi_ = pos[i, 0]
         yi_ = pos[i, 1]
-        cnt = 0
+        first = total
         for db in range(-1, 2):
             b = cy[i] + db
             if b < 0 or b >= ncy:
@@ -171,30 +171,32 @@ def _rebuild(pos, rad, nb_j, nb_cnt, nb_xi, ref, skin, r_drum, r_max) -> bool:
                         dy = pos[j, 1] - yi_
                         reach = rad[i] + rad[j] + skin
                         if dx * dx + dy * dy < reach * reach:
-                            if cnt >= kmax:
+                            if total >= cap:
                                 return False
                             # insertion sort by j
-                            k = cnt
-                            while k > 0 and new_j[i, k - 1] > j:
-                                new_j[i, k] = new_j[i, k - 1]
+                            k = total
+                            while k > first and new_j[k - 1] > j:
+                                new_j[k] = new_j[k - 1]
                                 k -= 1
-                            new_j[i, k] = j
-                            cnt += 1
+                            new_j[k] = j
+                            total += 1
                     j = nxt[j]
-        new_cnt[i] = cnt
-        # carry the tangential springs over (both lists sorted by j)
-        ko = 0
-        for k in range(cnt):
-            j = new_j[i, k]
-            while ko < nb_cnt[i] and nb_j[i, ko] < j:
+        # carry the tangential springs over (both rows sorted by j)
+        ko = nb_start[i]
+        end = nb_start[i + 1]
+        for k in range(first, total):
+            j = new_j[k]
+            while ko < end and nb_j[ko] < j:
                 ko += 1
-            if ko < nb_cnt[i] and nb_j[i, ko] == j:
-                new_xi[i, k] = nb_xi[i, ko]
+            new_xi[k] = nb_xi[ko] if ko < end and nb_j[ko] == j else 0.0
+        starts[i] = first
+    starts[n] = total
+    for k in range(total):
+        nb_j[k] = new_j[k]
+        nb_xi[k] = new_xi[k]
+    for i in range(n + 1):
+        nb_start[i] = starts[i]
     for i in range(n):
-        nb_cnt[i] = new_cnt[i]
-        for k in range(new_cnt[i]):
-            nb_j[i, k] = new_j[i, k]
-            nb_xi[i, k] = new_xi[i, k]
         ref[i, 0] = pos[i, 0]
         ref[i, 1] = pos[i, 1]
     return True
@@ -213,11 +215,11 @@ def run(
     cls,  # (n,) class index
     inv_m,  # (n,) 1 / mass, 1/kg
     inv_i,  # (n,) 1 / moment of inertia
-    c_pair,  # (n_cls, n_cls) normal damping coefficient of a class pair, N s/m
-    c_wall,  # (n_cls,) normal damping coefficient of a class at the wall
-    nb_j,  # (n, K) neighbour list (j > i, sorted), updated
-    nb_cnt,  # (n,) neighbours of each disk, updated
-    nb_xi,  # (n, K) tangential spring of each listed pair, m, updated
+    c_pair,  # (n_cls, n_cls, 3) per class pair: normal damping (N s/m), r_eff (m), 1 / (1/I_i + 1/I_j)
+    c_wall,  # (n_cls,) normal damping coefficient of a class at the wall, N s/m
+    nb_start,  # (n + 1,) row starts of the neighbour list, updated
+    nb_j,  # (cap,) neighbour list (compressed rows: j > i, sorted), updated
+    nb_xi,  # (cap,) tangential spring of each listed pair, m, updated
     wall_xi,  # (n,) tangential spring at the wall, m, updated
     ref,  # (n, 2) centres at the last list build, updated
     rebuild,  # bool: build the list before the first step
@@ -227,7 +229,7 @@ def run(
 ):
     """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed)."""
     n = pos.shape[0]
-    kmax = nb_j.shape[1]
+    cap = nb_j.size
     dt = prm[P_DT]
     kn = prm[P_KN]
     kt = prm[P_KT]
@@ -247,6 +249,7 @@ def run(
     n_contacts = 0
     half_skin2 = 0.25 * skin * skin
     ct_scale = 2.0 / 7.0  # tangential dashpot / normal dashpot
+    mu_r_dt = mu_r * dt
     inv_kt = 1.0 / kt
     r_max = 0.0
     for i in range(n):
@@ -256,10 +259,13 @@ def run(
     tq = np.empty(n)
     # this step's contacts in visiting order (i, then the wall, then i's partners j): for rolling friction
     roll_start = np.zeros(n + 1, dtype=np.int64)
-    roll_j = np.empty(n * (kmax + 1), dtype=np.int64)  # partner, -1 = the wall
-    roll_imp = np.empty(n * (kmax + 1))  # rolling friction angular impulse bound mu_r r_eff F_n dt
+    roll_j = np.empty(cap + n, dtype=np.int64)  # partner, -1 = the wall
+    roll_imp = np.empty(cap + n)  # rolling friction angular impulse bound mu_r r_eff F_n dt
+    roll_cap = np.empty(cap + n)  # impulse that stops the relative rotation, per rad/s
+    new_j = np.empty(cap, dtype=np.int64)  # scratch of the list builds
+    new_xi = np.empty(cap)
     if rebuild:
-        if not _rebuild(pos, rad, nb_j, nb_cnt, nb_xi, ref, skin, r_drum, r_max):
+        if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
             return 0
     for step in range(n_steps):
         # the drum follows its setpoint at the acceleration limit
@@ -275,14 +281,17 @@ def run(
             dy = pos[i, 1] - ref[i, 1]
             far = max(far, dx * dx + dy * dy)
         if far > half_skin2:
-            if not _rebuild(pos, rad, nb_j, nb_cnt, nb_xi, ref, skin, r_drum, r_max):
+            if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
                 _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
                 return step
+        last = step == n_steps - 1  # contacts per disk are counted in the last step only
         for i in range(n):
             fx[i] = 0.0
             fy[i] = -g / inv_m[i]
             tq[i] = 0.0
-            ncont[i] = 0
+        if last:
+            for i in range(n):
+                ncont[i] = 0
         m = 0
         for i in range(n):
             roll_start[i] = m
@@ -315,7 +324,8 @@ def run(
                 fx[i] += -fn * nx - ft * ny
                 fy[i] += -fn * ny + ft * nx
                 tq[i] += ri * ft
-                ncont[i] += 1
+                if last:
+                    ncont[i] += 1
                 if delta > wall_max:
                     wall_max = delta
                 roll_j[m] = -1
@@ -328,15 +338,15 @@ def run(
             fyi = 0.0
             tqi = 0.0
             nci = 0
-            for k in range(nb_cnt[i]):
-                j = nb_j[i, k]
+            for k in range(nb_start[i], nb_start[i + 1]):
+                j = nb_j[k]
                 dx = pos[j, 0] - xi0
                 dy = pos[j, 1] - yi0
                 rj = rad[j]
                 rs = ri + rj
                 d2 = dx * dx + dy * dy
                 if d2 >= rs * rs:
-                    nb_xi[i, k] = 0.0
+                    nb_xi[k] = 0.0
                     continue
                 d = math.sqrt(d2)
                 inv_d = 1.0 / d
@@ -345,17 +355,18 @@ def run(
                 dvx = vxi - vel[j, 0]
                 dvy = vyi - vel[j, 1]
                 delta = rs - d
-                cn = c_pair[ci, cls[j]]
+                cj = cls[j]
+                cn = c_pair[ci, cj, 0]
                 fn = kn * delta + cn * (dvx * nx + dvy * ny)
                 fn = max(fn, 0.0)
                 vt = -dvx * ny + dvy * nx + wi * ri + omg[j] * rj
-                xi = nb_xi[i, k] + vt * dt
+                xi = nb_xi[k] + vt * dt
                 ft = -kt * xi - ct_scale * cn * vt
                 lim = mu * fn
                 ftc = min(max(ft, -lim), lim)
                 xi = xi if ftc == ft else -ftc * inv_kt
                 ft = ftc
-                nb_xi[i, k] = xi
+                nb_xi[k] = xi
                 fxc = -fn * nx - ft * ny
                 fyc = -fn * ny + ft * nx
                 fxi += fxc
@@ -365,18 +376,21 @@ def run(
                 fx[j] -= fxc
                 fy[j] -= fyc
                 tq[j] += rj * ft
-                ncont[j] += 1
+                if last:
+                    ncont[j] += 1
                 if delta > ov_max:
                     ov_max = delta
                 hist[min(int(delta * bin_scale), nbins)] += 1
                 n_contacts += 1
                 roll_j[m] = j
-                roll_imp[m] = mu_r * ri * rj / rs * fn * dt
+                roll_imp[m] = mu_r_dt * c_pair[ci, cj, 1] * fn
+                roll_cap[m] = c_pair[ci, cj, 2]
                 m += 1
             fx[i] += fxi
             fy[i] += fyi
             tq[i] += tqi
-            ncont[i] += nci
+            if last:
+                ncont[i] += nci
         roll_start[n] = m
         # velocities
         for i in range(n):
@@ -394,20 +408,12 @@ def run(
                     jr = roll_imp[c]
                     if j < 0:
                         w_rel = wi - w_drum
-                        change = jr * ii
-                        if change >= abs(w_rel):
-                            wi = w_drum
-                        else:
-                            wi -= math.copysign(change, w_rel)
+                        wi -= math.copysign(min(jr * ii, abs(w_rel)), w_rel)
                     else:
                         w_rel = wi - omg[j]
-                        ij = inv_i[j]
-                        change = jr * (ii + ij)
-                        if change > 0.0 and w_rel != 0.0:
-                            f = 1.0 if change <= abs(w_rel) else abs(w_rel) / change
-                            sj = math.copysign(f * jr, w_rel)
-                            wi -= sj * ii
-                            omg[j] += sj * ij
+                        sj = math.copysign(min(jr, abs(w_rel) * roll_cap[c]), w_rel)
+                        wi -= sj * ii
+                        omg[j] += sj * inv_i[j]
                 omg[i] = wi
         # positions
         for i in range(n):

@@ -55,9 +55,10 @@ DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
 MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
 DEFAULT_STIFFNESS_N_M = 4000.0  # linear normal contact stiffness (docs/validation.md, section 2)
-STEPS_PER_CONTACT = 6  # default step = contact time of the lightest pair / this (section 3)
+STEPS_PER_CONTACT = 5  # default step = contact time of the lightest pair / this (section 3)
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
+SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
 _SETTLE_DAMP_S = 2.0  # velocity damping rate while settling, 1/s
 _INFLATE_S = 0.1  # time to inflate the disks from placement size to full size
 _OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
@@ -285,6 +286,7 @@ class DrumSim:
         self.t_s = 0.0
         self.n_steps = 0
         self._acc_s = 0.0
+        self._sort()
         self.reset_stats()
         self._ds[dem.DS_TARGET] = rpm
         self._ds[dem.DS_RPM] = rpm  # the drum starts at full speed
@@ -311,39 +313,38 @@ class DrumSim:
         self.t_s = float(st.t_s)
         self.n_steps = int(st.n_steps)
         self._acc_s = float(st.extra.get("acc_s", 0.0))
-        self._cls = np.ascontiguousarray(st.cls, dtype=np.int64)
+        # disks are stored in a spatial order (``_perm``: internal index -> disk), re-sorted every
+        # ``SORT_EVERY`` steps for memory locality; the public arrays are in the disks' own order
+        n = int(np.asarray(st.cls).size)
+        self._perm = np.asarray(st.extra.get("order", np.arange(n)), dtype=np.int64).copy()
+        self._inv_perm = np.argsort(self._perm)
+        p = self._perm
+        self._cls = np.ascontiguousarray(np.asarray(st.cls, dtype=np.int64)[p])
         self._r = np.array([st.classes[k].radius_m for k in self._cls], dtype=np.float64)
         self._rad = self._r * radius_scale  # the radii the contacts see (smaller while inflating)
         self._r_min = min(c.radius_m for c in st.classes)
         slab = _slab_m(st.classes)
         self._cls_mass = np.array([c.mass_kg(slab) for c in st.classes])
-        self._masses = self._cls_mass[self._cls]
-        self._inv_m = 1.0 / self._masses
-        self._inv_i = 1.0 / (0.4 * self._masses * self._r**2)
-        self._pos = np.array(st.pos_m, dtype=np.float64).reshape(-1, 2)
-        self._vel = np.array(st.vel_m_s, dtype=np.float64).reshape(-1, 2)
-        self._ang = np.array(st.angle_rad, dtype=np.float64)
-        self._omg = np.array(st.omega_rad_s, dtype=np.float64)
+        self._set_masses()
+        self._pos = np.array(st.pos_m, dtype=np.float64).reshape(-1, 2)[p]
+        self._vel = np.array(st.vel_m_s, dtype=np.float64).reshape(-1, 2)[p]
+        self._ang = np.array(st.angle_rad, dtype=np.float64)[p]
+        self._omg = np.array(st.omega_rad_s, dtype=np.float64)[p]
         self._ds = np.array([st.rpm_actual, st.rpm_target, st.drum_angle_rad], dtype=np.float64)
-        n = self._cls.size
         r_max = float(self._r.max())
         self._skin = SKIN_R * self._r_min
-        k = dem.neighbour_slots(r_max, self._r_min, self._skin)
-        self._nb_j = np.zeros((n, k), dtype=np.int64)
-        self._nb_cnt = np.zeros(n, dtype=np.int64)
-        self._nb_xi = np.zeros((n, k))
+        cap = n * dem.neighbour_slots(r_max, self._r_min, self._skin)
+        self._nb_start = np.zeros(n + 1, dtype=np.int64)
+        self._nb_j = np.zeros(cap, dtype=np.int64)
+        self._nb_xi = np.zeros(cap)
         self._ref = np.zeros((n, 2))
         self._wall_xi = np.zeros(n)
         self._ncont = np.zeros(n, dtype=np.int64)
         springs = st.extra.get("springs")
-        if springs is not None:  # the contacts' tangential springs: (i, j, xi) and the wall's
+        if springs is not None:  # the contacts' tangential springs: disk pairs, xi, the wall's (disk order)
             pairs, xis, wall_xi = springs
-            self._wall_xi[:] = wall_xi
-            for (i, j), xi in zip(np.asarray(pairs).reshape(-1, 2), np.asarray(xis), strict=True):
-                c = self._nb_cnt[i]
-                self._nb_j[i, c] = j
-                self._nb_xi[i, c] = xi
-                self._nb_cnt[i] = c + 1
+            self._wall_xi[:] = np.asarray(wall_xi, dtype=np.float64)[p]
+            self._set_springs(self._inv_perm[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], np.asarray(xis))
         self._rebuild = True
         self._set_prm()
         if not hasattr(self, "_hist"):
@@ -369,24 +370,84 @@ class DrumSim:
         zeta = dem.damping_ratio(p.restitution)
         m = self._cls_mass
         m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
-        self._c_pair = 2.0 * zeta * np.sqrt(m_pair * p.stiffness_n_m)
+        r = np.array([c.radius_m for c in self.classes])
+        inv_i = 1.0 / (0.4 * m * r**2)
+        self._c_pair = np.stack([2.0 * zeta * np.sqrt(m_pair * p.stiffness_n_m),
+                                 r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
+                                 1.0 / (inv_i[:, None] + inv_i[None, :])], axis=-1)
         self._c_wall = 2.0 * zeta * np.sqrt(m * p.stiffness_n_m)
 
-    def _run(self, n_steps: int) -> None:
-        """``n_steps`` fixed steps in the compiled loop (the neighbour list grows if it must)."""
+    def _set_masses(self) -> None:
+        self._masses = self._cls_mass[self._cls]
+        self._inv_m = 1.0 / self._masses
+        self._inv_i = 1.0 / (0.4 * self._masses * self._r**2)
+
+    def _springs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The listed pairs with a tangential spring: (m, 2) internal indices (i < j) and xi (m)."""
+        m = int(self._nb_start[-1])
+        rows = np.repeat(np.arange(self._cls.size), np.diff(self._nb_start))
+        keep = self._nb_xi[:m] != 0.0
+        return np.column_stack([rows[keep], self._nb_j[:m][keep]]), self._nb_xi[:m][keep].copy()
+
+    def _set_springs(self, pairs: np.ndarray, xis: np.ndarray) -> None:
+        """Load springs of internal pairs (either orientation: a pair's spring does not depend on it)."""
+        pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+        pairs, xis = pairs[order], np.asarray(xis, dtype=np.float64)[order]
+        n = self._cls.size
+        if len(pairs) > self._nb_j.size:
+            self._nb_j = np.zeros(2 * len(pairs), dtype=np.int64)
+            self._nb_xi = np.zeros(2 * len(pairs))
+        self._nb_start[0] = 0
+        self._nb_start[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n))
+        self._nb_j[: len(pairs)] = pairs[:, 1]
+        self._nb_xi[: len(pairs)] = xis
+        self._rebuild = True
+
+    def _sort(self) -> None:
+        """Re-order the disks in memory along the cells of the neighbour grid (locality of the contact loop)."""
+        cs = 2.0 * float(self._r.max()) + self._skin
+        r = self.drum.radius_m
+        nc = int(2.0 * r / cs) + 2
+        cell = np.clip(((self._pos + r) / cs).astype(np.int64), 0, nc - 1)
+        order = np.argsort(cell[:, 1] * nc + cell[:, 0], kind="stable")
+        pairs, xis = self._springs()
+        inv = np.empty_like(order)
+        inv[order] = np.arange(order.size)
+        for name in ("_cls", "_r", "_rad", "_pos", "_vel", "_ang", "_omg", "_wall_xi", "_ncont", "_ref", "_perm"):
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[order]))
+        self._inv_perm = np.argsort(self._perm)
+        self._set_masses()
+        self._set_springs(inv[pairs], xis)
+
+    def _run(self, n_steps: int, count: bool = True) -> None:
+        """``n_steps`` fixed steps in the compiled loop; with ``count`` they are the twin's own steps
+        (``n_steps`` counts them, and every ``SORT_EVERY`` of them the disks are re-sorted)."""
+        while n_steps > 0:
+            chunk = min(n_steps, SORT_EVERY - self.n_steps % SORT_EVERY) if count else n_steps
+            self._run_steps(chunk)
+            n_steps -= chunk
+            if count:
+                self.n_steps += chunk
+                if self.n_steps % SORT_EVERY == 0:
+                    self._sort()
+
+    def _run_steps(self, n_steps: int) -> None:
+        """``n_steps`` steps of ``dem.run`` (the neighbour list grows if it must)."""
         while n_steps > 0:
             done = dem.run(n_steps, self._prm, self._ds, self._pos, self._vel, self._ang, self._omg, self._rad,
-                           self._cls, self._inv_m, self._inv_i, self._c_pair, self._c_wall, self._nb_j, self._nb_cnt,
-                           self._nb_xi, self._wall_xi, self._ref, self._rebuild, self._hist, self._acc, self._ncont)
+                           self._cls, self._inv_m, self._inv_i, self._c_pair, self._c_wall, self._nb_start,
+                           self._nb_j, self._nb_xi, self._wall_xi, self._ref, self._rebuild, self._hist, self._acc,
+                           self._ncont)
             self._rebuild = False
             self._stat_steps += done
             n_steps -= done
-            if n_steps > 0:  # a disk had more neighbours than slots: more slots, same lists
-                n, k = self._nb_j.shape
-                if k > 16 * dem.neighbour_slots(float(self._r.max()), self._r_min, self._skin):
-                    raise SimError("the bed has blown up (a disk has too many neighbours): lower the step")
-                self._nb_j = np.hstack([self._nb_j, np.zeros((n, k), dtype=np.int64)])
-                self._nb_xi = np.hstack([self._nb_xi, np.zeros((n, k))])
+            if n_steps > 0:  # the neighbour list did not fit: more room, same rows
+                n = self._cls.size
+                if self._nb_j.size > 16 * n * dem.neighbour_slots(float(self._r.max()), self._r_min, self._skin):
+                    raise SimError("the bed has blown up (disks pile into each other): lower the step")
+                self._nb_j = np.concatenate([self._nb_j, np.zeros_like(self._nb_j)])
+                self._nb_xi = np.concatenate([self._nb_xi, np.zeros_like(self._nb_xi)])
                 self._rebuild = True
 
     def _settle(self, settle_s: float) -> None:
@@ -399,10 +460,10 @@ class DrumSim:
         for j in range(n_grow):
             self._rad = self._r * (_SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow)
             self._rebuild = True
-            self._run(per)
+            self._run(per, count=False)
         self._rad = self._r.copy()
         self._set_prm(gravity=True, damp_s=_SETTLE_DAMP_S)
-        self._run(int(round(settle_s / h)))
+        self._run(int(round(settle_s / h)), count=False)
         self._set_prm()
         self._vel[:] = 0.0
         self._omg[:] = 0.0
@@ -464,7 +525,6 @@ class DrumSim:
             return
         self._acc_s = max(0.0, self._acc_s - n * h)
         self._run(n)
-        self.n_steps += n
 
     # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:
@@ -489,14 +549,15 @@ class DrumSim:
 
     def contact_counts(self) -> np.ndarray:
         """Number of contacts (with disks or the wall) of each disk in the last step."""
-        return self._ncont.copy()
+        return self._ncont[self._inv_perm]
 
     # ----------------------------------------------------------------- read
     def particles(self) -> Particles:
         """Positions (m), radii (m), classes of all disks now."""
+        q = self._inv_perm
         return Particles(
-            x_m=self._pos[:, 0].copy(), y_m=self._pos[:, 1].copy(), r_m=self._r.copy(), cls=self._cls.copy(),
-            angle_rad=self._ang.copy(), class_names=tuple(c.name for c in self.classes),
+            x_m=self._pos[q, 0], y_m=self._pos[q, 1], r_m=self._r[q], cls=self._cls[q],
+            angle_rad=self._ang[q], class_names=tuple(c.name for c in self.classes),
             class_bgr=tuple(c.colour_bgr for c in self.classes),
         )
 
@@ -507,17 +568,15 @@ class DrumSim:
     def snapshot(self) -> SimState:
         """The whole state now (arrays are copies), contact springs included: every
         ``restore``/``from_state`` of it continues bit-identically to this twin."""
-        rows = np.repeat(np.arange(self._cls.size), self._nb_cnt)
-        cols = np.concatenate([self._nb_j[i, :c] for i, c in enumerate(self._nb_cnt)]) if rows.size else rows
-        xis = np.concatenate([self._nb_xi[i, :c] for i, c in enumerate(self._nb_cnt)]) if rows.size else np.zeros(0)
-        keep = xis != 0.0
-        springs = (np.column_stack([rows[keep], cols[keep]]).astype(np.int64), xis[keep].copy(), self._wall_xi.copy())
+        pairs, xis = self._springs()
+        q = self._inv_perm
         return SimState(
             drum=self.drum, recipe=self.recipe, classes=self.classes, case=self.case, seed=self.seed,
             params=self.params, t_s=self.t_s, rpm_target=self.rpm_target, rpm_actual=self.rpm_actual,
-            drum_angle_rad=float(self._ds[dem.DS_ANGLE]), cls=self._cls.copy(), pos_m=self._pos.copy(),
-            vel_m_s=self._vel.copy(), angle_rad=self._ang.copy(), omega_rad_s=self._omg.copy(),
-            n_steps=self.n_steps, extra={"acc_s": self._acc_s, "springs": springs},
+            drum_angle_rad=float(self._ds[dem.DS_ANGLE]), cls=self._cls[q], pos_m=self._pos[q],
+            vel_m_s=self._vel[q], angle_rad=self._ang[q], omega_rad_s=self._omg[q], n_steps=self.n_steps,
+            extra={"acc_s": self._acc_s, "springs": (self._perm[pairs], xis, self._wall_xi[q]),
+                   "order": self._perm.copy()},
         )
 
     def restore(self, state: SimState) -> None:

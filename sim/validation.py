@@ -51,9 +51,23 @@ def slope_run(rpm: float, seed: int, duration_s: float = 20.0, spin_up_s: float 
             "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm, "rtf": duration_s / wall}
 
 
-def convergence(seeds=(0, 1), steps_ms=(4.0, 2.0, 1.0, 0.5, 0.25), duration_s: float = 20.0) -> list[dict]:
-    """5 rpm slope, overlap and wall depth against the step (default iterations)."""
-    return [slope_run(5.0, s, duration_s, dt_s=h / 1e3) for h in steps_ms for s in seeds]
+def convergence(seeds=(0, 1), steps_per_contact=(3, 5, 10, 20, 40), stiffness_x=(0.5, 2.0),
+                duration_s: float = 20.0) -> dict:
+    """5 rpm slope, overlap and wall depth against the step (fractions of the contact time) and,
+    at the default step fraction, against the contact stiffness."""
+    from sim.drum import DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, _contact_time_s, slice_2d
+    from sim.recipe import PAPER_RECIPE
+
+    t_c = _contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), DEFAULT_STIFFNESS_N_M, 0.5)
+    by_step = [{**slope_run(5.0, s, duration_s, dt_s=t_c / k), "steps_per_contact": k}
+               for k in steps_per_contact for s in seeds]
+    by_stiffness = []
+    for x in stiffness_x:
+        k_n = x * DEFAULT_STIFFNESS_N_M
+        h = _contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), k_n, 0.5) / STEPS_PER_CONTACT
+        by_stiffness += [{**slope_run(5.0, s, duration_s, dt_s=h, stiffness_n_m=k_n), "stiffness_n_m": k_n}
+                         for s in seeds]
+    return {"contact_time_ms": t_c * 1e3, "by_step": by_step, "by_stiffness": by_stiffness}
 
 
 def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every_s: float = 1.0) -> dict:

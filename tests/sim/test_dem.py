@@ -29,10 +29,11 @@ def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, m
     hist = np.zeros(1001, dtype=np.int64)
     acc = np.zeros(4)
     ncont = np.zeros(n, dtype=np.int64)
+    pair = np.array([[[2 * zeta * np.sqrt(m / 2 * k), r / 2, 0.2 * m * r**2]]])  # damping, r_eff, I_eff
     dem.run(n_steps, prm, np.zeros(3), pos, vel, np.zeros(n), omg, rad, np.zeros(n, dtype=np.int64),
-            np.full(n, 1 / m), 1 / (0.4 * m * rad**2), np.array([[2 * zeta * np.sqrt(m / 2 * k)]]),
-            np.array([2 * zeta * np.sqrt(m * k)]), np.zeros((n, kk), dtype=np.int64), np.zeros(n, dtype=np.int64),
-            np.zeros((n, kk)), np.zeros(n), np.zeros((n, 2)), True, hist, acc, ncont)
+            np.full(n, 1 / m), 1 / (0.4 * m * rad**2), pair,
+            np.array([2 * zeta * np.sqrt(m * k)]), np.zeros(n + 1, dtype=np.int64), np.zeros(n * kk, dtype=np.int64),
+            np.zeros(n * kk), np.zeros(n), np.zeros((n, 2)), True, hist, acc, ncont)
     return pos, vel, omg, hist, acc, ncont
 
 
