@@ -257,6 +257,9 @@ def run(
     fx = np.empty(n)
     fy = np.empty(n)
     tq = np.empty(n)
+    weight = np.empty(n)
+    for i in range(n):
+        weight[i] = -g / inv_m[i]
     # this step's contacts in visiting order (i, then the wall, then i's partners j): for rolling friction
     roll_start = np.zeros(n + 1, dtype=np.int64)
     roll_j = np.empty(cap + n, dtype=np.int64)  # partner, -1 = the wall
@@ -287,7 +290,7 @@ def run(
         last = step == n_steps - 1  # contacts per disk are counted in the last step only
         for i in range(n):
             fx[i] = 0.0
-            fy[i] = -g / inv_m[i]
+            fy[i] = weight[i]
             tq[i] = 0.0
         if last:
             for i in range(n):
