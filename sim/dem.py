@@ -4,14 +4,16 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
 
 * **Normal**: ``F_n = max(0, k_n delta + c_n d(delta)/dt)`` with overlap ``delta``
   (m), linear stiffness ``k_n`` (N/m) and the viscous coefficient that gives the
-  restitution ``e`` for the pair's effective mass ``m*``:
-  ``c_n = 2 zeta sqrt(m* k_n)``, ``zeta = -ln e / sqrt(pi^2 + ln^2 e)``.
+  restitution ``e`` for the pair's effective mass ``m*``: ``c_n = 2 zeta sqrt(m* k_n)``
+  with ``zeta = damping_ratio(e)``, exact for a contact that ends when the force
+  reaches zero (no pull; Schwager & Poeschel 2008).
 * **Tangential**: a spring ``k_t = 2/7 k_n`` on the accumulated tangential displacement
   ``xi`` (a scalar in 2D) plus a dashpot ``c_t = 2/7 c_n`` (the same frequency and
   damping ratio as the normal direction for balls, ``I = 2/5 m r^2``), capped by
   Coulomb ``|F_t| <= mu F_n``; at the cap the spring is reset to ``mu F_n / k_t``.
 * **Rolling friction**: the "constant directional torque" model (Ai, Chen, Rotter &
-  Ooi, Powder Technol. 206, 2011, type A; LIGGGHTS ``rolling_friction cdt``): a torque
+  Ooi, Powder Technol. 206, 2011, type A; LIGGGHTS ``rolling_friction cdt``, EDEM's RVD
+  rolling friction): a torque
   ``mu_r r_eff F_n`` with ``r_eff = r_i r_j / (r_i + r_j)`` (``r_i`` at the wall)
   against the relative rotation ``omega_i - omega_j`` (the drum's rate at the wall),
   applied as an angular impulse after the velocity update, contact by contact in a
@@ -22,7 +24,7 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
   disk's own mass as ``m*`` and the wall's sliding friction.
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
-  by ``j``) rebuilt from a cell list whenever a disk has moved more than half the skin
+  by ``j``, in compressed rows) rebuilt from a cell list whenever a disk has moved more than half the skin
   since the last build: O(N). Contacts are visited in (i, j) order and forces are
   summed in that order, so the result does not depend on when the list was rebuilt:
   a restored state continues bit-identically.

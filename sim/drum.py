@@ -69,7 +69,7 @@ def _slab_m(classes) -> float:
     return 4.0 / 3.0 * max(c.radius_m for c in classes)
 
 
-def _contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
+def bed_contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
     """Contact time (s) of the lightest disk pair of the bed."""
     slab = _slab_m(classes)
     m = min(c.mass_kg(slab) for c in classes)
@@ -79,7 +79,7 @@ def _contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
 def default_dt_s(classes, stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
                  restitution: float = DEFAULT_RESTITUTION) -> float:
     """The default step (s): the contact time of the lightest disk pair over ``STEPS_PER_CONTACT``."""
-    return _contact_time_s(classes, stiffness_n_m, restitution) / STEPS_PER_CONTACT
+    return bed_contact_time_s(classes, stiffness_n_m, restitution) / STEPS_PER_CONTACT
 
 
 DEFAULT_DT_S = default_dt_s(slice_2d(PAPER_RECIPE, PAPER_DRUM))  # the paper bed's step
@@ -299,7 +299,7 @@ class DrumSim:
         self.case = st.case
         self.seed = st.seed
         params = st.params
-        t_c = _contact_time_s(st.classes, params.stiffness_n_m, params.restitution)
+        t_c = bed_contact_time_s(st.classes, params.stiffness_n_m, params.restitution)
         if params.dt_s is None:
             params = replace(params, dt_s=t_c / STEPS_PER_CONTACT)
         _check_params(params)
@@ -602,6 +602,7 @@ __all__ = [
     "Particles",
     "SimParams",
     "SimState",
+    "bed_contact_time_s",
     "check_rpm",
     "default_dt_s",
     "rpm_to_rad_s",

@@ -61,16 +61,16 @@ def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 5, 10, 20, 40), stiffn
                 duration_s: float = 30.0) -> dict:
     """Case C at 5 rpm: slope, late MI, overlap and wall depth against the step (fractions of the
     contact time) and, at the default step fraction, against the contact stiffness."""
-    from sim.drum import DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, _contact_time_s, slice_2d
-    from sim.recipe import PAPER_RECIPE
+    from sim.drum import DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, bed_contact_time_s
+    from sim.recipe import PAPER_RECIPE, slice_2d
 
-    t_c = _contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), DEFAULT_STIFFNESS_N_M, 0.5)
+    t_c = bed_contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), DEFAULT_STIFFNESS_N_M, 0.5)
     by_step = [{**slope_run(5.0, s, duration_s, dt_s=t_c / k), "steps_per_contact": k}
                for k in steps_per_contact for s in seeds]
     by_stiffness = []
     for x in stiffness_x:
         k_n = x * DEFAULT_STIFFNESS_N_M
-        h = _contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), k_n, 0.5) / STEPS_PER_CONTACT
+        h = bed_contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), k_n, 0.5) / STEPS_PER_CONTACT
         by_stiffness += [{**slope_run(5.0, s, duration_s, dt_s=h, stiffness_n_m=k_n), "stiffness_n_m": k_n}
                          for s in seeds]
     return {"contact_time_ms": t_c * 1e3, "by_step": by_step, "by_stiffness": by_stiffness}
