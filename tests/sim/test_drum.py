@@ -120,3 +120,17 @@ def test_a_step_too_long_for_the_contacts_is_an_error():
     with pytest.raises(SimError, match="too long for this bed's contacts"):
         DrumSim(dt_s=0.002, settle_s=0.0)
     assert DrumSim(dt_s=0.0001, settle_s=0.0).substep_s() == 0.0001
+
+
+def test_another_recipe_gets_its_own_step_and_stays_contained():
+    from sim.recipe import DrumSpec, ParticleSpec, Recipe
+
+    drum = DrumSpec(diameter_m=0.2, depth_m=0.05)
+    recipe = Recipe((ParticleSpec("big", 0.012, 60), ParticleSpec("small", 0.006, 480)), fill=0.4)
+    sim = DrumSim(drum, recipe, case="C", seed=1, rpm=30.0, settle_s=0.3)
+    assert sim.substep_s() < DrumSim(settle_s=0.0).substep_s()  # lighter disks, shorter contacts
+    sim.advance(1.0)
+    p = sim.particles()
+    assert np.all(np.hypot(p.x_m, p.y_m) + p.r_m < drum.radius_m + 0.002)
+    st = sim.stats()
+    assert st.overlap_p99_r <= 0.05 and st.wall_max_mm <= 2.0
