@@ -1,11 +1,12 @@
-"""Physics -> frames: the 2D pymunk drum twin, renderer, calibration, what-if studies.
+"""Physics -> frames: the 2D soft-sphere DEM drum twin, renderer, calibration, what-if studies.
 
 Imports ``vision`` (to measure its own frames) and nothing else of drumtwin.
 
 - ``sim.recipe``: ``DrumSpec``, ``ParticleSpec``, ``Recipe``, ``PAPER_RECIPE``, ``slice_2d``
 - ``sim.drum``: ``DrumSim`` (advance/step/set_rpm/particles/snapshot/restore/stats), ``SimState``,
   ``ContactStats``; one fixed internal step (``DEFAULT_DT_S``), paper materials as defaults
-- ``sim.contacts``: the compiled per-step contact pass (rolling friction, overlap statistics)
+- ``sim.dem``: the compiled DEM step loop (spring-dashpot contacts, Coulomb sliding, rolling friction,
+  the drum circle as the wall, Verlet neighbour list, overlap statistics)
 - ``sim.render``: ``Renderer``, ``Realism`` (synthetic camera)
 - ``sim.measure``: ``particle_mi``, ``free_surface`` / ``particle_slope_deg`` (free surface),
   ``particle_axis_deg`` (principal axis), ``twin_meter``

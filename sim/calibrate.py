@@ -4,11 +4,14 @@ The twin's dynamic slope angle at a given rpm grows with sliding friction and wi
 rolling friction. ``calibrate`` searches the (sliding, rolling) plane between
 ``FRICTION_RANGE`` and ``ROLLING_RANGE``:
 
-1. **Reachable range.** The two corners (least and most friction) bound the slopes the
-   twin can show at this rpm. A target outside that range (with ``RANGE_TOL_DEG`` of
-   grace) is a ``SimError`` that names the range -- never a silent best effort.
-2. **Slope.** Along a path from the low to the high corner the slope is monotone, and
-   a bracketing search (regula falsi) finds the point whose mean free-surface slope
+1. **Reachable range.** The least-friction corner gives the lowest slope. The highest is
+   not at the other corner: at the largest rolling friction the slope peaks at moderate
+   sliding friction (with more, the bed locks into slabs that slump), so the high end is
+   the best of ``HIGH_EDGE`` points on the ``rolling = ROLLING_RANGE[1]`` edge. A target
+   outside that range (with ``RANGE_TOL_DEG`` of grace) is a ``SimError`` that names
+   the range -- never a silent best effort.
+2. **Slope.** Along a path from the low corner to the high point the slope is monotone,
+   and a bracketing search (regula falsi) finds the point whose mean free-surface slope
    matches the target. Every evaluation uses the same seed (common random numbers).
 3. **Curvature** (when measured). Several paths through the plane -- sliding friction
    first, both together, rolling friction first -- each give a point on the target's
@@ -32,10 +35,11 @@ from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 FRICTION_RANGE = (0.05, 1.0)  # sliding friction searched (geometric)
 ROLLING_RANGE = (0.0, 1.0)  # rolling friction searched
 RANGE_TOL_DEG = 1.0  # a target this close outside the range still calibrates (to the end)
+HIGH_EDGE = (0.25, 0.5, 1.0)  # sliding friction tried at the largest rolling friction for the top of the range
 PATHS = ("diagonal", "sliding-first", "rolling-first")
 
 __all__ = [
-    "FRICTION_RANGE", "PATHS", "RANGE_TOL_DEG", "ROLLING_RANGE", "Calibration", "calibrate", "path_point",
+    "FRICTION_RANGE", "HIGH_EDGE", "PATHS", "RANGE_TOL_DEG", "ROLLING_RANGE", "Calibration", "calibrate", "path_point",
     "reachable_range", "twin_slope_deg", "twin_surface",
 ]
 
@@ -100,13 +104,14 @@ def twin_slope_deg(friction: float, rolling: float, rpm: float, **kwargs) -> flo
     return twin_surface(friction, rolling, rpm, **kwargs)[0]
 
 
-def path_point(u: float, path: str = "diagonal") -> tuple[float, float]:
-    """(sliding, rolling friction) at ``u`` in [0, 1] along one of ``PATHS`` (u=0: least, u=1: most friction)."""
+def path_point(u: float, path: str = "diagonal", high: tuple[float, float] | None = None) -> tuple[float, float]:
+    """(sliding, rolling friction) at ``u`` in [0, 1] along one of ``PATHS`` from the least-friction
+    corner (u=0) to ``high`` (u=1; default the most-friction corner); sliding friction is geometric."""
     if path not in PATHS:
         raise SimError(f"calibration path must be one of {', '.join(PATHS)} (got {path!r})")
     u = min(max(float(u), 0.0), 1.0)
-    lo, hi = FRICTION_RANGE
-    r_lo, r_hi = ROLLING_RANGE
+    lo, r_lo = FRICTION_RANGE[0], ROLLING_RANGE[0]
+    hi, r_hi = (FRICTION_RANGE[1], ROLLING_RANGE[1]) if high is None else high
     if path == "diagonal":
         us, ur = u, u
     elif path == "sliding-first":
@@ -127,9 +132,10 @@ def _check_target(target_slope_deg: float) -> float:
 
 
 def reachable_range(rpm: float, *, seed: int = 0, **kwargs) -> tuple[float, float]:
-    """(lowest, highest) free-surface slope (deg) the twin reaches at ``rpm`` within the search bounds."""
+    """(lowest, highest) free-surface slope (deg) the twin reaches at ``rpm`` within the search bounds
+    (the least-friction corner and the best ``HIGH_EDGE`` point)."""
     lo = twin_slope_deg(*path_point(0.0), rpm, seed=seed, **kwargs)
-    hi = twin_slope_deg(*path_point(1.0), rpm, seed=seed, **kwargs)
+    hi = max(twin_slope_deg(f, ROLLING_RANGE[1], rpm, seed=seed, **kwargs) for f in HIGH_EDGE)
     return lo, hi
 
 
@@ -150,8 +156,9 @@ def calibrate(
 ) -> Calibration:
     """Fit sliding and rolling friction so the twin's free surface at ``rpm`` matches the target.
 
-    ``max_evals`` is the budget per path (two corner runs, then the bracketing search).
-    A target outside the reachable range is a ``SimError`` naming the range.
+    ``max_evals`` is the budget of the bracketing search per path (after the range runs: the
+    low corner and the ``HIGH_EDGE`` points). A target outside the reachable range is a
+    ``SimError`` naming the range.
     """
     target = _check_target(target_slope_deg)
     rpm = check_rpm(rpm, drum)
@@ -161,12 +168,12 @@ def calibrate(
         raise SimError(f"target curvature must be a finite number (got {target_curvature})")
     if not (math.isfinite(tol_deg) and tol_deg > 0):
         raise SimError(f"tolerance must be > 0 deg (got {tol_deg})")
-    if max_evals < 2:
-        raise SimError(f"calibration needs at least 2 evaluations (got {max_evals})")
+    if max_evals < 1:
+        raise SimError(f"calibration needs at least 1 search evaluation (got {max_evals})")
     sign = 1.0 if target > 0 else -1.0  # compare magnitudes; report with the target's sign
     target_mag = abs(target)
     paths = PATHS if target_curvature is not None else PATHS[:1]
-    total = max_evals + (len(paths) - 1) * (max_evals - 2)
+    total = 1 + len(HIGH_EDGE) + len(paths) * max_evals
     history: list[tuple[float, float, float]] = []
     curv: dict[tuple[float, float], float] = {}
 
@@ -181,9 +188,12 @@ def calibrate(
         return s
 
     s_lo = evaluate(*path_point(0.0))
-    s_hi = evaluate(*path_point(1.0))
-    if not (math.isfinite(s_lo) and math.isfinite(s_hi)):
+    edge = [evaluate(f, ROLLING_RANGE[1]) for f in HIGH_EDGE]
+    finite = [(s, f) for s, f in zip(edge, HIGH_EDGE, strict=True) if math.isfinite(s)]
+    if not (math.isfinite(s_lo) and finite):
         raise SimError(f"the twin shows no free surface at {rpm:g} rpm: it cannot be calibrated by slope there")
+    s_hi, f_hi = max(finite)
+    high = (f_hi, ROLLING_RANGE[1])
     lo_b, hi_b = min(s_lo, s_hi), max(s_lo, s_hi)
     if not (lo_b - RANGE_TOL_DEG <= target_mag <= hi_b + RANGE_TOL_DEG):
         raise SimError(
@@ -191,18 +201,19 @@ def calibrate(
             f"at {abs(rpm):g} rpm (sliding friction {FRICTION_RANGE[0]:g}-{FRICTION_RANGE[1]:g}, "
             f"rolling friction {ROLLING_RANGE[0]:g}-{ROLLING_RANGE[1]:g})"
         )
+    ends = [history[0], next(h for h in history if (h[0], h[1]) == high)]
     candidates: list[tuple[str, tuple[float, float, float]]] = []
     for path in paths:
         start = len(history)
         lo_u, hi_u, sl, sh = 0.0, 1.0, s_lo, s_hi
-        own: list[tuple[float, float, float]] = [history[0], history[1]]
-        while len(history) - start < max_evals - 2:
+        own: list[tuple[float, float, float]] = list(ends)
+        while len(history) - start < max_evals:
             best = min(own, key=lambda h: abs(h[2] - target_mag))
             if abs(best[2] - target_mag) <= tol_deg or not (sl < target_mag < sh):
                 break
             w = min(max((target_mag - sl) / (sh - sl), 0.15), 0.85)  # regula falsi, kept off the ends
             u = lo_u + w * (hi_u - lo_u)
-            s = evaluate(*path_point(u, path))
+            s = evaluate(*path_point(u, path, high))
             own.append(history[-1])
             if not math.isfinite(s):
                 break
@@ -212,15 +223,17 @@ def calibrate(
                 hi_u, sh = u, s
         candidates.append((path, min(own, key=lambda h: abs(h[2] - target_mag))))
 
-    def score(c: tuple[str, tuple[float, float, float]]) -> float:
-        _, (f, r, s) = c
-        err = abs(s - target_mag)
-        if target_curvature is None:
-            return err
-        # slope within tolerance first; then the surface shape decides (1 deg ~ 0.01 curvature)
-        return max(err - tol_deg, 0.0) + 100.0 * abs(curv[(f, r)] - float(target_curvature))
+    def err(c: tuple[str, tuple[float, float, float]]) -> float:
+        return abs(c[1][2] - target_mag)
 
-    path, (f, r, s) = min(candidates, key=score)
+    # the slope decides first: only points within the tolerance (or the best slope found) compete;
+    # with a measured curvature the surface shape then picks among them
+    best_err = min(err(c) for c in candidates)
+    fits = [c for c in candidates if err(c) <= max(tol_deg, best_err)]
+    if target_curvature is None:
+        path, (f, r, s) = min(fits, key=err)
+    else:
+        path, (f, r, s) = min(fits, key=lambda c: abs(curv[(c[1][0], c[1][1])] - float(target_curvature)))
     return Calibration(
         friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s),
         residual_deg=float(sign * (s - target_mag)),

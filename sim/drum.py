@@ -1,32 +1,28 @@
-"""The 2D physics twin: a pymunk slice of the rotating drum.
+"""The 2D physics twin: a soft-sphere DEM slice of the rotating drum.
 
 Frame: origin at the drum axis, x to the right, y up (as the camera sees the front
 face, before the renderer flips y for the image). Positive rpm turns the drum
 counter-clockwise as seen by the camera, so the bed climbs the right-hand wall
 and its free surface rises to the right (positive slope angle).
 
-Model (all contacts are pymunk/Chipmunk2D impulses):
+Model (the compiled step loop and its contact laws are in ``sim.dem``):
 
-* **Wall**: a kinematic body of ``WALL_SEGMENTS`` thick segments (each as thick as
-  two large particles) whose inner surface is the drum circle; it turns at
-  ``rpm_actual``, which follows ``set_rpm`` at the mill's acceleration limit.
+* **Wall**: the drum is the exact circle of radius ``R``, a rigid boundary turning
+  at ``rpm_actual``, which follows ``set_rpm`` at the mill's acceleration limit.
 * **Particles**: disks of equal mass per area (a slab ``4/3 r_max`` thick, so the
   large disk weighs what its ball weighs) with a ball's moment ``I = 2/5 m r^2``.
-* **Sliding friction** ``friction`` (particle-particle, and particle-wall unless
-  ``wall_friction`` is given) and **restitution** are set per contact pair
-  (Chipmunk multiplies the two shapes' values, so each shape holds the square root).
-* **Rolling friction** ``rolling`` (coefficient mu_r): at every contact, after each
-  solver step, a torque ``mu_r * r_i * F_n`` on each disk opposing the contact's
-  relative rotation ``omega_i - omega_j`` (the drum's rate for a wall contact), with
-  ``F_n`` the contact's normal impulse / step. It is capped so that it cannot reverse
-  the relative rotation within a step: the "constant directional torque" model of
-  DEM codes (EDEM's rolling friction CDT; Ai et al. 2011, type A). No contact, no
-  torque: a disk in free flight keeps its spin.
-* **Time step**: one fixed internal step ``dt_s`` (chosen by the convergence study in
-  docs/validation.md), independent of how the caller slices time: ``advance(d)``
-  adds ``d`` to an accumulator and runs whole steps; the remainder (< one step) waits
-  for the next call. Contacts are stiff (``collision_slop``, ``collision_bias`` and
-  ``iterations`` set for small overlaps), walls never let a disk sink in.
+* **Contacts**: linear spring-dashpot normal force (stiffness ``stiffness_n_m``,
+  damping from the ``restitution``), Cundall-Strack tangential spring capped by
+  Coulomb sliding ``friction`` (particle-particle, and particle-wall unless
+  ``wall_friction`` is given), and contact **rolling friction** ``rolling`` (mu_r):
+  a torque ``mu_r r_eff F_n`` against the contact's relative rotation, capped so it
+  cannot reverse it within a step (the "constant directional torque" model). No
+  contact, no torque: a disk in free flight keeps its spin.
+* **Time step**: one fixed internal step ``dt_s``, by default a fixed fraction of the
+  contact time of the lightest pair (``STEPS_PER_CONTACT`` steps per contact; the
+  convergence study in docs/validation.md), independent of how the caller slices
+  time: ``advance(d)`` adds ``d`` to an accumulator and runs whole steps in one
+  compiled call; the remainder (< one step) waits for the next call.
 
 Initial states (paper Fig. 1): Case A large/small split left-right, Case B
 split top-bottom (large above), Case C random; placed by random sequential
@@ -44,45 +40,65 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import pymunk
-import pymunk.batch
 
-from sim.contacts import STAT_AIRBORNE, STAT_CONTACTS, STAT_OVERLAP_MAX, STAT_WALL_MAX, contact_pass
+from sim import dem
 from sim.errors import SimError
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 CASES = ("A", "B", "C")
-WALL_SEGMENTS = 72
 # The paper's Hertz-Mindlin parameters (tables 1-2, ball-ball = ball-vessel) are the defaults.
 PAPER_CONTACT = {"friction": 0.25, "rolling": 0.10, "restitution": 0.5}
 DEFAULT_FRICTION = PAPER_CONTACT["friction"]  # particle-particle sliding friction
 DEFAULT_WALL_FRICTION: float | None = None  # particle-wall: None = same as particle-particle
-DEFAULT_ROLLING = PAPER_CONTACT["rolling"]  # rolling friction coefficient mu_r (torque mu_r r F_n)
+DEFAULT_ROLLING = PAPER_CONTACT["rolling"]  # rolling friction coefficient mu_r (torque mu_r r_eff F_n)
 DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
-DEFAULT_DT_S = 0.0005  # converged internal step (docs/validation.md, convergence study)
-DEFAULT_ITERATIONS = 4
-DEFAULT_BIAS = 1e-4  # fraction of an overlap left after 1 s of position correction
-SLOP_R = 0.002  # allowed overlap before correction, in small radii
-_SETTLE_DT_S = 0.002
-_SETTLE_FINE_S = 0.1
+MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
+DEFAULT_STIFFNESS_N_M = 4000.0  # linear normal contact stiffness (docs/validation.md, section 2)
+STEPS_PER_CONTACT = 5  # default step = contact time of the lightest pair / this (section 3)
+MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
+SKIN_R = 0.4  # Verlet skin, in small radii
+SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
+_SETTLE_DAMP_S = 2.0  # velocity damping rate while settling, 1/s
+_INFLATE_S = 0.1  # time to inflate the disks from placement size to full size
 _OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
-_HASH_ABOVE = 500
 _SHRINK = 0.8  # placement size before inflation
+
+
+def _slab_m(classes) -> float:
+    return 4.0 / 3.0 * max(c.radius_m for c in classes)
+
+
+def bed_contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
+    """Contact time (s) of the lightest disk pair of the bed."""
+    slab = _slab_m(classes)
+    m = min(c.mass_kg(slab) for c in classes)
+    return dem.contact_time_s(stiffness_n_m, 0.5 * m, restitution)
+
+
+def default_dt_s(classes, stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
+                 restitution: float = DEFAULT_RESTITUTION) -> float:
+    """The default step (s): the contact time of the lightest disk pair over ``STEPS_PER_CONTACT``."""
+    return bed_contact_time_s(classes, stiffness_n_m, restitution) / STEPS_PER_CONTACT
+
+
+DEFAULT_DT_S = default_dt_s(slice_2d(PAPER_RECIPE, PAPER_DRUM))  # the paper bed's step
 
 
 @dataclass(frozen=True)
 class SimParams:
-    """Contact and integration parameters of the twin (the knobs calibration turns)."""
+    """Contact and integration parameters of the twin (the knobs calibration turns: friction, rolling).
+
+    ``dt_s`` None: the default step of the bed (``default_dt_s``), resolved when the twin is built.
+    """
 
     friction: float = DEFAULT_FRICTION
     rolling: float = DEFAULT_ROLLING
     restitution: float = DEFAULT_RESTITUTION
     wall_friction: float | None = DEFAULT_WALL_FRICTION  # None: same as ``friction``
     accel_rpm_s: float = DEFAULT_ACCEL_RPM_S
-    dt_s: float = DEFAULT_DT_S
-    iterations: int = DEFAULT_ITERATIONS
-    bias: float = DEFAULT_BIAS
+    dt_s: float | None = None
+    stiffness_n_m: float = DEFAULT_STIFFNESS_N_M
 
 
 @dataclass(frozen=True)
@@ -167,18 +183,16 @@ def _check_params(p: SimParams) -> None:
         raise SimError(f"friction must be in [0, 5] (got {p.friction})")
     if not (0.0 <= p.rolling <= 5.0) or not math.isfinite(p.rolling):
         raise SimError(f"rolling resistance must be in [0, 5] (got {p.rolling})")
-    if not (0.0 <= p.restitution <= 1.0):
-        raise SimError(f"restitution must be in [0, 1] (got {p.restitution})")
+    if not (MIN_RESTITUTION <= p.restitution <= 1.0):
+        raise SimError(f"restitution must be in [{MIN_RESTITUTION:g}, 1] (got {p.restitution})")
     if p.wall_friction is not None and not (0.0 <= p.wall_friction <= 5.0):
         raise SimError(f"wall friction must be in [0, 5] (got {p.wall_friction})")
-    if not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s):
+    if p.dt_s is not None and (not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s)):
         raise SimError(f"time step must be in [0.01, 20] ms (got {p.dt_s * 1e3:g} ms)")
-    if not (0.0 < p.bias < 1.0):
-        raise SimError(f"collision bias must be in (0, 1) (got {p.bias})")
+    if not (1.0 <= p.stiffness_n_m <= 1e9) or not math.isfinite(p.stiffness_n_m):
+        raise SimError(f"contact stiffness must be in [1, 1e9] N/m (got {p.stiffness_n_m})")
     if p.accel_rpm_s <= 0:
         raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
-    if not (1 <= p.iterations <= 200):
-        raise SimError(f"solver iterations must be in [1, 200] (got {p.iterations})")
 
 
 def _place(
@@ -235,9 +249,8 @@ class DrumSim:
         restitution: float = DEFAULT_RESTITUTION,
         wall_friction: float | None = DEFAULT_WALL_FRICTION,
         accel_rpm_s: float = DEFAULT_ACCEL_RPM_S,
-        dt_s: float = DEFAULT_DT_S,
-        iterations: int = DEFAULT_ITERATIONS,
-        bias: float = DEFAULT_BIAS,
+        dt_s: float | None = None,
+        stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
         settle_s: float = 1.0,
     ) -> None:
         case = str(case).upper()
@@ -245,7 +258,7 @@ class DrumSim:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
         params = SimParams(float(friction), float(rolling), float(restitution),
                            None if wall_friction is None else float(wall_friction),
-                           float(accel_rpm_s), float(dt_s), int(iterations), float(bias))
+                           float(accel_rpm_s), None if dt_s is None else float(dt_s), float(stiffness_n_m))
         _check_params(params)
         rpm = check_rpm(rpm, drum)
         classes = tuple(slice_2d(recipe, drum))
@@ -257,14 +270,26 @@ class DrumSim:
             t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
             vel_m_s=np.zeros((n, 2)), angle_rad=rng.uniform(0, 2 * math.pi, n), omega_rad_s=np.zeros(n),
         )
+        self._start(state, rpm, 0.0 if case == "B" else settle_s)
+
+    @classmethod
+    def from_placement(cls, state: SimState, rpm: float, settle_s: float) -> DrumSim:
+        """A twin from disks placed at ``_SHRINK`` size (``state``): inflated, settled for
+        ``settle_s`` with the drum at rest, then started at ``rpm`` (what ``__init__`` does)."""
+        sim = cls.__new__(cls)
+        sim._start(state, check_rpm(rpm, state.drum), settle_s)
+        return sim
+
+    def _start(self, state: SimState, rpm: float, settle_s: float) -> None:
         self._build(state, radius_scale=_SHRINK)
-        self._settle(0.0 if case == "B" else settle_s)
+        self._settle(settle_s)
         self.t_s = 0.0
         self.n_steps = 0
         self._acc_s = 0.0
+        self._sort()
         self.reset_stats()
-        self._rpm_target = rpm
-        self._set_rpm_actual(rpm)
+        self._ds[dem.DS_TARGET] = rpm
+        self._ds[dem.DS_RPM] = rpm  # the drum starts at full speed
 
     # ----------------------------------------------------------------- build
     def _build(self, st: SimState, radius_scale: float = 1.0) -> None:
@@ -273,123 +298,186 @@ class DrumSim:
         self.classes = st.classes
         self.case = st.case
         self.seed = st.seed
-        self.params = st.params
-        self.t_s = st.t_s
-        self.n_steps = st.n_steps
-        self._acc_s = float(st.extra.get("acc_s", 0.0))
-        space = pymunk.Space()
-        space.gravity = (0.0, -G_M_S2)
-        r_max = max(c.radius_m for c in st.classes)
-        r_min = min(c.radius_m for c in st.classes)
-        self._r_min = r_min
-        space.collision_slop = SLOP_R * r_min
-        # only this step's contacts stay cached, so the batch arbiter read sees live contacts only
-        space.collision_persistence = 1
-        space.sleep_time_threshold = float("inf")
-        self._space = space
-        # The drum is round, so its turning is all in the surface velocity of a static wall:
-        # static shapes are never re-indexed, and contacts see the same relative velocity.
-        wall = space.static_body
-        self._wall = wall
-        self._drum_angle_rad = float(st.drum_angle_rad)
-        seg_r = 2.0 * r_max
-        big_r = (st.drum.radius_m + seg_r) / math.cos(math.pi / WALL_SEGMENTS)
-        self._wall_shapes = []
-        self._wall_tangent = []
-        for i in range(WALL_SEGMENTS):
-            a0 = 2 * math.pi * i / WALL_SEGMENTS
-            a1 = 2 * math.pi * (i + 1) / WALL_SEGMENTS
-            seg = pymunk.Segment(
-                wall, (big_r * math.cos(a0), big_r * math.sin(a0)), (big_r * math.cos(a1), big_r * math.sin(a1)), seg_r
+        params = st.params
+        t_c = bed_contact_time_s(st.classes, params.stiffness_n_m, params.restitution)
+        if params.dt_s is None:
+            params = replace(params, dt_s=t_c / STEPS_PER_CONTACT)
+        _check_params(params)
+        assert params.dt_s is not None
+        if params.dt_s > t_c / MIN_STEPS_PER_CONTACT:
+            raise SimError(
+                f"time step {params.dt_s * 1e3:g} ms is too long for this bed's contacts, which last "
+                f"{t_c * 1e3:.2f} ms: at most {t_c / MIN_STEPS_PER_CONTACT * 1e3:.3f} ms"
             )
-            space.add(seg)
-            self._wall_shapes.append(seg)
-            am = 0.5 * (a0 + a1)
-            self._wall_tangent.append((-math.sin(am), math.cos(am)))  # counter-clockwise
-        self._cls = np.asarray(st.cls, dtype=np.int64)
-        self._r = np.array([st.classes[k].radius_m for k in self._cls])
-        self._bodies: list[pymunk.Body] = []
-        self._shapes: list[pymunk.Circle] = []
-        slab = 4.0 / 3.0 * r_max
-        for i, k in enumerate(self._cls):
-            c = st.classes[k]
-            m = c.mass_kg(slab)
-            b = pymunk.Body(m, 0.4 * m * c.radius_m**2)
-            b.position = (float(st.pos_m[i, 0]), float(st.pos_m[i, 1]))
-            b.velocity = (float(st.vel_m_s[i, 0]), float(st.vel_m_s[i, 1]))
-            b.angle = float(st.angle_rad[i])
-            b.angular_velocity = float(st.omega_rad_s[i])
-            s = pymunk.Circle(b, c.radius_m * radius_scale)
-            space.add(b, s)
-            self._bodies.append(b)
-            self._shapes.append(s)
-        self._masses = np.array([st.classes[k].mass_kg(slab) for k in self._cls])
-        self._inertia = 0.4 * self._masses * self._r**2
-        if self._cls.size >= _HASH_ABOVE:  # large beds: the spatial hash beats the bounding-box tree
-            space.use_spatial_hash(2.5 * r_max, 10 * self._cls.size)
-        self._rpm_target = st.rpm_target
-        self._rpm_actual = math.nan  # unset: the next _set_rpm_actual always applies
-        self._apply_params()
-        self._set_rpm_actual(st.rpm_actual)
-        self._buf = pymunk.batch.Buffer()
-        self._abuf = pymunk.batch.Buffer()
-        self._wbuf = pymunk.batch.Buffer()
-        ids = np.array([b.id for b in self._bodies], dtype=np.uint64)
-        self._ids_order = np.argsort(ids)
-        self._ids_sorted = ids[self._ids_order]
-        self._inv_i = 1.0 / self._inertia
-        self._slot = self._space_slots()
-        self._w_dummy = np.zeros(self._n_space_bodies)
+        self.params = params
+        self.t_s = float(st.t_s)
+        self.n_steps = int(st.n_steps)
+        self._acc_s = float(st.extra.get("acc_s", 0.0))
+        # disks are stored in a spatial order (``_perm``: internal index -> disk), re-sorted every
+        # ``SORT_EVERY`` steps for memory locality; the public arrays are in the disks' own order
+        n = int(np.asarray(st.cls).size)
+        self._perm = np.asarray(st.extra.get("order", np.arange(n)), dtype=np.int64).copy()
+        self._inv_perm = np.argsort(self._perm)
+        p = self._perm
+        self._cls = np.ascontiguousarray(np.asarray(st.cls, dtype=np.int64)[p])
+        self._r = np.array([st.classes[k].radius_m for k in self._cls], dtype=np.float64)
+        self._rad = self._r * radius_scale  # the radii the contacts see (smaller while inflating)
+        self._r_min = min(c.radius_m for c in st.classes)
+        slab = _slab_m(st.classes)
+        self._cls_mass = np.array([c.mass_kg(slab) for c in st.classes])
+        self._set_masses()
+        self._pos = np.array(st.pos_m, dtype=np.float64).reshape(-1, 2)[p]
+        self._vel = np.array(st.vel_m_s, dtype=np.float64).reshape(-1, 2)[p]
+        self._ang = np.array(st.angle_rad, dtype=np.float64)[p]
+        self._omg = np.array(st.omega_rad_s, dtype=np.float64)[p]
+        self._ds = np.array([st.rpm_actual, st.rpm_target, st.drum_angle_rad], dtype=np.float64)
+        r_max = float(self._r.max())
+        self._skin = SKIN_R * self._r_min
+        cap = n * dem.neighbour_slots(r_max, self._r_min, self._skin)
+        self._nb_start = np.zeros(n + 1, dtype=np.int64)
+        self._nb_j = np.zeros(cap, dtype=np.int64)
+        self._nb_xi = np.zeros(cap)
+        self._ref = np.zeros((n, 2))
+        self._wall_xi = np.zeros(n)
+        self._ncont = np.zeros(n, dtype=np.int64)
+        springs = st.extra.get("springs")
+        if springs is not None:  # the contacts' tangential springs: disk pairs, xi, the wall's (disk order)
+            pairs, xis, wall_xi = springs
+            self._wall_xi[:] = np.asarray(wall_xi, dtype=np.float64)[p]
+            self._set_springs(self._inv_perm[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], np.asarray(xis))
+        self._rebuild = True
+        self._set_prm()
         if not hasattr(self, "_hist"):
             self.reset_stats()
 
-    def _apply_params(self) -> None:
+    def _set_prm(self, gravity: bool = True, damp_s: float = 0.0) -> None:
         p = self.params
-        mu_p = math.sqrt(max(p.friction, 0.0))
-        mu_w = p.friction if p.wall_friction is None else p.wall_friction
-        e = math.sqrt(p.restitution)
-        for s in self._shapes:
-            s.friction = mu_p
-            s.elasticity = e
-        for seg in self._wall_shapes:
-            seg.friction = (mu_w / mu_p) if mu_p > 0 else 0.0
-            seg.elasticity = e
-        self._space.iterations = p.iterations
-        self._space.collision_bias = p.bias
+        assert p.dt_s is not None
+        prm = np.zeros(dem.P_N)
+        prm[dem.P_DT] = p.dt_s
+        prm[dem.P_KN] = p.stiffness_n_m
+        prm[dem.P_KT] = 2.0 / 7.0 * p.stiffness_n_m
+        prm[dem.P_MU] = p.friction
+        prm[dem.P_MU_W] = p.friction if p.wall_friction is None else p.wall_friction
+        prm[dem.P_MU_R] = p.rolling
+        prm[dem.P_G] = G_M_S2 if gravity else 0.0
+        prm[dem.P_R] = self.drum.radius_m
+        prm[dem.P_SKIN] = self._skin
+        prm[dem.P_DAMP] = damp_s
+        prm[dem.P_ACCEL] = p.accel_rpm_s
+        prm[dem.P_RMIN] = self._r_min
+        self._prm = prm
+        zeta = dem.damping_ratio(p.restitution)
+        m = self._cls_mass
+        m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
+        r = np.array([c.radius_m for c in self.classes])
+        inv_i = 1.0 / (0.4 * m * r**2)
+        self._c_pair = np.stack([2.0 * zeta * np.sqrt(m_pair * p.stiffness_n_m),
+                                 r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
+                                 1.0 / (inv_i[:, None] + inv_i[None, :])], axis=-1)
+        self._c_wall = 2.0 * zeta * np.sqrt(m * p.stiffness_n_m)
+
+    def _set_masses(self) -> None:
+        self._masses = self._cls_mass[self._cls]
+        self._inv_m = 1.0 / self._masses
+        self._inv_i = 1.0 / (0.4 * self._masses * self._r**2)
+
+    def _springs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The listed pairs with a tangential spring: (m, 2) internal indices (i < j) and xi (m)."""
+        m = int(self._nb_start[-1])
+        rows = np.repeat(np.arange(self._cls.size), np.diff(self._nb_start))
+        keep = self._nb_xi[:m] != 0.0
+        return np.column_stack([rows[keep], self._nb_j[:m][keep]]), self._nb_xi[:m][keep].copy()
+
+    def _set_springs(self, pairs: np.ndarray, xis: np.ndarray) -> None:
+        """Load springs of internal pairs (either orientation: a pair's spring does not depend on it)."""
+        pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+        pairs, xis = pairs[order], np.asarray(xis, dtype=np.float64)[order]
+        n = self._cls.size
+        if len(pairs) > self._nb_j.size:
+            self._nb_j = np.zeros(2 * len(pairs), dtype=np.int64)
+            self._nb_xi = np.zeros(2 * len(pairs))
+        self._nb_start[0] = 0
+        self._nb_start[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n))
+        self._nb_j[: len(pairs)] = pairs[:, 1]
+        self._nb_xi[: len(pairs)] = xis
+        self._rebuild = True
+
+    def _sort(self) -> None:
+        """Re-order the disks in memory along the cells of the neighbour grid (locality of the contact loop)."""
+        cs = 2.0 * float(self._r.max()) + self._skin
+        r = self.drum.radius_m
+        nc = int(2.0 * r / cs) + 2
+        cell = np.clip(((self._pos + r) / cs).astype(np.int64), 0, nc - 1)
+        order = np.argsort(cell[:, 1] * nc + cell[:, 0], kind="stable")
+        pairs, xis = self._springs()
+        inv = np.empty_like(order)
+        inv[order] = np.arange(order.size)
+        for name in ("_cls", "_r", "_rad", "_pos", "_vel", "_ang", "_omg", "_wall_xi", "_ncont", "_ref", "_perm"):
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[order]))
+        self._inv_perm = np.argsort(self._perm)
+        self._set_masses()
+        self._set_springs(inv[pairs], xis)
+
+    def _run(self, n_steps: int, count: bool = True) -> None:
+        """``n_steps`` fixed steps in the compiled loop; with ``count`` they are the twin's own steps
+        (``n_steps`` counts them, and every ``SORT_EVERY`` of them the disks are re-sorted)."""
+        while n_steps > 0:
+            chunk = min(n_steps, SORT_EVERY - self.n_steps % SORT_EVERY) if count else n_steps
+            self._run_steps(chunk)
+            n_steps -= chunk
+            if count:
+                self.n_steps += chunk
+                if self.n_steps % SORT_EVERY == 0:
+                    self._sort()
+
+    def _run_steps(self, n_steps: int) -> None:
+        """``n_steps`` steps of ``dem.run`` (the neighbour list grows if it must)."""
+        while n_steps > 0:
+            done = dem.run(n_steps, self._prm, self._ds, self._pos, self._vel, self._ang, self._omg, self._rad,
+                           self._cls, self._inv_m, self._inv_i, self._c_pair, self._c_wall, self._nb_start,
+                           self._nb_j, self._nb_xi, self._wall_xi, self._ref, self._rebuild, self._hist, self._acc,
+                           self._ncont)
+            self._rebuild = False
+            self._stat_steps += done
+            n_steps -= done
+            if n_steps > 0:  # the neighbour list did not fit: more room, same rows
+                n = self._cls.size
+                if self._nb_j.size > 16 * n * dem.neighbour_slots(float(self._r.max()), self._r_min, self._skin):
+                    raise SimError("the bed has blown up (disks pile into each other): lower the step")
+                self._nb_j = np.concatenate([self._nb_j, np.zeros_like(self._nb_j)])
+                self._nb_xi = np.concatenate([self._nb_xi, np.zeros_like(self._nb_xi)])
+                self._rebuild = True
 
     def _settle(self, settle_s: float) -> None:
         """Inflate the disks to full size (no gravity), then let the bed settle with the drum at rest."""
-        space = self._space
-        space.damping = 0.3
-        space.gravity = (0.0, 0.0)
-        h = _SETTLE_DT_S  # settling is damped and never measured: a coarse step is enough
-        n_grow = 40
+        h = self.params.dt_s
+        assert h is not None
+        n_grow = 20
+        per = max(1, int(round(_INFLATE_S / n_grow / h)))
+        self._set_prm(gravity=False, damp_s=10 * _SETTLE_DAMP_S)
         for j in range(n_grow):
-            scale = _SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow
-            for s, r in zip(self._shapes, self._r, strict=False):
-                s.unsafe_set_radius(float(r * scale))
-            space.step(h)
-        space.gravity = (0.0, -G_M_S2)
-        for _ in range(int(round(settle_s / h))):
-            space.step(h)
-        fine_s = _SETTLE_FINE_S if settle_s > 0 else 0.0  # case B starts as generated: no settling at all
-        for _ in range(int(round(fine_s / self.params.dt_s))):  # relax the coarse steps' overlaps
-            space.step(self.params.dt_s)
-        space.damping = 1.0
-        for b in self._bodies:
-            b.velocity = (0.0, 0.0)
-            b.angular_velocity = 0.0
+            self._rad = self._r * (_SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow)
+            self._rebuild = True
+            self._run(per, count=False)
+        self._rad = self._r.copy()
+        self._set_prm(gravity=True, damp_s=_SETTLE_DAMP_S)
+        self._run(int(round(settle_s / h)), count=False)
+        self._set_prm()
+        self._vel[:] = 0.0
+        self._omg[:] = 0.0
 
     # ------------------------------------------------------------- controls
     @property
     def rpm_actual(self) -> float:
         """Drum speed now (rpm), following the setpoint at the acceleration limit."""
-        return float(self._rpm_actual)
+        return float(self._ds[dem.DS_RPM])
 
     @property
     def rpm_target(self) -> float:
         """The rpm setpoint."""
-        return float(self._rpm_target)
+        return float(self._ds[dem.DS_TARGET])
 
     @property
     def critical_rpm(self) -> float:
@@ -398,7 +486,7 @@ class DrumSim:
 
     def set_rpm(self, rpm: float) -> None:
         """New rpm setpoint; the drum ramps to it at ``accel_rpm_s``. Above critical speed: SimError."""
-        self._rpm_target = check_rpm(rpm, self.drum)
+        self._ds[dem.DS_TARGET] = check_rpm(rpm, self.drum)
 
     def set_friction(self, mu: float, rolling: float | None = None) -> None:
         """Change sliding friction (and rolling friction) at run time."""
@@ -406,19 +494,11 @@ class DrumSim:
         params = replace(self.params, friction=float(mu), rolling=rolling)
         _check_params(params)
         self.params = params
-        self._apply_params()
-
-    def _set_rpm_actual(self, rpm: float) -> None:
-        if rpm == self._rpm_actual:
-            return
-        self._rpm_actual = float(rpm)
-        self._omega_wall = rpm_to_rad_s(rpm)
-        v = self._omega_wall * self.drum.radius_m
-        for s, (tx, ty) in zip(self._wall_shapes, self._wall_tangent, strict=True):
-            s.surface_velocity = (v * tx, v * ty)  # the drum's tangential velocity at this segment
+        self._set_prm()
 
     def substep_s(self) -> float:
         """The fixed internal step (s)."""
+        assert self.params.dt_s is not None
         return self.params.dt_s
 
     # ---------------------------------------------------------------- time
@@ -437,79 +517,21 @@ class DrumSim:
         """
         if duration_s < 0 or not math.isfinite(duration_s):
             raise SimError(f"duration must be >= 0 s (got {duration_s})")
-        h = self.params.dt_s
+        h = self.substep_s()
         self._acc_s += duration_s
         n = int(math.floor(self._acc_s / h + 1e-9))
         self.t_s += duration_s
         if n <= 0:
             return
         self._acc_s = max(0.0, self._acc_s - n * h)
-        accel = self.params.accel_rpm_s * h
-        space = self._space
-        for _ in range(n):
-            if self._rpm_actual != self._rpm_target:
-                diff = self._rpm_target - self._rpm_actual
-                step_rpm = diff if abs(diff) <= accel else math.copysign(accel, diff)
-                self._set_rpm_actual(self._rpm_actual + step_rpm)
-            space.step(h)
-            self._drum_angle_rad += self._omega_wall * h
-            self._after_step()
-        self.n_steps += n
+        self._run(n)
 
-    # ------------------------------------------------- contacts: rolling friction and statistics
-    def _index(self, ids: np.ndarray) -> np.ndarray:
-        """Insertion index of each body id; -1 for the wall (or anything else)."""
-        pos = np.minimum(np.searchsorted(self._ids_sorted, ids), self._ids_sorted.size - 1)
-        return np.where(self._ids_sorted[pos] == ids, self._ids_order[pos], -1)
-
-    def _space_slots(self) -> np.ndarray:
-        """Position of each disk in the space's body iteration order (stable: bodies never leave)."""
-        buf = self._wbuf
-        buf.clear()
-        pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, buf)
-        order = self._index(np.frombuffer(buf.int_buf(), dtype=np.uint64))
-        slot = np.empty(self._r.size, dtype=np.int64)
-        slot[order[order >= 0]] = np.nonzero(order >= 0)[0]
-        self._n_space_bodies = order.size
-        return slot
-
-    def _read_contacts(self) -> tuple[np.ndarray, np.ndarray]:
-        """This step's contacts: (m, 2) body ids and (m, 5) impulse x, y, normal x, y, distance."""
-        buf = self._abuf
-        buf.clear()
-        f = pymunk.batch.ArbiterFields
-        pymunk.batch.get_space_arbiters(
-            self._space, f.BODY_A_ID | f.BODY_B_ID | f.TOTAL_IMPULSE | f.NORMAL | f.DISTANCE_1, buf
-        )
-        ids = np.frombuffer(buf.int_buf(), dtype=np.uint64).reshape(-1, 2)
-        fl = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 5)
-        return ids, fl
-
-    def _after_step(self) -> None:
-        """Rolling friction and contact statistics from the step just taken (``sim.contacts``)."""
-        ids, fl = self._read_contacts()
-        mu_r = self.params.rolling
-        if mu_r > 0:
-            buf = self._wbuf
-            buf.clear()
-            pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.ANGULAR_VELOCITY, buf)
-            w_space = np.frombuffer(buf.float_buf(), dtype=np.float64)  # writable view of the batch buffer
-            if w_space.size != self._n_space_bodies:
-                self._slot = self._space_slots()
-                return self._after_step()
-        else:
-            w_space = self._w_dummy
-        self._stat_steps += 1
-        contact_pass(ids, fl, self._ids_sorted, self._ids_order, self._r, self._inv_i, self._slot, w_space,
-                     self._omega_wall, mu_r, self._r_min, self._hist, self._acc)
-        if mu_r > 0:  # the spins were changed in place: write them back
-            pymunk.batch.set_space_bodies(self._space, pymunk.batch.BodyFields.ANGULAR_VELOCITY, self._wbuf)
-
+    # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:
         """Start counting contact statistics (``stats()``) afresh."""
         self._hist = np.zeros(_OVERLAP_BINS + 1, dtype=np.int64)
         self._acc = np.zeros(4)
-        self._acc[STAT_AIRBORNE] = np.nan
+        self._acc[dem.ACC_AIRBORNE] = np.nan
         self._stat_steps = 0
 
     def stats(self) -> ContactStats:
@@ -518,78 +540,47 @@ class DrumSim:
         acc = self._acc
         if total:
             k = int(np.searchsorted(np.cumsum(self._hist), 0.99 * total))
-            p99 = min((k + 1) * 2.0 / _OVERLAP_BINS, float(acc[STAT_OVERLAP_MAX]))
+            p99 = min((k + 1) * 2.0 / _OVERLAP_BINS, float(acc[dem.ACC_OVERLAP_MAX]))
         else:
             p99 = 0.0
-        return ContactStats(self._stat_steps, int(acc[STAT_CONTACTS]), float(p99), float(acc[STAT_OVERLAP_MAX]),
-                            1e3 * float(acc[STAT_WALL_MAX]), float(acc[STAT_AIRBORNE]))
+        return ContactStats(self._stat_steps, int(acc[dem.ACC_CONTACTS]), float(p99),
+                            float(acc[dem.ACC_OVERLAP_MAX]), 1e3 * float(acc[dem.ACC_WALL_MAX]),
+                            float(acc[dem.ACC_AIRBORNE]))
 
     def contact_counts(self) -> np.ndarray:
         """Number of contacts (with disks or the wall) of each disk in the last step."""
-        ids, _ = self._read_contacts()
-        a = self._index(ids[:, 0])
-        b = self._index(ids[:, 1])
-        n = self._r.size
-        return (np.bincount(a[a >= 0], minlength=n) + np.bincount(b[b >= 0], minlength=n)).astype(np.int64)
+        return self._ncont[self._inv_perm]
 
     # ----------------------------------------------------------------- read
-    def _body_arrays(self) -> np.ndarray:
-        """(n, 6) array x, y, angle, vx, vy, w of the particles, in insertion order."""
-        buf = self._buf
-        buf.clear()
-        fields = (
-            pymunk.batch.BodyFields.BODY_ID
-            | pymunk.batch.BodyFields.POSITION
-            | pymunk.batch.BodyFields.ANGLE
-            | pymunk.batch.BodyFields.VELOCITY
-            | pymunk.batch.BodyFields.ANGULAR_VELOCITY
-        )
-        pymunk.batch.get_space_bodies(self._space, fields, buf)
-        ids = np.frombuffer(buf.int_buf(), dtype=np.uint64)
-        arr = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)
-        # map the space's body order to insertion order by body id
-        pos = np.searchsorted(self._ids_sorted, ids)
-        pos = np.minimum(pos, self._ids_sorted.size - 1)
-        ours = self._ids_sorted[pos] == ids
-        out = np.empty((len(self._bodies), 6))
-        out[self._ids_order[pos[ours]]] = arr[ours]
-        return out
     def particles(self) -> Particles:
         """Positions (m), radii (m), classes of all disks now."""
-        a = self._body_arrays()
+        q = self._inv_perm
         return Particles(
-            x_m=a[:, 0], y_m=a[:, 1], r_m=self._r.copy(), cls=self._cls.copy(), angle_rad=a[:, 2],
-            class_names=tuple(c.name for c in self.classes), class_bgr=tuple(c.colour_bgr for c in self.classes),
+            x_m=self._pos[q, 0], y_m=self._pos[q, 1], r_m=self._r[q], cls=self._cls[q],
+            angle_rad=self._ang[q], class_names=tuple(c.name for c in self.classes),
+            class_bgr=tuple(c.colour_bgr for c in self.classes),
         )
 
     def kinetic_energy_j(self) -> float:
-        a = self._body_arrays()
-        return float(0.5 * np.sum(self._masses * (a[:, 3] ** 2 + a[:, 4] ** 2)))
+        """Translational kinetic energy of the disks (J)."""
+        return float(0.5 * np.sum(self._masses * (self._vel[:, 0] ** 2 + self._vel[:, 1] ** 2)))
 
-    def snapshot(self, exact: bool = True) -> SimState:
-        """The whole state now (arrays are copies).
-
-        pymunk keeps contact impulses between steps that a state cannot carry, so with
-        ``exact`` (default) this twin is rebuilt from the snapshot too: its own future and
-        every ``restore``/``from_state`` branch of the snapshot are then bit-identical.
-        """
-        st = self._state_now()
-        if exact:
-            self._build(st)
-        return st
-
-    def _state_now(self) -> SimState:
-        a = self._body_arrays()
+    def snapshot(self) -> SimState:
+        """The whole state now (arrays are copies), contact springs included: every
+        ``restore``/``from_state`` of it continues bit-identically to this twin."""
+        pairs, xis = self._springs()
+        q = self._inv_perm
         return SimState(
             drum=self.drum, recipe=self.recipe, classes=self.classes, case=self.case, seed=self.seed,
-            params=self.params, t_s=self.t_s, rpm_target=self._rpm_target, rpm_actual=self._rpm_actual,
-            drum_angle_rad=self._drum_angle_rad, cls=self._cls.copy(), pos_m=a[:, 0:2].copy(),
-            vel_m_s=a[:, 3:5].copy(), angle_rad=a[:, 2].copy(), omega_rad_s=a[:, 5].copy(), n_steps=self.n_steps,
-            extra={"acc_s": self._acc_s},
+            params=self.params, t_s=self.t_s, rpm_target=self.rpm_target, rpm_actual=self.rpm_actual,
+            drum_angle_rad=float(self._ds[dem.DS_ANGLE]), cls=self._cls[q], pos_m=self._pos[q],
+            vel_m_s=self._vel[q], angle_rad=self._ang[q], omega_rad_s=self._omg[q], n_steps=self.n_steps,
+            extra={"acc_s": self._acc_s, "springs": (self._perm[pairs], xis, self._wall_xi[q]),
+                   "order": self._perm.copy()},
         )
 
     def restore(self, state: SimState) -> None:
-        """Go back to ``state`` (the pymunk space is rebuilt, so restores are repeatable)."""
+        """Go back to ``state`` (bit-identical continuation)."""
         self._build(state)
 
     @classmethod
@@ -605,11 +596,14 @@ __all__ = [
     "DEFAULT_DT_S",
     "DEFAULT_FRICTION",
     "DEFAULT_ROLLING",
+    "DEFAULT_STIFFNESS_N_M",
     "ContactStats",
     "DrumSim",
     "Particles",
     "SimParams",
     "SimState",
+    "bed_contact_time_s",
     "check_rpm",
+    "default_dt_s",
     "rpm_to_rad_s",
 ]

@@ -127,14 +127,7 @@ def seed_from_labels(
         t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
         vel_m_s=np.zeros((n, 2)), angle_rad=rng.uniform(0, 2 * math.pi, n), omega_rad_s=np.zeros(n),
     )
-    sim = DrumSim.__new__(DrumSim)
-    sim._build(state, radius_scale=_SHRINK)  # same construction as DrumSim.__init__
-    sim._settle(settle_s)
-    sim.t_s = 0.0
-    sim.n_steps = 0
-    sim._rpm_target = rpm
-    sim._set_rpm_actual(rpm)
-    return sim
+    return DrumSim.from_placement(state, rpm, settle_s)  # same construction as DrumSim.__init__
 
 
 def seed_from_frame(image_bgr: np.ndarray, meter, **kwargs) -> DrumSim:

@@ -35,25 +35,45 @@ def _plt():
 
 
 def slope_run(rpm: float, seed: int, duration_s: float = 20.0, spin_up_s: float = 2.0, **sim_kwargs) -> dict:
-    """Mean free-surface slope (after ``spin_up_s``), overlap p99, wall depth and speed of one run."""
+    """Mean free-surface slope (after ``spin_up_s``), MI (eq. 4) over the second half, overlap p99,
+    wall depth and speed of one case C run."""
     sim = DrumSim(case="C", seed=seed, rpm=rpm, **sim_kwargs)
     sim.advance(spin_up_s)
     sim.reset_stats()
     t0 = time.perf_counter()
-    slopes = []
-    for _ in range(int(round(duration_s / 0.1))):
+    slopes, mis = [], []
+    n = int(round(duration_s / 0.1))
+    for i in range(n):
         sim.advance(0.1)
-        slopes.append(free_surface(sim.particles(), sim.drum).slope_deg)
+        p = sim.particles()
+        slopes.append(free_surface(p, sim.drum).slope_deg)
+        if i >= n // 2:
+            mis.append(particle_mi(p, sim.drum).mi)
     wall = time.perf_counter() - t0
     st = sim.stats()
-    return {"rpm": rpm, "seed": seed, "dt_ms": sim.params.dt_s * 1e3, "iterations": sim.params.iterations,
-            "slope_deg": float(np.nanmean(slopes)), "overlap_p99_r": st.overlap_p99_r,
-            "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm, "rtf": duration_s / wall}
+    return {"rpm": rpm, "seed": seed, "dt_ms": sim.substep_s() * 1e3,
+            "slope_deg": float(np.nanmean(slopes)), "mi_late": float(np.nanmean(mis)),
+            "overlap_p99_r": st.overlap_p99_r, "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm,
+            "rtf": duration_s / wall}
 
 
-def convergence(seeds=(0, 1), steps_ms=(4.0, 2.0, 1.0, 0.5, 0.25), duration_s: float = 20.0) -> list[dict]:
-    """5 rpm slope, overlap and wall depth against the step (default iterations)."""
-    return [slope_run(5.0, s, duration_s, dt_s=h / 1e3) for h in steps_ms for s in seeds]
+def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 5, 10, 20, 40), stiffness_x=(0.5, 2.0),
+                duration_s: float = 30.0) -> dict:
+    """Case C at 5 rpm: slope, late MI, overlap and wall depth against the step (fractions of the
+    contact time) and, at the default step fraction, against the contact stiffness."""
+    from sim.drum import DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, bed_contact_time_s
+    from sim.recipe import PAPER_RECIPE, slice_2d
+
+    t_c = bed_contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), DEFAULT_STIFFNESS_N_M, 0.5)
+    by_step = [{**slope_run(5.0, s, duration_s, dt_s=t_c / k), "steps_per_contact": k}
+               for k in steps_per_contact for s in seeds]
+    by_stiffness = []
+    for x in stiffness_x:
+        k_n = x * DEFAULT_STIFFNESS_N_M
+        h = bed_contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), k_n, 0.5) / STEPS_PER_CONTACT
+        by_stiffness += [{**slope_run(5.0, s, duration_s, dt_s=h, stiffness_n_m=k_n), "stiffness_n_m": k_n}
+                         for s in seeds]
+    return {"contact_time_ms": t_c * 1e3, "by_step": by_step, "by_stiffness": by_stiffness}
 
 
 def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every_s: float = 1.0) -> dict:

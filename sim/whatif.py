@@ -66,7 +66,7 @@ def froude_regime(rpm: float, drum: DrumSpec = PAPER_DRUM) -> str:
 
 
 # Flow-based regime thresholds (docs/validation.md, section "regime from the flow")
-AIRBORNE_CATARACTING = 0.15  # mean fraction of disks without any contact (in free flight)
+AIRBORNE_CATARACTING = 0.23  # mean fraction of disks without any contact (docs/validation.md, section 6)
 CURVATURE_CASCADING = 0.06  # mean S-shape of the free surface (sim.measure.FreeSurface.curvature)
 
 

@@ -28,8 +28,9 @@ def test_regime_from_a_synthetic_flow():
     # flat surface, nothing flying: rolling; S-shaped surface: cascading; disks in flight: cataracting
     assert flow_regime(0.0, 0.0) == "rolling"
     assert flow_regime(0.01, 0.2) == "cascading"
-    assert flow_regime(0.2, 0.2) == "cataracting"
-    assert flow_regime(0.2, float("nan")) == "cataracting"
+    assert flow_regime(0.3, 0.2) == "cataracting"
+    assert flow_regime(0.3, float("nan")) == "cataracting"
+    assert flow_regime(0.2, 0.2) == "cascading"  # disks between contacts in a dense flowing layer do not fly
     assert flow_regime(float("nan"), 0.0) == "unknown"
 
 

@@ -24,7 +24,7 @@ def _versions() -> dict[str, str]:
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version()}
-    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "filterpy", "pyserial", "viser"):
+    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "numba", "filterpy", "pyserial", "viser"):
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:

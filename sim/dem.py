@@ -1,0 +1,443 @@
+"""The twin's compiled soft-sphere DEM step loop (numba): pure functions of arrays.
+
+Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
+
+* **Normal**: ``F_n = max(0, k_n delta + c_n d(delta)/dt)`` with overlap ``delta``
+  (m), linear stiffness ``k_n`` (N/m) and the viscous coefficient that gives the
+  restitution ``e`` for the pair's effective mass ``m*``: ``c_n = 2 zeta sqrt(m* k_n)``
+  with ``zeta = damping_ratio(e)``, exact for a contact that ends when the force
+  reaches zero (no pull; Schwager & Poeschel 2008).
+* **Tangential**: a spring ``k_t = 2/7 k_n`` on the accumulated tangential displacement
+  ``xi`` (a scalar in 2D) plus a dashpot ``c_t = 2/7 c_n`` (the same frequency and
+  damping ratio as the normal direction for balls, ``I = 2/5 m r^2``), capped by
+  Coulomb ``|F_t| <= mu F_n``; at the cap the spring is reset to ``mu F_n / k_t``.
+* **Rolling friction**: the "constant directional torque" model (Ai, Chen, Rotter &
+  Ooi, Powder Technol. 206, 2011, type A; LIGGGHTS ``rolling_friction cdt``, EDEM's RVD
+  rolling friction): a torque
+  ``mu_r r_eff F_n`` with ``r_eff = r_i r_j / (r_i + r_j)`` (``r_i`` at the wall)
+  against the relative rotation ``omega_i - omega_j`` (the drum's rate at the wall),
+  applied as an angular impulse after the velocity update, contact by contact in a
+  fixed order, each capped so that it cannot reverse the relative rotation. No contact,
+  no torque.
+* **Wall**: the drum is the exact circle of radius ``R``, a smooth rigid boundary
+  turning at the drum's rate: overlap ``|x| + r - R``, the same contact law with the
+  disk's own mass as ``m*`` and the wall's sliding friction.
+* **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
+* **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
+  by ``j``, in compressed rows) rebuilt from a cell list whenever a disk has moved more than half the skin
+  since the last build: O(N). Contacts are visited in (i, j) order and forces are
+  summed in that order, so the result does not depend on when the list was rebuilt:
+  a restored state continues bit-identically.
+
+All lengths in m, times in s, forces in N. ``run`` advances many steps in one call.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_OVERLAP_MAX", "ACC_WALL_MAX", "DS_ANGLE", "DS_RPM", "DS_TARGET",
+    "P_ACCEL", "P_DAMP", "P_DT", "P_G", "P_KN", "P_KT", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
+    "P_SKIN", "contact_time_s", "damping_ratio", "neighbour_slots", "run",
+]
+
+# slots of the float parameter vector ``prm``
+P_DT = 0  # step, s
+P_KN = 1  # normal stiffness, N/m
+P_KT = 2  # tangential stiffness, N/m
+P_MU = 3  # disk-disk sliding friction
+P_MU_W = 4  # disk-wall sliding friction
+P_MU_R = 5  # rolling friction coefficient
+P_G = 6  # gravity, m/s^2 (along -y)
+P_R = 7  # drum radius, m
+P_SKIN = 8  # Verlet skin, m
+P_DAMP = 9  # global velocity damping rate, 1/s (settling only; 0 in a run)
+P_ACCEL = 10  # drum acceleration limit, rpm/s
+P_RMIN = 11  # small radius, m (unit of the overlap statistics)
+P_N = 12
+
+# slots of the drum state ``ds``
+DS_RPM = 0  # drum speed now, rpm
+DS_TARGET = 1  # setpoint, rpm
+DS_ANGLE = 2  # drum angle, rad
+
+# slots of the statistics ``acc``
+ACC_OVERLAP_MAX = 0  # largest disk-disk overlap, small radii
+ACC_WALL_MAX = 1  # deepest wall penetration, m
+ACC_CONTACTS = 2  # disk-disk contacts counted (summed over steps)
+ACC_AIRBORNE = 3  # fraction of disks without any contact in the last step
+
+_RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+
+
+def _clamped_collision(zeta: float) -> tuple[float, float]:
+    """Restitution and duration (in units of ``1/omega_0``) of a linear spring-dashpot collision
+    whose normal force may not pull (it ends when the force reaches zero), damping ratio ``zeta``
+    (Schwager & Poeschel, Phys. Rev. E 78, 051304, 2008; the overdamped branch likewise)."""
+    if zeta <= 0.0:
+        return 1.0, math.pi
+    if zeta < 1.0:
+        w = math.sqrt(1.0 - zeta * zeta)
+        if zeta < math.sqrt(0.5):
+            phase = math.pi - math.atan(2.0 * zeta * w / (w * w - zeta * zeta))
+        else:
+            phase = math.atan(2.0 * zeta * w / (zeta * zeta - w * w))
+        return math.exp(-zeta / w * phase), phase / w
+    w = math.sqrt(zeta * zeta - 1.0)
+    if w == 0.0:  # critical damping: the limit of both branches
+        return math.exp(-2.0), 2.0
+    tau = math.atanh(2.0 * zeta * w / (2.0 * zeta * zeta - 1.0)) / w
+    return -math.exp(-zeta * tau) * (math.cosh(w * tau) - zeta / w * math.sinh(w * tau)), tau
+
+
+def damping_ratio(restitution: float) -> float:
+    """Damping ratio ``zeta`` (``c_n = 2 zeta sqrt(m* k_n)``) that gives ``restitution`` (0..1] to a
+    collision whose normal force may not pull (``_clamped_collision``), by bisection."""
+    if restitution >= 1.0:
+        return 0.0
+    lo, hi = 0.0, 50.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if _clamped_collision(mid)[0] > restitution:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def contact_time_s(stiffness_n_m: float, mass_kg: float, restitution: float) -> float:
+    """Duration (s) of a collision of effective mass ``mass_kg`` (no pull at the end)."""
+    return _clamped_collision(damping_ratio(restitution))[1] * math.sqrt(mass_kg / stiffness_n_m)
+
+
+def neighbour_slots(r_max: float, r_min: float, skin: float) -> int:
+    """Neighbour-list slots per disk: half (pairs are listed once) of an area bound on the disks of
+    radius ``r_min`` whose centres lie within ``r_max + r_min + skin`` of a disk of radius ``r_max``."""
+    reach = r_max + 2.0 * r_min + skin
+    return int(math.ceil(0.65 * (reach * reach - r_max * r_max) / (r_min * r_min))) + 2
+
+
+@njit(cache=True, error_model="numpy")
+def _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max) -> bool:
+    """New Verlet list (compressed rows: pairs j > i of disk i at ``nb_start[i]:nb_start[i + 1]``,
+    sorted by j), springs carried over; False if the list does not fit its arrays."""
+    n = pos.shape[0]
+    cap = nb_j.size
+    cs = 2.0 * r_max + skin
+    # cells over the disks' bounding box (inside the drum; capped so a stray disk cannot blow it up)
+    lo_x = hi_x = pos[0, 0]
+    lo_y = hi_y = pos[0, 1]
+    for i in range(n):
+        lo_x = min(lo_x, pos[i, 0])
+        hi_x = max(hi_x, pos[i, 0])
+        lo_y = min(lo_y, pos[i, 1])
+        hi_y = max(hi_y, pos[i, 1])
+    lo_x = max(lo_x, -r_drum)
+    lo_y = max(lo_y, -r_drum)
+    ncx = min(int((min(hi_x, r_drum) - lo_x) / cs) + 1, 4096)
+    ncy = min(int((min(hi_y, r_drum) - lo_y) / cs) + 1, 4096)
+    head = np.full(ncx * ncy, -1, dtype=np.int64)
+    nxt = np.full(n, -1, dtype=np.int64)
+    cx = np.empty(n, dtype=np.int64)
+    cy = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        a = min(max(int((pos[i, 0] - lo_x) / cs), 0), ncx - 1)
+        b = min(max(int((pos[i, 1] - lo_y) / cs), 0), ncy - 1)
+        cx[i] = a
+        cy[i] = b
+        c = b * ncx + a
+        nxt[i] = head[c]
+        head[c] = i
+    starts = np.empty(n + 1, dtype=np.int64)
+    total = 0
+    for i in range(n):
+        xi_ = pos[i, 0]
+        yi_ = pos[i, 1]
+        first = total
+        for db in range(-1, 2):
+            b = cy[i] + db
+            if b < 0 or b >= ncy:
+                continue
+            for da in range(-1, 2):
+                a = cx[i] + da
+                if a < 0 or a >= ncx:
+                    continue
+                j = head[b * ncx + a]
+                while j >= 0:
+                    if j > i:
+                        dx = pos[j, 0] - xi_
+                        dy = pos[j, 1] - yi_
+                        reach = rad[i] + rad[j] + skin
+                        if dx * dx + dy * dy < reach * reach:
+                            if total >= cap:
+                                return False
+                            # insertion sort by j
+                            k = total
+                            while k > first and new_j[k - 1] > j:
+                                new_j[k] = new_j[k - 1]
+                                k -= 1
+                            new_j[k] = j
+                            total += 1
+                    j = nxt[j]
+        # carry the tangential springs over (both rows sorted by j)
+        ko = nb_start[i]
+        end = nb_start[i + 1]
+        for k in range(first, total):
+            j = new_j[k]
+            while ko < end and nb_j[ko] < j:
+                ko += 1
+            new_xi[k] = nb_xi[ko] if ko < end and nb_j[ko] == j else 0.0
+        starts[i] = first
+    starts[n] = total
+    for k in range(total):
+        nb_j[k] = new_j[k]
+        nb_xi[k] = new_xi[k]
+    for i in range(n + 1):
+        nb_start[i] = starts[i]
+    for i in range(n):
+        ref[i, 0] = pos[i, 0]
+        ref[i, 1] = pos[i, 1]
+    return True
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz", "afn"})
+def run(
+    n_steps,  # int: steps to run
+    prm,  # (P_N,) float parameters (P_* slots)
+    ds,  # (3,) drum state (DS_* slots), updated
+    pos,  # (n, 2) centres, m, updated
+    vel,  # (n, 2) velocities, m/s, updated
+    ang,  # (n,) angles, rad, updated
+    omg,  # (n,) angular velocities, rad/s, updated
+    rad,  # (n,) radii, m
+    cls,  # (n,) class index
+    inv_m,  # (n,) 1 / mass, 1/kg
+    inv_i,  # (n,) 1 / moment of inertia
+    c_pair,  # (n_cls, n_cls, 3) per class pair: normal damping (N s/m), r_eff (m), 1 / (1/I_i + 1/I_j)
+    c_wall,  # (n_cls,) normal damping coefficient of a class at the wall, N s/m
+    nb_start,  # (n + 1,) row starts of the neighbour list, updated
+    nb_j,  # (cap,) neighbour list (compressed rows: j > i, sorted), updated
+    nb_xi,  # (cap,) tangential spring of each listed pair, m, updated
+    wall_xi,  # (n,) tangential spring at the wall, m, updated
+    ref,  # (n, 2) centres at the last list build, updated
+    rebuild,  # bool: build the list before the first step
+    hist,  # overlap histogram (bins of 2 / (hist.size - 1) small radii, last = overflow), updated
+    acc,  # (4,) statistics (ACC_* slots), updated
+    ncont,  # (n,) contacts of each disk in the last step, updated
+):
+    """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed)."""
+    n = pos.shape[0]
+    cap = nb_j.size
+    dt = prm[P_DT]
+    kn = prm[P_KN]
+    kt = prm[P_KT]
+    mu = prm[P_MU]
+    mu_w = prm[P_MU_W]
+    mu_r = prm[P_MU_R]
+    g = prm[P_G]
+    r_drum = prm[P_R]
+    skin = prm[P_SKIN]
+    damp = math.exp(-prm[P_DAMP] * dt)
+    accel = prm[P_ACCEL] * dt
+    r_min = prm[P_RMIN]
+    nbins = hist.size - 1
+    bin_scale = nbins / (2.0 * r_min)
+    ov_max = acc[ACC_OVERLAP_MAX] * r_min
+    wall_max = acc[ACC_WALL_MAX]
+    n_contacts = 0
+    half_skin2 = 0.25 * skin * skin
+    ct_scale = 2.0 / 7.0  # tangential dashpot / normal dashpot
+    mu_r_dt = mu_r * dt
+    inv_kt = 1.0 / kt
+    r_max = 0.0
+    for i in range(n):
+        r_max = max(r_max, rad[i])
+    fx = np.empty(n)
+    fy = np.empty(n)
+    tq = np.empty(n)
+    weight = np.empty(n)
+    for i in range(n):
+        weight[i] = -g / inv_m[i]
+    # this step's contacts in visiting order (i, then the wall, then i's partners j): for rolling friction
+    roll_start = np.zeros(n + 1, dtype=np.int64)
+    roll_j = np.empty(cap + n, dtype=np.int64)  # partner, -1 = the wall
+    roll_imp = np.empty(cap + n)  # rolling friction angular impulse bound mu_r r_eff F_n dt
+    roll_cap = np.empty(cap + n)  # impulse that stops the relative rotation, per rad/s
+    new_j = np.empty(cap, dtype=np.int64)  # scratch of the list builds
+    new_xi = np.empty(cap)
+    if rebuild:
+        if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+            return 0
+    for step in range(n_steps):
+        # the drum follows its setpoint at the acceleration limit
+        if ds[DS_RPM] != ds[DS_TARGET]:
+            diff = ds[DS_TARGET] - ds[DS_RPM]
+            ds[DS_RPM] = ds[DS_TARGET] if abs(diff) <= accel else ds[DS_RPM] + math.copysign(accel, diff)
+        w_drum = ds[DS_RPM] * _RPM_TO_RAD_S
+        v_wall = w_drum * r_drum
+        # neighbour list still valid?
+        far = 0.0
+        for i in range(n):
+            dx = pos[i, 0] - ref[i, 0]
+            dy = pos[i, 1] - ref[i, 1]
+            far = max(far, dx * dx + dy * dy)
+        if far > half_skin2:
+            if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+                _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
+                return step
+        last = step == n_steps - 1  # contacts per disk are counted in the last step only
+        for i in range(n):
+            fx[i] = 0.0
+            fy[i] = weight[i]
+            tq[i] = 0.0
+        if last:
+            for i in range(n):
+                ncont[i] = 0
+        m = 0
+        for i in range(n):
+            roll_start[i] = m
+            xi0 = pos[i, 0]
+            yi0 = pos[i, 1]
+            vxi = vel[i, 0]
+            vyi = vel[i, 1]
+            wi = omg[i]
+            ri = rad[i]
+            ci = cls[i]
+            # the drum wall: the exact circle, turning at w_drum
+            d2 = xi0 * xi0 + yi0 * yi0
+            lim_r = r_drum - ri
+            if d2 > lim_r * lim_r and d2 > 0.0:
+                d = math.sqrt(d2)
+                nx = xi0 / d
+                ny = yi0 / d
+                delta = d - lim_r
+                cn = c_wall[ci]
+                fn = kn * delta + cn * (vxi * nx + vyi * ny)
+                fn = max(fn, 0.0)
+                vt = -vxi * ny + vyi * nx + wi * ri - v_wall
+                xi = wall_xi[i] + vt * dt
+                ft = -kt * xi - ct_scale * cn * vt
+                lim = mu_w * fn
+                ftc = min(max(ft, -lim), lim)
+                xi = xi if ftc == ft else -ftc * inv_kt
+                ft = ftc
+                wall_xi[i] = xi
+                fx[i] += -fn * nx - ft * ny
+                fy[i] += -fn * ny + ft * nx
+                tq[i] += ri * ft
+                if last:
+                    ncont[i] += 1
+                if delta > wall_max:
+                    wall_max = delta
+                roll_j[m] = -1
+                roll_imp[m] = mu_r * ri * fn * dt
+                m += 1
+            else:
+                wall_xi[i] = 0.0
+            # disk-disk contacts (j > i: the sums of disk i stay in registers)
+            fxi = 0.0
+            fyi = 0.0
+            tqi = 0.0
+            nci = 0
+            for k in range(nb_start[i], nb_start[i + 1]):
+                j = nb_j[k]
+                dx = pos[j, 0] - xi0
+                dy = pos[j, 1] - yi0
+                rj = rad[j]
+                rs = ri + rj
+                d2 = dx * dx + dy * dy
+                if d2 >= rs * rs:
+                    nb_xi[k] = 0.0
+                    continue
+                d = math.sqrt(d2)
+                inv_d = 1.0 / d
+                nx = dx * inv_d
+                ny = dy * inv_d
+                dvx = vxi - vel[j, 0]
+                dvy = vyi - vel[j, 1]
+                delta = rs - d
+                cj = cls[j]
+                cn = c_pair[ci, cj, 0]
+                fn = kn * delta + cn * (dvx * nx + dvy * ny)
+                fn = max(fn, 0.0)
+                vt = -dvx * ny + dvy * nx + wi * ri + omg[j] * rj
+                xi = nb_xi[k] + vt * dt
+                ft = -kt * xi - ct_scale * cn * vt
+                lim = mu * fn
+                ftc = min(max(ft, -lim), lim)
+                xi = xi if ftc == ft else -ftc * inv_kt
+                ft = ftc
+                nb_xi[k] = xi
+                fxc = -fn * nx - ft * ny
+                fyc = -fn * ny + ft * nx
+                fxi += fxc
+                fyi += fyc
+                tqi += ri * ft
+                nci += 1
+                fx[j] -= fxc
+                fy[j] -= fyc
+                tq[j] += rj * ft
+                if last:
+                    ncont[j] += 1
+                if delta > ov_max:
+                    ov_max = delta
+                hist[min(int(delta * bin_scale), nbins)] += 1
+                n_contacts += 1
+                roll_j[m] = j
+                roll_imp[m] = mu_r_dt * c_pair[ci, cj, 1] * fn
+                roll_cap[m] = c_pair[ci, cj, 2]
+                m += 1
+            fx[i] += fxi
+            fy[i] += fyi
+            tq[i] += tqi
+            if last:
+                ncont[i] += nci
+        roll_start[n] = m
+        # velocities
+        for i in range(n):
+            vel[i, 0] = (vel[i, 0] + fx[i] * inv_m[i] * dt) * damp
+            vel[i, 1] = (vel[i, 1] + fy[i] * inv_m[i] * dt) * damp
+            omg[i] = (omg[i] + tq[i] * inv_i[i] * dt) * damp
+        # rolling friction: angular impulses contact by contact, each capped so that it
+        # cannot reverse the relative rotation
+        if mu_r > 0.0:
+            for i in range(n):
+                wi = omg[i]
+                ii = inv_i[i]
+                for c in range(roll_start[i], roll_start[i + 1]):
+                    j = roll_j[c]
+                    jr = roll_imp[c]
+                    if j < 0:
+                        w_rel = wi - w_drum
+                        wi -= math.copysign(min(jr * ii, abs(w_rel)), w_rel)
+                    else:
+                        w_rel = wi - omg[j]
+                        sj = math.copysign(min(jr, abs(w_rel) * roll_cap[c]), w_rel)
+                        wi -= sj * ii
+                        omg[j] += sj * inv_i[j]
+                omg[i] = wi
+        # positions
+        for i in range(n):
+            pos[i, 0] += vel[i, 0] * dt
+            pos[i, 1] += vel[i, 1] * dt
+            ang[i] += omg[i] * dt
+        ds[DS_ANGLE] += w_drum * dt
+    _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
+    return n_steps
+
+
+@njit(cache=True)
+def _store(acc, ov_max_r, wall_max, n_contacts, ncont):
+    """Write a run's statistics into ``acc``."""
+    acc[ACC_OVERLAP_MAX] = ov_max_r
+    acc[ACC_WALL_MAX] = wall_max
+    acc[ACC_CONTACTS] += n_contacts
+    n_free = 0
+    for i in range(ncont.size):
+        if ncont[i] == 0:
+            n_free += 1
+    acc[ACC_AIRBORNE] = n_free / max(1, ncont.size)

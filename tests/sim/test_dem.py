@@ -1,0 +1,110 @@
+"""The compiled DEM step (``sim.dem``): restitution, rolling friction, free flight, contact statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim import dem
+from sim.drum import DEFAULT_DT_S, DEFAULT_STIFFNESS_N_M, DrumSim
+
+R_SMALL = 0.005
+M_SMALL = 9.75e-4  # kg, a 10 mm disk of the paper bed
+G = 9.81
+
+
+def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, mu_r=0.1, e=0.5, g=0.0,
+         dt=DEFAULT_DT_S, k=DEFAULT_STIFFNESS_N_M):
+    """Run the kernel on a few equal disks; returns (pos, vel, omg, hist, acc, ncont) after ``n_steps``."""
+    pos = np.array(pos, float).reshape(-1, 2)
+    vel = np.array(vel, float).reshape(-1, 2)
+    omg = np.array(omg, float)
+    n = pos.shape[0]
+    prm = np.zeros(dem.P_N)
+    prm[[dem.P_DT, dem.P_KN, dem.P_KT, dem.P_MU, dem.P_MU_W, dem.P_MU_R, dem.P_G, dem.P_R, dem.P_SKIN,
+         dem.P_ACCEL, dem.P_RMIN]] = [dt, k, 2 / 7 * k, mu, mu, mu_r, g, drum_r, 0.4 * r, 20.0, r]
+    zeta = dem.damping_ratio(e)
+    rad = np.full(n, r)
+    kk = dem.neighbour_slots(r, r, 0.4 * r)
+    hist = np.zeros(1001, dtype=np.int64)
+    acc = np.zeros(4)
+    ncont = np.zeros(n, dtype=np.int64)
+    pair = np.array([[[2 * zeta * np.sqrt(m / 2 * k), r / 2, 0.2 * m * r**2]]])  # damping, r_eff, I_eff
+    dem.run(n_steps, prm, np.zeros(3), pos, vel, np.zeros(n), omg, rad, np.zeros(n, dtype=np.int64),
+            np.full(n, 1 / m), 1 / (0.4 * m * rad**2), pair,
+            np.array([2 * zeta * np.sqrt(m * k)]), np.zeros(n + 1, dtype=np.int64), np.zeros(n * kk, dtype=np.int64),
+            np.zeros(n * kk), np.zeros(n), np.zeros((n, 2)), True, hist, acc, ncont)
+    return pos, vel, omg, hist, acc, ncont
+
+
+@pytest.mark.parametrize("e", [0.2, 0.5, 0.9])
+def test_a_head_on_collision_at_the_default_step_has_the_set_restitution(e):
+    # averaged over where in a step the contact starts (the step is a sixth of the contact)
+    t_c = dem.contact_time_s(DEFAULT_STIFFNESS_N_M, M_SMALL / 2, e)
+    out = []
+    for gap in np.linspace(0.0, 0.25, 6) * DEFAULT_DT_S:  # v = 0.5 m/s: 0.5 steps of approach
+        _, vel, _, _, _, _ = _run([[-R_SMALL - gap / 2, 0], [R_SMALL + gap / 2, 0]], [[0.25, 0], [-0.25, 0]],
+                                  [0, 0], int(3 * t_c / DEFAULT_DT_S) + 2, e=e)
+        out.append((vel[1, 0] - vel[0, 0]) / 0.5)
+    assert np.mean(out) == pytest.approx(e, abs=0.03)
+    assert 3 * t_c > 2 * DEFAULT_DT_S  # (the disks have separated: the loop ran past the contact)
+
+
+def _rolling_speed(mu_r: float) -> tuple[np.ndarray, np.ndarray]:
+    """A disk rolling without slip along the bottom of a 200 m drum (locally flat), drum at rest."""
+    big = 100.0
+    dt = DEFAULT_DT_S
+    sag = M_SMALL * G / DEFAULT_STIFFNESS_N_M  # resting overlap
+    state = ([[0.0, -big + R_SMALL - sag]], [[0.3, 0.0]], [-0.3 / R_SMALL])
+    ts, vs = [], []
+    for i in range(20):
+        pos, vel, omg, _, _, _ = _run(*state, int(0.01 / dt), drum_r=big, mu_r=mu_r, g=G)
+        state = (pos, vel, omg)
+        ts.append((i + 1) * int(0.01 / dt) * dt)
+        vs.append(vel[0, 0])
+        assert vel[0, 0] == pytest.approx(-omg[0] * R_SMALL, rel=0.02)  # still rolling, not sliding
+    return np.array(ts), np.array(vs)
+
+
+def test_rolling_friction_decelerates_a_rolling_disk_at_the_rate_mu_r_predicts():
+    t, v = _rolling_speed(0.1)
+    a = np.polyfit(t, v, 1)[0]
+    # torque mu_r r m g against the rolling, I = 2/5 m r^2: a = -mu_r g / (1 + 2/5) = -5/7 mu_r g
+    assert a == pytest.approx(-5 / 7 * 0.1 * G, rel=0.05)
+    t0, v0 = _rolling_speed(0.0)
+    assert abs(np.polyfit(t0, v0, 1)[0]) < 0.02 * abs(a)  # no rolling friction: it keeps rolling
+
+
+def test_rolling_friction_never_reverses_the_rotation():
+    # a spinning disk resting on the flat bottom with huge rolling friction stops spinning, then stays still
+    big = 100.0
+    sag = M_SMALL * G / DEFAULT_STIFFNESS_N_M
+    _, vel, omg, _, _, _ = _run([[0.0, -big + R_SMALL - sag]], [[0.0, 0.0]], [5.0], int(0.3 / DEFAULT_DT_S),
+                                drum_r=big, mu_r=5.0, mu=0.0, g=G)
+    assert abs(omg[0]) < 1e-9 and abs(vel[0, 0]) < 1e-9
+
+
+def test_contact_statistics_overlaps_wall_depth_and_airborne():
+    # disk 0 and 1 overlap by 0.5 mm; disk 2 is 1.2 mm into the wall of a 0.1 m drum; disk 3 floats
+    r = R_SMALL
+    pos = [[-0.03, 0.0], [-0.03 + 2 * r - 0.0005, 0.0], [0.1 - r + 0.0012, 0.0], [0.0, 0.05]]
+    _, _, _, hist, acc, ncont = _run(pos, np.zeros((4, 2)), np.zeros(4), 1, drum_r=0.1)
+    assert acc[dem.ACC_CONTACTS] == 1
+    assert acc[dem.ACC_OVERLAP_MAX] == pytest.approx(0.1)  # 0.5 mm of a 5 mm small radius
+    assert acc[dem.ACC_WALL_MAX] == pytest.approx(0.0012)
+    assert list(ncont) == [1, 1, 1, 0]
+    assert acc[dem.ACC_AIRBORNE] == pytest.approx(1 / 4)
+    assert hist.sum() == 1 and hist[49:51].sum() == 1  # bins of 0.002 small radii
+
+
+def test_a_disk_in_free_flight_keeps_its_spin():
+    sim = DrumSim(case="C", seed=0, rpm=5.0, settle_s=0.1)
+    st = sim.snapshot()
+    st.pos_m[0] = (0.0, 0.12)  # near the top of the drum, far above the bed
+    st.vel_m_s[0] = (0.0, 0.0)
+    st.omega_rad_s[0] = 7.0
+    sim = DrumSim.from_state(st)
+    sim.advance(0.02)  # still far from the bed
+    assert sim.contact_counts()[0] == 0
+    assert sim.snapshot().omega_rad_s[0] == 7.0
+    assert sim.particles().y_m[0] == pytest.approx(0.12 - 0.5 * G * 0.02**2, abs=2e-4)  # it falls freely
