@@ -25,9 +25,12 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
   by ``j``, in compressed rows) rebuilt from a cell list whenever a disk has moved more than half the skin
-  since the last build: O(N). Contacts are visited in (i, j) order and forces are
-  summed in that order, so the result does not depend on when the list was rebuilt:
-  a restored state continues bit-identically.
+  since the last build: O(N). The skin of each build is chosen from the fastest disk
+  (``list_skin``: wide enough to last about ``SKIN_STEPS`` steps, between the caller's
+  ``P_SKIN`` and ``SKIN_MAX_R`` small radii), so fast-flowing beds rebuild less often.
+  Contacts are visited in (i, j) order and forces are summed in that order, so the result
+  depends neither on when the list was rebuilt nor on its skin: a restored state
+  continues bit-identically.
 
 All lengths in m, times in s, forces in N. ``run`` advances many steps in one call.
 """
@@ -42,7 +45,8 @@ from numba import njit
 __all__ = [
     "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_OVERLAP_MAX", "ACC_WALL_MAX", "DS_ANGLE", "DS_RPM", "DS_TARGET",
     "P_ACCEL", "P_DAMP", "P_DT", "P_G", "P_KN", "P_KT", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
-    "P_SKIN", "contact_time_s", "damping_ratio", "neighbour_slots", "run",
+    "P_SKIN", "SKIN_MAX_R", "SKIN_STEPS", "contact_time_s", "damping_ratio", "list_skin", "neighbour_slots",
+    "run",
 ]
 
 # slots of the float parameter vector ``prm``
@@ -54,7 +58,7 @@ P_MU_W = 4  # disk-wall sliding friction
 P_MU_R = 5  # rolling friction coefficient
 P_G = 6  # gravity, m/s^2 (along -y)
 P_R = 7  # drum radius, m
-P_SKIN = 8  # Verlet skin, m
+P_SKIN = 8  # smallest Verlet skin, m (``list_skin``)
 P_DAMP = 9  # global velocity damping rate, 1/s (settling only; 0 in a run)
 P_ACCEL = 10  # drum acceleration limit, rpm/s
 P_RMIN = 11  # small radius, m (unit of the overlap statistics)
@@ -72,6 +76,9 @@ ACC_CONTACTS = 2  # disk-disk contacts counted (summed over steps)
 ACC_AIRBORNE = 3  # fraction of disks without any contact in the last step
 
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+
+SKIN_STEPS = 40.0  # a list build's skin is chosen to last about this many steps at the fastest disk's speed
+SKIN_MAX_R = 1.5  # widest Verlet skin, small radii
 
 
 def _clamped_collision(zeta: float) -> tuple[float, float]:
@@ -119,6 +126,17 @@ def neighbour_slots(r_max: float, r_min: float, skin: float) -> int:
     radius ``r_min`` whose centres lie within ``r_max + r_min + skin`` of a disk of radius ``r_max``."""
     reach = r_max + 2.0 * r_min + skin
     return int(math.ceil(0.65 * (reach * reach - r_max * r_max) / (r_min * r_min))) + 2
+
+
+@njit(cache=True)
+def list_skin(vel, dt, skin_min, r_min):
+    """Skin (m) of a new Verlet list: twice the distance the fastest disk (``vel``, m/s) covers in
+    ``SKIN_STEPS`` steps of ``dt`` (s), at least ``skin_min`` and at most ``SKIN_MAX_R * r_min`` (m).
+    Only the cost depends on it (a wider list is rebuilt less often but holds more pairs)."""
+    v2 = 0.0
+    for i in range(vel.shape[0]):
+        v2 = max(v2, vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1])
+    return min(max(2.0 * SKIN_STEPS * math.sqrt(v2) * dt, skin_min), max(SKIN_MAX_R * r_min, skin_min))
 
 
 @njit(cache=True, error_model="numpy")
@@ -240,7 +258,7 @@ def run(
     mu_r = prm[P_MU_R]
     g = prm[P_G]
     r_drum = prm[P_R]
-    skin = prm[P_SKIN]
+    skin_min = prm[P_SKIN]
     damp = math.exp(-prm[P_DAMP] * dt)
     accel = prm[P_ACCEL] * dt
     r_min = prm[P_RMIN]
@@ -249,7 +267,9 @@ def run(
     ov_max = acc[ACC_OVERLAP_MAX] * r_min
     wall_max = acc[ACC_WALL_MAX]
     n_contacts = 0
-    half_skin2 = 0.25 * skin * skin
+    # the list's skin is known only for builds in this call: an older list is checked against the
+    # smallest skin (it was built at least that wide, so no contact is missed)
+    half_skin2 = 0.25 * skin_min * skin_min
     ct_scale = 2.0 / 7.0  # tangential dashpot / normal dashpot
     mu_r_dt = mu_r * dt
     inv_kt = 1.0 / kt
@@ -270,8 +290,10 @@ def run(
     new_j = np.empty(cap, dtype=np.int64)  # scratch of the list builds
     new_xi = np.empty(cap)
     if rebuild:
+        skin = list_skin(vel, dt, skin_min, r_min)
         if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
             return 0
+        half_skin2 = 0.25 * skin * skin
     for step in range(n_steps):
         # the drum follows its setpoint at the acceleration limit
         if ds[DS_RPM] != ds[DS_TARGET]:
@@ -286,9 +308,11 @@ def run(
             dy = pos[i, 1] - ref[i, 1]
             far = max(far, dx * dx + dy * dy)
         if far > half_skin2:
+            skin = list_skin(vel, dt, skin_min, r_min)
             if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
                 _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
                 return step
+            half_skin2 = 0.25 * skin * skin
         last = step == n_steps - 1  # contacts per disk are counted in the last step only
         for i in range(n):
             fx[i] = 0.0

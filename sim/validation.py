@@ -1,6 +1,6 @@
 """Regenerate the numbers and plots of docs/validation.md.
 
-``python -m sim.validation SECTION [OUT_DIR]`` with SECTION one of ``convergence``,
+``python -m sim.validation SECTION [OUT_DIR]`` with SECTION one of ``convergence``, ``case-a-long``,
 ``cases``, ``plateau``, ``calibration``, ``transfer``, ``branch``, ``all``. Every run is
 seeded; each section prints a JSON summary on stdout and writes its plot(s) to OUT_DIR
 (default ``docs/img``). Run it with ``nice`` and one worker on a shared machine.
@@ -57,7 +57,7 @@ def slope_run(rpm: float, seed: int, duration_s: float = 20.0, spin_up_s: float 
             "rtf": duration_s / wall}
 
 
-def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 5, 10, 20, 40), stiffness_x=(0.5, 2.0),
+def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 4, 5, 8, 10, 20, 40), stiffness_x=(0.5, 2.0),
                 duration_s: float = 30.0) -> dict:
     """Case C at 5 rpm: slope, late MI, overlap and wall depth against the step (fractions of the
     contact time) and, at the default step fraction, against the contact stiffness."""
