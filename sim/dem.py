@@ -139,6 +139,25 @@ def list_skin(vel, dt, skin_min, r_min):
     return min(max(2.0 * SKIN_STEPS * math.sqrt(v2) * dt, skin_min), max(SKIN_MAX_R * r_min, skin_min))
 
 
+_CT_SCALE = 2.0 / 7.0  # tangential dashpot / normal dashpot
+
+
+@njit(inline="always")
+def _contact_law(delta, vn, vt, xi_old, cn, mu, kn, kt, inv_kt, dt):
+    """One contact's forces: normal ``max(0, k_n delta + c_n vn)`` (N; ``delta`` overlap in m,
+    ``vn`` its rate in m/s) and the Cundall-Strack tangential force (N) from the spring
+    ``xi_old + vt dt`` (m; ``vt`` the tangential slip velocity, m/s) and its dashpot, capped at
+    ``mu`` times the normal force (the spring then reset to the cap). Returns ``(fn, ft, xi)``."""
+    fn = max(kn * delta + cn * vn, 0.0)
+    xi = xi_old + vt * dt
+    ft = -kt * xi - _CT_SCALE * cn * vt
+    lim = mu * fn
+    ftc = min(max(ft, -lim), lim)
+    if ftc != ft:
+        xi = -ftc * inv_kt
+    return fn, ftc, xi
+
+
 @njit(cache=True, error_model="numpy")
 def _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max) -> bool:
     """New Verlet list (compressed rows: pairs j > i of disk i at ``nb_start[i]:nb_start[i + 1]``,
@@ -270,7 +289,6 @@ def run(
     # the list's skin is known only for builds in this call: an older list is checked against the
     # smallest skin (it was built at least that wide, so no contact is missed)
     half_skin2 = 0.25 * skin_min * skin_min
-    ct_scale = 2.0 / 7.0  # tangential dashpot / normal dashpot
     mu_r_dt = mu_r * dt
     inv_kt = 1.0 / kt
     r_max = 0.0
@@ -339,17 +357,9 @@ def run(
                 nx = xi0 / d
                 ny = yi0 / d
                 delta = d - lim_r
-                cn = c_wall[ci]
-                fn = kn * delta + cn * (vxi * nx + vyi * ny)
-                fn = max(fn, 0.0)
                 vt = -vxi * ny + vyi * nx + wi * ri - v_wall
-                xi = wall_xi[i] + vt * dt
-                ft = -kt * xi - ct_scale * cn * vt
-                lim = mu_w * fn
-                ftc = min(max(ft, -lim), lim)
-                xi = xi if ftc == ft else -ftc * inv_kt
-                ft = ftc
-                wall_xi[i] = xi
+                fn, ft, wall_xi[i] = _contact_law(delta, vxi * nx + vyi * ny, vt, wall_xi[i], c_wall[ci],
+                                                  mu_w, kn, kt, inv_kt, dt)
                 fx[i] += -fn * nx - ft * ny
                 fy[i] += -fn * ny + ft * nx
                 tq[i] += ri * ft
@@ -385,17 +395,9 @@ def run(
                 dvy = vyi - vel[j, 1]
                 delta = rs - d
                 cj = cls[j]
-                cn = c_pair[ci, cj, 0]
-                fn = kn * delta + cn * (dvx * nx + dvy * ny)
-                fn = max(fn, 0.0)
                 vt = -dvx * ny + dvy * nx + wi * ri + omg[j] * rj
-                xi = nb_xi[k] + vt * dt
-                ft = -kt * xi - ct_scale * cn * vt
-                lim = mu * fn
-                ftc = min(max(ft, -lim), lim)
-                xi = xi if ftc == ft else -ftc * inv_kt
-                ft = ftc
-                nb_xi[k] = xi
+                fn, ft, nb_xi[k] = _contact_law(delta, dvx * nx + dvy * ny, vt, nb_xi[k], c_pair[ci, cj, 0],
+                                                mu, kn, kt, inv_kt, dt)
                 fxc = -fn * nx - ft * ny
                 fyc = -fn * ny + ft * nx
                 fxi += fxc
