@@ -331,9 +331,8 @@ class DrumSim:
         self._ang = np.array(st.angle_rad, dtype=np.float64)[p]
         self._omg = np.array(st.omega_rad_s, dtype=np.float64)[p]
         self._ds = np.array([st.rpm_actual, st.rpm_target, st.drum_angle_rad], dtype=np.float64)
-        r_max = float(self._r.max())
         self._skin = SKIN_R * self._r_min
-        cap = n * dem.neighbour_slots(r_max, self._r_min, self._skin)
+        cap = n * self._list_slots()
         self._nb_start = np.zeros(n + 1, dtype=np.int64)
         self._nb_j = np.zeros(cap, dtype=np.int64)
         self._nb_xi = np.zeros(cap)
@@ -376,6 +375,11 @@ class DrumSim:
                                  r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
                                  1.0 / (inv_i[:, None] + inv_i[None, :])], axis=-1)
         self._c_wall = 2.0 * zeta * np.sqrt(m * p.stiffness_n_m)
+
+    def _list_slots(self) -> int:
+        """Neighbour-list slots per disk for the widest skin ``dem.list_skin`` may choose."""
+        widest = max(self._skin, dem.SKIN_MAX_R * self._r_min)
+        return dem.neighbour_slots(float(self._r.max()), self._r_min, widest)
 
     def _set_masses(self) -> None:
         self._masses = self._cls_mass[self._cls]
@@ -444,7 +448,7 @@ class DrumSim:
             n_steps -= done
             if n_steps > 0:  # the neighbour list did not fit: more room, same rows
                 n = self._cls.size
-                if self._nb_j.size > 16 * n * dem.neighbour_slots(float(self._r.max()), self._r_min, self._skin):
+                if self._nb_j.size > 16 * n * self._list_slots():
                     raise SimError("the bed has blown up (disks pile into each other): lower the step")
                 self._nb_j = np.concatenate([self._nb_j, np.zeros_like(self._nb_j)])
                 self._nb_xi = np.concatenate([self._nb_xi, np.zeros_like(self._nb_xi)])
