@@ -131,12 +131,27 @@ def _check_target(target_slope_deg: float) -> float:
     return target
 
 
+def _range_ends(slope: Callable[[float, float], float], rpm: float) -> tuple[float, float, tuple[float, float]]:
+    """The ends of the reachable range from ``slope(friction, rolling)`` (deg magnitude, NaN: no free
+    surface): the least-friction corner's slope, the best ``HIGH_EDGE`` point's slope and that point.
+    No free surface at either end is a ``SimError``."""
+    s_lo = slope(*path_point(0.0))
+    edge = [(slope(f, ROLLING_RANGE[1]), f) for f in HIGH_EDGE]
+    finite = [e for e in edge if math.isfinite(e[0])]
+    if not (math.isfinite(s_lo) and finite):
+        raise SimError(f"the twin shows no free surface at {rpm:g} rpm: it cannot be calibrated by slope there")
+    s_hi, f_hi = max(finite)
+    return s_lo, s_hi, (f_hi, ROLLING_RANGE[1])
+
+
 def reachable_range(rpm: float, *, seed: int = 0, **kwargs) -> tuple[float, float]:
-    """(lowest, highest) free-surface slope (deg) the twin reaches at ``rpm`` within the search bounds
-    (the least-friction corner and the best ``HIGH_EDGE`` point)."""
-    lo = twin_slope_deg(*path_point(0.0), rpm, seed=seed, **kwargs)
-    hi = max(twin_slope_deg(f, ROLLING_RANGE[1], rpm, seed=seed, **kwargs) for f in HIGH_EDGE)
-    return lo, hi
+    """(lowest, highest) free-surface slope magnitude (deg) the twin reaches at ``rpm`` within the
+    search bounds: the least-friction corner and the best ``HIGH_EDGE`` point, as ``calibrate`` sees them."""
+    def slope(f: float, r: float) -> float:
+        return abs(twin_slope_deg(f, r, abs(rpm), seed=seed, **kwargs))
+
+    s_lo, s_hi, _ = _range_ends(slope, rpm)
+    return min(s_lo, s_hi), max(s_lo, s_hi)
 
 
 def calibrate(
@@ -187,13 +202,7 @@ def calibrate(
             progress(len(history), total)
         return s
 
-    s_lo = evaluate(*path_point(0.0))
-    edge = [evaluate(f, ROLLING_RANGE[1]) for f in HIGH_EDGE]
-    finite = [(s, f) for s, f in zip(edge, HIGH_EDGE, strict=True) if math.isfinite(s)]
-    if not (math.isfinite(s_lo) and finite):
-        raise SimError(f"the twin shows no free surface at {rpm:g} rpm: it cannot be calibrated by slope there")
-    s_hi, f_hi = max(finite)
-    high = (f_hi, ROLLING_RANGE[1])
+    s_lo, s_hi, high = _range_ends(evaluate, rpm)
     lo_b, hi_b = min(s_lo, s_hi), max(s_lo, s_hi)
     if not (lo_b - RANGE_TOL_DEG <= target_mag <= hi_b + RANGE_TOL_DEG):
         raise SimError(
