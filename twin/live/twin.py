@@ -108,9 +108,6 @@ class TwinWorker:
         self._slopes.extend(drain(self.slopes))
 
     def run(self, stop: threading.Event) -> None:
-        self._run(stop)
-
-    def _run(self, stop: threading.Event) -> None:
         view = self.view
         while not stop.is_set() and view.camera().image is None:
             self._drain_slopes()
