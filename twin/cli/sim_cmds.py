@@ -191,10 +191,9 @@ def _measure_source_surface(source: str, max_frames: int, bed: str | None = None
     n = 0
     for frame in open_source(source, loop=False, reconnect=False):
         n += 1
-        img = frame.image
-        if img is None or getattr(img, "size", 0) == 0 or img.ndim != 3 or min(img.shape[:2]) < 16:
-            raise SimError(f"frame {n} of {source} could not be decoded (truncated or not an image)")
-        rd = meter.measure(img)
+        if frame.error:  # vision.sources says why a frame cannot be decoded
+            raise SimError(f"frame {n} of {source}: {frame.error}")
+        rd = meter.measure(frame.image)
         if math.isfinite(rd.slope_deg):
             vals.append(rd.slope_deg)
             c = getattr(rd, "surface_curvature", None)
