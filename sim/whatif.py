@@ -327,7 +327,7 @@ def _parent_alive(pid: int) -> bool:
 
 
 def _die_with_parent(parent_pid: int, leftover_dir: str | None) -> None:
-    """Pool-worker initializer: a daemon thread ends this worker (``os._exit``) as soon as
+    """Pool-worker initializer: the worker ignores SIGINT, and a daemon thread ends it (``os._exit``) as soon as
     the process that made the pool is gone, even after ``kill -9``, and then removes that
     process's multiprocessing temp directory (the fork server's listener socket lives
     there; a killed parent cannot remove it itself).
@@ -339,8 +339,12 @@ def _die_with_parent(parent_pid: int, leftover_dir: str | None) -> None:
     """
     import select
     import shutil
+    import signal
     import threading
 
+    # Ctrl-C in a terminal reaches the whole process group: it is the parent's to handle (it
+    # closes the pool); a worker that took it would die with a KeyboardInterrupt traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         pidfd: int | None = os.pidfd_open(parent_pid)
     except (AttributeError, OSError):

@@ -282,6 +282,28 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(120)
+def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path) -> None:
+    """Ctrl-C in a terminal signals the whole process group, the calibration and what-if
+    worker processes included: the run stops cleanly and nobody prints a traceback."""
+    proc = subprocess.Popen(
+        [*DRUMTWIN, "run", "--no-dashboard", "--mode", "auto", "--speed", "2", "--log", str(tmp_path / "run")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    try:
+        csv = tmp_path / "run" / "frames.csv"
+        _wait(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-2000:]
+    assert "run ended" in err
+    assert any(e["kind"] == "stop" for e in read_events(tmp_path / "run"))
+
+
+@pytest.mark.timeout(120)
 def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [*DRUMTWIN, "run", "--no-dashboard", "--speed", "2", "--mode", "off", "--log", str(tmp_path / "run")],
