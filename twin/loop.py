@@ -111,6 +111,7 @@ class LiveLoop:
         self.mill_link = mill
         self.events = RunEvents(runlog, self.state)
         meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
+        self._classes = tuple(meter.colour_classes)
         # snapshots (one writer each)
         self.camera_box: Latest[CameraInfo] = Latest(CameraInfo())
         self.frames_box: Latest[FrameInfo] = Latest(FrameInfo())
@@ -135,7 +136,7 @@ class LiveLoop:
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
-                classes=tuple(meter.colour_classes),
+                classes=self._classes,
                 calibrate_kwargs=config.extra.get("calibrate_kwargs", {}),
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
@@ -152,6 +153,18 @@ class LiveLoop:
         self.state.update_numbers(mode=config.mode, mill_state="connecting")
 
     # -- lifecycle (the only place threads start and stop) ---------------------------------
+    def warm_up(self) -> None:
+        """Compile the compiled kernels the workers will use (the meter's one pass and free
+        surface, the DEM twin) before the run's clock starts. A first compile holds the GIL
+        for seconds; on a fresh machine it would stall the camera and vision threads at run
+        time and look like a stopped camera. With numba's on-disk cache this takes well under
+        a second after the first run. A throwaway meter and twin: no worker's state is touched."""
+        from sim.drum import DrumSim
+        from vision.synthetic import particle_drum
+
+        Meter(classes=self._classes).measure(particle_drum((320, 240)).image)
+        DrumSim(settle_s=0.0).advance(0.01)
+
     def start(self) -> LiveLoop:
         self.events.event("start", 0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""))
         if self.config.mode == "auto":

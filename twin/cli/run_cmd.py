@@ -106,6 +106,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
             ).start()
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
+        loop.warm_up()  # compile before the clock runs, not while the camera does
         clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
         loop.start()
         if plant is not None:  # the demo's drive runs once the loop feeds the board's watchdog
