@@ -294,6 +294,9 @@ def run(
     r_max = 0.0
     for i in range(n):
         r_max = max(r_max, rad[i])
+    # the overlap histogram in four lanes (contact k in lane k % 4): consecutive contacts, mostly in
+    # the same bin, then do not wait on each other's increments; summed into ``hist`` at the end
+    lanes = np.zeros((4, hist.size), dtype=hist.dtype)
     fx = np.empty(n)
     fy = np.empty(n)
     tq = np.empty(n)
@@ -307,7 +310,17 @@ def run(
     roll_cap = np.empty(cap + n)  # impulse that stops the relative rotation, per rad/s
     new_j = np.empty(cap, dtype=np.int64)  # scratch of the list builds
     new_xi = np.empty(cap)
+    for i in range(n):  # the forces start at the weight (and are reset so after each step)
+        fx[i] = 0.0
+        fy[i] = weight[i]
+        tq[i] = 0.0
+    far = 0.0
+    for i in range(n):
+        dx = pos[i, 0] - ref[i, 0]
+        dy = pos[i, 1] - ref[i, 1]
+        far = max(far, dx * dx + dy * dy)
     if rebuild:
+        far = 0.0
         skin = list_skin(vel, dt, skin_min, r_min)
         if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
             return 0
@@ -319,23 +332,14 @@ def run(
             ds[DS_RPM] = ds[DS_TARGET] if abs(diff) <= accel else ds[DS_RPM] + math.copysign(accel, diff)
         w_drum = ds[DS_RPM] * _RPM_TO_RAD_S
         v_wall = w_drum * r_drum
-        # neighbour list still valid?
-        far = 0.0
-        for i in range(n):
-            dx = pos[i, 0] - ref[i, 0]
-            dy = pos[i, 1] - ref[i, 1]
-            far = max(far, dx * dx + dy * dy)
+        # neighbour list still valid? (``far``: the largest squared move since the last build)
         if far > half_skin2:
             skin = list_skin(vel, dt, skin_min, r_min)
             if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
-                _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
+                _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
                 return step
             half_skin2 = 0.25 * skin * skin
         last = step == n_steps - 1  # contacts per disk are counted in the last step only
-        for i in range(n):
-            fx[i] = 0.0
-            fy[i] = weight[i]
-            tq[i] = 0.0
         if last:
             for i in range(n):
                 ncont[i] = 0
@@ -411,7 +415,7 @@ def run(
                     ncont[j] += 1
                 if delta > ov_max:
                     ov_max = delta
-                hist[min(int(delta * bin_scale), nbins)] += 1
+                lanes[n_contacts & 3, min(int(delta * bin_scale), nbins)] += 1
                 n_contacts += 1
                 roll_j[m] = j
                 roll_imp[m] = mu_r_dt * c_pair[ci, cj, 1] * fn
@@ -423,13 +427,12 @@ def run(
             if last:
                 ncont[i] += nci
         roll_start[n] = m
-        # velocities
+        # angular velocities
         for i in range(n):
-            vel[i, 0] = (vel[i, 0] + fx[i] * inv_m[i] * dt) * damp
-            vel[i, 1] = (vel[i, 1] + fy[i] * inv_m[i] * dt) * damp
             omg[i] = (omg[i] + tq[i] * inv_i[i] * dt) * damp
         # rolling friction: angular impulses contact by contact, each capped so that it
-        # cannot reverse the relative rotation
+        # cannot reverse the relative rotation (disk i's spin is final after its row: its
+        # angle moves on there)
         if mu_r > 0.0:
             for i in range(n):
                 wi = omg[i]
@@ -446,19 +449,37 @@ def run(
                         wi -= sj * ii
                         omg[j] += sj * inv_i[j]
                 omg[i] = wi
-        # positions
+                ang[i] += wi * dt
+        else:
+            for i in range(n):
+                ang[i] += omg[i] * dt
+        # velocities and positions; the largest move since the list was built; forces reset
+        far = 0.0
         for i in range(n):
-            pos[i, 0] += vel[i, 0] * dt
-            pos[i, 1] += vel[i, 1] * dt
-            ang[i] += omg[i] * dt
+            vx = (vel[i, 0] + fx[i] * inv_m[i] * dt) * damp
+            vy = (vel[i, 1] + fy[i] * inv_m[i] * dt) * damp
+            vel[i, 0] = vx
+            vel[i, 1] = vy
+            px = pos[i, 0] + vx * dt
+            py = pos[i, 1] + vy * dt
+            pos[i, 0] = px
+            pos[i, 1] = py
+            dx = px - ref[i, 0]
+            dy = py - ref[i, 1]
+            far = max(far, dx * dx + dy * dy)
+            fx[i] = 0.0
+            fy[i] = weight[i]
+            tq[i] = 0.0
         ds[DS_ANGLE] += w_drum * dt
-    _store(acc, ov_max / r_min, wall_max, n_contacts, ncont)
+    _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
     return n_steps
 
 
 @njit(cache=True)
-def _store(acc, ov_max_r, wall_max, n_contacts, ncont):
-    """Write a run's statistics into ``acc``."""
+def _store(acc, ov_max_r, wall_max, n_contacts, ncont, hist, lanes):
+    """Write a run's statistics into ``acc`` and its overlap histogram lanes into ``hist``."""
+    for b in range(hist.size):
+        hist[b] += lanes[0, b] + lanes[1, b] + lanes[2, b] + lanes[3, b]
     acc[ACC_OVERLAP_MAX] = ov_max_r
     acc[ACC_WALL_MAX] = wall_max
     acc[ACC_CONTACTS] += n_contacts
