@@ -129,7 +129,7 @@ def _truncated_jpeg(real_drum_dir: Path, tmp_path: Path) -> Path:
         (("calibrate", "--slope-deg", "nan", "--rpm", "5"), ("--slope-deg",)),
         (("calibrate", "--slope-deg", "30", "--rpm", "0"), ("--rpm",)),
         (("calibrate", "--slope-deg", "30", "--rpm", "nan"), ("rpm",)),
-        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--max-evals", "1"), ("--max-evals",)),
+        (("calibrate", "--slope-deg", "30", "--rpm", "5", "--max-evals", "0"), ("--max-evals", "1")),
         (("calibrate", "--slope-deg", "30", "--rpm", "5", "--window-s", "0"), ("--window-s",)),
         (("calibrate", "--slope-deg", "30", "--rpm", "5", "--curvature", "inf"), ("--curvature",)),
         (("calibrate", "--slope-deg", "30", "--rpm", "5", "--dt-ms", "-1"), ("--dt-ms",)),

@@ -217,7 +217,7 @@ def calibrate_cmd(
     bed: str | None = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
     config: Path | None = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
-    max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path (2..40)"),
+    max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path, after the range runs (1..40)"),
     spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
@@ -236,7 +236,7 @@ def calibrate_cmd(
     seed = _check_seed(seed)
     check_rpm(rpm, PAPER_DRUM)
     check_number("--rpm", rpm, 0.0, PAPER_DRUM.critical_rpm, lo_open=True)
-    check_number("--max-evals", max_evals, 2, 40, integer=True)
+    check_number("--max-evals", max_evals, 1, 40, integer=True)
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     sim_kw: dict[str, Any] = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
