@@ -152,7 +152,7 @@ def _make_kernel(erode: bool):
         width = 0
         for i in range(nrows):
             width = max(width, last[i])
-        lbuf = np.zeros((3, width + 2), np.uint8)
+        lbuf = np.zeros((3, width + 2 if erode else 1), np.uint8)  # label rows: the erosion only
         cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
         for q in range(occ.shape[1]):
             cend[q] = (((q + 1) << occ_shift) + step - 1) // step
