@@ -269,3 +269,30 @@ def test_commands_behind_a_refused_or_failed_one_are_dropped_with_an_event() -> 
     w.cycle()
     w.cycle()
     assert link.sent == [("stop", None)]  # the stop was kept for the link's return
+
+
+def test_a_board_reporting_rpm_no_board_can_have_is_a_lost_link_over_tcp() -> None:
+    """The board answers HB with a checksum-valid status whose rpm is NaN: the worker used to
+    publish it as a connected board (the supervisor had nothing to ramp from and jumped to
+    its target); it is a bad answer: link fault, no status published."""
+    import math
+
+    from control.device import DeviceConfig
+    from control.driver import MillClient
+    from control.emulator import MillEmulator
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.0), seed=3)
+    emu.device.status = lambda: MillStatus(math.nan, math.nan, True, None)  # type: ignore[method-assign]
+    port = emu.open_tcp(0)
+    try:
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=0,
+                          reconnect_wait_s=0.0)
+        sink, box = Sink(), Latest(MillSnapshot())
+        w = MillWorker(link, sink, box, now_s=lambda: 0.0)
+        for _ in range(3):
+            snap = w.cycle()
+        assert not snap.connected and snap.status is None and "mill_link" in sink.faults
+        assert "malformed mill status" in sink.kinds("fault")[0]["message"]
+        link.close()
+    finally:
+        emu.close()
