@@ -240,6 +240,35 @@ def test_process_worker_rows_trend_moving_average_and_slopes() -> None:
     assert state.snapshot().history["mi"].size == 3
 
 
+@pytest.mark.parametrize("bad_mi", [math.nan, math.inf, -math.inf, 1.5, -0.2])
+def test_a_reading_flagged_valid_with_an_impossible_mi_is_not_vision(bad_mi: float) -> None:
+    """A reading that says valid but carries NaN, inf or an MI outside [0, 1] kept the vision
+    timeout fed (AUTO never went safe) or dragged the trend; and an invalid reading's MI
+    reached the trend. Now both count as no valid MI: AUTO goes safe with the vision alarm."""
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    rows: list[Mapping[str, Any]] = []
+    slopes: queue.SimpleQueue = queue.SimpleQueue()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), slopes)
+    w, sink, _sent = sup_worker(b, Mode.AUTO)
+    t = 0.0
+    for i in range(40):  # 4 s of good frames, then 10 s of impossible ones
+        b.camera.set(CameraInfo(t, b.wall.t, None, None, i + 1, False))
+        pw.process(CameraReading(t, i, _reading(0.9)))
+        w.tick(b.view.now_s())
+        t, b.wall.t = t + 0.1, b.wall.t + 0.1
+    for i in range(40, 140):
+        b.camera.set(CameraInfo(t, b.wall.t, None, None, i + 1, False))
+        pw.process(CameraReading(t, i, _reading(bad_mi)))
+        pw.process(CameraReading(t + 0.05, i, _reading(0.1, valid=False)))
+        w.tick(b.view.now_s())
+        t, b.wall.t = t + 0.1, b.wall.t + 0.1
+    f = b.frames.get()
+    assert f.last_valid_t_s == pytest.approx(3.9) and f.estimate.level == pytest.approx(0.9, abs=0.02)
+    assert slopes.qsize() == 40 and rows[-1]["valid"] is False and rows[-2]["valid"] is False
+    assert "vision_lost" in sink.faults and w.safe
+
+
 def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     from vision.sources import Frame
 

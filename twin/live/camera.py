@@ -56,6 +56,12 @@ class Rate:
             return (len(self._times) - 1) / span if span > 0 else 0.0
 
 
+def is_valid_mi(r: Reading) -> bool:
+    """The reading counts as vision: flagged valid and its MI a number in [0, 1] (the meter's
+    indices are; anything else is a broken reading, never fed to the trend or the timeout)."""
+    return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
+
+
 def put_dropping_oldest(q: queue.Queue, item: Any) -> None:
     """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
     while True:
@@ -161,20 +167,22 @@ class ProcessWorker:
 
     def process(self, item: CameraReading) -> FrameRow:
         r = item.reading
+        valid = is_valid_mi(r)
+        mi = r.mi if valid else math.nan
         mill = self.view.mill()
         rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
-        est = self.trend.update(item.t_s, r.mi, rpm)
-        ma = self.ma.update(r.mi if r.valid else math.nan)
+        est = self.trend.update(item.t_s, mi, rpm)
+        ma = self.ma.update(mi)
         prev = self.box.get()
-        last_valid = item.t_s if r.valid else prev.last_valid_t_s
+        last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
-        if r.valid and self.slopes is not None and math.isfinite(r.slope_deg):
+        if valid and self.slopes is not None and math.isfinite(r.slope_deg):
             self.slopes.put((item.t_s, float(r.slope_deg)))
         tw = self.view.twin()
         row = FrameRow(
             t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
             d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration, slope_deg=r.slope_deg,
-            valid=r.valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
+            valid=valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
             ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
             rpm_setpoint=mill.setpoint_rpm, rpm_actual=mill.actual_rpm, mode=self.view.mode(), flags=tuple(r.flags),
