@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import queue
+import threading
 from collections.abc import Mapping
 from dataclasses import fields, replace
 from typing import Any
@@ -269,6 +270,65 @@ def test_a_reading_flagged_valid_with_an_impossible_mi_is_not_vision(bad_mi: flo
     assert "vision_lost" in sink.faults and w.safe
 
 
+def test_a_frame_time_that_goes_back_or_is_not_a_number_is_dropped_with_a_fault() -> None:
+    """A camera clock that jumps back (or a NaN frame time) raised in the Kalman trend and
+    killed the process thread: no more rows, no more trend. Now the frame is dropped with a
+    ``camera_clock`` fault, cleared when frames come in order again."""
+    b = Boxes("manual")
+    b.mill_at(5.0)
+    rows: list[Mapping[str, Any]] = []
+    sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, rows.append, LiveState())
+    for i, t in enumerate((1.0, 1.1, 1.2)):
+        pw.process(CameraReading(t, i, _reading(0.9)))
+    assert pw.process(CameraReading(0.5, 3, _reading(0.9))) is None  # back in time
+    assert pw.process(CameraReading(math.nan, 4, _reading(0.9))) is None
+    assert len(rows) == 3 and b.frames.get().t_s == 1.2 and b.frames.get().n_frames == 3
+    assert "camera_clock" in sink.faults
+    pw.process(CameraReading(1.2, 5, _reading(0.8)))  # in order again (the same time is fine)
+    pw.process(CameraReading(1.3, 6, _reading(0.8)))
+    assert len(rows) == 5 and b.frames.get().t_s == 1.3 and "camera_clock" not in sink.faults
+
+
+def test_a_camera_clock_that_jumps_back_is_lost_vision_for_auto() -> None:
+    """The camera's frame times jump 10 s back. Run time used to stand still until they
+    caught up again (the view never goes back) while every frame was refused: AUTO saw
+    neither a stopped camera nor lost vision. Now frames from the past do not count as
+    frames: run time goes on, the vision alarm and the safe state come."""
+    from vision.sources import Frame
+
+    class Meter:
+        def measure(self, image):
+            return _reading(0.9)
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    q: queue.Queue = queue.Queue()
+    sink = Sink()
+    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink, lambda row: None, LiveState())
+    w, _sink, sent = sup_worker(b, Mode.AUTO)
+    w.sink = sink
+    img = np.zeros((4, 4, 3), np.uint8)
+    seen: list[float] = []
+
+    def frames():
+        t = 0.0
+        for i in range(200):
+            if i == 100:
+                t -= 10.0  # the camera's clock jumps back
+            b.wall.t += 0.1
+            yield Frame(index=i, t_s=t, image=img)
+            t += 0.1
+            while not q.empty():
+                pw.process(q.get_nowait())
+            seen.append(b.view.now_s())
+            w.tick(seen[-1])
+
+    CameraWorker(frames(), Meter(), q, b.camera, LiveState(), monotonic=b.wall).run(threading.Event())
+    assert seen[-1] == pytest.approx(19.9, abs=0.05)  # run time went on through the jump
+    assert {"camera_clock", "vision_lost", "camera_stopped"} <= sink.faults and w.safe and sent == []
+
+
 def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     from vision.sources import Frame
 
@@ -280,8 +340,6 @@ def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     box: Latest[CameraInfo] = Latest(CameraInfo())
     frames = [Frame(index=i, t_s=i * 0.1, image=np.zeros((4, 4, 3), np.uint8)) for i in range(10)]
     cw = CameraWorker(frames, Meter(), q, box, LiveState())
-    import threading
-
     cw.run(threading.Event())
     assert box.get().ended and box.get().n_frames == 10 and box.get().t_s == pytest.approx(0.9)
     assert [q.get_nowait().frame for _ in range(3)] == [7, 8, 9]  # the oldest were dropped

@@ -117,13 +117,18 @@ class CameraWorker:
                 return
             wall = self._monotonic()  # when the frame arrived
             n += 1
-            roi = self.box.get().roi
-            self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, roi, n, False))  # it came (alarms)
+            t, prev = float(frame.t_s), self.box.get()
+            # a frame without a time or from before the newest one (the camera's clock jumped
+            # back) is no news: run time and the camera alarm go on; the process worker drops it
+            came = math.isfinite(t) and (prev.t_s is None or t >= prev.t_s)
+            roi = prev.roi
+            if came:
+                self.box.set(CameraInfo(t, wall, frame.image, roi, n, False))  # it came (alarms)
             reading = self.meter.measure(frame.image)
-            if reading.roi is not roi:
-                self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
+            if came and reading.roi is not roi:
+                self.box.set(CameraInfo(t, wall, frame.image, reading.roi, n, False))
             self.fps.tick()
-            put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
+            put_dropping_oldest(self.out, CameraReading(t, int(frame.index), reading))
             cadence = self._overlay_cadence
             if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
@@ -165,7 +170,18 @@ class ProcessWorker:
                 continue
             self.process(item)
 
-    def process(self, item: CameraReading) -> FrameRow:
+    def process(self, item: CameraReading) -> FrameRow | None:
+        """One reading -> trend, row, :class:`FrameInfo`. A frame whose time is not a number
+        or goes back before the newest processed one is dropped (None) with a
+        ``camera_clock`` fault: the trend's time only runs forward."""
+        prev = self.box.get()
+        if not math.isfinite(item.t_s) or (prev.n_frames and item.t_s < prev.t_s):
+            why = (f"went back from {prev.t_s:g} to {item.t_s:g} s" if math.isfinite(item.t_s)
+                   else f"is {item.t_s}")
+            self.sink.fault("camera_clock", f"camera frame time {why}: frames dropped until it runs forward again",
+                            self.view.now_s(), frame=item.frame)
+            return None
+        self.sink.clear_fault("camera_clock", "frame times in order again", item.t_s)
         r = item.reading
         valid = is_valid_mi(r)
         mi = r.mi if valid else math.nan
@@ -173,7 +189,6 @@ class ProcessWorker:
         rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
         est = self.trend.update(item.t_s, mi, rpm)
         ma = self.ma.update(mi)
-        prev = self.box.get()
         last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
         if valid and self.slopes is not None and math.isfinite(r.slope_deg):
