@@ -58,12 +58,15 @@ class MillSnapshot:
     """The mill as the mill worker last saw it: the board's own report (``status``, None
     before the first answer) plus the link. ``epoch`` grows by one each time the board
     was read again after a link loss or a refused command: commands decided on an older
-    epoch are stale and are dropped. ``polled``: the worker has tried at least once."""
+    epoch are stale and are dropped. ``polled``: the worker has tried at least once.
+    ``refused``: commands the board refused (NAK) or acknowledged without taking them, so
+    far in this run (the supervisor goes safe when it grows)."""
 
     status: MillStatus | None = None
     connected: bool = False
     epoch: int = 0
     polled: bool = False
+    refused: int = 0
 
     @property
     def actual_rpm(self) -> float:

@@ -54,6 +54,7 @@ def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
         mill_connected=mill.connected,
         mill_running=mill.running if mill.status is not None else None,
         mill_epoch=mill.epoch,
+        mill_refused=mill.refused,
         radial_factor=radial,
         last_valid_mi_s=frames.last_valid_t_s,
         camera_ended=cam.ended,
