@@ -197,6 +197,40 @@ def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path
     assert json.loads(lines[0])["log_dir"] == str(tmp_path / "run")
 
 
+@pytest.mark.timeout(60)
+def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tmp_path: Path, monkeypatch) -> None:
+    """The disk fills up after a few frame rows: the run ends at once, the mill (running, by
+    the operator's start) is stopped, and the command says so in one line, exit 2 (it
+    printed worker tracebacks and ran on unsupervised, unlogged)."""
+    import errno
+
+    from twin import runlog as runlog_mod
+
+    class FillingDisk(runlog_mod.RunLog):
+        def frame(self, row) -> None:
+            if self.n_frames >= 5:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            super().frame(row)
+
+    emu, url = tcp_mill
+    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)  # started at the front panel
+    monkeypatch.setattr(runlog_mod, "RunLog", FillingDisk)
+    from vision.synthetic import drum_frame
+
+    video = tmp_path / "drum.avi"  # a drum the meter finds (red and blue: its default classes)
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (160, 120))
+    for i in range(100):
+        vw.write(drum_frame((160, 120), seed=i))
+    vw.release()
+    r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "manual", "--duration", "60",
+            "--log", tmp_path / "run")
+    assert_one_line_error(r, "the run stopped", "No space left on device", str(tmp_path / "run"))
+    assert [a.cmd for a in emu.applied] == ["STP"] and not emu.motor.running
+    events = read_events(tmp_path / "run")
+    assert events[-1]["kind"] == "stop" and "No space left" in events[-1]["failure"]
+    assert len(read_frames(tmp_path / "run")) == 5
+
+
 def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:
     video = _video(tmp_path / "v.avi", n=2)
     for args, needle in (
