@@ -341,6 +341,7 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
     min_change_interval_s=30.0,
     max_rate_rpm_per_s=4.0,
     vision_timeout_s=5.0,  # the one vision timeout (run s): alarm and safe state together
+    require_twin=True,  # a twin that never ran (died or hung before its first step) is stale too
 )
 
 

@@ -136,6 +136,24 @@ def test_vision_lost_alarm_and_safe_state_come_together() -> None:
     assert i_safe > i_alarm and i_safe - i_alarm <= 3 and sent == []
 
 
+def test_a_twin_that_never_runs_is_stale_for_the_loops_auto() -> None:
+    """The twin worker died (or hung) before its first step: the supervisor saw no twin time
+    at all and never called it stale, so AUTO went on without it. With the loop's settings a
+    twin that has not run within the twin timeout is stale: safe state."""
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
+    b = Boxes()
+    b.mill_at(5.0)
+    cfg = supervisor_config(RunConfig(mode="auto", dashboard=False).resolved())
+    assert cfg.twin_timeout_s is not None
+    w = SupervisorWorker(Supervisor(cfg, mode=Mode.AUTO), b.view, Sink(), [].append, None, b.mode)
+    advance(b, w, 0, cfg.twin_timeout_s - 1.0)
+    assert not w.safe
+    advance(b, w, cfg.twin_timeout_s - 1.0, cfg.twin_timeout_s + 2.0)
+    assert w.safe and "twin stale" in w.supervisor.safe_reason
+
+
 def test_camera_end_means_safe_at_once() -> None:
     b = Boxes()
     b.mill_at(5.0)
