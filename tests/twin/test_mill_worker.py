@@ -360,3 +360,30 @@ def test_a_refused_command_puts_the_supervisor_in_its_safe_state_over_tcp() -> N
         link.close()
     finally:
         emu.close()
+
+
+def test_a_new_board_fault_is_logged_even_while_another_one_is_active() -> None:
+    """The board's fault changed from WDOG to DRIVE: the ``mill_fault`` fault was already
+    raised (the run's sink logs a fault once until cleared), so the DRIVE fault left no
+    event. Each new fault code is an event."""
+    from twin.live.records import RunEvents
+    from twin.state import LiveState
+
+    class Log:
+        def __init__(self) -> None:
+            self.events: list[dict] = []
+
+        def event(self, kind: str, t_s: float, **data) -> None:
+            self.events.append({"kind": kind, **data})
+
+    log = Log()
+    link, box = FakeLink(STOPPED_WDOG), Latest(MillSnapshot())
+    w = MillWorker(link, RunEvents(log, LiveState()), box, now_s=lambda: 0.0)
+    w.cycle()
+    link.board = MillStatus(13.0, 0.0, False, "DRIVE")
+    w.cycle()
+    w.cycle()
+    assert [e.get("mill_fault") for e in log.events if e["kind"] == "fault"] == ["WDOG", "DRIVE"]
+    link.board = MillStatus(13.0, 0.0, False, None)
+    w.cycle()
+    assert log.events[-1]["kind"] == "recovered" and log.events[-1]["fault"] == "mill_fault"

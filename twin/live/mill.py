@@ -180,6 +180,8 @@ class MillWorker:
             self.sink.clear_fault("mill_link", "mill link restored", t, url=self.link.url)
             self.sink.event("mill_synced", t, epoch=epoch, **st.as_dict())
         if st.fault:
+            if snap.fault and snap.fault != st.fault:  # another fault: an event of its own
+                self.sink.clear_fault("mill_fault", f"mill fault {snap.fault} replaced by {st.fault}", t)
             self.sink.fault("mill_fault", f"mill reports fault {st.fault}", t, mill_fault=st.fault)
         else:
             self.sink.clear_fault("mill_fault", "mill fault cleared", t)
