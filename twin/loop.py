@@ -34,8 +34,10 @@ from typing import Any
 from control.errors import ControlError
 from control.supervisor import Mode, Supervisor, SupervisorConfig
 from control.trend import MITrend, TrendConfig
+from sim.errors import SimError
 from twin.clock import RunClock
 from twin.config import RunConfig
+from twin.errors import TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.records import (
@@ -55,15 +57,21 @@ from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import WhatIfWorker
 from twin.state import LiveState
+from vision.errors import VisionError
 from vision.meter import Meter
 
 log = logging.getLogger("drumtwin.loop")
+
+EXPECTED_ERRORS: tuple[type[Exception], ...] = (VisionError, SimError, ControlError, TwinError, OSError)
+"""A worker stopped by bad input or its environment (no drum in the frames, a camera gone):
+a one-line fault, no traceback. Anything else is a bug and logged with its traceback."""
 
 ESSENTIAL_WORKERS = ("mill", "process", "supervisor")
 """Workers without which the run ends (see ``LiveLoop._fail``): with the supervisor gone the
 mill worker would feed the watchdog of a mill nobody supervises; with the mill worker gone
 the supervisor would believe a board nobody reads; without the process worker no frames
-are logged. (A camera that fails is an ended camera; a dead twin goes stale.)"""
+are logged. (A camera that fails is an ended camera, unless the meter cannot read its
+frames at all, a ``VisionError``: bad input ends the run too; a dead twin goes stale.)"""
 
 
 @dataclass
@@ -196,10 +204,13 @@ class LiveLoop:
             try:
                 run(self.stop_event)
             except Exception as exc:  # a crashed worker is a fault, never silent
-                log.exception("worker %s crashed", name)
+                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: its traceback (bad input is one line)
+                    log.exception("worker %s crashed", name)
                 self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", self.view.now_s())
                 if name in ESSENTIAL_WORKERS:
                     self._fail(f"the {name} worker crashed: {exc}")
+                elif name == "camera" and isinstance(exc, VisionError):  # e.g. no drum in the frames
+                    self._fail(f"camera: {exc}")
 
         return target
 
