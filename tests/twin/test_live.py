@@ -250,6 +250,7 @@ def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path) ->
     assert_one_line_error(r, "could not find the drum circle", "--roi")
     assert time.monotonic() - t0 < 20.0  # not the whole 30 s
     assert any(e["kind"] == "stop" and e["failure"] for e in read_events(tmp_path / "run"))
+    assert [a.cmd for a in emu.applied] == ["STP"]  # nothing but the stop on the way out
 
 
 def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:
