@@ -228,13 +228,16 @@ def status_args(status: MillStatus) -> tuple[str, ...]:
 
 
 def parse_status(args: tuple[str, ...]) -> MillStatus:
-    """Inverse of :func:`status_args` (the arguments after ``ACK``). Raises ControlError."""
+    """Inverse of :func:`status_args` (the arguments after ``ACK``). Raises ControlError,
+    also for rpm no board can have (NaN, infinite, negative, beyond five digits)."""
     if len(args) != 4 or args[2] not in ("0", "1"):
         raise ControlError(f"malformed mill status {','.join(args)!r}")
     try:
         sp, act = float(args[0]), float(args[1])
     except ValueError:
         raise ControlError(f"malformed mill status {','.join(args)!r}") from None
+    if not all(math.isfinite(v) and 0.0 <= v < 1e5 for v in (sp, act)):
+        raise ControlError(f"malformed mill status {','.join(args)!r}")
     return MillStatus(sp, act, args[2] == "1", None if args[3] == FAULT_NONE else args[3])
 
 

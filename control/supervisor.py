@@ -49,7 +49,8 @@ Board resync
     a ramp goes on from where the motor really is, never from a stale belief.
 
 Safe state
-    Mill link lost (``inputs.mill_connected`` False), the camera ended, no valid MI for
+    Mill link lost (``inputs.mill_connected`` False), a command the mill refused
+    (``inputs.mill_refused`` grew since the last step), the camera ended, no valid MI for
     ``vision_timeout_s`` (the one vision timeout: applications raise their own alarm with
     :meth:`SupervisorConfig.vision_lost`) or the twin not updated for ``twin_timeout_s``
     (AUTO) -> ``safe_action``: ``HOLD``
@@ -175,6 +176,7 @@ class SupervisorInputs:
     ``trend``: the latest Kalman estimate; ``actual_rpm``/``setpoint_rpm``/``mill_running``:
     from the mill status; ``mill_connected``: the link is up; ``mill_epoch``: changes each
     time the board was (re)read after a link loss or a refusal (the supervisor resyncs);
+    ``mill_refused``: commands the mill refused so far (growing: a fault for one step);
     ``radial_factor``: MI(eq. 4)/MI(eq. 3) of the latest valid reading (None: not used);
     ``last_valid_mi_s``: time of the last valid MI; ``camera_ended``: the frame source has
     ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
@@ -187,6 +189,7 @@ class SupervisorInputs:
     mill_connected: bool = True
     mill_running: bool | None = None
     mill_epoch: int = 0
+    mill_refused: int = 0
     radial_factor: float | None = None
     last_valid_mi_s: float | None = None
     camera_ended: bool = False
@@ -259,6 +262,7 @@ class Decision:
                 "mill_connected": inp.mill_connected,
                 "mill_running": inp.mill_running,
                 "mill_epoch": inp.mill_epoch,
+                "mill_refused": inp.mill_refused,
                 "camera_ended": inp.camera_ended,
                 "radial_factor": inp.radial_factor,
                 "last_valid_mi_s": inp.last_valid_mi_s,
@@ -357,6 +361,7 @@ class Supervisor:
         self._latched_stop = False
         self._t0: float | None = None
         self._epoch: int | None = None  # the board state last synced to
+        self._refused = 0  # the mill's refusals seen so far
         self._last_cmd_s = -math.inf
         self._last_eval_s = -math.inf
         self._due_since: float | None = None  # AUTO decision due, waiting for predictions
@@ -421,12 +426,15 @@ class Supervisor:
         self._last_inputs = inputs
         if inputs.mill_connected and inputs.mill_epoch != self._epoch:
             self._resync(inputs)
+        refused, self._refused = inputs.mill_refused > self._refused, inputs.mill_refused
         self._take_predictions(predictions)
         if self._mode is Mode.OFF:
             return None
         self.detector.update(now_s, inputs.trend, inputs.radial_factor)
 
         faults = self.faults(now_s, inputs)
+        if refused:
+            faults.append("the mill refused a command")
         if faults:
             self._clear_since = None
             if not self.safe:

@@ -31,10 +31,13 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from control.errors import ControlError
 from control.supervisor import Mode, Supervisor, SupervisorConfig
 from control.trend import MITrend, TrendConfig
+from sim.errors import SimError
 from twin.clock import RunClock
 from twin.config import RunConfig
+from twin.errors import TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.records import (
@@ -54,9 +57,21 @@ from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import WhatIfWorker
 from twin.state import LiveState
+from vision.errors import VisionError
 from vision.meter import Meter
 
 log = logging.getLogger("drumtwin.loop")
+
+EXPECTED_ERRORS: tuple[type[Exception], ...] = (VisionError, SimError, ControlError, TwinError, OSError)
+"""A worker stopped by bad input or its environment (no drum in the frames, a camera gone):
+a one-line fault, no traceback. Anything else is a bug and logged with its traceback."""
+
+ESSENTIAL_WORKERS = ("mill", "process", "supervisor")
+"""Workers without which the run ends (see ``LiveLoop._fail``): with the supervisor gone the
+mill worker would feed the watchdog of a mill nobody supervises; with the mill worker gone
+the supervisor would believe a board nobody reads; without the process worker no frames
+are logged. (A camera that fails is an ended camera, unless the meter cannot read its
+frames at all, a ``VisionError``: bad input ends the run too; a dead twin goes stale.)"""
 
 
 @dataclass
@@ -109,7 +124,9 @@ class LiveLoop:
         self.runlog = runlog
         self.state = state or LiveState()
         self.mill_link = mill
-        self.events = RunEvents(runlog, self.state)
+        self.failure: str | None = None  # why the run had to end (see _fail)
+        self._fail_lock = threading.Lock()
+        self.events = RunEvents(runlog, self.state, on_failure=self._fail)
         meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
         self._classes = tuple(meter.colour_classes)
         # snapshots (one writer each)
@@ -129,7 +146,7 @@ class LiveLoop:
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,
         )
         self.process = ProcessWorker(
-            readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, runlog.frame,
+            readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, self.events.frame,
             self.state, slopes, camera_fps=self.camera.fps.rate,
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
@@ -187,10 +204,25 @@ class LiveLoop:
             try:
                 run(self.stop_event)
             except Exception as exc:  # a crashed worker is a fault, never silent
-                log.exception("worker %s crashed", name)
+                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: its traceback (bad input is one line)
+                    log.exception("worker %s crashed", name)
                 self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", self.view.now_s())
+                if name in ESSENTIAL_WORKERS:
+                    self._fail(f"the {name} worker crashed: {exc}")
+                elif name == "camera" and isinstance(exc, VisionError):  # e.g. no drum in the frames
+                    self._fail(f"camera: {exc}")
 
         return target
+
+    def _fail(self, reason: str) -> None:
+        """The run cannot keep its rules any more (the run log cannot be written, or an
+        essential worker crashed): end it now; :meth:`stop` stops the mill on the way out
+        and ``failure`` says why (the CLI's one-line error)."""
+        with self._fail_lock:
+            if self.failure is not None:
+                return
+            self.failure = reason
+        self.stop_event.set()
 
     def now_s(self) -> float:
         """Run time (see :class:`RunView`)."""
@@ -219,9 +251,17 @@ class LiveLoop:
         alive = [th.name for th in self._threads if th.is_alive()]
         if alive:
             log.warning("workers still running after stop: %s", ", ".join(alive))
+        if self.failure is not None:  # the workers are gone: the link is ours to stop the mill
+            t = self.now_s()
+            try:
+                self.mill_link.stop()
+            except (OSError, ControlError) as exc:
+                self.events.event("mill_command_dropped", t, command="stop", source="run_failed", reason=str(exc))
+            else:
+                self.events.event("mill_command", t, command="stop", source="run_failed")
         self.mill_link.close()
         f = self.frames_box.get()
-        self.events.event("stop", f.t_s, frames=f.n_frames, workers_alive=alive)
+        self.events.event("stop", f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure)
 
     def summary(self, wall_s: float = 0.0) -> Summary:
         f = self.frames_box.get()
@@ -312,6 +352,7 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
     min_change_interval_s=30.0,
     max_rate_rpm_per_s=4.0,
     vision_timeout_s=5.0,  # the one vision timeout (run s): alarm and safe state together
+    require_twin=True,  # a twin that never ran (died or hung before its first step) is stale too
 )
 
 

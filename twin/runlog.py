@@ -237,13 +237,17 @@ class RunLog:
             return dict(self._metadata)
 
     def close(self) -> None:
-        """Flush, fsync and close (idempotent)."""
+        """Flush, fsync and close (idempotent). A flush that fails here (disk full) is not
+        raised again: the write that failed first was (see ``twin.live.records.RunEvents``)."""
         with self._lock:
             if self._closed:
                 return
             self._sync(force=True)
-            self._frames.close()
-            self._events.close()
+            for fh in (self._frames, self._events):
+                try:
+                    fh.close()
+                except OSError:
+                    pass
             self._closed = True
 
     def __enter__(self) -> RunLog:

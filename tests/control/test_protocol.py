@@ -92,6 +92,17 @@ def test_parse_rpm_arg():
         assert p.parse_rpm_arg(bad) is None
 
 
+def test_a_status_with_numbers_no_board_can_have_is_malformed():
+    """A checksum-valid status whose rpm is NaN, infinite, negative or beyond the protocol's
+    five digits was taken as the board's state (the supervisor then had no rpm to ramp from
+    and jumped straight to its target)."""
+    assert p.parse_status(("12.50", "0.00", "1", "OK")) == p.MillStatus(12.5, 0.0, True, None)
+    for sp, act in (("nan", "0.00"), ("0.00", "nan"), ("inf", "1.00"), ("-5.00", "0.00"), ("0.00", "-1.00"),
+                    ("1e9", "0.00"), ("100000.00", "0.00")):
+        with pytest.raises(ControlError, match="malformed mill status"):
+            p.parse_status((sp, act, "1", "OK"))
+
+
 def test_next_seq_wraps_and_skips_zero():
     assert p.next_seq(1) == 2
     assert p.next_seq(65535) == 1

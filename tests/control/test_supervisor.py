@@ -317,3 +317,23 @@ def test_one_vision_timeout_for_alarm_and_safe_state():
     ds = run(sup, 10, 16, level=0.9, last_valid_mi_s=10.0)
     first = next(d for d in ds if d.kind == "safe")
     assert first.t_s == pytest.approx(13.5)  # first step at which c.vision_lost(t, 10) holds
+
+
+@pytest.mark.parametrize("action", list(SafeAction))
+def test_a_refused_command_is_a_fault_of_its_own(action):
+    """A refusal (``mill_refused`` grows) enters the safe state once; HOLD/RAMP recover after
+    ``recover_s`` without another one, STOP stays latched. In OFF a refusal changes nothing."""
+    c = cfg(safe_action=action, safe_rpm=3.0, recover_s=5.0, max_rate_rpm_per_s=1.0, ramp_interval_s=1.0)
+    sup = Supervisor(c, mode=Mode.AUTO)
+    assert run(sup, 0, 10, level=0.8) == []
+    ds = run(sup, 10, 10.5, level=0.8, mill_refused=1)
+    assert [d.kind for d in ds] == ["safe"] and "refused" in ds[0].reason and sup.safe
+    assert ds[0].action is {SafeAction.STOP: Action.STOP, SafeAction.HOLD: Action.NONE,
+                            SafeAction.RAMP: Action.SET_RPM}[action]
+    ds = run(sup, 10.5, 30, level=0.8, mill_refused=1)  # the same count: no new refusal
+    if action is SafeAction.STOP:
+        assert ds == [] and sup.safe
+    else:
+        assert "recover" in [d.kind for d in ds] and not sup.safe
+    off = Supervisor(c, mode=Mode.OFF)
+    assert run(off, 0, 5, level=0.8, mill_refused=3) == [] and not off.safe

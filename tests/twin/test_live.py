@@ -136,12 +136,18 @@ def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
     assert_one_line_error(cli("compare", tmp_path, "--plot", png), "not a run log dir")
 
 
-def _video(path: Path, n: int = 30, size: int = 64) -> Path:
-    """A short synthetic video (grey noise: the meter finds no valid MI in it)."""
+def _video(path: Path, n: int = 30, size: int = 64, drum: bool = True) -> Path:
+    """A short synthetic video: an empty drum (the meter finds the drum and no valid MI in
+    it) or, ``drum=False``, grey noise (no drum to find: bad input)."""
     vw = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (size, size))
     rng = np.random.default_rng(0)
     for _ in range(n):
-        vw.write(rng.integers(90, 110, (size, size, 3), dtype=np.uint8))
+        if drum:
+            img = np.full((size, size, 3), 18, np.uint8)
+            cv2.circle(img, (size // 2, size // 2), int(0.46 * size), (150, 150, 150), 2, cv2.LINE_AA)
+        else:
+            img = rng.integers(90, 110, (size, size, 3), dtype=np.uint8)
+        vw.write(img)
     vw.release()
     return path
 
@@ -195,6 +201,56 @@ def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path
     lines = p.stdout.strip().splitlines()
     assert len(lines) == 1, p.stdout
     assert json.loads(lines[0])["log_dir"] == str(tmp_path / "run")
+
+
+@pytest.mark.timeout(60)
+def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tmp_path: Path, monkeypatch) -> None:
+    """The disk fills up after a few frame rows: the run ends at once, the mill (running, by
+    the operator's start) is stopped, and the command says so in one line, exit 2 (it
+    printed worker tracebacks and ran on unsupervised, unlogged)."""
+    import errno
+
+    from twin import runlog as runlog_mod
+
+    class FillingDisk(runlog_mod.RunLog):
+        def frame(self, row) -> None:
+            if self.n_frames >= 5:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            super().frame(row)
+
+    emu, url = tcp_mill
+    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)  # started at the front panel
+    monkeypatch.setattr(runlog_mod, "RunLog", FillingDisk)
+    from vision.synthetic import drum_frame
+
+    video = tmp_path / "drum.avi"  # a drum the meter finds (red and blue: its default classes)
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (160, 120))
+    for i in range(100):
+        vw.write(drum_frame((160, 120), seed=i))
+    vw.release()
+    r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "manual", "--duration", "60",
+            "--log", tmp_path / "run")
+    assert_one_line_error(r, "the run stopped", "No space left on device", str(tmp_path / "run"))
+    assert [a.cmd for a in emu.applied] == ["STP"] and not emu.motor.running
+    events = read_events(tmp_path / "run")
+    assert events[-1]["kind"] == "stop" and "No space left" in events[-1]["failure"]
+    assert len(read_frames(tmp_path / "run")) == 5
+
+
+@pytest.mark.timeout(60)
+def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path) -> None:
+    """Bad input: the meter cannot find the drum in the video. The camera and twin threads
+    printed a traceback each, and the run went on to its end and exited 0. Now: one line,
+    exit 2, and the run is over at once (the mill is sent a stop on the way out)."""
+    emu, url = tcp_mill
+    video = _video(tmp_path / "noise.avi", n=100, drum=False)
+    t0 = time.monotonic()
+    r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "off", "--duration", "30",
+            "--log", tmp_path / "run")
+    assert_one_line_error(r, "could not find the drum circle", "--roi")
+    assert time.monotonic() - t0 < 20.0  # not the whole 30 s
+    assert any(e["kind"] == "stop" and e["failure"] for e in read_events(tmp_path / "run"))
+    assert [a.cmd for a in emu.applied] == ["STP"]  # nothing but the stop on the way out
 
 
 def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:

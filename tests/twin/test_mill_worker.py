@@ -269,3 +269,121 @@ def test_commands_behind_a_refused_or_failed_one_are_dropped_with_an_event() -> 
     w.cycle()
     w.cycle()
     assert link.sent == [("stop", None)]  # the stop was kept for the link's return
+
+
+def test_a_board_reporting_rpm_no_board_can_have_is_a_lost_link_over_tcp() -> None:
+    """The board answers HB with a checksum-valid status whose rpm is NaN: the worker used to
+    publish it as a connected board (the supervisor had nothing to ramp from and jumped to
+    its target); it is a bad answer: link fault, no status published."""
+    import math
+
+    from control.device import DeviceConfig
+    from control.driver import MillClient
+    from control.emulator import MillEmulator
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.0), seed=3)
+    emu.device.status = lambda: MillStatus(math.nan, math.nan, True, None)  # type: ignore[method-assign]
+    port = emu.open_tcp(0)
+    try:
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=0,
+                          reconnect_wait_s=0.0)
+        sink, box = Sink(), Latest(MillSnapshot())
+        w = MillWorker(link, sink, box, now_s=lambda: 0.0)
+        for _ in range(3):
+            snap = w.cycle()
+        assert not snap.connected and snap.status is None and "mill_link" in sink.faults
+        assert "malformed mill status" in sink.kinds("fault")[0]["message"]
+        link.close()
+    finally:
+        emu.close()
+
+
+def test_a_refusal_and_a_setpoint_the_board_did_not_take_are_counted_for_the_supervisor() -> None:
+    """The supervisor goes safe on a refused command: the worker counts refusals in the
+    snapshot (``refused``). A set-rpm the board ACKs but does not report as its setpoint is
+    counted too (a ``mill_mismatch`` event), and the board is read again (new epoch)."""
+    w, link, sink, _box = make(RUNNING)
+    w.cycle()
+    link.refuse["set_rpm"] = "RANGE"
+    w.submit(SetRpm(50.0, epoch=1))
+    snap = w.cycle()
+    assert snap.refused == 1 and snap.epoch == 2 and snap.connected
+    link.refuse.clear()
+    real_set = link.set_rpm
+    link.set_rpm = lambda rpm: real_set(rpm + 5.0)  # type: ignore[method-assign]  # ACKs, takes another
+    w.submit(SetRpm(9.0, epoch=2))
+    snap = w.cycle()
+    assert snap.refused == 2 and snap.epoch == 3 and snap.connected and snap.setpoint_rpm == 14.0
+    mismatch = sink.kinds("mill_mismatch")
+    assert len(mismatch) == 1 and mismatch[0]["rpm"] == 9.0 and mismatch[0]["setpoint_rpm"] == 14.0
+    link.set_rpm = real_set  # type: ignore[method-assign]
+    w.submit(SetRpm(11.0, epoch=3))
+    for _ in range(3):
+        snap = w.cycle()
+    assert snap.refused == 2 and snap.epoch == 3 and snap.setpoint_rpm == 11.0
+
+
+def test_a_refused_command_puts_the_supervisor_in_its_safe_state_over_tcp() -> None:
+    """Every refused command ends in the safe state: MANUAL asks for 40 rpm, the board's drive
+    tops out at 20 rpm and answers NAK,RANGE; the supervisor used to resync and try again,
+    never safe. Now: a ``mill_refused`` event and a safe decision naming the refusal."""
+    from control.device import DeviceConfig
+    from control.driver import MillClient
+    from control.emulator import MillEmulator
+    from control.motor import MotorConfig
+    from control.supervisor import Mode
+    from tests.twin.test_workers import Boxes, sup_worker
+    from twin.live.records import SetManualRpm
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=20.0)), seed=4)
+    port = emu.open_tcp(0)
+    try:
+        emu.set_motor(setpoint_rpm=10.0, actual_rpm=10.0, running=True)
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1,
+                          reconnect_wait_s=0.2)
+        b = Boxes("manual")
+        sup, sink, _sent = sup_worker(b, Mode.MANUAL)
+        mill = MillWorker(link, sink, b.mill, now_s=lambda: 0.0)
+        sup.send = mill.submit
+        mill.cycle()
+        b.frame(0.0)
+        sup.tick(b.view.now_s())
+        sup.handle(SetManualRpm(40.0))
+        assert not sup.safe
+        mill.cycle()
+        b.wall.t += 0.5
+        sup.tick(b.view.now_s())
+        assert sink.kinds("mill_refused")[0]["reason"] == "RANGE" and sup.safe
+        safe = [d for d in sink.kinds("decision") if d["decision"] == "safe"]
+        assert len(safe) == 1 and "refused" in safe[0]["reason"]
+        assert emu.motor.setpoint_rpm == 10.0 and emu.motor.running
+        link.close()
+    finally:
+        emu.close()
+
+
+def test_a_new_board_fault_is_logged_even_while_another_one_is_active() -> None:
+    """The board's fault changed from WDOG to DRIVE: the ``mill_fault`` fault was already
+    raised (the run's sink logs a fault once until cleared), so the DRIVE fault left no
+    event. Each new fault code is an event."""
+    from twin.live.records import RunEvents
+    from twin.state import LiveState
+
+    class Log:
+        def __init__(self) -> None:
+            self.events: list[dict] = []
+
+        def event(self, kind: str, t_s: float, **data) -> None:
+            self.events.append({"kind": kind, **data})
+
+    log = Log()
+    link, box = FakeLink(STOPPED_WDOG), Latest(MillSnapshot())
+    w = MillWorker(link, RunEvents(log, LiveState()), box, now_s=lambda: 0.0)
+    w.cycle()
+    link.board = MillStatus(13.0, 0.0, False, "DRIVE")
+    w.cycle()
+    w.cycle()
+    assert [e.get("mill_fault") for e in log.events if e["kind"] == "fault"] == ["WDOG", "DRIVE"]
+    link.board = MillStatus(13.0, 0.0, False, None)
+    w.cycle()
+    assert log.events[-1]["kind"] == "recovered" and log.events[-1]["fault"] == "mill_fault"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import queue
+import threading
 from collections.abc import Mapping
 from dataclasses import fields, replace
 from typing import Any
@@ -135,6 +136,24 @@ def test_vision_lost_alarm_and_safe_state_come_together() -> None:
     assert i_safe > i_alarm and i_safe - i_alarm <= 3 and sent == []
 
 
+def test_a_twin_that_never_runs_is_stale_for_the_loops_auto() -> None:
+    """The twin worker died (or hung) before its first step: the supervisor saw no twin time
+    at all and never called it stale, so AUTO went on without it. With the loop's settings a
+    twin that has not run within the twin timeout is stale: safe state."""
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
+    b = Boxes()
+    b.mill_at(5.0)
+    cfg = supervisor_config(RunConfig(mode="auto", dashboard=False).resolved())
+    assert cfg.twin_timeout_s is not None
+    w = SupervisorWorker(Supervisor(cfg, mode=Mode.AUTO), b.view, Sink(), [].append, None, b.mode)
+    advance(b, w, 0, cfg.twin_timeout_s - 1.0)
+    assert not w.safe
+    advance(b, w, cfg.twin_timeout_s - 1.0, cfg.twin_timeout_s + 2.0)
+    assert w.safe and "twin stale" in w.supervisor.safe_reason
+
+
 def test_camera_end_means_safe_at_once() -> None:
     b = Boxes()
     b.mill_at(5.0)
@@ -240,6 +259,94 @@ def test_process_worker_rows_trend_moving_average_and_slopes() -> None:
     assert state.snapshot().history["mi"].size == 3
 
 
+@pytest.mark.parametrize("bad_mi", [math.nan, math.inf, -math.inf, 1.5, -0.2])
+def test_a_reading_flagged_valid_with_an_impossible_mi_is_not_vision(bad_mi: float) -> None:
+    """A reading that says valid but carries NaN, inf or an MI outside [0, 1] kept the vision
+    timeout fed (AUTO never went safe) or dragged the trend; and an invalid reading's MI
+    reached the trend. Now both count as no valid MI: AUTO goes safe with the vision alarm."""
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    rows: list[Mapping[str, Any]] = []
+    slopes: queue.SimpleQueue = queue.SimpleQueue()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), slopes)
+    w, sink, _sent = sup_worker(b, Mode.AUTO)
+    t = 0.0
+    for i in range(40):  # 4 s of good frames, then 10 s of impossible ones
+        b.camera.set(CameraInfo(t, b.wall.t, None, None, i + 1, False))
+        pw.process(CameraReading(t, i, _reading(0.9)))
+        w.tick(b.view.now_s())
+        t, b.wall.t = t + 0.1, b.wall.t + 0.1
+    for i in range(40, 140):
+        b.camera.set(CameraInfo(t, b.wall.t, None, None, i + 1, False))
+        pw.process(CameraReading(t, i, _reading(bad_mi)))
+        pw.process(CameraReading(t + 0.05, i, _reading(0.1, valid=False)))
+        w.tick(b.view.now_s())
+        t, b.wall.t = t + 0.1, b.wall.t + 0.1
+    f = b.frames.get()
+    assert f.last_valid_t_s == pytest.approx(3.9) and f.estimate.level == pytest.approx(0.9, abs=0.02)
+    assert slopes.qsize() == 40 and rows[-1]["valid"] is False and rows[-2]["valid"] is False
+    assert "vision_lost" in sink.faults and w.safe
+
+
+def test_a_frame_time_that_goes_back_or_is_not_a_number_is_dropped_with_a_fault() -> None:
+    """A camera clock that jumps back (or a NaN frame time) raised in the Kalman trend and
+    killed the process thread: no more rows, no more trend. Now the frame is dropped with a
+    ``camera_clock`` fault, cleared when frames come in order again."""
+    b = Boxes("manual")
+    b.mill_at(5.0)
+    rows: list[Mapping[str, Any]] = []
+    sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, rows.append, LiveState())
+    for i, t in enumerate((1.0, 1.1, 1.2)):
+        pw.process(CameraReading(t, i, _reading(0.9)))
+    assert pw.process(CameraReading(0.5, 3, _reading(0.9))) is None  # back in time
+    assert pw.process(CameraReading(math.nan, 4, _reading(0.9))) is None
+    assert len(rows) == 3 and b.frames.get().t_s == 1.2 and b.frames.get().n_frames == 3
+    assert "camera_clock" in sink.faults
+    pw.process(CameraReading(1.2, 5, _reading(0.8)))  # in order again (the same time is fine)
+    pw.process(CameraReading(1.3, 6, _reading(0.8)))
+    assert len(rows) == 5 and b.frames.get().t_s == 1.3 and "camera_clock" not in sink.faults
+
+
+def test_a_camera_clock_that_jumps_back_is_lost_vision_for_auto() -> None:
+    """The camera's frame times jump 10 s back. Run time used to stand still until they
+    caught up again (the view never goes back) while every frame was refused: AUTO saw
+    neither a stopped camera nor lost vision. Now frames from the past do not count as
+    frames: run time goes on, the vision alarm and the safe state come."""
+    from vision.sources import Frame
+
+    class Meter:
+        def measure(self, image):
+            return _reading(0.9)
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    q: queue.Queue = queue.Queue()
+    sink = Sink()
+    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink, lambda row: None, LiveState())
+    w, _sink, sent = sup_worker(b, Mode.AUTO)
+    w.sink = sink
+    img = np.zeros((4, 4, 3), np.uint8)
+    seen: list[float] = []
+
+    def frames():
+        t = 0.0
+        for i in range(200):
+            if i == 100:
+                t -= 10.0  # the camera's clock jumps back
+            b.wall.t += 0.1
+            yield Frame(index=i, t_s=t, image=img)
+            t += 0.1
+            while not q.empty():
+                pw.process(q.get_nowait())
+            seen.append(b.view.now_s())
+            w.tick(seen[-1])
+
+    CameraWorker(frames(), Meter(), q, b.camera, LiveState(), monotonic=b.wall).run(threading.Event())
+    assert seen[-1] == pytest.approx(19.9, abs=0.05)  # run time went on through the jump
+    assert {"camera_clock", "vision_lost", "camera_stopped"} <= sink.faults and w.safe and sent == []
+
+
 def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     from vision.sources import Frame
 
@@ -251,8 +358,6 @@ def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     box: Latest[CameraInfo] = Latest(CameraInfo())
     frames = [Frame(index=i, t_s=i * 0.1, image=np.zeros((4, 4, 3), np.uint8)) for i in range(10)]
     cw = CameraWorker(frames, Meter(), q, box, LiveState())
-    import threading
-
     cw.run(threading.Event())
     assert box.get().ended and box.get().n_frames == 10 and box.get().t_s == pytest.approx(0.9)
     assert [q.get_nowait().frame for _ in range(3)] == [7, 8, 9]  # the oldest were dropped

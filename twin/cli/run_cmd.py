@@ -48,7 +48,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     The mill link is opened first: a URL that cannot be opened raises ``ConnectionError``
     before anything else starts (the CLI exits 2). ``on_started(loop, plant, dashboard)``
     is called once everything runs (tests use it to inject faults). Ctrl-C / SIGTERM end
-    the run cleanly.
+    the run cleanly. A run that had to end (its log could not be written, an essential
+    worker crashed: ``LiveLoop.failure``) raises ``TwinError`` once it is shut down.
     """
     from twin.clock import RunClock
     from twin.demo import DemoPlant, PlantConfig
@@ -130,8 +131,10 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if runlog is not None:
             if loop is not None:
                 summary = loop.summary(time.monotonic() - t_wall)
-                runlog.set_metadata(summary=asdict(summary))
+                loop.events.metadata(summary=asdict(summary))
             runlog.close()
+    if loop is not None and loop.failure is not None:
+        raise TwinError(f"the run stopped: {loop.failure} (log in {cfg.log_dir})")
     return summary
 
 

@@ -56,6 +56,12 @@ class Rate:
             return (len(self._times) - 1) / span if span > 0 else 0.0
 
 
+def is_valid_mi(r: Reading) -> bool:
+    """The reading counts as vision: flagged valid and its MI a number in [0, 1] (the meter's
+    indices are; anything else is a broken reading, never fed to the trend or the timeout)."""
+    return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
+
+
 def put_dropping_oldest(q: queue.Queue, item: Any) -> None:
     """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
     while True:
@@ -111,13 +117,18 @@ class CameraWorker:
                 return
             wall = self._monotonic()  # when the frame arrived
             n += 1
-            roi = self.box.get().roi
-            self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, roi, n, False))  # it came (alarms)
+            t, prev = float(frame.t_s), self.box.get()
+            # a frame without a time or from before the newest one (the camera's clock jumped
+            # back) is no news: run time and the camera alarm go on; the process worker drops it
+            came = math.isfinite(t) and (prev.t_s is None or t >= prev.t_s)
+            roi = prev.roi
+            if came:
+                self.box.set(CameraInfo(t, wall, frame.image, roi, n, False))  # it came (alarms)
             reading = self.meter.measure(frame.image)
-            if reading.roi is not roi:
-                self.box.set(CameraInfo(float(frame.t_s), wall, frame.image, reading.roi, n, False))
+            if came and reading.roi is not roi:
+                self.box.set(CameraInfo(t, wall, frame.image, reading.roi, n, False))
             self.fps.tick()
-            put_dropping_oldest(self.out, CameraReading(float(frame.t_s), int(frame.index), reading))
+            put_dropping_oldest(self.out, CameraReading(t, int(frame.index), reading))
             cadence = self._overlay_cadence
             if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
@@ -159,22 +170,34 @@ class ProcessWorker:
                 continue
             self.process(item)
 
-    def process(self, item: CameraReading) -> FrameRow:
+    def process(self, item: CameraReading) -> FrameRow | None:
+        """One reading -> trend, row, :class:`FrameInfo`. A frame whose time is not a number
+        or goes back before the newest processed one is dropped (None) with a
+        ``camera_clock`` fault: the trend's time only runs forward."""
+        prev = self.box.get()
+        if not math.isfinite(item.t_s) or (prev.n_frames and item.t_s < prev.t_s):
+            why = (f"went back from {prev.t_s:g} to {item.t_s:g} s" if math.isfinite(item.t_s)
+                   else f"is {item.t_s}")
+            self.sink.fault("camera_clock", f"camera frame time {why}: frames dropped until it runs forward again",
+                            self.view.now_s(), frame=item.frame)
+            return None
+        self.sink.clear_fault("camera_clock", "frame times in order again", item.t_s)
         r = item.reading
+        valid = is_valid_mi(r)
+        mi = r.mi if valid else math.nan
         mill = self.view.mill()
         rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
-        est = self.trend.update(item.t_s, r.mi, rpm)
-        ma = self.ma.update(r.mi if r.valid else math.nan)
-        prev = self.box.get()
-        last_valid = item.t_s if r.valid else prev.last_valid_t_s
+        est = self.trend.update(item.t_s, mi, rpm)
+        ma = self.ma.update(mi)
+        last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
-        if r.valid and self.slopes is not None and math.isfinite(r.slope_deg):
+        if valid and self.slopes is not None and math.isfinite(r.slope_deg):
             self.slopes.put((item.t_s, float(r.slope_deg)))
         tw = self.view.twin()
         row = FrameRow(
             t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
             d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration, slope_deg=r.slope_deg,
-            valid=r.valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
+            valid=valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
             ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
             rpm_setpoint=mill.setpoint_rpm, rpm_actual=mill.actual_rpm, mode=self.view.mode(), flags=tuple(r.flags),

@@ -19,7 +19,10 @@ Rules (each has a test in ``tests/twin/test_mill_worker.py``):
   the newest is sent; a command that failed on a lost link is dropped, not re-queued
   (a stop is the exception: stopping is always safe, so a failed stop is retried).
 - **A refusal is not a lost link.** ``MillRefused`` (NAK) is an event; the command is
-  dropped and the board is re-read (new epoch) so the supervisor resyncs to it.
+  dropped and the board is re-read (new epoch) so the supervisor resyncs to it. A
+  set-rpm the board acknowledges but does not report as its setpoint at the next read is
+  a ``mill_mismatch`` event and a re-read too. Both count in ``MillSnapshot.refused``
+  (the supervisor's safe state).
 """
 
 from __future__ import annotations
@@ -79,6 +82,8 @@ class MillWorker:
         # pending, owned by the worker thread
         self._rpm: SetRpm | None = None
         self._run: StartMill | StopMill | None = None
+        self._refused = 0  # refusals and set-rpms not taken, so far
+        self._expect_rpm: float | None = None  # the setpoint an ACKed set-rpm must show
 
     # -- any thread ------------------------------------------------------------------------
     def submit(self, cmd: MillCommand) -> None:
@@ -103,6 +108,7 @@ class MillWorker:
                 try:
                     self._send(cmd)
                 except MillRefused as exc:
+                    self._refused += 1
                     self.sink.event("mill_refused", self.now_s(), reason=exc.reason, **_describe(cmd))
                     for rest in due[i + 1 :]:
                         self._drop(rest, "an earlier command was refused: the board is read again first")
@@ -147,6 +153,7 @@ class MillWorker:
     def _send(self, cmd: MillCommand) -> None:
         if isinstance(cmd, SetRpm):
             self.link.set_rpm(cmd.rpm)
+            self._expect_rpm = cmd.rpm
         elif isinstance(cmd, StartMill):
             self.link.start()
         else:
@@ -160,14 +167,21 @@ class MillWorker:
             st = self.link.heartbeat()
         except (OSError, ControlError) as exc:
             return self._lost(snap, exc)
-        epoch = snap.epoch + 1 if new_epoch else snap.epoch
-        new = MillSnapshot(status=st, connected=True, epoch=epoch, polled=True)
-        self.box.set(new)
         t = self.now_s()
+        expect, self._expect_rpm = self._expect_rpm, None
+        if expect is not None and abs(st.setpoint_rpm - round(expect, 2)) > 0.011:
+            self._refused += 1
+            new_epoch = True
+            self.sink.event("mill_mismatch", t, rpm=expect, **st.as_dict())
+        epoch = snap.epoch + 1 if new_epoch else snap.epoch
+        new = MillSnapshot(status=st, connected=True, epoch=epoch, polled=True, refused=self._refused)
+        self.box.set(new)
         if not snap.connected:
             self.sink.clear_fault("mill_link", "mill link restored", t, url=self.link.url)
             self.sink.event("mill_synced", t, epoch=epoch, **st.as_dict())
         if st.fault:
+            if snap.fault and snap.fault != st.fault:  # another fault: an event of its own
+                self.sink.clear_fault("mill_fault", f"mill fault {snap.fault} replaced by {st.fault}", t)
             self.sink.fault("mill_fault", f"mill reports fault {st.fault}", t, mill_fault=st.fault)
         else:
             self.sink.clear_fault("mill_fault", "mill fault cleared", t)
@@ -175,8 +189,9 @@ class MillWorker:
         return new
 
     def _lost(self, snap: MillSnapshot, exc: BaseException) -> MillSnapshot:
-        new = MillSnapshot(status=snap.status, connected=False, epoch=snap.epoch, polled=True)
+        new = MillSnapshot(status=snap.status, connected=False, epoch=snap.epoch, polled=True, refused=self._refused)
         self.box.set(new)
+        self._expect_rpm = None  # the board is read again when the link is back
         if self._rpm is not None:  # decided on a board we can no longer see
             self._drop(self._rpm, f"link lost: {exc}")
             self._rpm = None

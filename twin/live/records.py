@@ -58,12 +58,15 @@ class MillSnapshot:
     """The mill as the mill worker last saw it: the board's own report (``status``, None
     before the first answer) plus the link. ``epoch`` grows by one each time the board
     was read again after a link loss or a refused command: commands decided on an older
-    epoch are stale and are dropped. ``polled``: the worker has tried at least once."""
+    epoch are stale and are dropped. ``polled``: the worker has tried at least once.
+    ``refused``: commands the board refused (NAK) or acknowledged without taking them, so
+    far in this run (the supervisor goes safe when it grows)."""
 
     status: MillStatus | None = None
     connected: bool = False
     epoch: int = 0
     polled: bool = False
+    refused: int = 0
 
     @property
     def actual_rpm(self) -> float:
@@ -238,21 +241,42 @@ class EventSink(Protocol):
 class RunEvents:
     """The run's :class:`EventSink`: events to the run log (``event(kind, t_s, **data)``),
     faults raised once until cleared (an event plus a dashboard alarm), numbers to the
-    dashboard, metadata to the run log's ``metadata.json``. Thread-safe; counts faults and decisions."""
+    dashboard, metadata to the run log's ``metadata.json``, frame rows (``frame``).
+    Thread-safe; counts faults and decisions. A run-log write that fails (disk full,
+    read-only) never raises into a worker: the first one is a ``run_log`` alarm and goes to
+    ``on_failure`` (the loop ends the run)."""
 
-    def __init__(self, runlog: Any, state: LiveState) -> None:
+    def __init__(self, runlog: Any, state: LiveState, on_failure: Callable[[str], None] | None = None) -> None:
         self.runlog = runlog
         self.state = state
+        self.on_failure = on_failure
         self._lock = threading.Lock()
         self._active: set[str] = set()
         self.n_faults = 0
         self.n_decisions = 0
+        self.log_error: str | None = None
+
+    def _write(self, write: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        try:
+            write(*args, **kwargs)
+        except OSError as exc:
+            with self._lock:
+                if self.log_error is not None:
+                    return
+                self.log_error = reason = f"cannot write the run log: {exc}"
+            self.state.set_alarm("run_log", reason)
+            if self.on_failure is not None:
+                self.on_failure(reason)
+
+    def frame(self, row: Any) -> None:
+        """One ``frames.csv`` row."""
+        self._write(self.runlog.frame, row)
 
     def event(self, kind: str, t_s: float, **data: Any) -> None:
         if kind == "decision":
             with self._lock:
                 self.n_decisions += 1
-        self.runlog.event(kind, t_s, **data)
+        self._write(self.runlog.event, kind, t_s, **data)
 
     def fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
         with self._lock:
@@ -260,7 +284,7 @@ class RunEvents:
                 return
             self._active.add(key)
             self.n_faults += 1
-        self.runlog.event("fault", t_s, fault=key, message=message, **data)
+        self._write(self.runlog.event, "fault", t_s, fault=key, message=message, **data)
         self.state.set_alarm(key, message)
 
     def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
@@ -268,14 +292,14 @@ class RunEvents:
             if key not in self._active:
                 return
             self._active.discard(key)
-        self.runlog.event("recovered", t_s, fault=key, message=message, **data)
+        self._write(self.runlog.event, "recovered", t_s, fault=key, message=message, **data)
         self.state.set_alarm(key, None)
 
     def numbers(self, **values: Any) -> None:
         self.state.update_numbers(**values)
 
     def metadata(self, **data: Any) -> None:
-        self.runlog.set_metadata(**data)
+        self._write(self.runlog.set_metadata, **data)
 
     def active(self) -> frozenset[str]:
         with self._lock:

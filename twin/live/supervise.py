@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 from control.errors import ControlError
 from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
+from twin.live.camera import is_valid_mi
 from twin.live.records import (
     EventSink,
     Latest,
@@ -44,7 +45,7 @@ def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
     """What the supervisor sees now, from the newest snapshots."""
     frames, mill, twin, cam = view.frames(), view.mill(), view.twin(), view.camera()
     r = frames.reading
-    radial = r.mi / r.mi_sigmoid if r is not None and r.valid and r.mi_sigmoid > 0 else None
+    radial = r.mi / r.mi_sigmoid if r is not None and is_valid_mi(r) and r.mi_sigmoid > 0 else None
     sp, act = mill.setpoint_rpm, mill.actual_rpm
     return SupervisorInputs(
         trend=frames.estimate,
@@ -53,6 +54,7 @@ def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
         mill_connected=mill.connected,
         mill_running=mill.running if mill.status is not None else None,
         mill_epoch=mill.epoch,
+        mill_refused=mill.refused,
         radial_factor=radial,
         last_valid_mi_s=frames.last_valid_t_s,
         camera_ended=cam.ended,

@@ -1,0 +1,107 @@
+"""The live loop's threads on a fake mill and no camera: when the run can no longer keep its
+rules (the run log cannot be written, the supervisor or the mill worker crashed) it ends,
+stops the mill on the way out, and says why (seconds; no sim, no serial)."""
+
+from __future__ import annotations
+
+import errno
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from control.protocol import MillStatus
+from tests.twin.test_mill_worker import FakeLink
+from twin.config import RunConfig
+from twin.loop import LiveLoop
+from twin.runlog import RunLog, read_events
+
+
+class FullDisk(RunLog):
+    """A run log on a disk that fills up when ``full`` is set (ENOSPC on every write)."""
+
+    full = False
+
+    def _write(self, fh, text: str) -> None:
+        if self.full:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        super()._write(fh, text)
+
+
+def _wait(pred, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+@pytest.fixture
+def thread_errors(monkeypatch) -> list[BaseException | None]:
+    """Exceptions that escape a thread (each printed a traceback on the run's stderr)."""
+    seen: list[BaseException | None] = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: seen.append(args.exc_value))
+    return seen
+
+
+def _loop(tmp_path: Path, log: RunLog) -> tuple[LiveLoop, FakeLink]:
+    link = FakeLink(MillStatus(12.0, 12.0, True, None))  # a running board
+    cfg = RunConfig(dashboard=False, mode="manual", log_dir=tmp_path / "run").resolved()
+    loop = LiveLoop(cfg, iter(()), link, log).start()
+    assert _wait(lambda: loop.mill_box.get().connected, 5.0)
+    return loop, link
+
+
+@pytest.mark.timeout(30)
+def test_a_full_disk_ends_the_run_and_stops_the_mill(tmp_path: Path, thread_errors) -> None:
+    """ENOSPC on the run log: the supervisor thread died on its next event (a traceback), the
+    guard's own fault event failed too, and the mill worker fed the board's watchdog on:
+    the mill ran unsupervised and unlogged. Now the run ends and the mill is stopped."""
+    log = FullDisk(tmp_path / "run")
+    loop, link = _loop(tmp_path, log)
+    try:
+        log.full = True
+        loop.set_manual_rpm(20.0)  # the operator's event cannot be written
+        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its log"
+    finally:
+        loop.stop()
+        log.close()
+    assert loop.failure is not None and "No space left on device" in loop.failure
+    assert link.sent[-1] == ("stop", None) and not link.board.running
+    assert thread_errors == []
+    assert any("cannot write the run log" in a for a in loop.state.alarms)
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("worker", ["supervisor", "mill"])
+def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
+    tmp_path: Path, worker: str, monkeypatch
+) -> None:
+    """A crashed supervisor left the mill worker feeding the watchdog of a running mill with
+    nobody deciding; a crashed mill worker left a snapshot that still said 'connected'.
+    Either way the run now ends, logs why, and stops the mill."""
+    log = RunLog(tmp_path / "run")
+    loop, link = _loop(tmp_path, log)
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("bug")
+
+    try:
+        if worker == "supervisor":
+            monkeypatch.setattr(loop.supervisor, "tick", boom)
+            loop.set_manual_rpm(20.0)
+        else:
+            monkeypatch.setattr(loop.mill, "cycle", boom)  # its next poll, within 0.1 s
+        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its worker"
+    finally:
+        loop.stop()
+        log.close()
+    assert loop.failure is not None and f"{worker} worker crashed" in loop.failure
+    assert link.sent[-1] == ("stop", None) and not link.board.running
+    events = read_events(tmp_path / "run")
+    assert any(e["kind"] == "fault" and e["fault"] == f"thread_{worker}" for e in events)
+    assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
+               for e in events)
+    assert events[-1]["kind"] == "stop" and f"{worker} worker crashed" in events[-1]["failure"]
