@@ -40,7 +40,8 @@ Limits
     application (``sim.recipe.DrumSpec.critical_rpm`` is the one formula; ``None``: only
     ``max_rpm`` limits). The setpoint moves
     at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
-    ``ramp`` decision).
+    ``ramp`` decision); a ramp from a board found outside the limits (started from its
+    front panel) steps inside them at once.
 
 Board resync
     ``inputs.mill_epoch`` changes whenever the application has (re)read the board after a
@@ -473,8 +474,9 @@ class Supervisor:
         self.commanded_rpm = round(float(board), 2)
         if not ramping or self.safe:
             self.target_rpm = self.commanded_rpm
-        if self.manual_rpm is None and self._mode is Mode.MANUAL:
-            self.manual_rpm = self.commanded_rpm
+        lo, hi = self.config.rpm_limits
+        if self.manual_rpm is None and self._mode is Mode.MANUAL and lo <= self.commanded_rpm <= hi:
+            self.manual_rpm = self.commanded_rpm  # (a board outside the limits: no operator rpm until one is given)
 
     # -- internals ---------------------------------------------------------------------------
     def faults(self, now_s: float, inputs: SupervisorInputs) -> list[str]:
@@ -543,6 +545,8 @@ class Supervisor:
         nxt = round(self.commanded_rpm + max(-max_d, min(max_d, diff)), 2)
         if abs(self.target_rpm - nxt) < 0.01:
             nxt = self.target_rpm
+        # a board found outside the limits (front panel): the first step goes inside them at once
+        nxt = c.clamp(nxt)
         self.commanded_rpm, self._last_cmd_s = nxt, now_s
         return nxt
 
