@@ -73,6 +73,11 @@ the supervisor would believe a board nobody reads; without the process worker no
 are logged. (A camera that fails is an ended camera, unless the meter cannot read its
 frames at all, a ``VisionError``: bad input ends the run too; a dead twin goes stale.)"""
 
+SUPERVISOR_STALL_S = 5.0
+"""Wall seconds (at least; 5 supervisor periods if longer) without one pass of the supervisor
+worker's loop before the run ends: a supervisor that hangs (no crash) would otherwise leave
+the mill worker feeding the watchdog of a mill nobody supervises."""
+
 
 @dataclass
 class Summary:
@@ -135,6 +140,7 @@ class LiveLoop:
         self.mill_box: Latest[MillSnapshot] = Latest(MillSnapshot())
         self.twin_box: Latest[TwinInfo] = Latest(TwinInfo())
         self.mode_box: Latest[str] = Latest(config.mode)
+        self.supervisor_alive: Latest[float] = Latest(time.monotonic())  # its last pass (wall, monotonic s)
         self.view = RunView(
             self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box,
             self.clock.now_s,
@@ -165,6 +171,7 @@ class LiveLoop:
         self.supervisor = SupervisorWorker(
             Supervisor(supervisor_config(config), mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
+            alive=self.supervisor_alive,
         )
         self._threads: list[threading.Thread] = []
         self.state.update_numbers(mode=config.mode, mill_state="connecting")
@@ -197,7 +204,23 @@ class LiveLoop:
             th = threading.Thread(target=self._guard(name, worker.run), name=f"drumtwin-{name}", daemon=True)
             th.start()
             self._threads.append(th)
+        th = threading.Thread(target=self._watch, name="drumtwin-watch", daemon=True)
+        th.start()
+        self._threads.append(th)
         return self
+
+    def _watch(self) -> None:
+        """End the run when the supervisor worker stops passing through its loop (hung, not
+        crashed: a crash is the guard's) for ``SUPERVISOR_STALL_S``."""
+        self.supervisor_alive.set(time.monotonic())
+        limit = max(SUPERVISOR_STALL_S, 5.0 * self.config.supervisor_period_s / self.clock.speed)
+        while not self.stop_event.wait(0.25):
+            quiet = time.monotonic() - self.supervisor_alive.get()
+            if quiet > limit:
+                reason = f"the supervisor worker has not run for {quiet:.1f} s"
+                self.events.fault("supervisor_stalled", reason, self.view.now_s())
+                self._fail(reason)
+                return
 
     def _guard(self, name: str, run: Callable[[threading.Event], None]) -> Callable[[], None]:
         def target() -> None:

@@ -105,3 +105,29 @@ def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
     assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
                for e in events)
     assert events[-1]["kind"] == "stop" and f"{worker} worker crashed" in events[-1]["failure"]
+
+
+@pytest.mark.timeout(30)
+def test_a_hung_supervisor_ends_the_run_and_stops_the_mill(tmp_path: Path, monkeypatch) -> None:
+    """A supervisor that hangs (no crash for the guard to see) left the mill worker feeding
+    the watchdog of a running mill with nobody deciding. The loop's watch now ends the run
+    once the supervisor has not passed through its loop for the stall time."""
+    import twin.loop
+
+    monkeypatch.setattr(twin.loop, "SUPERVISOR_STALL_S", 1.0)
+    log = RunLog(tmp_path / "run")
+    loop, link = _loop(tmp_path, log)
+    release = threading.Event()
+    try:
+        assert not _wait(loop.stop_event.is_set, 1.5), "a healthy supervisor is not a stall"
+        monkeypatch.setattr(loop.supervisor, "tick", lambda now_s: release.wait(20.0))
+        loop.set_manual_rpm(20.0)  # its next pass hangs in tick
+        assert _wait(loop.stop_event.is_set, 5.0), "the run went on with a hung supervisor"
+    finally:
+        release.set()
+        loop.stop()
+        log.close()
+    assert loop.failure is not None and "supervisor worker has not run" in loop.failure
+    assert link.sent[-1] == ("stop", None) and not link.board.running
+    events = read_events(tmp_path / "run")
+    assert any(e["kind"] == "fault" and e["fault"] == "supervisor_stalled" for e in events)

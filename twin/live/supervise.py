@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import queue
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -76,6 +77,7 @@ class SupervisorWorker:
         *,
         period_s: float = 1.0,
         speed: float = 1.0,
+        alive: Latest[float] | None = None,
     ) -> None:
         self.supervisor = supervisor
         self.view = view
@@ -85,6 +87,7 @@ class SupervisorWorker:
         self.mode_box = mode_box
         self.period_s = float(period_s)
         self.speed = float(speed)
+        self.alive = alive  # the wall time (monotonic s) of each pass of run(): the loop's stall watch
         self._inbox: queue.SimpleQueue[SupervisorCommand] = queue.SimpleQueue()
         self._epoch = 0  # the mill epoch of the inputs of the latest step
         self.safe = False  # mirrors supervisor.safe after each tick (read by tests and the CLI)
@@ -98,6 +101,8 @@ class SupervisorWorker:
     def run(self, stop: threading.Event) -> None:
         period_wall = self.period_s / self.speed
         while not stop.is_set():
+            if self.alive is not None:
+                self.alive.set(time.monotonic())
             try:
                 cmd = self._inbox.get(timeout=period_wall)
             except queue.Empty:
