@@ -171,7 +171,8 @@ def _refine_circle(
 def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     """Find the drum circle in a front-view frame (px of the original image).
 
-    Hough transform on a copy downscaled to <= 400 px (at three vote thresholds), a
+    Hough transform on a copy downscaled to <= 400 px (median-filtered, then Gaussian-blurred
+    if that finds no whole rim; at three vote thresholds each), a
     least-squares circle fit on the rim's outer edge for each candidate, and the candidate
     with the most complete rim wins. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
     Raises ``VisionError`` when no circle is found (pass ``--roi cx,cy,r`` then).
@@ -188,22 +189,26 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     h, w = gray.shape
     s = min(1.0, 400.0 / max(h, w))
     small = cv2.resize(gray, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1.0 else gray.copy()
-    small = cv2.medianBlur(small, 5)
     sh, sw = small.shape
     pts = _edge_points(gray)
     best: tuple[int, tuple[float, float, float]] | None = None
-    for acc in (30, 20, 12):
-        circles = cv2.HoughCircles(
-            small, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
-            minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
-        )
-        if circles is None:
-            continue
-        fit = _refine_circle(pts, *(float(v) / s for v in circles[0][0][:3]))
-        cover = _rim_coverage(pts, *fit)
-        if best is None or cover > best[0]:
-            best = (cover, fit)
-        if cover >= 300:  # a (nearly) whole rim: done; in a small frame the strongest circle can be the bed's edge
+    # the median keeps the rim and drops the particles' texture, but it erases a rim that the
+    # downscaling made a line of a pixel or less (large frames): a Gaussian blur keeps that one
+    for blurred in (cv2.medianBlur(small, 5), cv2.GaussianBlur(small, (5, 5), 0)):
+        for acc in (30, 20, 12):
+            circles = cv2.HoughCircles(
+                blurred, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
+                minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
+            )
+            if circles is None:
+                continue
+            fit = _refine_circle(pts, *(float(v) / s for v in circles[0][0][:3]))
+            cover = _rim_coverage(pts, *fit)
+            if best is None or cover > best[0]:
+                best = (cover, fit)
+            if cover >= 300:  # a (nearly) whole rim: done; in a small frame the strongest circle can be the bed's edge
+                break
+        if best is not None and best[0] >= 300:
             break
     if best is None:
         raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")

@@ -9,6 +9,7 @@ from vision.errors import VisionError
 from vision.meter import Meter
 from vision.roi import DrumROI, detect_drum, roi_mask
 from vision.slope import bed_slope_deg
+from vision.synthetic import particle_drum
 
 # HSV classes for the synthetic particle renders (blue and white)
 PAINTED = (
@@ -209,6 +210,21 @@ def test_detect_drum_on_synthetic_frame():
     true = H.roi_for()
     assert abs(roi.cx_px - true.cx_px) < 4 and abs(roi.cy_px - true.cy_px) < 4
     assert abs(roi.r_px - (true.r_px + 4)) < 0.05 * true.r_px
+
+
+@pytest.mark.parametrize(("size", "colours"), [
+    ((2048, 2048), ((30, 70, 140), (170, 210, 230))),  # brown and beige
+    ((1600, 1200), ((0, 140, 255), (35, 35, 35))),  # orange and black
+])
+def test_detect_drum_on_a_large_frame_with_a_thin_rim(size, colours):
+    """The rim of a large frame is a line of 1 px or less once the frame is scaled to 400 px for
+    the Hough transform; it must still be found (a median filter there erased it and the
+    circle found was the bed's, 15-30% of R off)."""
+    sc = particle_drum(size, colours, mix=0.5, slope_deg=30.0, seed=1)
+    roi = detect_drum(sc.image)
+    R = sc.roi.r_px
+    assert math.hypot(roi.cx_px - sc.roi.cx_px, roi.cy_px - sc.roi.cy_px) < 0.01 * R
+    assert abs(roi.r_px / 0.975 - R) < 0.01 * R  # the rim's outer edge, 3 px out at most
 
 
 def test_detect_drum_fails_clearly():
