@@ -339,14 +339,29 @@ def suggest_classes(
     return MeterConfig(fit_colour_model(samples, k=k, seed=seed), None, "color", source="<suggested>")
 
 
+_NO_CLASS_BGR = ((45, 45, 45), (150, 150, 150), (110, 30, 110))  # candidates, the first preferred
+
+
+def _no_class_bgr(class_bgr: Sequence[tuple[int, int, int]]) -> tuple[int, int, int]:
+    """The preview's colour for *no class*: dark grey, unless a class is shown in about that
+    colour (black particles), then the candidate farthest from every class colour."""
+    def gap(c: tuple[int, int, int]) -> float:
+        return min((float(np.abs(np.subtract(c, k)).max()) for k in class_bgr), default=255.0)
+
+    first = _NO_CLASS_BGR[0]
+    return first if gap(first) >= 60 else max(_NO_CLASS_BGR, key=gap)
+
+
 def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: DrumROI) -> np.ndarray:
-    """The frame beside its class map (each class in its display colour, no class dark grey),
-    with the drum circle and a legend: a check at a glance."""
+    """The frame beside its class map (each class in its display colour; no class dark grey,
+    or, when a class is shown about that colour, another colour the legend shows), with the
+    drum circle and a legend: a check at a glance."""
     img = np.asarray(image_bgr)
     h, w = img.shape[:2]
     labels = classify(img, tuple(classes))
     counted = counted_classes(classes)
-    cmap = np.full((len(counted) + 1, 3), 45, np.uint8)
+    cmap = np.empty((len(counted) + 1, 3), np.uint8)
+    cmap[0] = none_bgr = _no_class_bgr([c.display_bgr for c in counted])
     for i, c in enumerate(counted):
         cmap[i + 1] = c.display_bgr
     painted = cmap[labels]
@@ -364,7 +379,7 @@ def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: Dr
         (f"{c.name}  {100 * float(((labels == i + 1) & inside).sum()) / n_in:.1f}% of drum", c.display_bgr)
         for i, c in enumerate(counted)
     ]
-    lines.append(("grey: no class (background, rim, glare, shadow)", None))
+    lines.append(("no class (background, rim, glare, shadow)", none_bgr))
     width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, fs, 1)[0][0] for t, _ in lines) + lh + 20
     panel = out[0: lh * len(lines) + 10, w: min(2 * w, w + width)]
     panel[...] = (panel * 0.3).astype(np.uint8)
