@@ -1,8 +1,10 @@
 """``classes suggest``: the class preview and the notes it gives on the learned classes."""
 
+import cv2
 import numpy as np
 
 from vision.colours import classify
+from vision.config import parse_config
 from vision.suggest import class_preview, suggest_classes
 from vision.synthetic import particle_drum
 
@@ -23,3 +25,22 @@ def test_preview_tells_a_black_class_from_no_class():
     for i, c in enumerate(cfg.counted, start=1):
         shown = np.median(pane[(labels == i) & ~legend].astype(int), axis=0)
         assert np.abs(shown - none_bgr).max() >= 60, (c.name, shown, none_bgr)
+
+
+def test_classes_without_a_valley_between_them_are_a_warning(tmp_path):
+    """Grey and white particles differ only in lightness, and shading spreads both over the
+    same greys: no colour rule splits them right, so ``classes suggest`` says so (on stderr
+    and in the TOML) instead of handing out a config that looks fine; blue/white does not."""
+    from tests.cli import cli
+
+    grey_white = particle_drum((640, 480), ((128, 128, 128), (235, 235, 235)), mix=0.0, seed=0)
+    cfg = suggest_classes(grey_white.image)
+    assert len(cfg.warnings) == 1 and "not separated by a valley" in cfg.warnings[0]
+    assert all(f"'{c.name}'" in cfg.warnings[0] for c in cfg.counted)
+    assert suggest_classes(particle_drum((640, 480), mix=0.0, seed=0).image).warnings == ()
+    path = tmp_path / "grey-white.png"
+    cv2.imwrite(str(path), grey_white.image)
+    r = cli("classes", "suggest", path)
+    assert r.code == 0 and r.err.count("warning:") == 1 and "valley" in r.err
+    assert "# warning: classes" in r.out
+    assert parse_config(r.out).warnings == ()  # a comment: the config itself reads back as before

@@ -308,6 +308,8 @@ def suggest_cmd(
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
                "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
+    comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
+    _warn(cfg.warnings)
     if preview is not None:
         import cv2
 
