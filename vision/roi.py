@@ -123,6 +123,26 @@ def _rim_coverage(pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: f
     return int(np.unique(ang).size)
 
 
+def _in_frame_degrees(shape_hw: tuple[int, int], cx: float, cy: float, r: float) -> int:
+    """Degrees of the circle (0..360) that lie inside the image."""
+    a = np.radians(np.arange(360) + 0.5 - 180.0)
+    x, y = cx + r * np.cos(a), cy + r * np.sin(a)
+    return int(((x >= 0) & (x <= shape_hw[1] - 1) & (y >= 0) & (y <= shape_hw[0] - 1)).sum())
+
+
+def _looks_like_a_rim(pts: tuple[np.ndarray, np.ndarray], shape_hw: tuple[int, int], cx: float, cy: float,
+                      r: float) -> bool:
+    """A drum's rim is a (nearly) whole circle of edges where the frame shows it, or at least an
+    arc that stands out from the edges 10% inside and outside it (by >= 120 degrees, on the
+    calmer side). The best circle through a scene without a drum (clutter, a photo) is a
+    broken arc no clearer than its surroundings."""
+    cover = _rim_coverage(pts, cx, cy, r)
+    if cover >= 0.8 * _in_frame_degrees(shape_hw, cx, cy, r):
+        return True
+    around = min(_rim_coverage(pts, cx, cy, 0.9 * r), _rim_coverage(pts, cx, cy, 1.1 * r))
+    return cover - around >= 120
+
+
 def _refine_circle(
     pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: float
 ) -> tuple[float, float, float]:
@@ -175,7 +195,8 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     if that finds no whole rim; at three vote thresholds each), a
     least-squares circle fit on the rim's outer edge for each candidate, and the candidate
     with the most complete rim wins. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
-    Raises ``VisionError`` when no circle is found (pass ``--roi cx,cy,r`` then).
+    Raises ``VisionError`` when no circle is found, or the best one does not look like a rim
+    (a scene without a drum; pass ``--roi cx,cy,r`` then).
     """
     img = np.asarray(image_bgr)
     if img.ndim == 3 and img.shape[2] == 3:
@@ -213,4 +234,7 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     if best is None:
         raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")
     cx, cy, r = best[1]
+    if not _looks_like_a_rim(pts, (h, w), cx, cy, r):
+        raise VisionError("could not find the drum circle in the first frame (no circle of edges stands out as a "
+                          "rim: is the drum in the picture?); pass --roi cx,cy,r (px)")
     return DrumROI(float(cx), float(cy), float(r * (1.0 - inset)))
