@@ -260,3 +260,18 @@ def test_rect_roi_mask():
     roi = DrumROI(50, 40, 20, kind="rect", half_w_px=30, half_h_px=10)
     m = roi_mask(roi, (100, 120))
     assert m.sum() == 61 * 21
+
+
+def test_a_drum_cut_by_the_frame_edge_gives_no_mi():
+    """A drum partly outside the frame: the centroids are those of the part in view, so the
+    MI is not the bed's. More than 5% of the drum's area outside the frame makes the row
+    invalid (flag ``roi_outside_frame``); a sliver, or the drum touching the edge, does not."""
+    sc = particle_drum((640, 480), mix=0.0, slope_deg=30.0, seed=2, particle_r_frac=0.045)
+    x0 = int(sc.roi.cx_px)  # the frame cut at the drum's centre: half of it is outside
+    for img, roi, valid in [(sc.image, None, True), (sc.image[:, x0:], None, False),
+                            (sc.image[:, 95:], None, True),  # the rim just touches the edge
+                            (sc.image, DrumROI(sc.roi.cx_px, 100.0, sc.roi.r_px), False)]:
+        r = Meter(PAINTED, roi=roi).measure(np.ascontiguousarray(img))
+        assert r.valid is valid and math.isfinite(r.mi) is valid, (img.shape, r.flags)
+        assert any(f.startswith("roi_outside_frame:") for f in r.flags) is not valid, r.flags
+        assert math.isfinite(r.cls("blue").cx_px)  # what is in view is still measured
