@@ -248,3 +248,18 @@ def test_mi_dark_bed_without_classes_still_gives_the_slope(tmp_path):
     row = rows_of(r.out)[0]
     assert row["valid"] == "0" and "few_pixels" in row["flags"]
     assert float(row["slope_deg"]) == pytest.approx(25.0, abs=1.0)
+
+
+def test_mi_on_grayscale_frames_is_an_error(tmp_path):
+    """A grayscale image cannot give colour classes: one image is a one-line error (it was a
+    CSV with one invalid row and exit 0), and so is a folder of nothing else; in a folder
+    with colour frames it stays a flagged row."""
+    gray = cv2.cvtColor(H.half_disks(), cv2.COLOR_BGR2GRAY)
+    cv2.imwrite(str(tmp_path / "a.png"), gray)
+    cv2.imwrite(str(tmp_path / "b.jpg"), gray)
+    assert_one_line_error(cli("mi", tmp_path / "a.png"), "a.png", "grayscale")
+    assert_one_line_error(cli("mi", tmp_path), "none of the 2 frames", "grayscale")
+    cv2.imwrite(str(tmp_path / "c.png"), H.half_disks())
+    r = cli("mi", tmp_path)
+    assert r.code == 0, r.err
+    assert [row["valid"] for row in rows_of(r.out)] == ["0", "0", "1"]

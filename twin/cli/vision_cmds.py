@@ -141,6 +141,7 @@ def mi_cmd(
     n_valid = 0
     n_good = 0
     n = 0
+    first_bad: str | None = None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     progress = Progress(TextColumn("mi"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -153,6 +154,13 @@ def mi_cmd(
                     if kind == "image":
                         raise VisionError(fr.error)
                     reading = meter._invalid(f"bad_frame:{fr.error}")
+                    first_bad = first_bad or fr.error
+                elif fr.image.ndim == 2:
+                    why = f"{fr.name or 'the frame'} is a grayscale image; the mixing index needs colour frames"
+                    if kind == "image":
+                        raise VisionError(why)
+                    reading = meter.measure(fr.image)  # a flagged row
+                    first_bad = first_bad or why
                 else:
                     reading = meter.measure(fr.image)
                     n_good += 1
@@ -211,7 +219,7 @@ def mi_cmd(
     if n == 0:
         raise VisionError("the source gave no frames")
     if n_good == 0:
-        raise VisionError(f"none of the {n} frames could be read (corrupt or not images)")
+        raise VisionError(f"none of the {n} frames could be read (corrupt or not images): {first_bad}")
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
     console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
