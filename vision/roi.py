@@ -232,9 +232,9 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
         if best is not None and best[0] >= 300:
             break
     if best is None:
-        raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")
+        raise VisionError("could not find the drum circle; pass --roi cx,cy,r (px)")
     cx, cy, r = best[1]
     if not _looks_like_a_rim(pts, (h, w), cx, cy, r):
-        raise VisionError("could not find the drum circle in the first frame (no circle of edges stands out as a "
-                          "rim: is the drum in the picture?); pass --roi cx,cy,r (px)")
+        raise VisionError("could not find the drum circle (no circle of edges stands out as a rim: is the drum "
+                          "in the picture?); pass --roi cx,cy,r (px)")
     return DrumROI(float(cx), float(cy), float(r * (1.0 - inset)))

@@ -263,3 +263,18 @@ def test_mi_on_grayscale_frames_is_an_error(tmp_path):
     r = cli("mi", tmp_path)
     assert r.code == 0, r.err
     assert [row["valid"] for row in rows_of(r.out)] == ["0", "0", "1"]
+
+
+def test_a_frame_without_a_drum_in_a_sequence_is_a_flagged_row(tmp_path):
+    """A frame of another size in which no drum is found (a test chart, a blank frame) made
+    the whole folder an error after the rows before it; now it is an invalid row saying so.
+    When the first frame has no drum, the error names it."""
+    cv2.imwrite(str(tmp_path / "a.png"), H.half_disks())
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((300, 400, 3), 128, np.uint8))
+    cv2.imwrite(str(tmp_path / "c.png"), H.fine_mix())
+    r = cli("mi", tmp_path)
+    assert r.code == 0, r.err
+    rows = rows_of(r.out)
+    assert [row["valid"] for row in rows] == ["1", "0", "1"]
+    assert "drum" in rows[1]["flags"] and rows[1]["mi"] == ""
+    assert_one_line_error(cli("mi", tmp_path / "b.png", tmp_path / "c.png"), "b.png", "drum", "--roi")

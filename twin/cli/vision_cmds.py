@@ -162,8 +162,14 @@ def mi_cmd(
                     reading = meter.measure(fr.image)  # a flagged row
                     first_bad = first_bad or why
                 else:
-                    reading = meter.measure(fr.image)
-                    n_good += 1
+                    try:
+                        reading = meter.measure(fr.image)
+                    except VisionError as exc:  # no drum found in a frame of a new size
+                        if n_good == 0:
+                            raise VisionError(f"{fr.name or 'the first frame'}: {exc}") from None
+                        reading = meter._invalid(f"bad_frame:{exc}")
+                    else:
+                        n_good += 1
                     if (cfg.is_default and meter.bed == "color" and n_good == 1
                             and any(f.startswith("few_pixels") for f in reading.flags)):
                         raise _no_default_pixels_error()
