@@ -278,3 +278,18 @@ def test_a_frame_without_a_drum_in_a_sequence_is_a_flagged_row(tmp_path):
     assert [row["valid"] for row in rows] == ["1", "0", "1"]
     assert "drum" in rows[1]["flags"] and rows[1]["mi"] == ""
     assert_one_line_error(cli("mi", tmp_path / "b.png", tmp_path / "c.png"), "b.png", "drum", "--roi")
+
+
+
+def test_classes_suggest_uses_every_frame_of_a_short_source(tmp_path):
+    """Fewer images than --frames: every one is learned from (3 of 3 was 1, 5 of 5 was 2:
+    the spread divided by --frames instead of the frames taken)."""
+    from vision.synthetic import particle_drum
+
+    for i in range(5):
+        cv2.imwrite(str(tmp_path / f"f{i}.png"), particle_drum((200, 150), mix=0.5, seed=i).image)
+    for n, want in ((12, 5), (3, 3), (1, 1)):
+        r = cli("classes", "suggest", tmp_path, "--frames", n)
+        assert r.code == 0, r.err
+        assert f"from {want} frame(s)" in r.out, r.out.splitlines()[0]
+

@@ -262,7 +262,8 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
         paths = [_P(str(spec))] if kind == "image" else _image_paths(spec)
         if kind == "image" and not paths[0].exists():
             raise FileNotFoundError(f"no such file: {paths[0]}")
-        idx = sorted({round(i * (len(paths) - 1) / max(n_frames - 1, 1)) for i in range(min(n_frames, len(paths)))})
+        m = min(n_frames, len(paths))
+        idx = sorted({round(i * (len(paths) - 1) / max(m - 1, 1)) for i in range(m)})
         out = []
         for i in idx:
             img, err = read_image(paths[i])
