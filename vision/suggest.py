@@ -338,12 +338,13 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
 
 def suggest_classes(
     frames: Sequence[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
-    per_frame: int | None = None,
+    per_frame: int | None = None, rois: Sequence[DrumROI] | None = None,
 ) -> MeterConfig:
     """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames.
 
-    ``roi`` fixes the drum for every frame; ``None`` detects it in each frame. The ROI is
-    not written into the config (the meter finds the drum per frame size). ``warnings``
+    ``roi`` fixes the drum for every frame; ``rois`` gives each frame's (already found);
+    with neither, it is detected in each frame. The ROI is not written into the config
+    (the meter finds the drum per frame size). ``warnings``
     names classes with no valley between their colours (see the module's step 6)."""
     if isinstance(frames, np.ndarray):
         frames = [frames]
@@ -354,7 +355,10 @@ def suggest_classes(
         if not (isinstance(img, np.ndarray) and img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8):
             shape = getattr(img, "shape", None)
             raise VisionError(f"classes suggest needs colour (BGR, 8-bit) frames, got shape {shape}")
-    rois = [roi if roi is not None else detect_drum(img) for img in frames]
+    if rois is None:
+        rois = [roi if roi is not None else detect_drum(img) for img in frames]
+    elif len(rois) != len(frames):
+        raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
     per = per_frame or max(2000, 40000 // len(frames))
     samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
     classes, notes = _fit_colour_model(samples, k, seed)

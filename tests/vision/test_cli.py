@@ -293,3 +293,17 @@ def test_classes_suggest_uses_every_frame_of_a_short_source(tmp_path):
         assert r.code == 0, r.err
         assert f"from {want} frame(s)" in r.out, r.out.splitlines()[0]
 
+
+def test_classes_suggest_skips_frames_without_a_drum(tmp_path):
+    """One frame without a drum among the frames made classes suggest fail without saying
+    which; it is now left out with a warning naming it (and all of them is an error)."""
+    from vision.synthetic import particle_drum
+
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / f"f{i}.png"), particle_drum((400, 300), mix=0.5, seed=i).image)
+    cv2.imwrite(str(tmp_path / "f2.png"), np.full((300, 400, 3), 128, np.uint8))
+    r = cli("classes", "suggest", tmp_path)
+    assert r.code == 0, r.err
+    assert "warning" in r.err and "f2.png" in r.err and "drum" in r.err
+    assert [c.name for c in parse_config(r.out).counted] == ["blue", "white"]
+    assert_one_line_error(cli("classes", "suggest", tmp_path / "f2.png"), "f2.png", "drum", "--roi")

@@ -316,9 +316,23 @@ def suggest_cmd(
     for name, img in picked:
         if img.ndim != 3:
             raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
+    rois = []
+    if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
+        kept = []
+        for name, img in picked:
+            try:
+                rois.append(detect_drum(img))
+                kept.append((name, img))
+            except VisionError as exc:
+                if len(picked) == 1:
+                    raise VisionError(f"{name}: {exc}") from None
+                _warn([f"{name} left out: {exc}"])
+        if not kept:
+            raise VisionError(f"none of the {len(picked)} frames shows a drum that can be found; pass --roi cx,cy,r")
+        picked = kept
     frames = [img for _, img in picked]
-    cfg = suggest_classes(frames, manual, k=k)
-    r0 = manual or detect_drum(frames[0])
+    cfg = suggest_classes(frames, manual, k=k, rois=rois or None)
+    r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
