@@ -82,7 +82,8 @@ def roi_bbox(roi: DrumROI, shape_hw: tuple[int, int]) -> tuple[int, int, int, in
     x1 = min(w, int(math.ceil(roi.cx_px + hw)) + 1)
     y1 = min(h, int(math.ceil(roi.cy_px + hh)) + 1)
     if x1 <= x0 or y1 <= y0:
-        raise VisionError(f"ROI {roi} lies outside the {w}x{h} image")
+        raise VisionError(f"the drum ROI (centre {roi.cx_px:g}, {roi.cy_px:g}, radius {roi.r_px:g} px) lies outside "
+                          f"the {w}x{h} image")
     return x0, y0, x1, y1
 
 

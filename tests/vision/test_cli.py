@@ -162,6 +162,8 @@ def test_mi_one_line_errors(tmp_path, junk, real_drum_dir):
     assert_one_line_error(cli("mi", img, "--max-frames", -1), "--max-frames")
     assert_one_line_error(cli("mi", img, "--roi", "1,2"), "--roi")
     assert_one_line_error(cli("mi", img, "--roi", "320,320,nan"), "roi")
+    msg = assert_one_line_error(cli("mi", img, "--roi", "5000,5000,100"), "outside the 640x640 image")
+    assert "DrumROI(" not in msg and "5000, 5000" in msg  # what the user typed, not a repr
     assert_one_line_error(cli("mi", junk / "random.png"), "decode")
     assert_one_line_error(cli("mi", junk / "truncated.jpg"), "truncated.jpg")
     assert_one_line_error(cli("mi", junk), "none of the 2 frames")
