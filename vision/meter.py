@@ -23,9 +23,11 @@ from vision.moments import class_tables, frame_moments, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
-__all__ = ["BED_MODES", "ClassStats", "Meter", "Reading", "check_meter_numbers"]
+__all__ = ["BED_MODES", "MAX_OUTSIDE", "ClassStats", "Meter", "Reading", "check_meter_numbers"]
 
 BED_MODES = ("color", "dark")
+MAX_OUTSIDE = 0.05
+"""A drum with more than this share of its area outside the frame gives no MI (``roi_outside_frame``)."""
 _NAN = float("nan")
 
 
@@ -58,7 +60,8 @@ class Reading:
     (see ``vision.slope``); ``surface_mid_px`` = a point of the fitted surface line.
     ``roi`` = the drum region used for this frame. ``valid`` is
     False when ``mi`` is NaN; ``flags`` say why (``few_pixels:blue``, ``collapsed:blue``,
-    ``bad_frame:...``).
+    ``roi_outside_frame:12%`` (more than ``MAX_OUTSIDE`` of the drum out of view; the
+    classes in view are still measured), ``bad_frame:...``).
     """
 
     mi: float
@@ -96,6 +99,7 @@ class _Geometry:
     full_area: float
     occ: np.ndarray  # bed pixels per cell (filled by the kernel)
     work: np.ndarray
+    outside: float = 0.0  # share of the ROI's area outside the image
 
 
 class Meter:
@@ -111,7 +115,8 @@ class Meter:
     Validity is relative to the ROI: a class with less than ``min_share`` of the ROI's
     pixels (or fewer than ``min_pixels``) is ``few_pixels``; one whose share drops below
     ``collapse_ratio`` x its running median over the last ``history`` good frames is
-    ``collapsed``. Either gives MI = NaN (collapsed frames do not enter the median).
+    ``collapsed``. Either gives MI = NaN (collapsed frames do not enter the median), and so
+    does a drum with more than ``MAX_OUTSIDE`` of its area outside the frame.
 
     ``erode``: a pixel counts for its class only when its four neighbours (left, right,
     up, down, on the stride grid) are of the same class -- a one-pixel erosion of each
@@ -205,8 +210,11 @@ class Meter:
         shift = occupancy_shift(roi.r_px, s)
         area = cell_areas(inside, s, shift)
         full = float(((1 << shift) + s - 1) // s) ** 2
+        roi_area = math.pi * roi.r_px ** 2 if roi.kind == "circle" else 4.0 * roi.half_w_px * roi.half_h_px  # type: ignore[operator]
+        in_view = float(_mask_in_box(roi, box).sum())
         g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
-                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64))
+                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64),
+                      max(0.0, 1.0 - in_view / roi_area))
         self._geoms[shape_hw] = g
         return g
 
@@ -263,6 +271,9 @@ class Meter:
             var = max(sxx / n - cx * cx, 0.0) + max(syy / n - cy * cy, 0.0)
             stats.append(ClassStats(cls.name, cx, cy, math.sqrt(var), n_px, frac, share))
         a, b = stats[0], stats[1]
+        if g.outside > MAX_OUTSIDE:  # the centroids are those of the part in view, not the bed's
+            flags.append(f"roi_outside_frame:{100.0 * g.outside:.0f}%")
+            a = b = ClassStats(a.name, _NAN, _NAN, _NAN, 0, _NAN)
         mix = mixing_indices((a.cx_px, a.cy_px), (b.cx_px, b.cy_px), a.sigma_px, b.sigma_px, roi.r_px, self._d0)
         if self._d0 is None and math.isfinite(mix.d_px) and mix.d_px > 0:
             self._d0 = mix.d_px

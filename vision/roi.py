@@ -82,7 +82,8 @@ def roi_bbox(roi: DrumROI, shape_hw: tuple[int, int]) -> tuple[int, int, int, in
     x1 = min(w, int(math.ceil(roi.cx_px + hw)) + 1)
     y1 = min(h, int(math.ceil(roi.cy_px + hh)) + 1)
     if x1 <= x0 or y1 <= y0:
-        raise VisionError(f"ROI {roi} lies outside the {w}x{h} image")
+        raise VisionError(f"the drum ROI (centre {roi.cx_px:g}, {roi.cy_px:g}, radius {roi.r_px:g} px) lies outside "
+                          f"the {w}x{h} image")
     return x0, y0, x1, y1
 
 
@@ -121,6 +122,26 @@ def _rim_coverage(pts: tuple[np.ndarray, np.ndarray], cx: float, cy: float, r: f
     near = np.abs(rr - r) <= max(1.5, 0.015 * r)
     ang = (np.degrees(np.arctan2(ys[near] - cy, xs[near] - cx)) + 180.0).astype(np.int64) % 360
     return int(np.unique(ang).size)
+
+
+def _in_frame_degrees(shape_hw: tuple[int, int], cx: float, cy: float, r: float) -> int:
+    """Degrees of the circle (0..360) that lie inside the image."""
+    a = np.radians(np.arange(360) + 0.5 - 180.0)
+    x, y = cx + r * np.cos(a), cy + r * np.sin(a)
+    return int(((x >= 0) & (x <= shape_hw[1] - 1) & (y >= 0) & (y <= shape_hw[0] - 1)).sum())
+
+
+def _looks_like_a_rim(pts: tuple[np.ndarray, np.ndarray], shape_hw: tuple[int, int], cx: float, cy: float,
+                      r: float) -> bool:
+    """A drum's rim is a (nearly) whole circle of edges where the frame shows it, or at least an
+    arc that stands out from the edges 10% inside and outside it (by >= 120 degrees, on the
+    calmer side). The best circle through a scene without a drum (clutter, a photo) is a
+    broken arc no clearer than its surroundings."""
+    cover = _rim_coverage(pts, cx, cy, r)
+    if cover >= 0.8 * _in_frame_degrees(shape_hw, cx, cy, r):
+        return True
+    around = min(_rim_coverage(pts, cx, cy, 0.9 * r), _rim_coverage(pts, cx, cy, 1.1 * r))
+    return cover - around >= 120
 
 
 def _refine_circle(
@@ -171,10 +192,12 @@ def _refine_circle(
 def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     """Find the drum circle in a front-view frame (px of the original image).
 
-    Hough transform on a copy downscaled to <= 400 px (at three vote thresholds), a
+    Hough transform on a copy downscaled to <= 400 px (median-filtered, then Gaussian-blurred
+    if that finds no whole rim; at three vote thresholds each), a
     least-squares circle fit on the rim's outer edge for each candidate, and the candidate
     with the most complete rim wins. The radius is shrunk by ``inset`` (fraction) to keep the rim out.
-    Raises ``VisionError`` when no circle is found (pass ``--roi cx,cy,r`` then).
+    Raises ``VisionError`` when no circle is found, or the best one does not look like a rim
+    (a scene without a drum; pass ``--roi cx,cy,r`` then).
     """
     img = np.asarray(image_bgr)
     if img.ndim == 3 and img.shape[2] == 3:
@@ -188,24 +211,31 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     h, w = gray.shape
     s = min(1.0, 400.0 / max(h, w))
     small = cv2.resize(gray, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1.0 else gray.copy()
-    small = cv2.medianBlur(small, 5)
     sh, sw = small.shape
     pts = _edge_points(gray)
     best: tuple[int, tuple[float, float, float]] | None = None
-    for acc in (30, 20, 12):
-        circles = cv2.HoughCircles(
-            small, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
-            minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
-        )
-        if circles is None:
-            continue
-        fit = _refine_circle(pts, *(float(v) / s for v in circles[0][0][:3]))
-        cover = _rim_coverage(pts, *fit)
-        if best is None or cover > best[0]:
-            best = (cover, fit)
-        if cover >= 300:  # a (nearly) whole rim: done; in a small frame the strongest circle can be the bed's edge
+    # the median keeps the rim and drops the particles' texture, but it erases a rim that the
+    # downscaling made a line of a pixel or less (large frames): a Gaussian blur keeps that one
+    for blurred in (cv2.medianBlur(small, 5), cv2.GaussianBlur(small, (5, 5), 0)):
+        for acc in (30, 20, 12):
+            circles = cv2.HoughCircles(
+                blurred, cv2.HOUGH_GRADIENT, dp=1, minDist=max(sh, sw), param1=80, param2=acc,
+                minRadius=int(0.25 * min(sh, sw)), maxRadius=int(0.6 * max(sh, sw)),
+            )
+            if circles is None:
+                continue
+            fit = _refine_circle(pts, *(float(v) / s for v in circles[0][0][:3]))
+            cover = _rim_coverage(pts, *fit)
+            if best is None or cover > best[0]:
+                best = (cover, fit)
+            if cover >= 300:  # a (nearly) whole rim: done; in a small frame the strongest circle can be the bed's edge
+                break
+        if best is not None and best[0] >= 300:
             break
     if best is None:
-        raise VisionError("could not find the drum circle in the first frame; pass --roi cx,cy,r (px)")
+        raise VisionError("could not find the drum circle; pass --roi cx,cy,r (px)")
     cx, cy, r = best[1]
+    if not _looks_like_a_rim(pts, (h, w), cx, cy, r):
+        raise VisionError("could not find the drum circle (no circle of edges stands out as a rim: is the drum "
+                          "in the picture?); pass --roi cx,cy,r (px)")
     return DrumROI(float(cx), float(cy), float(r * (1.0 - inset)))

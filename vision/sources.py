@@ -66,14 +66,16 @@ def source_kind(spec) -> str:
 def read_image(path: str | os.PathLike) -> tuple[np.ndarray, str | None]:
     """Decode one image file into BGR uint8: ``(image, None)`` or ``(empty, reason)``.
 
-    Grayscale files stay 2-D (the meter flags them); alpha is dropped; 16-bit is scaled.
+    Grayscale files stay 2-D (the meter flags them); alpha is dropped; 16-bit is scaled; a
+    JPEG's EXIF orientation is applied (the image as a viewer shows it).
     Raises ``FileNotFoundError`` when the file does not exist.
     """
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"no such image: {p}")
     data = np.fromfile(str(p), dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    # any depth and channel count, alpha dropped, EXIF orientation applied (IMREAD_UNCHANGED ignores it)
+    img = cv2.imdecode(data, cv2.IMREAD_ANYCOLOR | cv2.IMREAD_ANYDEPTH) if data.size else None
     if img is None:
         return _EMPTY, f"cannot decode image {p.name} (corrupt or not an image)"
     if _truncated(data):

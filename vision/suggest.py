@@ -24,6 +24,10 @@
 5. Each class keeps its Gaussians; the background is one reject class. The meter's
    lookup table assigns every colour to its most likely component, and counts it only
    within ``max_distance`` sigmas of a particle class.
+6. Two classes with no valley between them (the density dips by less than ``_NO_VALLEY``)
+   are a note for the user: either one material was split by its shading (the other
+   taken for background, e.g. black particles on a dark drum) or two materials differ
+   only in lightness (grey and white), which shading mixes up pixel by pixel.
 
 Classes are named by colour and sorted by name, so the TOML is the same for any frames
 of the same material pair.
@@ -31,6 +35,7 @@ of the same material pair.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -62,6 +67,7 @@ _GLARE_CLIPPED = 0.1  # a component with this share of clipped samples ...
 _GLARE_WEIGHT = 0.25  # ... and under this x the largest particle component's weight is glare
 _BRIDGE_T = (0.2, 0.8)  # a class member between the background and another class (position on the segment) ...
 _BRIDGE_OFF = 0.2  # ... and this close to the segment (x its length) is mixed edge pixels of both
+_NO_VALLEY = -0.6  # two classes whose density dips less than this between them (log, see _ridge): a note
 _COV_FLOOR = (4.0, 1.0, 1.0)  # variance floor (L, a, b): JPEG noise, frames not seen
 _HUE_NAMES = ((8, "red"), (20, "orange"), (33, "yellow"), (78, "green"), (95, "teal"), (130, "blue"),
               (155, "purple"), (170, "magenta"), (180, "red"))
@@ -191,6 +197,11 @@ def _name_of(lab: np.ndarray) -> str:
 
 def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[ColourClass, ...]:
     """``k`` particle classes (sorted by name) and one reject class ``background``."""
+    return _fit_colour_model(samples, k, seed)[0]
+
+
+def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[ColourClass, ...], tuple[str, ...]]:
+    """:func:`fit_colour_model` and its notes for the user (classes that may be wrongly split)."""
     if not 2 <= k <= 6:
         raise VisionError(f"k must be within 2..6, got {k}")
     n = k + 3
@@ -255,24 +266,33 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
     _drop_bridges(groups, background, cap, mu_f, counts)
     total = counts.sum()
     named = []
-    for g in groups:
+    for gi, g in enumerate(groups):
         lab_mean = np.average(mu[g], axis=0, weights=counts[g])
         comps = tuple(_component(mu[j], cov[j], counts[j] / total) for j in g)
-        named.append((_name_of(lab_mean), float(lab_mean[0]), comps, _lab_to_bgr(lab_mean)))
+        named.append((_name_of(lab_mean), float(lab_mean[0]), comps, _lab_to_bgr(lab_mean), gi))
     named.sort(key=lambda x: (x[0], x[1]))
     names = [x[0] for x in named]
     classes = []
-    for i, (name, _, comps, bgr) in enumerate(named):
+    name_of_group = {}
+    for i, (name, _, comps, bgr, gi) in enumerate(named):
         if names.count(name) > 1:
             same = [j for j, m in enumerate(names) if m == name]
             rank = same.index(i)
             suffix = "dark" if rank == 0 else ("light" if rank == len(same) - 1 else f"mid{rank}")
             name = f"{name}-{suffix}"
         classes.append(ColourClass(name, display_bgr=bgr, lab=comps, max_distance=MAX_DISTANCE))
+        name_of_group[gi] = name
     if background:
         comps = tuple(_component(mu[j], cov[j], max(counts[j], 1.0) / total) for j in background)
         classes.append(ColourClass("background", display_bgr=(40, 40, 40), lab=comps, reject=True))
-    return tuple(classes)
+    notes = []
+    for a, b in itertools.combinations(range(len(groups)), 2):
+        if groups[a] and groups[b] and max(ridge[i, j] for i in groups[a] for j in groups[b]) > _NO_VALLEY:
+            x, y = sorted((name_of_group[a], name_of_group[b]))
+            notes.append(f"classes {x!r} and {y!r} are not separated by a valley in colour: one material in light "
+                         "and shade (a second one taken for background?), or two that differ only in lightness, "
+                         "which shading mixes up; check the preview, their centroids may be wrong")
+    return tuple(classes), tuple(notes)
 
 
 def _between(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
@@ -318,12 +338,14 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
 
 def suggest_classes(
     frames: Sequence[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
-    per_frame: int | None = None,
+    per_frame: int | None = None, rois: Sequence[DrumROI] | None = None,
 ) -> MeterConfig:
     """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames.
 
-    ``roi`` fixes the drum for every frame; ``None`` detects it in each frame. The ROI is
-    not written into the config (the meter finds the drum per frame size)."""
+    ``roi`` fixes the drum for every frame; ``rois`` gives each frame's (already found);
+    with neither, it is detected in each frame. The ROI is not written into the config
+    (the meter finds the drum per frame size). ``warnings``
+    names classes with no valley between their colours (see the module's step 6)."""
     if isinstance(frames, np.ndarray):
         frames = [frames]
     frames = list(frames)
@@ -333,20 +355,39 @@ def suggest_classes(
         if not (isinstance(img, np.ndarray) and img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8):
             shape = getattr(img, "shape", None)
             raise VisionError(f"classes suggest needs colour (BGR, 8-bit) frames, got shape {shape}")
-    rois = [roi if roi is not None else detect_drum(img) for img in frames]
+    if rois is None:
+        rois = [roi if roi is not None else detect_drum(img) for img in frames]
+    elif len(rois) != len(frames):
+        raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
     per = per_frame or max(2000, 40000 // len(frames))
     samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
-    return MeterConfig(fit_colour_model(samples, k=k, seed=seed), None, "color", source="<suggested>")
+    classes, notes = _fit_colour_model(samples, k, seed)
+    return MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
+
+
+_NO_CLASS_BGR = ((45, 45, 45), (150, 150, 150), (110, 30, 110))  # candidates, the first preferred
+
+
+def _no_class_bgr(class_bgr: Sequence[tuple[int, int, int]]) -> tuple[int, int, int]:
+    """The preview's colour for *no class*: dark grey, unless a class is shown in about that
+    colour (black particles), then the candidate farthest from every class colour."""
+    def gap(c: tuple[int, int, int]) -> float:
+        return min((float(np.abs(np.subtract(c, k)).max()) for k in class_bgr), default=255.0)
+
+    first = _NO_CLASS_BGR[0]
+    return first if gap(first) >= 60 else max(_NO_CLASS_BGR, key=gap)
 
 
 def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: DrumROI) -> np.ndarray:
-    """The frame beside its class map (each class in its display colour, no class dark grey),
-    with the drum circle and a legend: a check at a glance."""
+    """The frame beside its class map (each class in its display colour; no class dark grey,
+    or, when a class is shown about that colour, another colour the legend shows), with the
+    drum circle and a legend: a check at a glance."""
     img = np.asarray(image_bgr)
     h, w = img.shape[:2]
     labels = classify(img, tuple(classes))
     counted = counted_classes(classes)
-    cmap = np.full((len(counted) + 1, 3), 45, np.uint8)
+    cmap = np.empty((len(counted) + 1, 3), np.uint8)
+    cmap[0] = none_bgr = _no_class_bgr([c.display_bgr for c in counted])
     for i, c in enumerate(counted):
         cmap[i + 1] = c.display_bgr
     painted = cmap[labels]
@@ -364,7 +405,7 @@ def class_preview(image_bgr: np.ndarray, classes: Sequence[ColourClass], roi: Dr
         (f"{c.name}  {100 * float(((labels == i + 1) & inside).sum()) / n_in:.1f}% of drum", c.display_bgr)
         for i, c in enumerate(counted)
     ]
-    lines.append(("grey: no class (background, rim, glare, shadow)", None))
+    lines.append(("no class (background, rim, glare, shadow)", none_bgr))
     width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, fs, 1)[0][0] for t, _ in lines) + lh + 20
     panel = out[0: lh * len(lines) + 10, w: min(2 * w, w + width)]
     panel[...] = (panel * 0.3).astype(np.uint8)

@@ -162,6 +162,8 @@ def test_mi_one_line_errors(tmp_path, junk, real_drum_dir):
     assert_one_line_error(cli("mi", img, "--max-frames", -1), "--max-frames")
     assert_one_line_error(cli("mi", img, "--roi", "1,2"), "--roi")
     assert_one_line_error(cli("mi", img, "--roi", "320,320,nan"), "roi")
+    msg = assert_one_line_error(cli("mi", img, "--roi", "5000,5000,100"), "outside the 640x640 image")
+    assert "DrumROI(" not in msg and "5000, 5000" in msg  # what the user typed, not a repr
     assert_one_line_error(cli("mi", junk / "random.png"), "decode")
     assert_one_line_error(cli("mi", junk / "truncated.jpg"), "truncated.jpg")
     assert_one_line_error(cli("mi", junk), "none of the 2 frames")
@@ -248,3 +250,62 @@ def test_mi_dark_bed_without_classes_still_gives_the_slope(tmp_path):
     row = rows_of(r.out)[0]
     assert row["valid"] == "0" and "few_pixels" in row["flags"]
     assert float(row["slope_deg"]) == pytest.approx(25.0, abs=1.0)
+
+
+def test_mi_on_grayscale_frames_is_an_error(tmp_path):
+    """A grayscale image cannot give colour classes: one image is a one-line error (it was a
+    CSV with one invalid row and exit 0), and so is a folder of nothing else; in a folder
+    with colour frames it stays a flagged row."""
+    gray = cv2.cvtColor(H.half_disks(), cv2.COLOR_BGR2GRAY)
+    cv2.imwrite(str(tmp_path / "a.png"), gray)
+    cv2.imwrite(str(tmp_path / "b.jpg"), gray)
+    assert_one_line_error(cli("mi", tmp_path / "a.png"), "a.png", "grayscale")
+    assert_one_line_error(cli("mi", tmp_path), "none of the 2 frames", "grayscale")
+    cv2.imwrite(str(tmp_path / "c.png"), H.half_disks())
+    r = cli("mi", tmp_path)
+    assert r.code == 0, r.err
+    assert [row["valid"] for row in rows_of(r.out)] == ["0", "0", "1"]
+
+
+def test_a_frame_without_a_drum_in_a_sequence_is_a_flagged_row(tmp_path):
+    """A frame of another size in which no drum is found (a test chart, a blank frame) made
+    the whole folder an error after the rows before it; now it is an invalid row saying so.
+    When the first frame has no drum, the error names it."""
+    cv2.imwrite(str(tmp_path / "a.png"), H.half_disks())
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((300, 400, 3), 128, np.uint8))
+    cv2.imwrite(str(tmp_path / "c.png"), H.fine_mix())
+    r = cli("mi", tmp_path)
+    assert r.code == 0, r.err
+    rows = rows_of(r.out)
+    assert [row["valid"] for row in rows] == ["1", "0", "1"]
+    assert "drum" in rows[1]["flags"] and rows[1]["mi"] == ""
+    assert_one_line_error(cli("mi", tmp_path / "b.png", tmp_path / "c.png"), "b.png", "drum", "--roi")
+
+
+
+def test_classes_suggest_uses_every_frame_of_a_short_source(tmp_path):
+    """Fewer images than --frames: every one is learned from (3 of 3 was 1, 5 of 5 was 2:
+    the spread divided by --frames instead of the frames taken)."""
+    from vision.synthetic import particle_drum
+
+    for i in range(5):
+        cv2.imwrite(str(tmp_path / f"f{i}.png"), particle_drum((200, 150), mix=0.5, seed=i).image)
+    for n, want in ((12, 5), (3, 3), (1, 1)):
+        r = cli("classes", "suggest", tmp_path, "--frames", n)
+        assert r.code == 0, r.err
+        assert f"from {want} frame(s)" in r.out, r.out.splitlines()[0]
+
+
+def test_classes_suggest_skips_frames_without_a_drum(tmp_path):
+    """One frame without a drum among the frames made classes suggest fail without saying
+    which; it is now left out with a warning naming it (and all of them is an error)."""
+    from vision.synthetic import particle_drum
+
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / f"f{i}.png"), particle_drum((400, 300), mix=0.5, seed=i).image)
+    cv2.imwrite(str(tmp_path / "f2.png"), np.full((300, 400, 3), 128, np.uint8))
+    r = cli("classes", "suggest", tmp_path)
+    assert r.code == 0, r.err
+    assert "warning" in r.err and "f2.png" in r.err and "drum" in r.err
+    assert [c.name for c in parse_config(r.out).counted] == ["blue", "white"]
+    assert_one_line_error(cli("classes", "suggest", tmp_path / "f2.png"), "f2.png", "drum", "--roi")

@@ -7,7 +7,7 @@ import pytest
 from tests.vision import helpers as H
 from vision.config import config_to_toml, load_config, parse_config
 from vision.errors import VisionError
-from vision.sources import open_source, source_kind
+from vision.sources import open_source, read_image, source_kind
 
 GOOD = """
 [meter]
@@ -80,6 +80,25 @@ def test_corrupt_and_grayscale_images_are_frames_with_errors(tmp_path):
     f1, f2 = list(open_source(tmp_path))
     assert f1.error and "decode" in f1.error and f1.image.size == 0
     assert f2.error is None and f2.image.ndim == 2
+
+
+def test_image_depths_alpha_and_exif_orientation(tmp_path):
+    """16-bit is scaled, alpha dropped, and a JPEG's EXIF orientation applied (phones store
+    the pixels turned and a tag saying how to show them; unapplied, the drum's empty top is
+    at the side and the slope is 90 deg off)."""
+    from PIL import Image
+
+    img = H.half_disks(64, 48)
+    cv2.imwrite(str(tmp_path / "deep.png"), img.astype(np.uint16) * 257)
+    cv2.imwrite(str(tmp_path / "alpha.png"), np.dstack([img, np.zeros((48, 64), np.uint8)]))
+    turned = Image.fromarray(np.ascontiguousarray(np.rot90(img[:, :, ::-1])))  # stored turned 90 deg left
+    exif = turned.getexif()
+    exif[0x0112] = 6  # orientation: turn 90 deg right to show
+    turned.save(tmp_path / "phone.jpg", exif=exif.tobytes(), quality=95)
+    for name in ("deep.png", "alpha.png", "phone.jpg"):
+        out, err = read_image(tmp_path / name)
+        assert err is None and out.dtype == np.uint8 and out.shape == (48, 64, 3), name
+        assert np.abs(out.astype(int) - img).mean() < (10 if name.endswith(".jpg") else 3), name
 
 
 def test_missing_and_unreadable_files(tmp_path):

@@ -141,6 +141,7 @@ def mi_cmd(
     n_valid = 0
     n_good = 0
     n = 0
+    first_bad: str | None = None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     progress = Progress(TextColumn("mi"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -153,9 +154,22 @@ def mi_cmd(
                     if kind == "image":
                         raise VisionError(fr.error)
                     reading = meter._invalid(f"bad_frame:{fr.error}")
+                    first_bad = first_bad or fr.error
+                elif fr.image.ndim == 2:
+                    why = f"{fr.name or 'the frame'} is a grayscale image; the mixing index needs colour frames"
+                    if kind == "image":
+                        raise VisionError(why)
+                    reading = meter.measure(fr.image)  # a flagged row
+                    first_bad = first_bad or why
                 else:
-                    reading = meter.measure(fr.image)
-                    n_good += 1
+                    try:
+                        reading = meter.measure(fr.image)
+                    except VisionError as exc:  # no drum found in a frame of a new size
+                        if n_good == 0:
+                            raise VisionError(f"{fr.name or 'the first frame'}: {exc}") from None
+                        reading = meter._invalid(f"bad_frame:{exc}")
+                    else:
+                        n_good += 1
                     if (cfg.is_default and meter.bed == "color" and n_good == 1
                             and any(f.startswith("few_pixels") for f in reading.flags)):
                         raise _no_default_pixels_error()
@@ -211,7 +225,7 @@ def mi_cmd(
     if n == 0:
         raise VisionError("the source gave no frames")
     if n_good == 0:
-        raise VisionError(f"none of the {n} frames could be read (corrupt or not images)")
+        raise VisionError(f"none of the {n} frames could be read (corrupt or not images): {first_bad}")
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
     console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
@@ -248,7 +262,8 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
         paths = [_P(str(spec))] if kind == "image" else _image_paths(spec)
         if kind == "image" and not paths[0].exists():
             raise FileNotFoundError(f"no such file: {paths[0]}")
-        idx = sorted({round(i * (len(paths) - 1) / max(n_frames - 1, 1)) for i in range(min(n_frames, len(paths)))})
+        m = min(n_frames, len(paths))
+        idx = sorted({round(i * (len(paths) - 1) / max(m - 1, 1)) for i in range(m)})
         out = []
         for i in idx:
             img, err = read_image(paths[i])
@@ -301,13 +316,29 @@ def suggest_cmd(
     for name, img in picked:
         if img.ndim != 3:
             raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
+    rois = []
+    if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
+        kept = []
+        for name, img in picked:
+            try:
+                rois.append(detect_drum(img))
+                kept.append((name, img))
+            except VisionError as exc:
+                if len(picked) == 1:
+                    raise VisionError(f"{name}: {exc}") from None
+                _warn([f"{name} left out: {exc}"])
+        if not kept:
+            raise VisionError(f"none of the {len(picked)} frames shows a drum that can be found; pass --roi cx,cy,r")
+        picked = kept
     frames = [img for _, img in picked]
-    cfg = suggest_classes(frames, manual, k=k)
-    r0 = manual or detect_drum(frames[0])
+    cfg = suggest_classes(frames, manual, k=k, rois=rois or None)
+    r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
                "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
+    comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
+    _warn(cfg.warnings)
     if preview is not None:
         import cv2
 

@@ -1,0 +1,46 @@
+"""``classes suggest``: the class preview and the notes it gives on the learned classes."""
+
+import cv2
+import numpy as np
+
+from vision.colours import classify
+from vision.config import parse_config
+from vision.suggest import class_preview, suggest_classes
+from vision.synthetic import particle_drum
+
+
+def test_preview_tells_a_black_class_from_no_class():
+    """Black particles are shown about the dark grey that meant *no class*: the preview must
+    paint no class in another colour, so where the black class is can be seen."""
+    sc = particle_drum((400, 300), ((0, 140, 255), (35, 35, 35)), mix=0.0, seed=0, particle_r_frac=0.045)
+    cfg = suggest_classes(sc.image)
+    assert [c.name for c in cfg.counted] == ["black", "orange"]
+    pane = class_preview(sc.image, cfg.classes, sc.roi)[:, 400:]
+    labels = classify(sc.image, cfg.classes)
+    legend = np.zeros(labels.shape, bool)
+    legend[:120] = True  # the legend is drawn over the top of the class map
+    none = pane[(labels == 0) & ~legend].astype(int)
+    assert len(none) > 1000
+    none_bgr = np.median(none, axis=0)
+    for i, c in enumerate(cfg.counted, start=1):
+        shown = np.median(pane[(labels == i) & ~legend].astype(int), axis=0)
+        assert np.abs(shown - none_bgr).max() >= 60, (c.name, shown, none_bgr)
+
+
+def test_classes_without_a_valley_between_them_are_a_warning(tmp_path):
+    """Grey and white particles differ only in lightness, and shading spreads both over the
+    same greys: no colour rule splits them right, so ``classes suggest`` says so (on stderr
+    and in the TOML) instead of handing out a config that looks fine; blue/white does not."""
+    from tests.cli import cli
+
+    grey_white = particle_drum((640, 480), ((128, 128, 128), (235, 235, 235)), mix=0.0, seed=0)
+    cfg = suggest_classes(grey_white.image)
+    assert len(cfg.warnings) == 1 and "not separated by a valley" in cfg.warnings[0]
+    assert all(f"'{c.name}'" in cfg.warnings[0] for c in cfg.counted)
+    assert suggest_classes(particle_drum((640, 480), mix=0.0, seed=0).image).warnings == ()
+    path = tmp_path / "grey-white.png"
+    cv2.imwrite(str(path), grey_white.image)
+    r = cli("classes", "suggest", path)
+    assert r.code == 0 and r.err.count("warning:") == 1 and "valley" in r.err
+    assert "# warning: classes" in r.out
+    assert parse_config(r.out).warnings == ()  # a comment: the config itself reads back as before
