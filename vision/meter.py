@@ -219,7 +219,8 @@ class Meter:
         return g
 
     # -- per frame -------------------------------------------------------------------
-    def _invalid(self, flag: str) -> Reading:
+    def invalid(self, flag: str) -> Reading:
+        """An invalid reading with one flag (a frame that cannot be measured), on the current ROI."""
         stats = tuple(ClassStats(c.name, _NAN, _NAN, _NAN, 0, _NAN) for c in self.classes)
         return Reading(_NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, False, (flag,), stats, self._roi)
 
@@ -232,7 +233,7 @@ class Meter:
         if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
             shape = getattr(img, "shape", None)
             dtype = getattr(img, "dtype", type(img).__name__)
-            return self._invalid(f"bad_frame:not a 3-channel 8-bit BGR image (shape {shape}, dtype {dtype})")
+            return self.invalid(f"bad_frame:not a 3-channel 8-bit BGR image (shape {shape}, dtype {dtype})")
         shape_hw = (int(img.shape[0]), int(img.shape[1]))
         g = self._geometry(img, shape_hw)
         self._roi = g.roi

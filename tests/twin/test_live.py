@@ -28,6 +28,7 @@ from tests.cli import assert_one_line_error, cli
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events, read_frames, read_metadata
+from vision.synthetic import drum_frame
 
 # The whole-loop runs are heavy (a demo with its plant twin, vision and twin workers): under
 # pytest-xdist they share one worker, one after another, while the other worker runs the rest.
@@ -221,7 +222,6 @@ def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tm
     emu, url = tcp_mill
     emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)  # started at the front panel
     monkeypatch.setattr(runlog_mod, "RunLog", FillingDisk)
-    from vision.synthetic import drum_frame
 
     video = tmp_path / "drum.avi"  # a drum the meter finds (red and blue: its default classes)
     vw = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (160, 120))
@@ -238,12 +238,14 @@ def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tm
 
 
 @pytest.mark.timeout(60)
-def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path) -> None:
+@pytest.mark.parametrize("n_frames", [100, 15])
+def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path, n_frames: int) -> None:
     """Bad input: the meter cannot find the drum in the video. The camera and twin threads
     printed a traceback each, and the run went on to its end and exited 0. Now: one line,
-    exit 2, and the run is over at once (the mill is sent a stop on the way out)."""
+    exit 2, and the run is over once the camera's grace for a first drum is over (10 s of
+    video) or the video ends without one (1.5 s); the mill is sent a stop on the way out."""
     emu, url = tcp_mill
-    video = _video(tmp_path / "noise.avi", n=100, drum=False)
+    video = _video(tmp_path / "noise.avi", n=n_frames, drum=False)
     t0 = time.monotonic()
     r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "off", "--duration", "30",
             "--log", tmp_path / "run")
@@ -251,6 +253,28 @@ def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path) ->
     assert time.monotonic() - t0 < 20.0  # not the whole 30 s
     assert any(e["kind"] == "stop" and e["failure"] for e in read_events(tmp_path / "run"))
     assert [a.cmd for a in emu.applied] == ["STP"]  # nothing but the stop on the way out
+
+
+@pytest.mark.timeout(60)
+def test_a_camera_warming_up_without_a_drum_is_flagged_not_the_end_of_the_run(tcp_mill, tmp_path: Path) -> None:
+    """A webcam's first frames are often black: the first frame (a new size) had no drum to
+    find and ended the run. Frames without a drum in the first seconds are flagged rows
+    (``no_drum:``); once the drum shows, the run measures it and ends normally."""
+    emu, url = tcp_mill
+    video = tmp_path / "warmup.avi"
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (160, 120))
+    for i in range(50):  # 2 s of black, then 3 s of a drum the default classes see
+        vw.write(np.zeros((120, 160, 3), np.uint8) if i < 20 else drum_frame((160, 120), seed=i))
+    vw.release()
+    r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "off", "--duration", "4.5",
+            "--log", tmp_path / "run")
+    assert r.code == 0, r.err
+    rows = read_frames(tmp_path / "run")
+    early = [row for row in rows if float(row["t_s"]) < 1.9]
+    late = [row for row in rows if float(row["t_s"]) > 2.1]
+    assert early and all("no_drum" in row["flags"] for row in early)
+    assert late and any(float(row["valid"]) == 1 for row in late)
+    assert emu.applied == []  # OFF: nothing sent, not even on the way out
 
 
 def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:

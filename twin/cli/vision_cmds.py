@@ -153,7 +153,7 @@ def mi_cmd(
                 if fr.error:
                     if kind == "image":
                         raise VisionError(fr.error)
-                    reading = meter._invalid(f"bad_frame:{fr.error}")
+                    reading = meter.invalid(f"bad_frame:{fr.error}")
                     first_bad = first_bad or fr.error
                 elif fr.image.ndim == 2:
                     why = f"{fr.name or 'the frame'} is a grayscale image; the mixing index needs colour frames"
@@ -167,7 +167,7 @@ def mi_cmd(
                     except VisionError as exc:  # no drum found in a frame of a new size
                         if n_good == 0:
                             raise VisionError(f"{fr.name or 'the first frame'}: {exc}") from None
-                        reading = meter._invalid(f"bad_frame:{exc}")
+                        reading = meter.invalid(f"bad_frame:{exc}")
                     else:
                         n_good += 1
                     if (cfg.is_default and meter.bed == "color" and n_good == 1

@@ -17,7 +17,13 @@ from control.trend import MITrend, MovingAverage
 from twin.clock import Cadence
 from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
 from twin.state import FrameRow, LiveState
+from vision.errors import VisionError
 from vision.meter import Reading
+
+NO_DRUM_GRACE_S = 5.0
+"""Camera seconds from the first frame during which frames without a findable drum (a webcam
+warming up: black or washed-out frames) are flagged readings (``no_drum:``); a source that
+shows no drum for longer, or ends without one, is bad input and ends the run."""
 
 READINGS_MAX = 512  # readings waiting for the process worker; beyond that the oldest go
 
@@ -112,6 +118,9 @@ class CameraWorker:
 
     def _run(self, stop: threading.Event) -> None:
         n = 0
+        t_first: float | None = None  # camera time of the first frame
+        found = False  # a drum was found in a frame of this run
+        missed: VisionError | None = None
         for frame in self.frames:
             if stop.is_set():
                 return
@@ -124,7 +133,16 @@ class CameraWorker:
             roi = prev.roi
             if came:
                 self.box.set(CameraInfo(t, wall, frame.image, roi, n, False))  # it came (alarms)
-            reading = self.meter.measure(frame.image)
+            if t_first is None and math.isfinite(t):
+                t_first = t
+            try:
+                reading = self.meter.measure(frame.image)
+                found = True
+            except VisionError as exc:  # no drum in a frame of a new size
+                missed = exc
+                if not found and t_first is not None and t - t_first > NO_DRUM_GRACE_S:
+                    raise VisionError(f"no drum in {t - t_first:.0f} s of camera frames: {exc}") from None
+                reading = self.meter.invalid(f"no_drum:{exc}")
             if came and reading.roi is not roi:
                 self.box.set(CameraInfo(t, wall, frame.image, reading.roi, n, False))
             self.fps.tick()
@@ -132,6 +150,8 @@ class CameraWorker:
             cadence = self._overlay_cadence
             if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
+        if not found and missed is not None and not stop.is_set():
+            raise VisionError(f"no drum in any camera frame: {missed}")
 
 
 class ProcessWorker:
