@@ -36,8 +36,8 @@ def frames_per_second(
 
 
 def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = None) -> dict:
-    """Run the benchmark and return the numbers (frames/s); ``centroid_fps_erode`` is the
-    centroid path with the opt-in class erosion (``[meter] erode = true``)."""
+    """Run the benchmark and return the numbers (frames/s); ``centroid_fps_opening`` is the
+    centroid path with the class opening (``[meter] opening = true``)."""
     prev = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -53,7 +53,7 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         say("centroid 640x480 ...")
         res["centroid_fps"] = frames_per_second(Meter(roi=roi).measure, vga, seconds)
         res["centroid_fps_stride2"] = frames_per_second(Meter(roi=roi, stride=2).measure, vga, seconds)
-        res["centroid_fps_erode"] = frames_per_second(Meter(roi=roi, erode=True).measure, vga, seconds)
+        res["centroid_fps_opening"] = frames_per_second(Meter(roi=roi, opening=True).measure, vga, seconds)
         say("GLCM 640x480 ...")
         res["glcm_fps"] = frames_per_second(GLCMMeter(roi).measure, vga, seconds)
         say("Lacey 640x480 ...")

@@ -5,7 +5,7 @@ Example (see ``configs/example.toml``)::
     [meter]
     bed = "color"          # "color" (union of classes) or "dark" (backlit drum)
     min_share = 0.005      # a class below this share of the drum's pixels -> NaN + flag
-    erode = false          # true: a pixel counts for its class only if its 4 neighbours agree
+    opening = false        # true: class opening (drops thin rims/gaps of JPEG chroma blur)
     roi = [320, 318, 312]  # optional manual drum circle cx, cy, r (px)
 
     [[classes]]            # two or more counted classes; the MI uses the first two
@@ -43,7 +43,7 @@ from vision.roi import DrumROI
 __all__ = ["MeterConfig", "config_to_toml", "load_config", "parse_config"]
 
 _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
-               "roi_kind", "half_w_px", "half_h_px", "erode"}
+               "roi_kind", "half_w_px", "half_h_px", "opening", "erode"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
 _TOP_KEYS = {"meter", "classes"}
 
@@ -66,9 +66,9 @@ class MeterConfig:
     collapse_ratio: float = 0.4
     history: int = 25
     warnings: tuple[str, ...] = field(default=(), compare=False)
-    erode: bool = False
-    """One-pixel erosion of every class map before the sums (see ``vision.meter.Meter``):
-    for JPEG-compressed footage of particles about 10 px across or more; off by default."""
+    opening: bool = False
+    """Class opening before the sums (see ``vision.meter.Meter``): JPEG chroma blur between
+    particles of one hue; ``classes suggest`` sets it when it matters on its frames."""
 
     @property
     def is_default(self) -> bool:
@@ -85,7 +85,7 @@ class MeterConfig:
         return Meter(
             self.classes, roi if roi is not None else self.roi, bed or self.bed, self.min_pixels,
             dark_v_max=self.dark_v_max, stride=self.stride, min_share=self.min_share,
-            collapse_ratio=self.collapse_ratio, history=self.history, erode=self.erode,
+            collapse_ratio=self.collapse_ratio, history=self.history, opening=self.opening,
         )
 
 
@@ -197,9 +197,12 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     history = _int(where, "history", meter.get("history", 25), 1, 10_000)
     dark_v_max = _int(where, "dark_v_max", meter.get("dark_v_max", 80), 0, 255)
     stride = _int(where, "stride", meter.get("stride", 1), 1, 16)
-    erode = meter.get("erode", False)
-    if not isinstance(erode, bool):
-        raise VisionError(f"{where}: erode must be true or false, got {erode!r}")
+    if "erode" in meter:
+        raise VisionError(f"{where}: erode was replaced by opening (the same rims dropped, particles kept whole): "
+                          "write opening = true")
+    opening = meter.get("opening", False)
+    if not isinstance(opening, bool):
+        raise VisionError(f"{where}: opening must be true or false, got {opening!r}")
     roi = None
     if "roi" in meter:
         r = meter["roi"]
@@ -235,7 +238,7 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         " for a learned model)" for a, b in overlapping_classes(classes)
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
-                       warnings, erode)
+                       warnings, opening)
 
 
 def _nums(values, digits: int = 6) -> str:
@@ -254,8 +257,8 @@ def config_to_toml(cfg: MeterConfig, comment: str = "") -> str:
         lines.append(f"dark_v_max = {cfg.dark_v_max}")
     if cfg.stride != 1:
         lines.append(f"stride = {cfg.stride}")
-    if cfg.erode:
-        lines.append("erode = true")
+    if cfg.opening:
+        lines.append("opening = true")
     if cfg.roi is not None:
         r = cfg.roi
         lines.append(f"roi = [{r.cx_px:.1f}, {r.cy_px:.1f}, {r.r_px:.1f}]")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, class_lut, counted_classes, lut_labels
-from vision.moments import erode_labels
+from vision.moments import open_labels
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
 __all__ = ["LaceyMeter", "LaceyResult", "lacey_from_labels"]
@@ -85,8 +85,8 @@ class LaceyMeter:
     """Per-frame Lacey index with the same classes and ROI as the centroid meter.
 
     ``cell_px`` defaults to ``R / 5`` (about 78 cells in a full disc). Class 1 and 2 are
-    the first two classes. ``erode`` applies the centroid meter's one-pixel class erosion
-    (``vision.moments.erode_labels``), so both see the same pixels.
+    the first two classes. ``opening`` applies the centroid meter's class opening
+    (``vision.moments.open_labels``), so both see the same pixels.
     """
 
     def __init__(
@@ -95,7 +95,7 @@ class LaceyMeter:
         roi: DrumROI | None = None,
         cell_px: int | None = None,
         seed: int = 0,
-        erode: bool = False,
+        opening: bool = False,
     ) -> None:
         self.colour_classes = check_class_set(classes)
         self.classes = counted_classes(self.colour_classes)
@@ -103,7 +103,7 @@ class LaceyMeter:
         self.roi = roi
         self.cell_px = cell_px
         self.rng = np.random.default_rng(seed)
-        self.erode = bool(erode)
+        self.opening = bool(opening)
         self._key: tuple | None = None
 
     def measure(self, image_bgr: np.ndarray) -> LaceyResult:
@@ -123,6 +123,6 @@ class LaceyMeter:
         crop = np.ascontiguousarray(image_bgr[y0:y1, x0:x1])
         labels = lut_labels(crop, self._lut)
         labels[~self._inside] = 0
-        if self.erode:
-            labels = erode_labels(labels)
+        if self.opening:
+            labels = open_labels(labels)
         return lacey_from_labels(labels, self._inside, self._cell, self.rng)

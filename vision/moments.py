@@ -10,8 +10,9 @@ x, y, x^2, y^2 and xy (integers, exact), plus the same for dark pixels
 (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed. Within a row it follows runs of
 one class: a pixel that continues the run costs one table look-up and one compare, and
 a run's sums (and its pixels per free-surface occupancy cell) are added in closed form
-when it ends. The optional one-pixel erosion (``erode``) classifies each row into a
-label row first and is a separate compiled kernel, so the plain one carries none of it.
+when it ends. The optional class opening (``opening``: a one-pixel erosion, then a
+dilation back inside the class) classifies each row into a label row first and is a
+separate compiled kernel, so the plain one carries none of it.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
-__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "erode_labels", "frame_moments", "row_spans"]
+__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "open_labels", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -96,13 +97,19 @@ def row_spans(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first.astype(np.int64), last.astype(np.int64)
 
 
-def erode_labels(labels: np.ndarray) -> np.ndarray:
-    """The one-pixel class erosion of ``frame_moments(..., erode=True)`` on a label map
-    (H, W; 0 = no class): a pixel keeps its class only when its four neighbours have the
-    same one (pixels off the map count as 0). Returns a new array."""
+def open_labels(labels: np.ndarray) -> np.ndarray:
+    """The class opening of ``frame_moments(..., opening=True)`` on a label map (H, W; 0 =
+    no class), with the 4-neighbour cross: a pixel survives the erosion when its four
+    neighbours have its class (pixels off the map count as 0), and keeps its class when it
+    or one of its four neighbours survived. Thin rims and gaps (one or two pixels wide)
+    lose their class; a particle keeps every pixel it can fit the cross into, so its
+    centroid does not move (an erosion alone would shift it away from holes and edges).
+    Returns a new array."""
     lab = np.asarray(labels)
     p = np.pad(lab, 1)
-    keep = (p[1:-1, :-2] == lab) & (p[1:-1, 2:] == lab) & (p[:-2, 1:-1] == lab) & (p[2:, 1:-1] == lab)
+    core = (p[1:-1, :-2] == lab) & (p[1:-1, 2:] == lab) & (p[:-2, 1:-1] == lab) & (p[2:, 1:-1] == lab) & (lab != 0)
+    q = np.pad(core, 1)
+    keep = core | q[1:-1, :-2] | q[1:-1, 2:] | q[:-2, 1:-1] | q[2:, 1:-1]
     return np.where(keep, lab, 0).astype(lab.dtype)
 
 
@@ -131,9 +138,9 @@ _add_run = _add_run_py  # replaced by their compiled forms before a kernel is co
 _add_cells = _add_cells_py
 
 
-def _make_kernel(erode: bool):
-    """The moments kernel, with or without the one-pixel class erosion (``erode`` is a
-    compile-time constant of the closure, so the plain kernel carries none of its code)."""
+def _make_kernel(opening: bool):
+    """The moments kernel, with or without the class opening (``opening`` is a compile-time
+    constant of the closure, so the plain kernel carries none of its code)."""
 
     def kernel(  # pragma: no cover - compiled
         img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
@@ -141,10 +148,11 @@ def _make_kernel(erode: bool):
         """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
 
         ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
-        classified pixels (before any erosion), or the dark pixels when ``occ_dark``. With
-        ``erode``, each grid row is first classified into a label row (three kept, zero
-        outside the spans) and a pixel counts for its class only when its four grid
-        neighbours have the same class."""
+        classified pixels (before any opening), or the dark pixels when ``occ_dark``. With
+        ``opening``, grid row i + 2 is classified into a label row (five kept, zero outside
+        the spans), row i + 1 eroded (a pixel keeps its class when its four grid neighbours
+        have it; three kept) and a pixel of row i counts for its class when it or one of its
+        four neighbours survived the erosion."""
         out[:, :] = 0
         occ[:, :] = 0
         hist = np.zeros((n_classes + 1, 3), np.int64)
@@ -152,17 +160,18 @@ def _make_kernel(erode: bool):
         width = 0
         for i in range(nrows):
             width = max(width, last[i])
-        lbuf = np.zeros((3, width + 2 if erode else 1), np.uint8)  # label rows: the erosion only
+        lbuf = np.zeros((5, width + 2 if opening else 1), np.uint8)  # label rows: the opening only
+        ebuf = np.zeros((3, width + 2 if opening else 1), np.uint8)  # eroded rows
         cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
         for q in range(occ.shape[1]):
             cend[q] = (((q + 1) << occ_shift) + step - 1) // step
-        for i in range(-1 if erode else 0, nrows):
-            if erode:
-                # classify grid row i + 1 into its label row (the erosion needs the row below)
-                k = i + 1
-                dst = lbuf[k % 3]
-                if k >= 3:  # the slot held row k - 3: clear its span
-                    for j in range(first[k - 3], last[k - 3]):
+        for i in range(-2 if opening else 0, nrows):
+            if opening:
+                # classify grid row i + 2 into its label row
+                k = i + 2
+                dst = lbuf[k % 5]
+                if k >= 5:  # the slot held row k - 5: clear its span
+                    for j in range(first[k - 5], last[k - 5]):
                         dst[j + 1] = 0
                 if k < nrows and last[k] > first[k]:
                     krow = img[y0 + k * step]
@@ -175,6 +184,21 @@ def _make_kernel(erode: bool):
                         if c == 255:
                             c = fine[(bb << 16) | (gg << 8) | rr]
                         dst[j + 1] = c
+                # erode grid row e = i + 1 (needs label rows e - 1, e, e + 1)
+                e = i + 1
+                if e >= 0:
+                    edst = ebuf[e % 3]
+                    if e >= 3:  # the slot held row e - 3
+                        for j in range(first[e - 3], last[e - 3]):
+                            edst[j + 1] = 0
+                    if e < nrows:
+                        lc = lbuf[e % 5]
+                        lu = lbuf[(e + 4) % 5]  # row e - 1 (zeros for e = 0)
+                        ld = lbuf[(e + 1) % 5]
+                        for j in range(first[e], last[e]):
+                            c = lc[j + 1]
+                            if c != 0 and lc[j] == c and lc[j + 2] == c and lu[j + 1] == c and ld[j + 1] == c:
+                                edst[j + 1] = c
                 if i < 0:
                     continue
             a = first[i]
@@ -185,21 +209,23 @@ def _make_kernel(erode: bool):
             row = img[y]
             orow = occ[(i * step) >> occ_shift]
             hist[:, :] = 0
-            if erode:
-                cur = lbuf[i % 3]
-                dn = lbuf[(i + 1) % 3]
-                up = lbuf[(i + 2) % 3]  # row i - 1 (zeros for i = 0)
+            if opening:
+                cur = lbuf[i % 5]
+                ec = ebuf[i % 3]
+                eu = ebuf[(i + 2) % 3]  # eroded row i - 1 (zeros for i = 0)
+                ed = ebuf[(i + 1) % 3]  # eroded row i + 1 (zeros past the last row)
             # runs of one class: a run's n, sum x and sum x^2 added in closed form at its end
-            # (and, without the erosion, its pixels to the occupancy cells it covers)
+            # (and, without the opening, its pixels to the occupancy cells it covers)
             rc = 0  # class of the current run
             rj = a  # its first grid column
-            if erode:
+            if opening:
                 for j in range(a, b):
                     c = np.int64(cur[j + 1])
                     if c != 0:
-                        if not occ_dark:  # the bed before the erosion
+                        if not occ_dark:  # the bed before the opening
                             orow[(j * step) >> occ_shift] += 1
-                        if cur[j] != c or cur[j + 2] != c or up[j + 1] != c or dn[j + 1] != c:
+                        # kept when it or a neighbour survived the erosion (only its own class can)
+                        if ec[j + 1] == 0 and ec[j] == 0 and ec[j + 2] == 0 and eu[j + 1] == 0 and ed[j + 1] == 0:
                             c = 0
                     if c != rc:
                         if rc > 0:
@@ -265,15 +291,15 @@ def _make_kernel(erode: bool):
 _kernels: dict[bool, object] = {}
 
 
-def _compiled(erode: bool = False):
+def _compiled(opening: bool = False):
     global _add_run, _add_cells
-    k = _kernels.get(erode)
+    k = _kernels.get(opening)
     if k is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
         _add_run = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_run_py)
         _add_cells = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_cells_py)
-        k = _kernels[erode] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(erode))
+        k = _kernels[opening] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(opening))
     return k
 
 
@@ -288,7 +314,7 @@ def frame_moments(
     out: np.ndarray | None = None,
     occupancy: np.ndarray | None = None,
     occ_shift: int = 3,
-    erode: bool = False,
+    opening: bool = False,
 ) -> np.ndarray:
     """Moments of every class (and of dark pixels) over the ROI's row spans.
 
@@ -297,13 +323,12 @@ def frame_moments(
     Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
     in original image px: row k is class k+1, the last row the dark pixels.
 
-    ``erode``: a pixel counts for its class only when its four grid neighbours (left,
-    right, up, down) are of the same class -- a one-pixel erosion of every class map,
-    which drops the thin rims and gaps that chroma blur (JPEG) or anti-aliasing give
-    the wrong class. ``occupancy`` (int32, at least ``ceil(box_h / 2^occ_shift)`` x
-    ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
+    ``opening``: the class opening of :func:`open_labels` on the grid -- drops the thin
+    rims and gaps that chroma blur (JPEG) or anti-aliasing give the wrong class, and
+    keeps whole particles (at least 3 grid pixels across). ``occupancy`` (int32, at least
+    ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
     ``2^occ_shift`` px, counted from ``origin_xy``: the classified pixels (before the
-    erosion), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
+    opening), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
     if out is None:
         out = np.empty((tables.n_classes + 1, 6), np.int64)
@@ -312,6 +337,6 @@ def frame_moments(
         rows = (len(first) * step >> occ_shift) + 1
         cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
-    _compiled(bool(erode))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
+    _compiled(bool(opening))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
                            tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
     return out

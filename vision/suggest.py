@@ -28,6 +28,10 @@
    are a note for the user: either one material was split by its shading (the other
    taken for background, e.g. black particles on a dark drum) or two materials differ
    only in lightness (grey and white), which shading mixes up pixel by pixel.
+7. The class opening (``[meter] opening``) is turned on when it moves a class centroid on
+   the frames given by more than ``OPENING_SHIFT`` R (``needs_opening``): chroma blur
+   (JPEG 4:2:0) gives the dark gaps between light particles the colour of a darker class
+   of the same hue, which the opening drops while it keeps whole particles.
 
 Classes are named by colour and sorted by name, so the TOML is the same for any frames
 of the same material pair.
@@ -37,7 +41,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -49,16 +53,26 @@ from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
 __all__ = [
     "MAX_DISTANCE",
+    "OPENING_KEEP",
+    "OPENING_SHIFT",
     "DrumSamples",
     "class_preview",
     "colour_name",
     "fit_colour_model",
+    "needs_opening",
     "sample_drum_pixels",
     "suggest_classes",
 ]
 
 MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
+
+OPENING_SHIFT = 0.01
+"""``classes suggest`` turns the class opening on when it moves a class centroid by more than
+this share of R on a frame it learned from (a third of the 3% accuracy aim)."""
+
+OPENING_KEEP = 0.5
+"""... and not when it would leave a class less than this share of its pixels."""
 
 _L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
 _SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main lightness is shadow/gap
@@ -362,7 +376,25 @@ def suggest_classes(
     per = per_frame or max(2000, 40000 // len(frames))
     samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
     classes, notes = _fit_colour_model(samples, k, seed)
-    return MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
+    cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
+    return replace(cfg, opening=needs_opening(cfg, frames, rois))
+
+
+def needs_opening(cfg: MeterConfig, frames: Sequence[np.ndarray], rois: Sequence[DrumROI]) -> bool:
+    """Whether the class opening (``[meter] opening``) changes what ``cfg`` measures on these
+    frames: a class centroid moving by more than ``OPENING_SHIFT`` R on any frame (thin rims
+    and gaps in a class's colour: JPEG chroma blur between particles of one hue), unless it
+    would leave a class less than ``OPENING_KEEP`` of its pixels (particles too small for it)."""
+    plain, opened = replace(cfg, opening=False), replace(cfg, opening=True)
+    moved = False
+    for img, roi in zip(frames, rois, strict=True):
+        a, b = plain.make_meter(roi).measure(img), opened.make_meter(roi).measure(img)
+        for sa, sb in zip(a.classes, b.classes, strict=True):
+            if sa.n_px > 0 and sb.n_px < OPENING_KEEP * sa.n_px:
+                return False
+            shift = float(np.hypot(sa.cx_px - sb.cx_px, sa.cy_px - sb.cy_px)) / roi.r_px
+            moved = moved or shift > OPENING_SHIFT  # (NaN, a class too small on a frame: no vote)
+    return moved
 
 
 _NO_CLASS_BGR = ((45, 45, 45), (150, 150, 150), (110, 30, 110))  # candidates, the first preferred

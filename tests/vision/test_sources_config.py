@@ -32,9 +32,9 @@ def test_config_roundtrip_and_meter():
     assert cfg.roi.r_px == 200 and cfg.min_pixels == 10
     again = parse_config(config_to_toml(cfg))
     assert again.classes == cfg.classes and again.roi == cfg.roi
-    assert not cfg.erode and "erode" not in config_to_toml(cfg)
-    eroding = parse_config(GOOD.replace("min_pixels = 10", "min_pixels = 10\nerode = true"))
-    assert eroding.erode and eroding.make_meter().erode and parse_config(config_to_toml(eroding)).erode
+    assert not cfg.opening and "opening" not in config_to_toml(cfg)
+    opened = parse_config(GOOD.replace("min_pixels = 10", "min_pixels = 10\nopening = true"))
+    assert opened.opening and opened.make_meter().opening and parse_config(config_to_toml(opened)).opening
 
 
 @pytest.mark.parametrize(
@@ -46,7 +46,8 @@ def test_config_roundtrip_and_meter():
         (GOOD.replace("[[0, 0, 160], [179, 50, 255]]", "[[0, 0, 160], [179, 50, 100]]"), "inverted V"),
         (GOOD.replace('bed = "color"', 'bed = "glow"'), "bed"),
         (GOOD.replace("min_pixels = 10", "min_pixels = 'ten'"), "integer"),
-        (GOOD.replace("min_pixels = 10", "erode = 1"), "erode must be true or false"),
+        (GOOD.replace("min_pixels = 10", "opening = 1"), "opening must be true or false"),
+        (GOOD.replace("min_pixels = 10", "erode = true"), "erode was replaced by opening"),
         ("[meter\n", "TOML"),
         ("[meter]\nbed='color'\n[[classes]]\nname='a'\nhsv=[[[0,0,0],[10,255,255]]]\n", "two"),
     ],

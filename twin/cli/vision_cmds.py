@@ -106,7 +106,7 @@ def mi_cmd(
     if method is Method.lacey:
         from vision.lacey import LaceyMeter
 
-        baseline = LaceyMeter(cfg.classes, manual_roi or cfg.roi, erode=cfg.erode)
+        baseline = LaceyMeter(cfg.classes, manual_roi or cfg.roi, opening=cfg.opening)
     elif method is Method.glcm:
         from vision.glcm import GLCMMeter
 
@@ -337,6 +337,11 @@ def suggest_cmd(
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
                "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
+    if cfg.opening:
+        comment += ("\nopening = true: the class opening moved a class centroid by more than 1% of R on these "
+                    "frames\n(colour blur between particles of one hue); it drops thin rims and gaps, keeps particles.")
+        console_err.print("class opening on (it matters on these frames: colour blur between particles)",
+                          highlight=False)
     comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
     _warn(cfg.warnings)
     if preview is not None:

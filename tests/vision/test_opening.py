@@ -1,0 +1,118 @@
+"""The class opening (``[meter] opening``): exact in the compiled pass, shared with the
+Lacey baseline, and what it is for -- rims and gaps that JPEG chroma blur gives the wrong
+class -- without moving a particle's centroid."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from vision.colours import DEFAULT_CLASSES, ColourClass, classify
+from vision.config import config_to_toml
+from vision.lacey import LaceyMeter
+from vision.meter import Meter
+from vision.moments import class_tables, frame_moments, open_labels, row_spans
+from vision.roi import _mask_in_box, roi_bbox
+from vision.suggest import suggest_classes
+from vision.synthetic import drum_frame, particle_drum
+
+
+def test_open_labels_drops_thin_structures_and_keeps_blobs_whole():
+    rng = np.random.default_rng(0)
+    lab = np.zeros((20, 24), np.uint8)
+    lab[1:9, 1:9] = 1  # an 8 x 8 block keeps all but its four corners
+    lab[4, 12:20] = 2  # a one-pixel line vanishes
+    lab[12:14, 1:20] = 2  # so does a two-pixel band
+    lab[16:19, 2:22] = rng.integers(0, 3, (3, 20))  # noise: checked against OpenCV below
+    out = open_labels(lab)
+    want = lab == 1
+    want[[1, 1, 8, 8], [1, 8, 1, 8]] = False
+    assert ((out == 1)[:10] == want[:10]).all()
+    assert not (out[:15] == 2).any()
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    for c in (1, 2):  # the per-class morphological opening, the map's outside counted as no class
+        m = np.pad((lab == c).astype(np.uint8), 1)
+        ref = cv2.dilate(cv2.erode(m, cross, borderValue=0), cross, borderValue=0)[1:-1, 1:-1]
+        assert ((out == c) == (ref > 0)).all(), c
+
+
+THREE = (*DEFAULT_CLASSES, ColourClass("grey", (((0, 0, 100), (179, 40, 200)),), (150, 150, 150)))
+
+
+@pytest.mark.parametrize("opening", [False, True])
+@pytest.mark.parametrize("step, classes, dark", [(1, DEFAULT_CLASSES, -1), (2, DEFAULT_CLASSES, -1),
+                                                 (3, THREE, -1), (1, THREE, 80)])
+def test_compiled_pass_matches_the_label_map(step, classes, dark, opening):
+    """Every class's moments (runs summed in closed form) and the occupancy grid equal
+    those of the label map, opened or not; the grid counts the bed before the opening."""
+    img = drum_frame((320, 240), mix=0.6, seed=2)
+    img[100:140, 60:260] = (120, 125, 130)  # a grey band: the third class
+    roi = Meter().measure(img).roi
+    box = roi_bbox(roi, img.shape[:2])
+    x0, y0, x1, y1 = box
+    inside = _mask_in_box(roi, box)[::step, ::step]
+    first, last = row_spans(inside)
+    tables = class_tables(classes)
+    occ = np.full(((inside.shape[0] * step >> 3) + 1, (inside.shape[1] * step >> 3) + 1), 7, np.int32)
+    got = frame_moments(img, tables, (x0, y0), first, last, step, dark, occupancy=occ, opening=opening)
+    sub = np.ascontiguousarray(img[y0:y1:step, x0:x1:step][: inside.shape[0], : inside.shape[1]])
+    raw = np.where(inside, classify(sub, classes), 0)
+    lab = open_labels(raw) if opening else raw
+    ys, xs = np.mgrid[0 : lab.shape[0], 0 : lab.shape[1]]
+    X, Y = x0 + xs * step, y0 + ys * step
+    darkpx = inside & (sub.max(axis=2) <= dark)
+    for k, m in enumerate([lab == c for c in range(1, len(classes) + 1)] + [darkpx]):
+        want = [m.sum(), X[m].sum(), Y[m].sum(), (X[m] ** 2).sum(), (Y[m] ** 2).sum(), (X[m] * Y[m]).sum()]
+        assert got[k].tolist() == [int(v) for v in want], k
+    assert (lab == 3).sum() > 100 if len(classes) == 3 else True
+    bed = darkpx if dark >= 0 else raw > 0
+    want_occ = np.zeros_like(occ)
+    np.add.at(want_occ, ((ys * step) >> 3, (xs * step) >> 3), bed.astype(np.int32))
+    assert (occ == want_occ).all()
+
+
+def test_lacey_uses_the_same_opened_labels():
+    img = drum_frame((320, 240), mix=0.0, seed=1)
+    roi = Meter().measure(img).roi
+    a = LaceyMeter(roi=roi).measure(img)
+    b = LaceyMeter(roi=roi, opening=True).measure(img)
+    assert math.isfinite(a.m) and math.isfinite(b.m) and a.s0_2 != b.s0_2
+
+
+@pytest.mark.parametrize("quality", [30, 75])
+def test_opening_removes_jpeg_chroma_rims_on_a_same_hue_pair(quality):
+    """Dark vs light green at JPEG quality 30 and 75: gaps between light particles take the
+    dark green's colour (chroma blur); without the opening the dark centroid is pulled
+    towards the light side, with it it stays within 3% of R."""
+    cols = ((30, 110, 20), (150, 235, 150))
+    scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
+              for i, (m, sl) in enumerate([(0.0, 25.0), (0.4, 35.0)])]
+    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
+           for s in scenes]
+    cfg = suggest_classes(jpg, per_frame=2500)
+    dark = min(range(2), key=lambda k: sum(cfg.counted[k].lab[0].mean_lab[:1]))
+    errs = {}
+    for opening in (False, True):
+        meter = Meter(cfg.classes, opening=opening)
+        errs[opening] = []
+        for s, img in zip(scenes, jpg, strict=True):
+            st = meter.measure(img).classes[dark]
+            errs[opening].append(math.hypot(st.cx_px - s.centroids[0][0], st.cy_px - s.centroids[0][1]) / s.roi.r_px)
+    assert max(errs[True]) < 0.03, errs
+    assert max(errs[False]) > 2 * max(errs[True]), errs
+
+
+def test_classes_suggest_turns_the_opening_on_where_it_matters():
+    """On JPEG frames of a same-hue pair the opening moves the dark class's centroid (the
+    bled gaps): suggest turns it on and writes it into the TOML; on clean frames of two
+    hues it changes nothing, and the fast pass stays."""
+    cols = ((30, 110, 20), (150, 235, 150))
+    scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
+              for i, (m, sl) in enumerate([(0.0, 25.0), (0.4, 35.0)])]
+    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, 50])[1], cv2.IMREAD_COLOR)
+           for s in scenes]
+    cfg = suggest_classes(jpg, per_frame=2500)
+    assert cfg.opening and "opening = true" in config_to_toml(cfg)
+    clean = [particle_drum((400, 300), mix=m, seed=i, particle_r_frac=0.045).image for i, m in enumerate([0.0, 0.5])]
+    assert not suggest_classes(clean, per_frame=2500).opening
