@@ -31,7 +31,10 @@
 7. The class opening (``[meter] opening``) is turned on when it moves a class centroid on
    the frames given by more than ``OPENING_SHIFT`` R (``needs_opening``): chroma blur
    (JPEG 4:2:0) gives the dark gaps between light particles the colour of a darker class
-   of the same hue, which the opening drops while it keeps whole particles.
+   of the same hue, which the opening drops while it keeps whole particles. It works on the
+   meter's stride grid, so on large frames the stride is set to about a twelfth of a
+   particle's diameter (``particle_diameter_px``, ``opening_stride``; halved while the
+   opening would eat the particles): the blurred gaps grow with the particles.
 
 Classes are named by colour and sorted by name, so the TOML is the same for any frames
 of the same material pair.
@@ -40,6 +43,7 @@ of the same material pair.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -53,6 +57,7 @@ from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
 __all__ = [
     "MAX_DISTANCE",
+    "OPENING_GRID",
     "OPENING_KEEP",
     "OPENING_SHIFT",
     "DrumSamples",
@@ -60,6 +65,8 @@ __all__ = [
     "colour_name",
     "fit_colour_model",
     "needs_opening",
+    "opening_stride",
+    "particle_diameter_px",
     "sample_drum_pixels",
     "suggest_classes",
 ]
@@ -73,6 +80,11 @@ this share of R on a frame it learned from (a third of the 3% accuracy aim)."""
 
 OPENING_KEEP = 0.5
 """... and not when it would leave a class less than this share of its pixels."""
+
+_CHORD_MEDIAN = 0.91  # pixel-weighted median chord of a disc / its diameter: L = d sqrt(1 - u^2), weighted by L
+
+OPENING_GRID = 12.0
+"""Grid pixels across a particle for the opening's stride (``opening_stride``)."""
 
 _L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
 _SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main lightness is shadow/gap
@@ -377,21 +389,70 @@ def suggest_classes(
     samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
     classes, notes = _fit_colour_model(samples, k, seed)
     cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
-    return replace(cfg, opening=needs_opening(cfg, frames, rois))
+    # the smallest estimate over (up to 8 of) the frames: in a segregated bed touching
+    # particles of one class merge into longer runs, a mixed frame shows them one by one
+    d = min((particle_diameter_px(cfg, img, roi) for img, roi in list(zip(frames, rois, strict=True))[:8]),
+            key=lambda v: v if math.isfinite(v) else math.inf)
+    stride = opening_stride(d)
+    while stride >= 1:  # from the particle size's grid down, while the opening eats particles
+        verdict = needs_opening(cfg, frames, rois, stride)
+        if verdict is not None:
+            return replace(cfg, opening=True, stride=stride) if verdict else cfg
+        stride //= 2
+    return cfg
 
 
-def needs_opening(cfg: MeterConfig, frames: Sequence[np.ndarray], rois: Sequence[DrumROI]) -> bool:
-    """Whether the class opening (``[meter] opening``) changes what ``cfg`` measures on these
-    frames: a class centroid moving by more than ``OPENING_SHIFT`` R on any frame (thin rims
-    and gaps in a class's colour: JPEG chroma blur between particles of one hue), unless it
-    would leave a class less than ``OPENING_KEEP`` of its pixels (particles too small for it)."""
-    plain, opened = replace(cfg, opening=False), replace(cfg, opening=True)
+def particle_diameter_px(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> float:
+    """A particle's diameter (px) in ``frame``, from the classified drum: the length of the
+    horizontal runs of each counted class that half of its pixels lie in (fragments of a few
+    pixels -- noise, highlights -- hardly count; for the chords of a disc at uniform offsets
+    it is ``_CHORD_MEDIAN`` d), the smallest over the classes (a class whose particles merge
+    through gaps of its colour gives longer runs). NaN when no class has runs."""
+    box = roi_bbox(roi, frame.shape[:2])
+    x0, y0, x1, y1 = box
+    lab = classify(np.ascontiguousarray(frame[y0:y1, x0:x1]), cfg.classes)
+    lab[~_mask_in_box(roi, box)] = 0
+    best = np.nan
+    for c in range(1, len(cfg.classes) + 1):
+        if cfg.classes[c - 1].reject:
+            continue
+        m = np.pad(lab == c, ((0, 0), (1, 1)))
+        starts = np.nonzero(m[:, 1:] & ~m[:, :-1])
+        ends = np.nonzero(~m[:, 1:] & m[:, :-1])
+        if starts[0].size >= 20:
+            lengths = np.sort(ends[1] - starts[1])
+            cum = np.cumsum(lengths)  # the run length that half of the class's pixels lie in
+            run = float(lengths[np.searchsorted(cum, 0.5 * cum[-1])]) / _CHORD_MEDIAN
+            best = run if not best <= run else best
+    return float(best)
+
+
+def opening_stride(diameter_px: float) -> int:
+    """The meter's stride for the class opening: a power of two, at most ``diameter_px /
+    OPENING_GRID`` (so a particle spans that many grid pixels and the cross fits in it, while
+    the gaps between particles, their colour blurred in, shrink to a grid pixel or two), at
+    most 8; 1 for an unknown or small diameter."""
+    s = 1
+    while math.isfinite(diameter_px) and s < 8 and 2 * s <= diameter_px / OPENING_GRID:
+        s *= 2
+    return s
+
+
+def needs_opening(
+    cfg: MeterConfig, frames: Sequence[np.ndarray], rois: Sequence[DrumROI], stride: int = 1
+) -> bool | None:
+    """Whether the class opening (``[meter] opening`` on the grid of ``stride``) changes what
+    ``cfg`` measures on these frames: a class centroid moving by more than ``OPENING_SHIFT`` R
+    on any frame (thin rims and gaps in a class's colour: JPEG chroma blur between particles of
+    one hue). None when it would leave a class less than ``OPENING_KEEP`` of its pixels
+    (particles too small for the grid)."""
+    plain, opened = replace(cfg, opening=False), replace(cfg, opening=True, stride=stride)
     moved = False
     for img, roi in zip(frames, rois, strict=True):
         a, b = plain.make_meter(roi).measure(img), opened.make_meter(roi).measure(img)
         for sa, sb in zip(a.classes, b.classes, strict=True):
             if sa.n_px > 0 and sb.n_px < OPENING_KEEP * sa.n_px:
-                return False
+                return None
             shift = float(np.hypot(sa.cx_px - sb.cx_px, sa.cy_px - sb.cy_px)) / roi.r_px
             moved = moved or shift > OPENING_SHIFT  # (NaN, a class too small on a frame: no vote)
     return moved

@@ -14,7 +14,7 @@ from vision.lacey import LaceyMeter
 from vision.meter import Meter
 from vision.moments import class_tables, frame_moments, open_labels, row_spans
 from vision.roi import _mask_in_box, roi_bbox
-from vision.suggest import suggest_classes
+from vision.suggest import opening_stride, particle_diameter_px, suggest_classes
 from vision.synthetic import drum_frame, particle_drum
 
 
@@ -116,3 +116,34 @@ def test_classes_suggest_turns_the_opening_on_where_it_matters():
     assert cfg.opening and "opening = true" in config_to_toml(cfg)
     clean = [particle_drum((400, 300), mix=m, seed=i, particle_r_frac=0.045).image for i, m in enumerate([0.0, 0.5])]
     assert not suggest_classes(clean, per_frame=2500).opening
+
+
+@pytest.mark.parametrize("size, r_frac", [((400, 300), 0.045), ((1280, 960), 0.045), ((1280, 960), 0.02)])
+def test_particle_diameter_is_read_from_the_classified_bed(size, r_frac):
+    s = particle_drum(size, mix=0.5, particle_r_frac=r_frac, seed=1)
+    cfg = suggest_classes([s.image], per_frame=2500)
+    d = particle_diameter_px(cfg, s.image, s.roi)
+    assert abs(d / (2 * r_frac * s.roi.r_px) - 1) < 0.25, d
+    assert [opening_stride(v) for v in (float("nan"), 10.0, 23.0, 24.0, 60.0, 500.0)] == [1, 1, 1, 2, 4, 8]
+
+
+def test_on_large_jpeg_frames_the_opening_works_on_a_coarser_grid():
+    """Brown vs beige, 1600 x 1200, JPEG 30: the blurred gaps between beige particles (brown
+    in colour) are several pixels wide, more than the cross removes on the full grid; the
+    suggested config opens on a grid of about a twelfth of a particle and holds 3% of R."""
+    cols = ((30, 70, 140), (170, 210, 230))
+    scenes = [particle_drum((1600, 1200), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
+              for i, (m, sl) in enumerate([(0.0, 30.0), (0.5, 35.0)])]
+    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, 30])[1], cv2.IMREAD_COLOR)
+           for s in scenes]
+    cfg = suggest_classes(jpg, per_frame=4000)
+    assert cfg.opening and cfg.stride >= 2, (cfg.opening, cfg.stride)
+    full_grid = Meter(cfg.classes, opening=True)
+    for s, img in zip(scenes, jpg, strict=True):
+        got, fine = cfg.make_meter().measure(img), full_grid.measure(img)
+        errs = [min(math.hypot(st.cx_px - c[0], st.cy_px - c[1]) for c in s.centroids) / s.roi.r_px
+                for st in got.classes]
+        assert max(errs) < 0.03, errs
+        fine_errs = [min(math.hypot(st.cx_px - c[0], st.cy_px - c[1]) for c in s.centroids) / s.roi.r_px
+                     for st in fine.classes]
+        assert max(fine_errs) >= max(errs), (fine_errs, errs)
