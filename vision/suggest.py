@@ -34,7 +34,9 @@
    of the same hue, which the opening drops while it keeps whole particles. It works on the
    meter's stride grid, so on large frames the stride is set to about a twelfth of a
    particle's diameter (``particle_diameter_px``, ``opening_stride``; halved while the
-   opening would eat the particles): the blurred gaps grow with the particles.
+   opening would eat the particles): the blurred gaps grow with the particles. On such a
+   coarse grid the opening is always on (it costs nothing there, and the gaps it drops
+   need not move a centroid on the frames given -- a mixed bed -- to move one on others).
 
 Classes are named by colour and sorted by name, so the TOML is the same for any frames
 of the same material pair.
@@ -397,7 +399,10 @@ def suggest_classes(
     while stride >= 1:  # from the particle size's grid down, while the opening eats particles
         verdict = needs_opening(cfg, frames, rois, stride)
         if verdict is not None:
-            return replace(cfg, opening=True, stride=stride) if verdict else cfg
+            # on a coarse grid the opening is always on: it costs nothing there (the grid is
+            # faster than the full one), and the blurred gaps it drops may not move a centroid
+            # on the frames given (a mixed bed) yet will on others (a segregated one)
+            return replace(cfg, opening=True, stride=stride) if verdict or stride > 1 else cfg
         stride //= 2
     return cfg
 
