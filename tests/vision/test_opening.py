@@ -37,6 +37,15 @@ def test_open_labels_drops_thin_structures_and_keeps_blobs_whole():
         assert ((out == c) == (ref > 0)).all(), c
 
 
+def jpeg_pair(cols, quality: int, size=(400, 300), slopes=(25.0, 35.0), mixes=(0.0, 0.4)):
+    """Two rendered drums of a colour pair (segregated and partly mixed) and their JPEG copies."""
+    scenes = [particle_drum(size, cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
+              for i, (m, sl) in enumerate(zip(mixes, slopes, strict=True))]
+    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
+           for s in scenes]
+    return scenes, jpg
+
+
 THREE = (*DEFAULT_CLASSES, ColourClass("grey", (((0, 0, 100), (179, 40, 200)),), (150, 150, 150)))
 
 
@@ -85,11 +94,7 @@ def test_opening_removes_jpeg_chroma_rims_on_a_same_hue_pair(quality):
     """Dark vs light green at JPEG quality 30 and 75: gaps between light particles take the
     dark green's colour (chroma blur); without the opening the dark centroid is pulled
     towards the light side, with it it stays within 3% of R."""
-    cols = ((30, 110, 20), (150, 235, 150))
-    scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
-              for i, (m, sl) in enumerate([(0.0, 25.0), (0.4, 35.0)])]
-    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
-           for s in scenes]
+    scenes, jpg = jpeg_pair(((30, 110, 20), (150, 235, 150)), quality)
     cfg = suggest_classes(jpg, per_frame=2500)
     dark = min(range(2), key=lambda k: sum(cfg.counted[k].lab[0].mean_lab[:1]))
     errs = {}
@@ -107,11 +112,7 @@ def test_classes_suggest_turns_the_opening_on_where_it_matters():
     """On JPEG frames of a same-hue pair the opening moves the dark class's centroid (the
     bled gaps): suggest turns it on and writes it into the TOML; on clean frames of two
     hues it changes nothing, and the fast pass stays."""
-    cols = ((30, 110, 20), (150, 235, 150))
-    scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
-              for i, (m, sl) in enumerate([(0.0, 25.0), (0.4, 35.0)])]
-    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, 50])[1], cv2.IMREAD_COLOR)
-           for s in scenes]
+    _, jpg = jpeg_pair(((30, 110, 20), (150, 235, 150)), 50)
     cfg = suggest_classes(jpg, per_frame=2500)
     assert cfg.opening and "opening = true" in config_to_toml(cfg)
     clean = [particle_drum((400, 300), mix=m, seed=i, particle_r_frac=0.045).image for i, m in enumerate([0.0, 0.5])]
@@ -131,11 +132,8 @@ def test_on_large_jpeg_frames_the_opening_works_on_a_coarser_grid():
     """Brown vs beige, 1600 x 1200, JPEG 30: the blurred gaps between beige particles (brown
     in colour) are several pixels wide, more than the cross removes on the full grid; the
     suggested config opens on a grid of about a twelfth of a particle and holds 3% of R."""
-    cols = ((30, 70, 140), (170, 210, 230))
-    scenes = [particle_drum((1600, 1200), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
-              for i, (m, sl) in enumerate([(0.0, 30.0), (0.5, 35.0)])]
-    jpg = [cv2.imdecode(cv2.imencode(".jpg", s.image, [cv2.IMWRITE_JPEG_QUALITY, 30])[1], cv2.IMREAD_COLOR)
-           for s in scenes]
+    scenes, jpg = jpeg_pair(((30, 70, 140), (170, 210, 230)), 30, size=(1600, 1200), slopes=(30.0, 35.0),
+                            mixes=(0.0, 0.5))
     cfg = suggest_classes(jpg, per_frame=4000)
     assert cfg.opening and cfg.stride >= 2, (cfg.opening, cfg.stride)
     full_grid = Meter(cfg.classes, opening=True)
