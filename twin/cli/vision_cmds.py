@@ -301,7 +301,7 @@ def suggest_cmd(
     """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml
     from vision.roi import detect_drum, parse_roi
-    from vision.suggest import class_preview, suggest_classes
+    from vision.suggest import OPENING_GRID, class_preview, suggest_classes
 
     _check_number("--k", k, 2, 6)
     _check_number("--frames", n_frames, 1, 500)
@@ -338,10 +338,11 @@ def suggest_cmd(
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
                "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
     if cfg.opening:
-        comment += ("\nopening = true: the class opening moved a class centroid by more than 1% of R on these "
-                    "frames\n(colour blur between particles of one hue); it drops thin rims and gaps, keeps particles.")
-        console_err.print("class opening on (it matters on these frames: colour blur between particles)",
-                          highlight=False)
+        why = (f"particles about {cfg.stride * OPENING_GRID:.0f} px or more across: opened on a grid of stride "
+               f"{cfg.stride}" if cfg.stride > 1 else "it moved a class centroid by more than 1% of R on these frames")
+        comment += (f"\nopening = true ({why}): it drops the thin rims and gaps that colour blur gives a class,\n"
+                    "and keeps whole particles.")
+        console_err.print(f"class opening on ({why})", highlight=False)
     comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
     _warn(cfg.warnings)
     if preview is not None:
