@@ -15,7 +15,7 @@ import numpy as np
 from vision.glcm import GLCMMeter
 from vision.lacey import LaceyMeter
 from vision.meter import Meter
-from vision.synthetic import drum_frame
+from vision.synthetic import drum_frame, perturb
 
 __all__ = ["frames_per_second", "run_vision_bench"]
 
@@ -37,7 +37,8 @@ def frames_per_second(
 
 def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = None) -> dict:
     """Run the benchmark and return the numbers (frames/s); ``centroid_fps_opening`` is the
-    centroid path with the class opening (``[meter] opening = true``)."""
+    centroid path with the class opening (``[meter] opening = true``), ``centroid_fps_glare``
+    on the same frames with three glare spots each (filled, ``vision.glare``)."""
     prev = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -54,6 +55,8 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         res["centroid_fps"] = frames_per_second(Meter(roi=roi).measure, vga, seconds)
         res["centroid_fps_stride2"] = frames_per_second(Meter(roi=roi, stride=2).measure, vga, seconds)
         res["centroid_fps_opening"] = frames_per_second(Meter(roi=roi, opening=True).measure, vga, seconds)
+        glare = [perturb(f, "glare", seed=i)[0] for i, f in enumerate(vga)]
+        res["centroid_fps_glare"] = frames_per_second(Meter(roi=roi).measure, glare, seconds)
         say("GLCM 640x480 ...")
         res["glcm_fps"] = frames_per_second(GLCMMeter(roi).measure, vga, seconds)
         say("Lacey 640x480 ...")

@@ -5,7 +5,8 @@ with the exact BGR lookup table of the colour classes (learned model or HSV boxe
 sums each class's pixel count and first and second moments, and the bed's pixels per
 small cell; centroids, spreads and the MI follow from the sums, the free-surface angle
 from the cells (``vision.slope``). The drum is detected, and the ROI's row spans built,
-once per frame size.
+once per frame size. On a frame with glare (clipped light) the spots and their halos are
+filled with the class mix around them (``vision.glare``).
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
+from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes, lut_labels
 from vision.errors import VisionError
+from vision.glare import HALO, RING, glare_fill
 from vision.mixing import mixing_indices
-from vision.moments import class_tables, frame_moments, row_spans
+from vision.moments import class_tables, frame_moments, open_labels, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
@@ -99,6 +101,7 @@ class _Geometry:
     full_area: float
     occ: np.ndarray  # bed pixels per cell (filled by the kernel)
     work: np.ndarray
+    gocc: np.ndarray  # glare pixels per cell (filled by the kernel)
     outside: float = 0.0  # share of the ROI's area outside the image
 
 
@@ -126,6 +129,10 @@ class Meter:
     default (it halves the frame rate); ``classes suggest`` turns it on when it changes
     the centroids on the frames it learned from. The free surface uses the pixels before
     the opening.
+
+    ``glare_fill``: fill glare spots (clipped light no class claims) and their halos with
+    the class mix seen around them (``vision.glare``); it costs nothing on frames without
+    glare.
     """
 
     def __init__(
@@ -141,6 +148,7 @@ class Meter:
         collapse_ratio: float = 0.4,
         history: int = 25,
         opening: bool = False,
+        glare_fill: bool = True,
     ) -> None:
         self.colour_classes = check_class_set(classes)
         self.classes = counted_classes(self.colour_classes)
@@ -160,8 +168,9 @@ class Meter:
         if not isinstance(opening, (bool, np.bool_)):
             raise VisionError(f"opening must be true or false, got {opening!r}")
         self.opening = bool(opening)
+        self.glare_fill = bool(glare_fill)
         self._tables = class_tables(self.colour_classes)
-        self._sums = np.zeros((len(self.classes) + 1, 6), np.int64)
+        self._sums = np.zeros((len(self.classes) + 2, 6), np.int64)
         self._roi = roi
         self._roi_given = roi is not None
         self._rois: dict[tuple[int, int], DrumROI] = {}
@@ -216,7 +225,7 @@ class Meter:
         in_view = float(_mask_in_box(roi, box).sum())
         g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
                       np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64),
-                      max(0.0, 1.0 - in_view / roi_area))
+                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi_area))
         self._geoms[shape_hw] = g
         return g
 
@@ -241,15 +250,40 @@ class Meter:
         self._roi = g.roi
         dark = self.dark_v_max if self.bed == "dark" else -1
         sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
-                             occupancy=g.occ, occ_shift=g.shift, opening=self.opening)
-        return self._reading(sums, g)
+                             occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc)
+        k = len(self.classes)
+        rows = sums.tolist()  # Python ints: one conversion, not one per element
+        if self.glare_fill and rows[k][0] > 0:
+            for i, d in enumerate(self._glare_delta(img, g, rows[k][0]).tolist()):
+                rows[i] = [a + b for a, b in zip(rows[i], d, strict=True)]
+        return self._reading(rows, g)
 
-    def _reading(self, sums: np.ndarray, g: _Geometry) -> Reading:
+    def _glare_delta(self, img: np.ndarray, g: _Geometry, n_glare: float) -> np.ndarray:
+        """``vision.glare.glare_fill`` on the grid window around the frame's glare cells."""
+        s = self.stride
+        x0, y0 = g.box[:2]
+        ci, cj = np.nonzero(g.gocc)
+        cell = 1 << g.shift
+        margin = (HALO + RING) * math.sqrt(n_glare / math.pi) + 6.0  # grid px beyond the glare's cells
+        ia = max(0, int(ci.min() * cell / s - margin))
+        ib = min(len(g.first), int(math.ceil((ci.max() + 1) * cell / s + margin)))
+        ja = max(0, int(cj.min() * cell / s - margin))
+        jb = min(int(g.last.max()), int(math.ceil((cj.max() + 1) * cell / s + margin)))
+        sub = np.ascontiguousarray(img[y0 + ia * s: y0 + ib * s: s, x0 + ja * s: x0 + jb * s: s])
+        labels = lut_labels(sub, self._tables.fine)
+        jj = np.arange(ja, ja + labels.shape[1])
+        rows = slice(ia, ia + labels.shape[0])
+        inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])
+        labels[~inside] = 0  # as the kernel sees them: nothing outside the spans
+        if self.opening:
+            labels = open_labels(labels)
+        return glare_fill(labels, inside, len(self.classes), (x0 + ja * s, y0 + ia * s), s)
+
+    def _reading(self, rows: list[list[float]], g: _Geometry) -> Reading:
         roi = g.roi
         area = float(self.stride * self.stride)
         flags: list[str] = []
         k = len(self.classes)
-        rows = sums.tolist()  # Python ints: one conversion, not one per element
         ns = [float(rows[i][0]) for i in range(k)]
         total = sum(ns)
         stats: list[ClassStats] = []
@@ -284,7 +318,7 @@ class Meter:
         n12 = ns[0] + ns[1]
         conc = ns[0] / n12 if n12 > 0 else _NAN
         # the classes are exclusive: their moments add up to the bed's
-        bed = rows[k] if self.bed == "dark" else [sum(c) for c in zip(*rows[:k], strict=True)]
+        bed = rows[k + 1] if self.bed == "dark" else [sum(c) for c in zip(*rows[:k], strict=True)]
         m00, m10, m01, m20, m02, m11 = (float(v) for v in bed)
         min_bed = max(1.0, self.min_pixels / area, self.min_share * g.roi_px)
         axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)

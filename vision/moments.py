@@ -12,7 +12,9 @@ one class: a pixel that continues the run costs one table look-up and one compar
 a run's sums (and its pixels per free-surface occupancy cell) are added in closed form
 when it ends. The optional class opening (``opening``: a one-pixel erosion, then a
 dilation back inside the class) classifies each row into a label row first and is a
-separate compiled kernel, so the plain one carries none of it.
+separate compiled kernel, so the plain one carries none of it. Clipped light gets a label
+of its own (``GLARE_MIN``): its moments and cells tell the meter where to fill it in
+(``vision.glare``).
 """
 
 from __future__ import annotations
@@ -25,20 +27,29 @@ import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes
 
-__all__ = ["MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "open_labels", "row_spans"]
+__all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "open_labels", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
 
 _AMBIGUOUS = 255  # 6-bit table: this bin straddles a class boundary, ask the 24-bit table
 
+GLARE_MIN = 250
+"""A colour with every channel at or above this is *glare* (clipped light: the tables give
+it the label ``n_classes + 1``, see ``vision.glare``) unless an achromatic class claims it:
+an HSV class, or a learned class whose mean colour has a CIELAB chroma of at most
+``GLARE_CHROMA`` (white or grey particles clip too). A coloured class's learned spread
+may reach white through its particles' highlights, but clipped white carries no hue."""
+GLARE_CHROMA = 12.0
+
 
 @dataclass(frozen=True, eq=False)
 class ClassTables:
     """The two BGR lookup tables of one class set: ``coarse`` (64^3) and ``fine`` (256^3).
 
-    Values: 0 = no class, k = the k-th class (1-based); ``coarse`` uses 255 for a bin
-    that the fine table must decide.
+    Values: 0 = no class, k = the k-th class (1-based), ``n_classes + 1`` = glare (every
+    channel >= ``GLARE_MIN`` and no counted class); ``coarse`` uses 255 for a bin that the
+    fine table must decide.
     """
 
     coarse: np.ndarray
@@ -68,14 +79,26 @@ _coarse_kernel = None
 @lru_cache(maxsize=8)
 def _tables(classes: tuple[ColourClass, ...]) -> ClassTables:
     global _coarse_kernel
-    fine = class_lut(classes)
+    fine = class_lut(classes).copy()  # (the cached table stays as it is: Lacey and classify share it)
+    counted = counted_classes(classes)
+    sat = np.arange(GLARE_MIN, 256, dtype=np.int64)
+    idx = ((sat[:, None, None] << 16) | (sat[None, :, None] << 8) | sat[None, None, :]).ravel()
+    keep = [k + 1 for k, c in enumerate(counted) if not c.lab or _chroma(c) <= GLARE_CHROMA]
+    fine[idx[~np.isin(fine[idx], keep)]] = len(counted) + 1
     if _coarse_kernel is None:
         import numba
 
         _coarse_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_coarse_py)
     coarse = np.empty(1 << 18, np.uint8)
     _coarse_kernel(fine, coarse)
-    return ClassTables(coarse, fine, len(counted_classes(classes)))
+    return ClassTables(coarse, fine, len(counted))
+
+
+def _chroma(c: ColourClass) -> float:
+    """CIELAB chroma of a learned class's mean colour (its components' weighted mean)."""
+    w = np.array([comp.weight for comp in c.lab])
+    ab = np.array([comp.mean_lab[1:] for comp in c.lab])
+    return float(np.hypot(*(w @ ab / w.sum())))
 
 
 def class_tables(classes: Sequence[ColourClass] | Classifier) -> ClassTables:
@@ -143,19 +166,22 @@ def _make_kernel(opening: bool):
     constant of the closure, so the plain kernel carries none of its code)."""
 
     def kernel(  # pragma: no cover - compiled
-        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark
+        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark, gocc
     ):
-        """Sums into ``out`` (n_classes + 1, 6) int64; row k-1 is class k, the last row dark pixels.
+        """Sums into ``out`` (n_classes + 2, 6) int64; row k-1 is class k, row n_classes glare
+        (label n_classes + 1), the last row dark pixels.
 
         ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
-        classified pixels (before any opening), or the dark pixels when ``occ_dark``. With
+        classified pixels (before any opening), or the dark pixels when ``occ_dark``; ``gocc``
+        the same cells' glare pixels (after any opening). With
         ``opening``, grid row i + 2 is classified into a label row (five kept, zero outside
         the spans), row i + 1 eroded (a pixel keeps its class when its four grid neighbours
         have it; three kept) and a pixel of row i counts for its class when it or one of its
         four neighbours survived the erosion."""
         out[:, :] = 0
         occ[:, :] = 0
-        hist = np.zeros((n_classes + 1, 3), np.int64)
+        gocc[:, :] = 0
+        hist = np.zeros((n_classes + 2, 3), np.int64)
         nrows = first.shape[0]
         width = 0
         for i in range(nrows):
@@ -208,6 +234,7 @@ def _make_kernel(opening: bool):
             y = y0 + i * step
             row = img[y]
             orow = occ[(i * step) >> occ_shift]
+            grow = gocc[(i * step) >> occ_shift]
             hist[:, :] = 0
             if opening:
                 cur = lbuf[i % 5]
@@ -222,11 +249,13 @@ def _make_kernel(opening: bool):
                 for j in range(a, b):
                     c = np.int64(cur[j + 1])
                     if c != 0:
-                        if not occ_dark:  # the bed before the opening
+                        if not occ_dark and c <= n_classes:  # the bed before the opening
                             orow[(j * step) >> occ_shift] += 1
                         # kept when it or a neighbour survived the erosion (only its own class can)
                         if ec[j + 1] == 0 and ec[j] == 0 and ec[j + 2] == 0 and eu[j + 1] == 0 and ed[j + 1] == 0:
                             c = 0
+                        elif c > n_classes:
+                            grow[(j * step) >> occ_shift] += 1
                     if c != rc:
                         if rc > 0:
                             _add_run(hist, rc, rj, j, x0, step)
@@ -249,13 +278,17 @@ def _make_kernel(opening: bool):
                             continue
                     if rc > 0:
                         _add_run(hist, rc, rj, j, x0, step)
-                        if not occ_dark:
+                        if rc > n_classes:
+                            _add_cells(grow, rj, j, step, occ_shift, cend)
+                        elif not occ_dark:
                             _add_cells(orow, rj, j, step, occ_shift, cend)
                     rc = c
                     rj = j
                 if rc > 0:
                     _add_run(hist, rc, rj, b, x0, step)
-                    if not occ_dark:
+                    if rc > n_classes:
+                        _add_cells(grow, rj, b, step, occ_shift, cend)
+                    elif not occ_dark:
                         _add_cells(orow, rj, b, step, occ_shift, cend)
             nd = 0
             sxd = 0
@@ -268,7 +301,7 @@ def _make_kernel(opening: bool):
                         sxxd += x * x
                         if occ_dark:
                             orow[(x - x0) >> occ_shift] += 1
-            for kk in range(1, n_classes + 1):
+            for kk in range(1, n_classes + 2):
                 n = hist[kk, 0]
                 if n:
                     out[kk - 1, 0] += n
@@ -278,12 +311,12 @@ def _make_kernel(opening: bool):
                     out[kk - 1, 4] += n * y * y
                     out[kk - 1, 5] += hist[kk, 1] * y
             if nd:
-                out[n_classes, 0] += nd
-                out[n_classes, 1] += sxd
-                out[n_classes, 2] += nd * y
-                out[n_classes, 3] += sxxd
-                out[n_classes, 4] += nd * y * y
-                out[n_classes, 5] += sxd * y
+                out[n_classes + 1, 0] += nd
+                out[n_classes + 1, 1] += sxd
+                out[n_classes + 1, 2] += nd * y
+                out[n_classes + 1, 3] += sxxd
+                out[n_classes + 1, 4] += nd * y * y
+                out[n_classes + 1, 5] += sxd * y
 
     return kernel
 
@@ -315,13 +348,16 @@ def frame_moments(
     occupancy: np.ndarray | None = None,
     occ_shift: int = 3,
     opening: bool = False,
+    glare_cells: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Moments of every class (and of dark pixels) over the ROI's row spans.
+    """Moments of every class (and of glare and dark pixels) over the ROI's row spans.
 
     Row ``i`` of the spans is image row ``y0 + i * step``; its span ``[first[i], last[i])``
     counts grid columns ``x0 + j * step``. ``dark_v_max`` < 0 skips the dark sums.
-    Returns ``out``, an int64 array (n_classes + 1, 6) with columns :data:`MOMENT_FIELDS`
-    in original image px: row k is class k+1, the last row the dark pixels.
+    Returns ``out``, an int64 array (n_classes + 2, 6) with columns :data:`MOMENT_FIELDS`
+    in original image px: row k is class k+1, row n_classes the glare (``GLARE_MIN``), the
+    last row the dark pixels. ``glare_cells`` (like ``occupancy``) receives the glare
+    pixels per cell.
 
     ``opening``: the class opening of :func:`open_labels` on the grid -- drops the thin
     rims and gaps that chroma blur (JPEG) or anti-aliasing give the wrong class, and
@@ -331,12 +367,15 @@ def frame_moments(
     opening), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
     if out is None:
-        out = np.empty((tables.n_classes + 1, 6), np.int64)
+        out = np.empty((tables.n_classes + 2, 6), np.int64)
     x0, y0 = origin_xy
     if occupancy is None:
         rows = (len(first) * step >> occ_shift) + 1
         cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
+    if glare_cells is None:
+        glare_cells = np.empty_like(occupancy)
     _compiled(bool(opening))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
-                           tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0))
+                           tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0),
+                           glare_cells)
     return out

@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.colours import DEFAULT_CLASSES, ColourClass, classify
+from vision.colours import DEFAULT_CLASSES, ColourClass, classify, lut_labels
 from vision.config import config_to_toml
 from vision.lacey import LaceyMeter
 from vision.meter import Meter
-from vision.moments import class_tables, frame_moments, open_labels, row_spans
+from vision.moments import GLARE_MIN, class_tables, frame_moments, open_labels, row_spans
 from vision.roi import _mask_in_box, roi_bbox
 from vision.suggest import opening_stride, particle_diameter_px, suggest_classes
 from vision.synthetic import drum_frame, particle_drum
@@ -53,32 +53,43 @@ THREE = (*DEFAULT_CLASSES, ColourClass("grey", (((0, 0, 100), (179, 40, 200)),),
 @pytest.mark.parametrize("step, classes, dark", [(1, DEFAULT_CLASSES, -1), (2, DEFAULT_CLASSES, -1),
                                                  (3, THREE, -1), (1, THREE, 80)])
 def test_compiled_pass_matches_the_label_map(step, classes, dark, opening):
-    """Every class's moments (runs summed in closed form) and the occupancy grid equal
-    those of the label map, opened or not; the grid counts the bed before the opening."""
+    """Every class's moments (runs summed in closed form), the glare's and the occupancy
+    grids equal those of the label map, opened or not; the bed grid counts the classes
+    before the opening, the glare grid the glare after it."""
     img = drum_frame((320, 240), mix=0.6, seed=2)
     img[100:140, 60:260] = (120, 125, 130)  # a grey band: the third class
+    img[60:72, 150:171] = 255  # clipped light: glare (no class claims it)
+    img[80, 100:120] = 252  # a one-pixel line of it: the opening drops it
     roi = Meter().measure(img).roi
     box = roi_bbox(roi, img.shape[:2])
     x0, y0, x1, y1 = box
     inside = _mask_in_box(roi, box)[::step, ::step]
     first, last = row_spans(inside)
     tables = class_tables(classes)
+    n = len(classes)
     occ = np.full(((inside.shape[0] * step >> 3) + 1, (inside.shape[1] * step >> 3) + 1), 7, np.int32)
-    got = frame_moments(img, tables, (x0, y0), first, last, step, dark, occupancy=occ, opening=opening)
+    gocc = np.full_like(occ, 5)
+    got = frame_moments(img, tables, (x0, y0), first, last, step, dark, occupancy=occ, opening=opening,
+                        glare_cells=gocc)
+    assert got.shape == (n + 2, 6)
     sub = np.ascontiguousarray(img[y0:y1:step, x0:x1:step][: inside.shape[0], : inside.shape[1]])
-    raw = np.where(inside, classify(sub, classes), 0)
+    raw = np.where(inside, lut_labels(sub, tables.fine), 0)
+    assert ((raw == n + 1) == (inside & (sub.min(axis=2) >= GLARE_MIN))).all()
+    assert (np.where(raw <= n, raw, 0) == np.where(inside, classify(sub, classes), 0)).all()
     lab = open_labels(raw) if opening else raw
     ys, xs = np.mgrid[0 : lab.shape[0], 0 : lab.shape[1]]
     X, Y = x0 + xs * step, y0 + ys * step
     darkpx = inside & (sub.max(axis=2) <= dark)
-    for k, m in enumerate([lab == c for c in range(1, len(classes) + 1)] + [darkpx]):
+    for k, m in enumerate([lab == c for c in range(1, n + 2)] + [darkpx]):
         want = [m.sum(), X[m].sum(), Y[m].sum(), (X[m] ** 2).sum(), (Y[m] ** 2).sum(), (X[m] * Y[m]).sum()]
         assert got[k].tolist() == [int(v) for v in want], k
-    assert (lab == 3).sum() > 100 if len(classes) == 3 else True
-    bed = darkpx if dark >= 0 else raw > 0
-    want_occ = np.zeros_like(occ)
-    np.add.at(want_occ, ((ys * step) >> 3, (xs * step) >> 3), bed.astype(np.int32))
-    assert (occ == want_occ).all()
+    assert (lab == 3).sum() > 100 if n == 3 else True
+    assert (lab == n + 1).sum() > 20
+    bed = darkpx if dark >= 0 else (raw > 0) & (raw <= n)
+    for grid, m in ((occ, bed), (gocc, lab == n + 1)):
+        want_occ = np.zeros_like(occ)
+        np.add.at(want_occ, ((ys * step) >> 3, (xs * step) >> 3), m.astype(np.int32))
+        assert (grid == want_occ).all()
 
 
 def test_lacey_uses_the_same_opened_labels():
