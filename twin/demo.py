@@ -73,9 +73,9 @@ class DemoPlant:
         self.frames_rendered = 0
 
     def start_drive(self) -> None:
-        """The operator's front panel: the drive runs at the start speed when the demo
-        begins (as a real one would be). Call it once the loop's mill worker is connected:
-        the board's watchdog stops a running drive that no host feeds."""
+        """The front panel: the drive spins at the start speed when the demo begins (as a
+        real one would be). A run keeps only a mill it commanded alive, so the demo's
+        operator then presses Start in the loop (``drumtwin run`` does both)."""
         start = float(self.config.start_rpm)
         self.emulator.set_motor(setpoint_rpm=start, actual_rpm=start, running=True)
 

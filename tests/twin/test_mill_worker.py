@@ -20,7 +20,8 @@ class FakeLink:
         self.up = True
         self.refuse: dict[str, str] = {}  # command -> NAK reason
         self.sent: list[tuple[str, float | None]] = []
-        self.polls = 0
+        self.polls = 0  # heartbeats (feed the board's watchdog)
+        self.reads = 0  # status reads (do not)
 
     def _check(self, cmd: str) -> None:
         if not self.up:
@@ -46,6 +47,11 @@ class FakeLink:
     def heartbeat(self) -> MillStatus:
         self._check("heartbeat")
         self.polls += 1
+        return self.board
+
+    def status(self) -> MillStatus:
+        self._check("status")
+        self.reads += 1
         return self.board
 
     def close(self) -> None:
@@ -93,7 +99,7 @@ def test_connecting_reads_and_never_restarts_a_stopped_mill() -> None:
     w, link, sink, box = make(STOPPED_WDOG)
     for _ in range(20):
         w.cycle()
-    assert link.sent == [] and link.polls == 20  # only reads (heartbeats), no command
+    assert link.sent == [] and link.reads == 20 and link.polls == 0  # only reads, no command
     snap = box.get()
     assert snap.connected and snap.epoch == 1 and snap.status == STOPPED_WDOG
     assert snap.state == "fault WDOG" and "mill_fault" in sink.faults
@@ -191,13 +197,52 @@ def test_emergency_stop_drops_pending_commands_and_stops() -> None:
 
 
 @pytest.mark.parametrize("status", [RUNNING, STOPPED_WDOG])
-def test_the_worker_polls_with_heartbeats_only(status: MillStatus) -> None:
-    """The run controls the motor: its one poller feeds the watchdog (HB) and reads the
-    status from the answer; no other request goes out unless commanded."""
+def test_the_worker_feeds_the_watchdog_only_once_this_run_commanded_the_mill(status: MillStatus) -> None:
+    """Until a command of this run goes through the poller only reads (STA: a mill left running
+    by another host is not kept alive); from then on it heartbeats (HB). No other request goes
+    out unless commanded; a refused command does not make the run the controller."""
     w, link, _sink, box = make(status)
     for _ in range(3):
         w.cycle()
-    assert link.polls == 3 and link.sent == [] and box.get().status == status
+    assert link.reads == 3 and link.polls == 0 and link.sent == [] and box.get().status == status
+    link.refuse["set_rpm"] = "FAULT"
+    w.submit(SetRpm(rpm=7.0, epoch=box.get().epoch))
+    w.cycle()
+    assert link.polls == 0 and link.reads == 4
+    del link.refuse["set_rpm"]
+    w.submit(SetRpm(rpm=7.0, epoch=box.get().epoch))
+    for _ in range(3):
+        w.cycle()
+    assert link.sent == [("set_rpm", 7.0)] and link.polls == 3 and link.reads == 4
+
+
+def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() -> None:
+    """Defect: the run's poller fed the watchdog from its first poll, so a mill left running
+    (a crashed earlier run, a front panel) kept turning although nobody asked this run to
+    move it. Now it only reads until the operator or AUTO commands: the board's watchdog
+    stops the motor, and the worker reports the WDOG fault."""
+    import time
+
+    from control.device import DeviceConfig
+    from control.driver import MillClient
+    from control.emulator import MillEmulator
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.5), seed=3)
+    port = emu.open_tcp(0)
+    try:
+        emu.set_motor(setpoint_rpm=30.0, actual_rpm=30.0, running=True)
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1,
+                          reconnect_wait_s=0.2)
+        sink, box = Sink(), Latest(MillSnapshot())
+        w = MillWorker(link, sink, box, now_s=lambda: 0.0)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and not (box.get().fault == "WDOG"):
+            w.cycle()
+            time.sleep(0.05)
+        assert box.get().connected and box.get().fault == "WDOG" and not emu.motor.running
+        assert emu.applied == [] and "mill_fault" in sink.faults
+    finally:
+        emu.close()
 
 
 def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:

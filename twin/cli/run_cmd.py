@@ -110,11 +110,12 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         loop.warm_up()  # compile before the clock runs, not while the camera does
         clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
         loop.start()
-        if plant is not None:  # the demo's drive runs once the loop feeds the board's watchdog
-            end = time.monotonic() + 20.0
+        if plant is not None:  # the demo's drive spins at its start rpm, and its operator takes
+            end = time.monotonic() + 20.0  # control in this run: Start (the loop then feeds its watchdog)
             while not loop.mill_box.get().connected and time.monotonic() < end and not clock.stop.is_set():
                 time.sleep(0.01)
             plant.start_drive()
+            loop.start_mill()
         if on_started is not None:
             on_started(loop, plant, dash)
         _wait(loop, cfg, progress)

@@ -3,15 +3,17 @@
 Shape (after pyserial's ``serial.threaded``): the protocol and transport live in
 ``control.driver.MillClient`` (built with ``heartbeat_s=None``: no thread of its own);
 this worker owns the only thread that uses it. Each :meth:`MillWorker.cycle` sends what
-is pending, then polls the board with ``heartbeat()`` (this run controls the motor, so
-it feeds the board's watchdog; the answer is the board's status) and publishes one
-:class:`MillSnapshot`.
+is pending, then polls the board and publishes one :class:`MillSnapshot`.
 
 Rules (each has a test in ``tests/twin/test_mill_worker.py``):
 
 - **Nothing moves unless asked.** The worker sends only commands it was given in this
   run; it never starts the motor by itself: connecting, reconnecting or finding a
-  watchdog trip changes nothing on the board.
+  watchdog trip changes nothing on the board. Nor does it keep a motor running that this
+  run never commanded: until its first command goes through it polls with ``status()``
+  (STA, which does not feed the board's watchdog), so a mill left running by a host that
+  is gone stops on its own watchdog; from then on with ``heartbeat()`` (HB: this run
+  controls the motor and keeps its watchdog fed).
 - **Read before writing.** After the link comes back the first exchange is a read; the
   snapshot's ``epoch`` grows, and only then are commands sent.
 - **No stale commands.** Commands queued before the newest read (an older ``epoch``)
@@ -48,6 +50,7 @@ class MillLink(Protocol):
     def set_rpm(self, rpm: float) -> None: ...
     def start(self) -> None: ...
     def stop(self) -> None: ...
+    def status(self) -> MillStatus: ...
     def heartbeat(self) -> MillStatus: ...
     def close(self) -> None: ...
 
@@ -84,6 +87,7 @@ class MillWorker:
         self._run: StartMill | StopMill | None = None
         self._refused = 0  # refusals and set-rpms not taken, so far
         self._expect_rpm: float | None = None  # the setpoint an ACKed set-rpm must show
+        self._controlling = False  # a command of this run went through: feed the watchdog
 
     # -- any thread ------------------------------------------------------------------------
     def submit(self, cmd: MillCommand) -> None:
@@ -121,6 +125,7 @@ class MillWorker:
                             self._drop(failed, f"link lost: {exc}")
                     return self._lost(snap, exc)
                 self.sink.event("mill_command", self.now_s(), **_describe(cmd))
+                self._controlling = True
         return self._poll(snap, new_epoch=not snap.connected)
 
     def _take_commands(self) -> None:
@@ -164,7 +169,7 @@ class MillWorker:
 
     def _poll(self, snap: MillSnapshot, new_epoch: bool) -> MillSnapshot:
         try:
-            st = self.link.heartbeat()
+            st = self.link.heartbeat() if self._controlling else self.link.status()
         except (OSError, ControlError) as exc:
             return self._lost(snap, exc)
         t = self.now_s()
