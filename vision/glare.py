@@ -37,14 +37,20 @@ RING = 1.0
 """Width of the ring whose class mix fills the disc, in core radii (at least 2 grid pixels)."""
 
 
+def _terms(ii: np.ndarray, jj: np.ndarray, origin_xy: tuple[float, float], step: int) -> np.ndarray:
+    """Per grid pixel (row ``ii``, column ``jj``) its moment terms ``1, x, y, x^2, y^2, xy``
+    (px; float64, shape (6, n)); grid pixel (i, j) lies at px ``(x0 + j * step, y0 + i * step)``."""
+    x = origin_xy[0] + jj.astype(np.float64) * step
+    y = origin_xy[1] + ii.astype(np.float64) * step
+    return np.stack([np.ones_like(x), x, y, x * x, y * y, x * y])
+
+
 def region_moments(mask: np.ndarray, origin_xy: tuple[float, float], step: int) -> np.ndarray:
     """Moments ``n, sum x, sum y, sum x^2, sum y^2, sum xy`` (px, px^2; float64, shape (6,)) of
     the grid pixels set in ``mask`` (h, w); grid pixel (i, j) lies at px
     ``(x0 + j * step, y0 + i * step)``."""
     ii, jj = np.nonzero(mask)
-    x = origin_xy[0] + jj.astype(np.float64) * step
-    y = origin_xy[1] + ii.astype(np.float64) * step
-    return np.array([x.size, x.sum(), y.sum(), (x * x).sum(), (y * y).sum(), (x * y).sum()])
+    return _terms(ii, jj, origin_xy, step).sum(axis=1)
 
 
 def glare_fill(labels: np.ndarray, inside: np.ndarray, n_classes: int, origin_xy: tuple[float, float],
@@ -74,15 +80,12 @@ def glare_fill(labels: np.ndarray, inside: np.ndarray, n_classes: int, origin_xy
     r_out = r_in + np.maximum(RING * r0, 2.0)
     disc = (dist <= r_in[near]) & inside
     ring = (dist > r_in[near]) & (dist <= r_out[near]) & inside & (labels != glare)
-    # each spot's ring: pixels per class (column 0: no class, background, ...)
-    lab_ring = np.where(labels[ring] <= n_classes, labels[ring], 0).astype(np.int64)
-    counts = np.bincount(near[ring] * (n_classes + 1) + lab_ring, minlength=n_spots * (n_classes + 1))
+    # each spot's ring: pixels per label (column 0: no class, background, ...; the ring holds no glare)
+    counts = np.bincount(near[ring] * (n_classes + 1) + labels[ring], minlength=n_spots * (n_classes + 1))
     counts = counts.reshape(n_spots, n_classes + 1).astype(np.float64)
     share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1.0)
     ii, jj = np.nonzero(disc)
-    x = origin_xy[0] + jj.astype(np.float64) * step
-    y = origin_xy[1] + ii.astype(np.float64) * step
-    terms = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y])  # (6, n) per disc pixel
+    terms = _terms(ii, jj, origin_xy, step)  # (6, n) per disc pixel
     spot = near[ii, jj]
     lab = labels[ii, jj]
     for k in range(1, n_classes + 1):
