@@ -44,25 +44,24 @@ from numba import njit
 
 __all__ = [
     "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_OVERLAP_MAX", "ACC_WALL_MAX", "DS_ANGLE", "DS_RPM", "DS_TARGET",
-    "P_ACCEL", "P_DAMP", "P_DT", "P_G", "P_KN", "P_KT", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
-    "P_SKIN", "SKIN_MAX_R", "SKIN_STEPS", "contact_time_s", "damping_ratio", "list_skin", "neighbour_slots",
-    "run",
+    "P_ACCEL", "P_DAMP", "P_DT", "P_END", "P_G", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
+    "P_SKIN", "SKIN_MAX_R", "SKIN_STEPS", "contact_tables", "contact_time_s", "damping_ratio", "list_skin",
+    "neighbour_slots", "run",
 ]
 
 # slots of the float parameter vector ``prm``
 P_DT = 0  # step, s
-P_KN = 1  # normal stiffness, N/m
-P_KT = 2  # tangential stiffness, N/m
-P_MU = 3  # disk-disk sliding friction
-P_MU_W = 4  # disk-wall sliding friction
-P_MU_R = 5  # rolling friction coefficient
-P_G = 6  # gravity, m/s^2 (along -y)
-P_R = 7  # drum radius, m
-P_SKIN = 8  # smallest Verlet skin, m (``list_skin``)
-P_DAMP = 9  # global velocity damping rate, 1/s (settling only; 0 in a run)
-P_ACCEL = 10  # drum acceleration limit, rpm/s
-P_RMIN = 11  # small radius, m (unit of the overlap statistics)
-P_N = 12
+P_MU = 1  # disk-disk sliding friction
+P_MU_W = 2  # disk-wall sliding friction
+P_MU_R = 3  # rolling friction coefficient
+P_G = 4  # gravity, m/s^2 (along -y)
+P_R = 5  # drum radius, m
+P_SKIN = 6  # smallest Verlet skin, m (``list_skin``)
+P_DAMP = 7  # global velocity damping rate, 1/s (settling only; 0 in a run)
+P_ACCEL = 8  # drum acceleration limit, rpm/s
+P_RMIN = 9  # small radius, m (unit of the overlap statistics)
+P_END = 10  # end-plate friction over the drum's depth, mu_end / depth, 1/m (0: no end plates)
+P_N = 11
 
 # slots of the drum state ``ds``
 DS_RPM = 0  # drum speed now, rpm
@@ -79,6 +78,9 @@ _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
 SKIN_STEPS = 40.0  # a list build's skin is chosen to last about this many steps at the fastest disk's speed
 SKIN_MAX_R = 1.5  # widest Verlet skin, small radii
+
+
+_KT_SCALE = 2.0 / 7.0  # tangential stiffness / normal stiffness (balls: the same frequency)
 
 
 def _clamped_collision(zeta: float) -> tuple[float, float]:
@@ -119,6 +121,33 @@ def damping_ratio(restitution: float) -> float:
 def contact_time_s(stiffness_n_m: float, mass_kg: float, restitution: float) -> float:
     """Duration (s) of a collision of effective mass ``mass_kg`` (no pull at the end)."""
     return _clamped_collision(damping_ratio(restitution))[1] * math.sqrt(mass_kg / stiffness_n_m)
+
+
+def contact_tables(mass_kg: np.ndarray, radius_m: np.ndarray, stiffness_n_m: float,
+                   restitution: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per class pair and per class at the wall, the contact constants ``run`` reads.
+
+    Every contact lasts the same time (MercuryDPM's collision-time parametrisation): the lightest
+    pair has the normal stiffness ``stiffness_n_m`` (N/m), every other pair (and a disk at the
+    wall, whose effective mass is its own) a stiffness in proportion to its effective mass ``m*``.
+    ``mass_kg``, ``radius_m``: (n_cls,) per class. Returns ``c_pair`` (n_cls, n_cls, 6): normal
+    damping (N s/m), ``r_eff`` (m), ``1 / (1/I_i + 1/I_j)`` (kg m^2), ``k_n``, ``k_t = 2/7 k_n``
+    (N/m), ``1 / k_t`` (m/N); and ``c_wall`` (n_cls, 4): normal damping, ``k_n``, ``k_t``, ``1 / k_t``.
+    """
+    m = np.asarray(mass_kg, dtype=np.float64)
+    r = np.asarray(radius_m, dtype=np.float64)
+    zeta = damping_ratio(restitution)
+    m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
+    k_per_kg = stiffness_n_m / m_pair.min()
+    inv_i = 1.0 / (0.4 * m * r**2)
+    k_pair = k_per_kg * m_pair
+    k_wall = k_per_kg * m
+    c_pair = np.stack([2.0 * zeta * np.sqrt(m_pair * k_pair), r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
+                       1.0 / (inv_i[:, None] + inv_i[None, :]), k_pair, _KT_SCALE * k_pair,
+                       1.0 / (_KT_SCALE * k_pair)], axis=-1)
+    c_wall = np.stack([2.0 * zeta * np.sqrt(m * k_wall), k_wall, _KT_SCALE * k_wall, 1.0 / (_KT_SCALE * k_wall)],
+                      axis=-1)
+    return np.ascontiguousarray(c_pair), np.ascontiguousarray(c_wall)
 
 
 def neighbour_slots(r_max: float, r_min: float, skin: float) -> int:
@@ -254,8 +283,9 @@ def run(
     cls,  # (n,) class index
     inv_m,  # (n,) 1 / mass, 1/kg
     inv_i,  # (n,) 1 / moment of inertia
-    c_pair,  # (n_cls, n_cls, 3) per class pair: normal damping (N s/m), r_eff (m), 1 / (1/I_i + 1/I_j)
-    c_wall,  # (n_cls,) normal damping coefficient of a class at the wall, N s/m
+    c_pair,  # (n_cls, n_cls, 6) per class pair: normal damping (N s/m), r_eff (m), 1 / (1/I_i + 1/I_j),
+    #          normal and tangential stiffness (N/m), 1 / tangential stiffness (m/N)
+    c_wall,  # (n_cls, 4) per class at the wall: normal damping (N s/m), k_n, k_t (N/m), 1 / k_t (m/N)
     nb_start,  # (n + 1,) row starts of the neighbour list, updated
     nb_j,  # (cap,) neighbour list (compressed rows: j > i, sorted), updated
     nb_xi,  # (cap,) tangential spring of each listed pair, m, updated
@@ -270,8 +300,6 @@ def run(
     n = pos.shape[0]
     cap = nb_j.size
     dt = prm[P_DT]
-    kn = prm[P_KN]
-    kt = prm[P_KT]
     mu = prm[P_MU]
     mu_w = prm[P_MU_W]
     mu_r = prm[P_MU_R]
@@ -281,6 +309,7 @@ def run(
     damp = math.exp(-prm[P_DAMP] * dt)
     accel = prm[P_ACCEL] * dt
     r_min = prm[P_RMIN]
+    end_w = prm[P_END] * dt
     nbins = hist.size - 1
     bin_scale = nbins / (2.0 * r_min)
     ov_max = acc[ACC_OVERLAP_MAX] * r_min
@@ -290,16 +319,13 @@ def run(
     # smallest skin (it was built at least that wide, so no contact is missed)
     half_skin2 = 0.25 * skin_min * skin_min
     mu_r_dt = mu_r * dt
-    inv_kt = 1.0 / kt
     r_max = 0.0
     for i in range(n):
         r_max = max(r_max, rad[i])
     # the overlap histogram in four lanes (contact k in lane k % 4): consecutive contacts, mostly in
     # the same bin, then do not wait on each other's increments; summed into ``hist`` at the end
     lanes = np.zeros((4, hist.size), dtype=hist.dtype)
-    fx = np.empty(n)
-    fy = np.empty(n)
-    tq = np.empty(n)
+    frc = np.zeros((n, 4))  # per disk: force x, y (N), torque (N m), sum of normal forces (N, end plates)
     weight = np.empty(n)
     for i in range(n):
         weight[i] = -g / inv_m[i]
@@ -310,10 +336,20 @@ def run(
     roll_cap = np.empty(cap + n)  # impulse that stops the relative rotation, per rad/s
     new_j = np.empty(cap, dtype=np.int64)  # scratch of the list builds
     new_xi = np.empty(cap)
+    # the disks' hot state in one row each (one or two cache lines per partner in the contact loop):
+    # x, y (m), vx, vy (m/s), omega (rad/s), radius (m), class, 1 / moment of inertia; written back at the end
+    hot = np.empty((n, 8))
+    for i in range(n):
+        hot[i, 0] = pos[i, 0]
+        hot[i, 1] = pos[i, 1]
+        hot[i, 2] = vel[i, 0]
+        hot[i, 3] = vel[i, 1]
+        hot[i, 4] = omg[i]
+        hot[i, 5] = rad[i]
+        hot[i, 6] = cls[i]
+        hot[i, 7] = inv_i[i]
     for i in range(n):  # the forces start at the weight (and are reset so after each step)
-        fx[i] = 0.0
-        fy[i] = weight[i]
-        tq[i] = 0.0
+        frc[i, 1] = weight[i]
     far = 0.0
     for i in range(n):
         dx = pos[i, 0] - ref[i, 0]
@@ -334,9 +370,10 @@ def run(
         v_wall = w_drum * r_drum
         # neighbour list still valid? (``far``: the largest squared move since the last build)
         if far > half_skin2:
-            skin = list_skin(vel, dt, skin_min, r_min)
-            if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+            skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
+            if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
                 _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
+                _unpack(hot, pos, vel, omg)
                 return step
             half_skin2 = 0.25 * skin * skin
         last = step == n_steps - 1  # contacts per disk are counted in the last step only
@@ -346,13 +383,13 @@ def run(
         m = 0
         for i in range(n):
             roll_start[i] = m
-            xi0 = pos[i, 0]
-            yi0 = pos[i, 1]
-            vxi = vel[i, 0]
-            vyi = vel[i, 1]
-            wi = omg[i]
-            ri = rad[i]
-            ci = cls[i]
+            xi0 = hot[i, 0]
+            yi0 = hot[i, 1]
+            vxi = hot[i, 2]
+            vyi = hot[i, 3]
+            wi = hot[i, 4]
+            ri = hot[i, 5]
+            ci = int(hot[i, 6])
             # the drum wall: the exact circle, turning at w_drum
             d2 = xi0 * xi0 + yi0 * yi0
             lim_r = r_drum - ri
@@ -362,11 +399,12 @@ def run(
                 ny = yi0 / d
                 delta = d - lim_r
                 vt = -vxi * ny + vyi * nx + wi * ri - v_wall
-                fn, ft, wall_xi[i] = _contact_law(delta, vxi * nx + vyi * ny, vt, wall_xi[i], c_wall[ci],
-                                                  mu_w, kn, kt, inv_kt, dt)
-                fx[i] += -fn * nx - ft * ny
-                fy[i] += -fn * ny + ft * nx
-                tq[i] += ri * ft
+                fn, ft, wall_xi[i] = _contact_law(delta, vxi * nx + vyi * ny, vt, wall_xi[i], c_wall[ci, 0],
+                                                  mu_w, c_wall[ci, 1], c_wall[ci, 2], c_wall[ci, 3], dt)
+                frc[i, 0] += -fn * nx - ft * ny
+                frc[i, 1] += -fn * ny + ft * nx
+                frc[i, 2] += ri * ft
+                frc[i, 3] += fn
                 if last:
                     ncont[i] += 1
                 if delta > wall_max:
@@ -380,12 +418,13 @@ def run(
             fxi = 0.0
             fyi = 0.0
             tqi = 0.0
+            sfi = 0.0
             nci = 0
             for k in range(nb_start[i], nb_start[i + 1]):
                 j = nb_j[k]
-                dx = pos[j, 0] - xi0
-                dy = pos[j, 1] - yi0
-                rj = rad[j]
+                dx = hot[j, 0] - xi0
+                dy = hot[j, 1] - yi0
+                rj = hot[j, 5]
                 rs = ri + rj
                 d2 = dx * dx + dy * dy
                 if d2 >= rs * rs:
@@ -395,22 +434,25 @@ def run(
                 inv_d = 1.0 / d
                 nx = dx * inv_d
                 ny = dy * inv_d
-                dvx = vxi - vel[j, 0]
-                dvy = vyi - vel[j, 1]
+                dvx = vxi - hot[j, 2]
+                dvy = vyi - hot[j, 3]
                 delta = rs - d
-                cj = cls[j]
-                vt = -dvx * ny + dvy * nx + wi * ri + omg[j] * rj
-                fn, ft, nb_xi[k] = _contact_law(delta, dvx * nx + dvy * ny, vt, nb_xi[k], c_pair[ci, cj, 0],
-                                                mu, kn, kt, inv_kt, dt)
+                cj = int(hot[j, 6])
+                vt = -dvx * ny + dvy * nx + wi * ri + hot[j, 4] * rj
+                cp = c_pair[ci, cj]
+                fn, ft, nb_xi[k] = _contact_law(delta, dvx * nx + dvy * ny, vt, nb_xi[k], cp[0],
+                                                mu, cp[3], cp[4], cp[5], dt)
                 fxc = -fn * nx - ft * ny
                 fyc = -fn * ny + ft * nx
                 fxi += fxc
                 fyi += fyc
                 tqi += ri * ft
+                sfi += fn
                 nci += 1
-                fx[j] -= fxc
-                fy[j] -= fyc
-                tq[j] += rj * ft
+                frc[j, 0] -= fxc
+                frc[j, 1] -= fyc
+                frc[j, 2] += rj * ft
+                frc[j, 3] += fn
                 if last:
                     ncont[j] += 1
                 if delta > ov_max:
@@ -418,25 +460,26 @@ def run(
                 lanes[n_contacts & 3, min(int(delta * bin_scale), nbins)] += 1
                 n_contacts += 1
                 roll_j[m] = j
-                roll_imp[m] = mu_r_dt * c_pair[ci, cj, 1] * fn
-                roll_cap[m] = c_pair[ci, cj, 2]
+                roll_imp[m] = mu_r_dt * cp[1] * fn
+                roll_cap[m] = cp[2]
                 m += 1
-            fx[i] += fxi
-            fy[i] += fyi
-            tq[i] += tqi
+            frc[i, 0] += fxi
+            frc[i, 1] += fyi
+            frc[i, 2] += tqi
+            frc[i, 3] += sfi
             if last:
                 ncont[i] += nci
         roll_start[n] = m
         # angular velocities
         for i in range(n):
-            omg[i] = (omg[i] + tq[i] * inv_i[i] * dt) * damp
+            hot[i, 4] = (hot[i, 4] + frc[i, 2] * hot[i, 7] * dt) * damp
         # rolling friction: angular impulses contact by contact, each capped so that it
         # cannot reverse the relative rotation (disk i's spin is final after its row: its
         # angle moves on there)
         if mu_r > 0.0:
             for i in range(n):
-                wi = omg[i]
-                ii = inv_i[i]
+                wi = hot[i, 4]
+                ii = hot[i, 7]
                 for c in range(roll_start[i], roll_start[i + 1]):
                     j = roll_j[c]
                     jr = roll_imp[c]
@@ -444,35 +487,61 @@ def run(
                         w_rel = wi - w_drum
                         wi -= math.copysign(min(jr * ii, abs(w_rel)), w_rel)
                     else:
-                        w_rel = wi - omg[j]
+                        w_rel = wi - hot[j, 4]
                         sj = math.copysign(min(jr, abs(w_rel) * roll_cap[c]), w_rel)
                         wi -= sj * ii
-                        omg[j] += sj * inv_i[j]
-                omg[i] = wi
+                        hot[j, 4] += sj * hot[j, 7]
+                hot[i, 4] = wi
                 ang[i] += wi * dt
         else:
             for i in range(n):
-                ang[i] += omg[i] * dt
+                ang[i] += hot[i, 4] * dt
         # velocities and positions; the largest move since the list was built; forces reset
         far = 0.0
         for i in range(n):
-            vx = (vel[i, 0] + fx[i] * inv_m[i] * dt) * damp
-            vy = (vel[i, 1] + fy[i] * inv_m[i] * dt) * damp
-            vel[i, 0] = vx
-            vel[i, 1] = vy
-            px = pos[i, 0] + vx * dt
-            py = pos[i, 1] + vy * dt
-            pos[i, 0] = px
-            pos[i, 1] = py
+            vx = hot[i, 2] + frc[i, 0] * inv_m[i] * dt
+            vy = hot[i, 3] + frc[i, 1] * inv_m[i] * dt
+            if end_w > 0.0:
+                # end-plate friction: against the velocity relative to the end plates (turning with the
+                # drum), mu_end r_i sum(F_n) / depth, capped so it cannot reverse that velocity in a step
+                ux = vx + w_drum * hot[i, 1]
+                uy = vy - w_drum * hot[i, 0]
+                u = math.sqrt(ux * ux + uy * uy)
+                dv = end_w * hot[i, 5] * frc[i, 3] * inv_m[i]
+                if u > 0.0:
+                    s = min(dv, u) / u
+                    vx -= s * ux
+                    vy -= s * uy
+            vx *= damp
+            vy *= damp
+            hot[i, 2] = vx
+            hot[i, 3] = vy
+            px = hot[i, 0] + vx * dt
+            py = hot[i, 1] + vy * dt
+            hot[i, 0] = px
+            hot[i, 1] = py
             dx = px - ref[i, 0]
             dy = py - ref[i, 1]
             far = max(far, dx * dx + dy * dy)
-            fx[i] = 0.0
-            fy[i] = weight[i]
-            tq[i] = 0.0
+            frc[i, 0] = 0.0
+            frc[i, 1] = weight[i]
+            frc[i, 2] = 0.0
+            frc[i, 3] = 0.0
         ds[DS_ANGLE] += w_drum * dt
     _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
+    _unpack(hot, pos, vel, omg)
     return n_steps
+
+
+@njit(cache=True)
+def _unpack(hot, pos, vel, omg):
+    """Write the hot rows' positions, velocities and spins back to the state arrays."""
+    for i in range(pos.shape[0]):
+        pos[i, 0] = hot[i, 0]
+        pos[i, 1] = hot[i, 1]
+        vel[i, 0] = hot[i, 2]
+        vel[i, 1] = hot[i, 3]
+        omg[i] = hot[i, 4]
 
 
 @njit(cache=True)

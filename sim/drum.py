@@ -50,12 +50,13 @@ CASES = ("A", "B", "C")
 PAPER_CONTACT = {"friction": 0.25, "rolling": 0.10, "restitution": 0.5}
 DEFAULT_FRICTION = PAPER_CONTACT["friction"]  # particle-particle sliding friction
 DEFAULT_WALL_FRICTION: float | None = None  # particle-wall: None = same as particle-particle
+DEFAULT_END_FRICTION: float | None = None  # particle-end plate: None = same as particle-wall
 DEFAULT_ROLLING = PAPER_CONTACT["rolling"]  # rolling friction coefficient mu_r (torque mu_r r_eff F_n)
 DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
 MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
-DEFAULT_STIFFNESS_N_M = 4000.0  # linear normal contact stiffness (docs/validation.md, section 2)
-STEPS_PER_CONTACT = 5  # default step = contact time of the lightest pair / this (section 3)
+DEFAULT_STIFFNESS_N_M = 2800.0  # normal stiffness of the lightest pair (docs/validation.md, section 2)
+STEPS_PER_CONTACT = 4  # default step = the contact time (every pair's) / this (section 3)
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
 SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
@@ -99,6 +100,7 @@ class SimParams:
     accel_rpm_s: float = DEFAULT_ACCEL_RPM_S
     dt_s: float | None = None
     stiffness_n_m: float = DEFAULT_STIFFNESS_N_M
+    end_friction: float | None = DEFAULT_END_FRICTION  # None: same as the wall; 0: no end plates
 
 
 @dataclass(frozen=True)
@@ -187,6 +189,8 @@ def _check_params(p: SimParams) -> None:
         raise SimError(f"restitution must be in [{MIN_RESTITUTION:g}, 1] (got {p.restitution})")
     if p.wall_friction is not None and not (0.0 <= p.wall_friction <= 5.0):
         raise SimError(f"wall friction must be in [0, 5] (got {p.wall_friction})")
+    if p.end_friction is not None and not (0.0 <= p.end_friction <= 5.0):
+        raise SimError(f"end-plate friction must be in [0, 5] (got {p.end_friction})")
     if p.dt_s is not None and (not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s)):
         raise SimError(f"time step must be in [0.01, 20] ms (got {p.dt_s * 1e3:g} ms)")
     if not (1.0 <= p.stiffness_n_m <= 1e9) or not math.isfinite(p.stiffness_n_m):
@@ -251,6 +255,7 @@ class DrumSim:
         accel_rpm_s: float = DEFAULT_ACCEL_RPM_S,
         dt_s: float | None = None,
         stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
+        end_friction: float | None = DEFAULT_END_FRICTION,
         settle_s: float = 1.0,
     ) -> None:
         case = str(case).upper()
@@ -258,7 +263,8 @@ class DrumSim:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
         params = SimParams(float(friction), float(rolling), float(restitution),
                            None if wall_friction is None else float(wall_friction),
-                           float(accel_rpm_s), None if dt_s is None else float(dt_s), float(stiffness_n_m))
+                           float(accel_rpm_s), None if dt_s is None else float(dt_s), float(stiffness_n_m),
+                           None if end_friction is None else float(end_friction))
         _check_params(params)
         rpm = check_rpm(rpm, drum)
         classes = tuple(slice_2d(recipe, drum))
@@ -354,10 +360,9 @@ class DrumSim:
         assert p.dt_s is not None
         prm = np.zeros(dem.P_N)
         prm[dem.P_DT] = p.dt_s
-        prm[dem.P_KN] = p.stiffness_n_m
-        prm[dem.P_KT] = 2.0 / 7.0 * p.stiffness_n_m
         prm[dem.P_MU] = p.friction
-        prm[dem.P_MU_W] = p.friction if p.wall_friction is None else p.wall_friction
+        mu_wall = p.friction if p.wall_friction is None else p.wall_friction
+        prm[dem.P_MU_W] = mu_wall
         prm[dem.P_MU_R] = p.rolling
         prm[dem.P_G] = G_M_S2 if gravity else 0.0
         prm[dem.P_R] = self.drum.radius_m
@@ -365,16 +370,10 @@ class DrumSim:
         prm[dem.P_DAMP] = damp_s
         prm[dem.P_ACCEL] = p.accel_rpm_s
         prm[dem.P_RMIN] = self._r_min
+        prm[dem.P_END] = (mu_wall if p.end_friction is None else p.end_friction) / self.drum.depth_m
         self._prm = prm
-        zeta = dem.damping_ratio(p.restitution)
-        m = self._cls_mass
-        m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
-        r = np.array([c.radius_m for c in self.classes])
-        inv_i = 1.0 / (0.4 * m * r**2)
-        self._c_pair = np.stack([2.0 * zeta * np.sqrt(m_pair * p.stiffness_n_m),
-                                 r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
-                                 1.0 / (inv_i[:, None] + inv_i[None, :])], axis=-1)
-        self._c_wall = 2.0 * zeta * np.sqrt(m * p.stiffness_n_m)
+        self._c_pair, self._c_wall = dem.contact_tables(self._cls_mass, np.array([c.radius_m for c in self.classes]),
+                                                        p.stiffness_n_m, p.restitution)
 
     def _list_slots(self) -> int:
         """Neighbour-list slots per disk for the widest skin ``dem.list_skin`` may choose."""

@@ -279,7 +279,8 @@ def main(argv: list[str] | None = None) -> None:
         elif s == "calibration":
             summary[s] = calibration()
         elif s == "transfer":
-            summary[s] = transfer()
+            # plants at both ends of the (sliding, rolling) plane and one near the top of the range
+            summary[s] = [transfer(plant=p) for p in ((0.5, 0.05), (0.15, 0.6), (0.6, 0.3))]
         elif s == "branch":
             summary[s] = branch(out_dir)
         summary[f"{s}_wall_s"] = time.perf_counter() - t0

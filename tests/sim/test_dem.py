@@ -14,26 +14,25 @@ G = 9.81
 
 
 def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, mu_r=0.1, e=0.5, g=0.0,
-         dt=DEFAULT_DT_S, k=DEFAULT_STIFFNESS_N_M, skin=0.4 * R_SMALL):
+         dt=DEFAULT_DT_S, k=DEFAULT_STIFFNESS_N_M, skin=0.4 * R_SMALL, end=0.0):
     """Run the kernel on a few equal disks; returns (pos, vel, omg, hist, acc, ncont) after ``n_steps``
-    (``skin``: the smallest Verlet skin, m)."""
+    (``skin``: the smallest Verlet skin, m; ``end``: end-plate friction over the drum's depth, 1/m)."""
     pos = np.array(pos, float).reshape(-1, 2)
     vel = np.array(vel, float).reshape(-1, 2)
     omg = np.array(omg, float)
     n = pos.shape[0]
     prm = np.zeros(dem.P_N)
-    prm[[dem.P_DT, dem.P_KN, dem.P_KT, dem.P_MU, dem.P_MU_W, dem.P_MU_R, dem.P_G, dem.P_R, dem.P_SKIN,
-         dem.P_ACCEL, dem.P_RMIN]] = [dt, k, 2 / 7 * k, mu, mu, mu_r, g, drum_r, skin, 20.0, r]
-    zeta = dem.damping_ratio(e)
+    prm[[dem.P_DT, dem.P_MU, dem.P_MU_W, dem.P_MU_R, dem.P_G, dem.P_R, dem.P_SKIN,
+         dem.P_ACCEL, dem.P_RMIN, dem.P_END]] = [dt, mu, mu, mu_r, g, drum_r, skin, 20.0, r, end]
     rad = np.full(n, r)
     kk = dem.neighbour_slots(r, r, max(skin, dem.SKIN_MAX_R * r))
     hist = np.zeros(1001, dtype=np.int64)
     acc = np.zeros(4)
     ncont = np.zeros(n, dtype=np.int64)
-    pair = np.array([[[2 * zeta * np.sqrt(m / 2 * k), r / 2, 0.2 * m * r**2]]])  # damping, r_eff, I_eff
+    pair, wall = dem.contact_tables(np.array([m]), np.array([r]), k, e)
     done = dem.run(n_steps, prm, np.zeros(3), pos, vel, np.zeros(n), omg, rad, np.zeros(n, dtype=np.int64),
             np.full(n, 1 / m), 1 / (0.4 * m * rad**2), pair,
-            np.array([2 * zeta * np.sqrt(m * k)]), np.zeros(n + 1, dtype=np.int64), np.zeros(n * kk, dtype=np.int64),
+            wall, np.zeros(n + 1, dtype=np.int64), np.zeros(n * kk, dtype=np.int64),
             np.zeros(n * kk), np.zeros(n), np.zeros((n, 2)), True, hist, acc, ncont)
     assert done == n_steps
     return pos, vel, omg, hist, acc, ncont
@@ -61,7 +60,7 @@ def _rolling_speed(mu_r: float) -> tuple[np.ndarray, np.ndarray]:
     """A disk rolling without slip along the bottom of a 200 m drum (locally flat), drum at rest."""
     big = 100.0
     dt = DEFAULT_DT_S
-    sag = M_SMALL * G / DEFAULT_STIFFNESS_N_M  # resting overlap
+    sag = M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)  # resting overlap (the wall: twice the pair's stiffness)
     state = ([[0.0, -big + R_SMALL - sag]], [[0.3, 0.0]], [-0.3 / R_SMALL])
     ts, vs = [], []
     for i in range(20):
@@ -80,6 +79,61 @@ def test_rolling_friction_decelerates_a_rolling_disk_at_the_rate_mu_r_predicts()
     assert a == pytest.approx(-5 / 7 * 0.1 * G, rel=0.05)
     t0, v0 = _rolling_speed(0.0)
     assert abs(np.polyfit(t0, v0, 1)[0]) < 0.02 * abs(a)  # no rolling friction: it keeps rolling
+
+
+def test_every_disk_pair_and_a_disk_at_the_wall_have_the_same_contact_time():
+    # MercuryDPM's collision-time parametrisation: the lightest pair has the set stiffness, the others
+    # a stiffness in proportion to their effective mass (the paper bed: 10 mm and 20 mm disks)
+    from sim.drum import _slab_m
+    from sim.recipe import PAPER_DRUM, PAPER_RECIPE, slice_2d
+
+    classes = slice_2d(PAPER_RECIPE, PAPER_DRUM)
+    m = np.array([c.mass_kg(_slab_m(classes)) for c in classes])
+    r = np.array([c.radius_m for c in classes])
+    pair, wall = dem.contact_tables(m, r, 3000.0, 0.5)
+    m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
+    t_c = dem.contact_time_s(3000.0, m_pair.min(), 0.5)
+    assert pair[..., 3].min() == pytest.approx(3000.0)  # the lightest pair keeps the set stiffness
+    assert pair[..., 3].max() == pytest.approx(3000.0 * 4)  # two 20 mm disks (4x the mass per disk)
+    for a in range(2):
+        assert dem.contact_time_s(wall[a, 1], m[a], 0.5) == pytest.approx(t_c)
+        assert wall[a, 2] == pytest.approx(2 / 7 * wall[a, 1]) and wall[a, 3] == pytest.approx(1 / wall[a, 2])
+        for b in range(2):
+            assert dem.contact_time_s(pair[a, b, 3], m_pair[a, b], 0.5) == pytest.approx(t_c)
+            # the damping gives every pair the same restitution: c_n = 2 zeta sqrt(m* k_n)
+            assert pair[a, b, 0] == pytest.approx(2 * dem.damping_ratio(0.5) * np.sqrt(m_pair[a, b] * pair[a, b, 3]))
+
+
+def test_end_plates_decelerate_a_sliding_disk_at_mu_end_g_r_over_the_depth():
+    # a disk sliding without spin on the frictionless bottom of a 200 m drum at rest: the two end plates
+    # 0.1 m apart (friction 0.25) take mu_end r sum(F_n) / depth, with sum(F_n) = m g; the same run
+    # without end plates takes out the drum's curvature (it climbs 0.6 mm/m along the path)
+    big, depth, mu_end = 100.0, 0.1, 0.25
+    n = int(0.02 / DEFAULT_DT_S)
+    rates = []
+    for end in (mu_end / depth, 0.0):
+        state = ([[0.0, -big + R_SMALL - M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)]], [[0.3, 0.0]], [0.0])
+        ts, vs = [], []
+        for i in range(20):
+            pos, vel, omg, _, _, _ = _run(*state, n, drum_r=big, mu=0.0, mu_r=0.0, g=G, end=end)
+            state = (pos, vel, omg)
+            ts.append((i + 1) * n * DEFAULT_DT_S)
+            vs.append(vel[0, 0])
+        assert omg[0] == 0.0  # it slides: no friction turns it
+        rates.append(np.polyfit(ts[2:], vs[2:], 1)[0])  # (after the first contact's settling)
+    assert abs(rates[1]) < 0.1 * abs(rates[0])
+    assert rates[0] - rates[1] == pytest.approx(-mu_end * G * R_SMALL / depth, rel=0.03)
+
+
+def test_end_plate_friction_stops_a_slow_disk_without_reversing_it_and_spares_one_turning_with_the_drum():
+    big = 100.0
+    rest = [[0.0, -big + R_SMALL - M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)]]
+    _, vel, _, _, _, _ = _run(rest, [[1e-4, 0.0]], [0.0], int(0.1 / DEFAULT_DT_S), drum_r=big, mu=0.0, mu_r=0.0,
+                              g=G, end=2.5)
+    assert abs(vel[0, 0]) < 1e-12  # stopped within 0.1 s, not pushed back
+    # a disk pressed on a wall that moves with it: no relative velocity to the end plates, no force
+    pos, vel, _, _, _, _ = _run([[0.0, 0.5]], [[0.0, 0.0]], [0.0], 200, drum_r=1.0, mu=0.0, mu_r=0.0, end=2.5)
+    assert vel[0, 1] == 0.0 and pos[0, 1] == 0.5
 
 
 def test_rolling_friction_never_reverses_the_rotation():

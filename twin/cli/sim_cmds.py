@@ -370,8 +370,9 @@ def bench_twin(
 ) -> None:
     """Real-time factor of the twin on one core: paper bed at 5 and 30 rpm, 4x and 16x particles at 5 rpm.
 
-    The 4x/16x beds keep the particles and fill level and grow the drum (D x2, x4), so the
-    particle count grows at the same time step and contact physics. Timed by this process's
+    The 4x/16x beds keep the particles and fill level and grow the drum (diameter and depth x2, x4:
+    the paper's drum scaled, its end plates as far apart relative to its size), so the particle
+    count grows at the same time step and contact physics. Timed by this process's
     CPU time (a shared machine's other jobs do not count), the best of three equal chunks.
     """
     from sim.drum import DrumSim
@@ -382,8 +383,8 @@ def bench_twin(
     cases = [
         ("rtf_paper_5rpm", PAPER_DRUM, 5.0),
         ("rtf_paper_30rpm", PAPER_DRUM, 30.0),
-        ("rtf_4x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 2), 5.0),
-        ("rtf_16x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 4), 5.0),
+        ("rtf_4x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 2, depth_m=PAPER_DRUM.depth_m * 2), 5.0),
+        ("rtf_16x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 4, depth_m=PAPER_DRUM.depth_m * 4), 5.0),
     ]
     out: dict = {}
     counts: dict = {}
