@@ -22,6 +22,12 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
 * **Wall**: the drum is the exact circle of radius ``R``, a smooth rigid boundary
   turning at the drum's rate: overlap ``|x| + r - R``, the same contact law with the
   disk's own mass as ``m*`` and the wall's sliding friction.
+* **Stiffness**: every contact lasts the same time (``contact_tables``): ``k_n`` of a pair
+  (or of a disk at the wall) in proportion to its effective mass.
+* **End plates** (the drum's depth ``W``; Taberlet et al. 2003's side-wall friction of a
+  quasi-2D flow): a force ``mu_end r_i sum(F_n) / W`` (``sum(F_n)``: the normal forces on
+  disk i this step, N) against its velocity relative to the plates, which turn with the drum;
+  capped so that it cannot reverse that velocity within a step.
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
   by ``j``, in compressed rows) rebuilt from a cell list whenever a disk has moved more than half the skin

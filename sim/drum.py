@@ -18,8 +18,11 @@ Model (the compiled step loop and its contact laws are in ``sim.dem``):
   a torque ``mu_r r_eff F_n`` against the contact's relative rotation, capped so it
   cannot reverse it within a step (the "constant directional torque" model). No
   contact, no torque: a disk in free flight keeps its spin.
+* **End plates**: the drum's two end walls (``DrumSpec.depth_m`` apart) brake each disk by
+  ``end_friction r sum(F_n) / depth`` against its motion relative to them (``end_friction``
+  None: the wall friction; 0: no end plates).
 * **Time step**: one fixed internal step ``dt_s``, by default a fixed fraction of the
-  contact time of the lightest pair (``STEPS_PER_CONTACT`` steps per contact; the
+  contact time (the same for every pair; ``STEPS_PER_CONTACT`` steps per contact; the
   convergence study in docs/validation.md), independent of how the caller slices
   time: ``advance(d)`` adds ``d`` to an accumulator and runs whole steps in one
   compiled call; the remainder (< one step) waits for the next call.
@@ -71,7 +74,8 @@ def _slab_m(classes) -> float:
 
 
 def bed_contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
-    """Contact time (s) of the lightest disk pair of the bed."""
+    """Contact time (s) of the bed's contacts: the lightest disk pair's, which every pair shares
+    (``sim.dem.contact_tables``)."""
     slab = _slab_m(classes)
     m = min(c.mass_kg(slab) for c in classes)
     return dem.contact_time_s(stiffness_n_m, 0.5 * m, restitution)
@@ -79,7 +83,7 @@ def bed_contact_time_s(classes, stiffness_n_m: float, restitution: float) -> flo
 
 def default_dt_s(classes, stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
                  restitution: float = DEFAULT_RESTITUTION) -> float:
-    """The default step (s): the contact time of the lightest disk pair over ``STEPS_PER_CONTACT``."""
+    """The default step (s): the bed's contact time over ``STEPS_PER_CONTACT``."""
     return bed_contact_time_s(classes, stiffness_n_m, restitution) / STEPS_PER_CONTACT
 
 

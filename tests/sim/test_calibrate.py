@@ -29,6 +29,19 @@ def test_slope_grows_with_sliding_and_rolling_friction():
     assert hi > lo + 10.0
 
 
+def test_the_end_plates_steepen_the_bed_and_a_narrower_drum_more():
+    # Taberlet's side-wall friction: tan(slope) grows by about mu_w h / W; the paper's drum (W = 100 mm)
+    # at 5 rpm stands about 5 deg steeper with its end plates (docs/validation.md, section 2)
+    from sim.recipe import PAPER_DRUM, DrumSpec
+
+    kw = {"spin_up_s": 2.0, "window_s": 3.0}
+    without = twin_slope_deg(0.25, 0.1, 5.0, end_friction=0.0, **kw)
+    paper = twin_slope_deg(0.25, 0.1, 5.0, **kw)  # end-plate friction = the wall friction
+    narrow = twin_slope_deg(0.25, 0.1, 5.0, drum=DrumSpec(PAPER_DRUM.diameter_m, depth_m=0.05), **kw)
+    assert paper > without + 2.5
+    assert narrow > paper + 2.5
+
+
 def test_a_target_outside_the_reachable_range_is_an_error_that_names_the_range():
     with pytest.raises(SimError, match=r"outside the twin's reachable range \d+\.\d-\d+\.\d deg at 10 rpm"):
         calibrate(75.0, 10.0, spin_up_s=0.5, window_s=0.5)
