@@ -40,10 +40,10 @@ def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, m
 
 @pytest.mark.parametrize("e", [0.2, 0.5, 0.9])
 def test_a_head_on_collision_at_the_default_step_has_the_set_restitution(e):
-    # the twin's step for restitution e: the lightest pair's contact time / STEPS_PER_CONTACT;
-    # averaged over where in a step the contact starts (32 onsets over one whole step): at five
-    # steps per contact one collision's restitution depends on that phase (0.42-0.63 at e = 0.5),
-    # its mean does not much: 0.166 / 0.486 / 0.901 for e = 0.2 / 0.5 / 0.9 (the step's error,
+    # the twin's step for restitution e: the contact time (every pair's) / STEPS_PER_CONTACT;
+    # averaged over where in a step the contact starts (32 onsets over one whole step): at four
+    # steps per contact one collision's restitution depends on that phase (0.41-0.63 at e = 0.5),
+    # its mean does not much: 0.167 / 0.489 / 0.903 for e = 0.2 / 0.5 / 0.9 (the step's error,
     # largest for strong damping; docs/validation.md, section 3)
     t_c = dem.contact_time_s(DEFAULT_STIFFNESS_N_M, M_SMALL / 2, e)
     dt = t_c / STEPS_PER_CONTACT
