@@ -30,8 +30,9 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
   capped so that it cannot reverse that velocity within a step.
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
-  by ``j``, in compressed rows) rebuilt from a cell list whenever a disk has moved more than half the skin
-  since the last build: O(N). The skin of each build is chosen from the fastest disk
+  by ``j``, in compressed rows) rebuilt whenever a disk has moved more than half the skin since
+  the last build: O(N), the disks counted into cells (a counting sort) and each pair found once
+  from a half stencil of cells. The skin of each build is chosen from the fastest disk
   (``list_skin``: wide enough to last about ``SKIN_STEPS`` steps, between the caller's
   ``P_SKIN`` and ``SKIN_MAX_R`` small radii), so fast-flowing beds rebuild less often.
   Contacts are visited in (i, j) order and forces are summed in that order, so the result
@@ -212,61 +213,97 @@ def _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, 
     lo_y = max(lo_y, -r_drum)
     ncx = min(int((min(hi_x, r_drum) - lo_x) / cs) + 1, 4096)
     ncy = min(int((min(hi_y, r_drum) - lo_y) / cs) + 1, 4096)
-    head = np.full(ncx * ncy, -1, dtype=np.int64)
-    nxt = np.full(n, -1, dtype=np.int64)
-    cx = np.empty(n, dtype=np.int64)
-    cy = np.empty(n, dtype=np.int64)
+    # the disks counted into their cells (a counting sort): a cell's disks lie together, in index
+    # order, their coordinates beside them (read sequentially)
+    ncell = ncx * ncy
+    cell_start = np.zeros(ncell + 1, dtype=np.int64)
+    cell = np.empty(n, dtype=np.int64)
     for i in range(n):
         a = min(max(int((pos[i, 0] - lo_x) / cs), 0), ncx - 1)
         b = min(max(int((pos[i, 1] - lo_y) / cs), 0), ncy - 1)
-        cx[i] = a
-        cy[i] = b
         c = b * ncx + a
-        nxt[i] = head[c]
-        head[c] = i
-    starts = np.empty(n + 1, dtype=np.int64)
-    total = 0
+        cell[i] = c
+        cell_start[c + 1] += 1
+    for c in range(ncell):
+        cell_start[c + 1] += cell_start[c]
+    fill = cell_start[:ncell].copy()
+    sx = np.empty(n)
+    sy = np.empty(n)
+    sr = np.empty(n)
+    sid = np.empty(n, dtype=np.int64)
     for i in range(n):
-        xi_ = pos[i, 0]
-        yi_ = pos[i, 1]
-        first = total
-        for db in range(-1, 2):
-            b = cy[i] + db
-            if b < 0 or b >= ncy:
-                continue
-            for da in range(-1, 2):
-                a = cx[i] + da
-                if a < 0 or a >= ncx:
-                    continue
-                j = head[b * ncx + a]
-                while j >= 0:
-                    if j > i:
-                        dx = pos[j, 0] - xi_
-                        dy = pos[j, 1] - yi_
-                        reach = rad[i] + rad[j] + skin
+        k = fill[cell[i]]
+        fill[cell[i]] = k + 1
+        sx[k] = pos[i, 0]
+        sy[k] = pos[i, 1]
+        sr[k] = rad[i]
+        sid[k] = i
+    # the pairs, cell by cell, into new_j in visiting order with their row (the smaller index)
+    # counted; then laid out in rows and sorted by j within each row
+    row_n = np.zeros(n + 1, dtype=np.int64)
+    pair_i = np.empty(cap, dtype=np.int64)
+    m = 0
+    for b in range(ncy):
+        for a in range(ncx):
+            c = b * ncx + a
+            c1 = cell_start[c + 1]
+            for p in range(cell_start[c], c1):
+                x = sx[p]
+                y = sy[p]
+                ri = sr[p] + skin
+                ip = sid[p]
+                # each pair once (a half stencil): the later disks of the own cell and the next cell
+                # of the row (together in the sorted order), then the three cells of the row above
+                for half in range(2):
+                    if half == 0:
+                        q0 = p + 1
+                        q1 = cell_start[c + 2] if a + 1 < ncx else c1
+                    elif b + 1 < ncy:
+                        q0 = cell_start[(b + 1) * ncx + max(a - 1, 0)]
+                        q1 = cell_start[(b + 1) * ncx + min(a + 1, ncx - 1) + 1]
+                    else:
+                        break
+                    for q in range(q0, q1):
+                        dx = sx[q] - x
+                        dy = sy[q] - y
+                        reach = ri + sr[q]
                         if dx * dx + dy * dy < reach * reach:
-                            if total >= cap:
+                            if m >= cap:
                                 return False
-                            # insertion sort by j
-                            k = total
-                            while k > first and new_j[k - 1] > j:
-                                new_j[k] = new_j[k - 1]
-                                k -= 1
-                            new_j[k] = j
-                            total += 1
-                    j = nxt[j]
-        # carry the tangential springs over (both rows sorted by j)
+                            jq = sid[q]
+                            i = min(ip, jq)
+                            pair_i[m] = i
+                            new_j[m] = max(ip, jq)
+                            m += 1
+                            row_n[i + 1] += 1
+    starts = np.empty(n + 1, dtype=np.int64)
+    starts[0] = 0
+    for i in range(n):
+        starts[i + 1] = starts[i] + row_n[i + 1]
+    put = starts[:n].copy()
+    rows_j = np.empty(m, dtype=np.int64)
+    for k in range(m):
+        i = pair_i[k]
+        j = new_j[k]
+        # insertion sort by j within the row
+        first = starts[i]
+        t = put[i]
+        while t > first and rows_j[t - 1] > j:
+            rows_j[t] = rows_j[t - 1]
+            t -= 1
+        rows_j[t] = j
+        put[i] += 1
+    # carry the tangential springs over (both rows sorted by j)
+    for i in range(n):
         ko = nb_start[i]
         end = nb_start[i + 1]
-        for k in range(first, total):
-            j = new_j[k]
+        for k in range(starts[i], starts[i + 1]):
+            j = rows_j[k]
             while ko < end and nb_j[ko] < j:
                 ko += 1
             new_xi[k] = nb_xi[ko] if ko < end and nb_j[ko] == j else 0.0
-        starts[i] = first
-    starts[n] = total
-    for k in range(total):
-        nb_j[k] = new_j[k]
+    for k in range(m):
+        nb_j[k] = rows_j[k]
         nb_xi[k] = new_xi[k]
     for i in range(n + 1):
         nb_start[i] = starts[i]

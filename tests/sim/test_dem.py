@@ -184,6 +184,36 @@ def test_the_verlet_skin_changes_only_the_cost_not_a_single_bit():
         assert np.array_equal(hist, runs[0][3]) and np.array_equal(acc, runs[0][4])
 
 
+def test_the_neighbour_list_holds_every_pair_within_reach_once_in_sorted_rows_with_its_spring():
+    # 600 disks of two sizes in a 0.3 m drum (many per cell, some outside the box's cells), against
+    # all pairs by brute force; a spring of the old list survives only for a pair still listed
+    rng = np.random.default_rng(3)
+    n, skin = 600, 0.004
+    rad = np.where(rng.random(n) < 0.3, 0.01, 0.005)
+    pos = rng.uniform(-0.15, 0.15, (n, 2))
+    d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    want = [(i, j) for i in range(n) for j in range(i + 1, n) if d[i, j] < rad[i] + rad[j] + skin]
+    cap = 40 * n
+    nb_start, nb_j, nb_xi = np.zeros(n + 1, dtype=np.int64), np.zeros(cap, dtype=np.int64), np.zeros(cap)
+    # an old list: disk 0 with springs for its first two partners and for one pair that is gone
+    old = sorted({*[j for i, j in want if i == 0][:2], n - 1})
+    nb_start[1:] = len(old)
+    nb_j[: len(old)] = old
+    nb_xi[: len(old)] = np.arange(1, len(old) + 1) * 1e-4
+    ref = np.zeros((n, 2))
+    ok = dem._rebuild(pos, rad, nb_start, nb_j, nb_xi, np.empty(cap, dtype=np.int64), np.empty(cap), ref, skin,
+                      0.15, 0.01)
+    assert ok and len(want) > 2 * n
+    got = [(i, int(j)) for i in range(n) for j in nb_j[nb_start[i]:nb_start[i + 1]]]
+    assert got == want  # every pair once, rows by i, sorted by j
+    kept = {(0, j): x for j, x in zip(old, np.arange(1, len(old) + 1) * 1e-4, strict=True) if (0, j) in want}
+    for k, (i, j) in enumerate(got):
+        assert nb_xi[k] == kept.get((i, j), 0.0)
+    assert np.array_equal(ref, pos)
+    assert not dem._rebuild(pos, rad, nb_start, nb_j[: len(want) - 1], nb_xi[: len(want) - 1],
+                            np.empty(len(want) - 1, dtype=np.int64), np.empty(len(want) - 1), ref, skin, 0.15, 0.01)
+
+
 def test_the_list_skin_lasts_the_set_steps_at_the_fastest_speed_within_its_bounds():
     dt, r = 2e-4, R_SMALL
     vel = np.array([[0.1, 0.0], [0.0, -0.2]])
