@@ -508,6 +508,11 @@ class DrumSim:
         assert self.params.dt_s is not None
         return self.params.dt_s
 
+    @property
+    def end_friction(self) -> float:
+        """Friction of the drum's end plates in effect (``params.end_friction``, else the wall's)."""
+        return float(self._prm[dem.P_END] * self.drum.depth_m)
+
     # ---------------------------------------------------------------- time
     def step(self, dt_s: float) -> None:
         """Advance by ``dt_s`` seconds (same as ``advance``; kept for callers of the old API)."""

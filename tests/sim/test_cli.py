@@ -31,6 +31,7 @@ def test_sim_writes_csv_video_and_json_summary_with_the_contact_numbers(tmp_path
     assert 0 < s["slope_deg"] < 60  # free surface after min(5 s, half the run)
     assert 0 < s["overlap_p99_r"] <= 0.05 and 0 < s["wall_max_mm"] <= 2.0
     assert s["regime"] in ("rolling", "cascading", "cataracting") and s["froude"] > 0
+    assert s["end_friction"] == pytest.approx(0.25)  # the end plates take the wall's (the paper's) friction
     rows = list(csv.DictReader(out_csv.open()))
     assert len(rows) == 16
     assert {"t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "slope_deg", "slope_deg_particles"} <= set(rows[0])
@@ -38,6 +39,14 @@ def test_sim_writes_csv_video_and_json_summary_with_the_contact_numbers(tmp_path
     cap = cv2.VideoCapture(str(out_mp4))
     assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 16
     cap.release()
+
+
+def test_sim_end_friction_sets_the_end_plates_apart_from_the_wall():
+    r = cli("sim", "--rpm", "5", "--duration", "2", "--fps", "2", "--end-friction", "0", "--json")
+    assert r.code == 0, r.err
+    assert json.loads(r.out)["end_friction"] == 0.0
+    bad = cli("sim", "--end-friction", "-1")
+    assert bad.code == 2 and "--end-friction" in bad.err and "Traceback" not in bad.err
 
 
 @pytest.mark.timeout(240)

@@ -60,6 +60,8 @@ def sim_cmd(
     realism: bool = typer.Option(False, "--realism", help="camera noise, blur, glare, drift, JPEG, drops"),
     friction: float | None = typer.Option(None, "--friction", help="sliding friction (paper: 0.25)"),
     rolling: float | None = typer.Option(None, "--rolling", help="rolling friction (paper: 0.1)"),
+    end_friction: float | None = typer.Option(None, "--end-friction",
+                                              help="friction of the drum's end plates (default: the wall's; 0: none)"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step, ms (default: the converged step)"),
     as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
 ) -> None:
@@ -81,6 +83,8 @@ def sim_cmd(
         kw["friction"] = check_number("--friction", friction, 0.0, 5.0)
     if rolling is not None:
         kw["rolling"] = check_number("--rolling", rolling, 0.0, 5.0)
+    if end_friction is not None:
+        kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
     if dt_ms is not None:
         kw["dt_s"] = check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3
     sim = DrumSim(case=case, seed=seed, rpm=rpm, **kw)
@@ -157,7 +161,7 @@ def sim_cmd(
     summary = {
         "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
         "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
-        "friction": sim.params.friction, "rolling": sim.params.rolling,
+        "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.end_friction,
         "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
         "mi_sigmoid_end": mean(mis[-tail:]),
         "mi_particles_start": float(mip[0]), "mi_particles_end": mean(mip[-tail:]),
