@@ -395,13 +395,13 @@ def run(
         frc[i, 1] = weight[i]
     far = 0.0
     for i in range(n):
-        dx = pos[i, 0] - ref[i, 0]
-        dy = pos[i, 1] - ref[i, 1]
+        dx = hot[i, 0] - ref[i, 0]
+        dy = hot[i, 1] - ref[i, 1]
         far = max(far, dx * dx + dy * dy)
-    if rebuild:
+    if rebuild:  # (on the hot rows, as in the step loop: one compiled form of the list build)
         far = 0.0
-        skin = list_skin(vel, dt, skin_min, r_min)
-        if not _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+        skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
+        if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
             return 0
         half_skin2 = 0.25 * skin * skin
     for step in range(n_steps):

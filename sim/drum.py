@@ -106,6 +106,16 @@ class SimParams:
     stiffness_n_m: float = DEFAULT_STIFFNESS_N_M
     end_friction: float | None = DEFAULT_END_FRICTION  # None: same as the wall; 0: no end plates
 
+    @property
+    def wall_mu(self) -> float:
+        """Particle-wall sliding friction in effect (``wall_friction``, else ``friction``)."""
+        return self.friction if self.wall_friction is None else self.wall_friction
+
+    @property
+    def end_mu(self) -> float:
+        """Friction of the drum's end plates in effect (``end_friction``, else the wall's)."""
+        return self.wall_mu if self.end_friction is None else self.end_friction
+
 
 @dataclass(frozen=True)
 class ContactStats:
@@ -365,8 +375,7 @@ class DrumSim:
         prm = np.zeros(dem.P_N)
         prm[dem.P_DT] = p.dt_s
         prm[dem.P_MU] = p.friction
-        mu_wall = p.friction if p.wall_friction is None else p.wall_friction
-        prm[dem.P_MU_W] = mu_wall
+        prm[dem.P_MU_W] = p.wall_mu
         prm[dem.P_MU_R] = p.rolling
         prm[dem.P_G] = G_M_S2 if gravity else 0.0
         prm[dem.P_R] = self.drum.radius_m
@@ -374,7 +383,7 @@ class DrumSim:
         prm[dem.P_DAMP] = damp_s
         prm[dem.P_ACCEL] = p.accel_rpm_s
         prm[dem.P_RMIN] = self._r_min
-        prm[dem.P_END] = (mu_wall if p.end_friction is None else p.end_friction) / self.drum.depth_m
+        prm[dem.P_END] = p.end_mu / self.drum.depth_m
         self._prm = prm
         self._c_pair, self._c_wall = dem.contact_tables(self._cls_mass, np.array([c.radius_m for c in self.classes]),
                                                         p.stiffness_n_m, p.restitution)
@@ -507,11 +516,6 @@ class DrumSim:
         """The fixed internal step (s)."""
         assert self.params.dt_s is not None
         return self.params.dt_s
-
-    @property
-    def end_friction(self) -> float:
-        """Friction of the drum's end plates in effect (``params.end_friction``, else the wall's)."""
-        return float(self._prm[dem.P_END] * self.drum.depth_m)
 
     # ---------------------------------------------------------------- time
     def step(self, dt_s: float) -> None:

@@ -161,7 +161,7 @@ def sim_cmd(
     summary = {
         "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
         "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
-        "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.end_friction,
+        "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.params.end_mu,
         "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
         "mi_sigmoid_end": mean(mis[-tail:]),
         "mi_particles_start": float(mip[0]), "mi_particles_end": mean(mip[-tail:]),
