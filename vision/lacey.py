@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, class_lut, counted_classes, lut_labels
-from vision.moments import open_labels
+from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, class_lut, counted_classes
+from vision.moments import kernel_labels
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
 __all__ = ["LaceyMeter", "LaceyResult", "lacey_from_labels"]
@@ -86,7 +86,7 @@ class LaceyMeter:
 
     ``cell_px`` defaults to ``R / 5`` (about 78 cells in a full disc). Class 1 and 2 are
     the first two classes. ``opening`` applies the centroid meter's class opening
-    (``vision.moments.open_labels``), so both see the same pixels.
+    (``vision.moments.open_labels``, through ``kernel_labels``), so both see the same pixels.
     """
 
     def __init__(
@@ -121,8 +121,5 @@ class LaceyMeter:
             self._key = shape
         x0, y0, x1, y1 = self._box
         crop = np.ascontiguousarray(image_bgr[y0:y1, x0:x1])
-        labels = lut_labels(crop, self._lut)
-        labels[~self._inside] = 0
-        if self.opening:
-            labels = open_labels(labels)
+        labels = kernel_labels(crop, self._lut, self._inside, self.opening)
         return lacey_from_labels(labels, self._inside, self._cell, self.rng)

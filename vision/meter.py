@@ -17,11 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes, lut_labels
+from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
 from vision.errors import VisionError
 from vision.glare import HALO, RING, glare_fill
 from vision.mixing import mixing_indices
-from vision.moments import class_tables, frame_moments, open_labels, row_spans
+from vision.moments import class_tables, frame_moments, kernel_labels, row_spans
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
@@ -216,16 +216,16 @@ class Meter:
         assert roi is not None
         box = roi_bbox(roi, shape_hw)
         s = self.stride
-        inside = _mask_in_box(roi, box)[::s, ::s]
+        in_box = _mask_in_box(roi, box)  # the ROI's pixels in the image
+        inside = in_box[::s, ::s]
         first, last = row_spans(inside)
         shift = occupancy_shift(roi.r_px, s)
         area = cell_areas(inside, s, shift)
         full = float(((1 << shift) + s - 1) // s) ** 2
-        roi_area = math.pi * roi.r_px ** 2 if roi.kind == "circle" else 4.0 * roi.half_w_px * roi.half_h_px  # type: ignore[operator]
-        in_view = float(_mask_in_box(roi, box).sum())
+        in_view = float(in_box.sum())
         g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
                       np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64),
-                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi_area))
+                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi.area_px))
         self._geoms[shape_hw] = g
         return g
 
@@ -270,13 +270,10 @@ class Meter:
         ja = max(0, int(cj.min() * cell / s - margin))
         jb = min(int(g.last.max()), int(math.ceil((cj.max() + 1) * cell / s + margin)))
         sub = np.ascontiguousarray(img[y0 + ia * s: y0 + ib * s: s, x0 + ja * s: x0 + jb * s: s])
-        labels = lut_labels(sub, self._tables.fine)
-        jj = np.arange(ja, ja + labels.shape[1])
-        rows = slice(ia, ia + labels.shape[0])
-        inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])
-        labels[~inside] = 0  # as the kernel sees them: nothing outside the spans
-        if self.opening:
-            labels = open_labels(labels)
+        jj = np.arange(ja, ja + sub.shape[1])
+        rows = slice(ia, ia + sub.shape[0])
+        inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])  # the spans
+        labels = kernel_labels(sub, self._tables.fine, inside, self.opening)
         return glare_fill(labels, inside, len(self.classes), (x0 + ja * s, y0 + ia * s), s)
 
     def _reading(self, rows: list[list[float]], g: _Geometry) -> Reading:

@@ -25,9 +25,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from vision.colours import Classifier, ColourClass, class_lut, counted_classes
+from vision.colours import Classifier, ColourClass, class_lut, counted_classes, lut_labels
 
-__all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "open_labels", "row_spans"]
+__all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "kernel_labels", "open_labels",
+           "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -134,6 +135,15 @@ def open_labels(labels: np.ndarray) -> np.ndarray:
     q = np.pad(core, 1)
     keep = core | q[1:-1, :-2] | q[1:-1, 2:] | q[:-2, 1:-1] | q[2:, 1:-1]
     return np.where(keep, lab, 0).astype(lab.dtype)
+
+
+def kernel_labels(image_bgr: np.ndarray, lut: np.ndarray, inside: np.ndarray, opening: bool = False) -> np.ndarray:
+    """The labels the moments kernel counts, as a map (uint8, H x W): ``lut``'s label of each pixel
+    of a BGR image (``ClassTables.fine``, or a ``class_lut`` without the glare label), 0 outside
+    ``inside`` (bool, H x W), then the class opening (:func:`open_labels`) when ``opening``."""
+    labels = lut_labels(image_bgr, lut)
+    labels[~inside] = 0
+    return open_labels(labels) if opening else labels
 
 
 def _add_run_py(hist, c, j0, j1, x0, step):  # pragma: no cover - compiled

@@ -49,6 +49,14 @@ class DrumROI:
             object.__setattr__(self, "half_w_px", float(hw))
             object.__setattr__(self, "half_h_px", float(hh))
 
+    @property
+    def area_px(self) -> float:
+        """The region's area, px^2 (in the image or not)."""
+        if self.kind == "circle":
+            return math.pi * self.r_px**2
+        assert self.half_w_px is not None and self.half_h_px is not None  # set for a rect by __post_init__
+        return 4.0 * self.half_w_px * self.half_h_px
+
     def scaled(self, factor: float) -> DrumROI:
         """The same ROI in an image scaled by ``factor``."""
         f = float(factor)
