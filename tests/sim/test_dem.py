@@ -11,6 +11,9 @@ from sim.drum import DEFAULT_DT_S, DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, Dru
 R_SMALL = 0.005
 M_SMALL = 9.75e-4  # kg, a 10 mm disk of the paper bed
 G = 9.81
+BIG = 100.0  # m: the radius of a drum whose bottom is flat for a small disk
+ON_BOTTOM = (0.0, -BIG + R_SMALL - M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M))
+"""A small disk resting on the bottom of that drum (m; the wall's stiffness is twice its pair's)."""
 
 
 def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, mu_r=0.1, e=0.5, g=0.0,
@@ -58,13 +61,11 @@ def test_a_head_on_collision_at_the_default_step_has_the_set_restitution(e):
 
 def _rolling_speed(mu_r: float) -> tuple[np.ndarray, np.ndarray]:
     """A disk rolling without slip along the bottom of a 200 m drum (locally flat), drum at rest."""
-    big = 100.0
     dt = DEFAULT_DT_S
-    sag = M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)  # resting overlap (the wall: twice the pair's stiffness)
-    state = ([[0.0, -big + R_SMALL - sag]], [[0.3, 0.0]], [-0.3 / R_SMALL])
+    state = ([ON_BOTTOM], [[0.3, 0.0]], [-0.3 / R_SMALL])
     ts, vs = [], []
     for i in range(20):
-        pos, vel, omg, _, _, _ = _run(*state, int(0.01 / dt), drum_r=big, mu_r=mu_r, g=G)
+        pos, vel, omg, _, _, _ = _run(*state, int(0.01 / dt), drum_r=BIG, mu_r=mu_r, g=G)
         state = (pos, vel, omg)
         ts.append((i + 1) * int(0.01 / dt) * dt)
         vs.append(vel[0, 0])
@@ -108,14 +109,14 @@ def test_end_plates_decelerate_a_sliding_disk_at_mu_end_g_r_over_the_depth():
     # a disk sliding without spin on the frictionless bottom of a 200 m drum at rest: the two end plates
     # 0.1 m apart (friction 0.25) take mu_end r sum(F_n) / depth, with sum(F_n) = m g; the same run
     # without end plates takes out the drum's curvature (it climbs 0.6 mm/m along the path)
-    big, depth, mu_end = 100.0, 0.1, 0.25
+    depth, mu_end = 0.1, 0.25
     n = int(0.02 / DEFAULT_DT_S)
     rates = []
     for end in (mu_end / depth, 0.0):
-        state = ([[0.0, -big + R_SMALL - M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)]], [[0.3, 0.0]], [0.0])
+        state = ([ON_BOTTOM], [[0.3, 0.0]], [0.0])
         ts, vs = [], []
         for i in range(20):
-            pos, vel, omg, _, _, _ = _run(*state, n, drum_r=big, mu=0.0, mu_r=0.0, g=G, end=end)
+            pos, vel, omg, _, _, _ = _run(*state, n, drum_r=BIG, mu=0.0, mu_r=0.0, g=G, end=end)
             state = (pos, vel, omg)
             ts.append((i + 1) * n * DEFAULT_DT_S)
             vs.append(vel[0, 0])
@@ -126,9 +127,7 @@ def test_end_plates_decelerate_a_sliding_disk_at_mu_end_g_r_over_the_depth():
 
 
 def test_end_plate_friction_stops_a_slow_disk_without_reversing_it_and_spares_one_turning_with_the_drum():
-    big = 100.0
-    rest = [[0.0, -big + R_SMALL - M_SMALL * G / (2 * DEFAULT_STIFFNESS_N_M)]]
-    _, vel, _, _, _, _ = _run(rest, [[1e-4, 0.0]], [0.0], int(0.1 / DEFAULT_DT_S), drum_r=big, mu=0.0, mu_r=0.0,
+    _, vel, _, _, _, _ = _run([ON_BOTTOM], [[1e-4, 0.0]], [0.0], int(0.1 / DEFAULT_DT_S), drum_r=BIG, mu=0.0, mu_r=0.0,
                               g=G, end=2.5)
     assert abs(vel[0, 0]) < 1e-12  # stopped within 0.1 s, not pushed back
     # a disk pressed on a wall that moves with it: no relative velocity to the end plates, no force
@@ -138,10 +137,8 @@ def test_end_plate_friction_stops_a_slow_disk_without_reversing_it_and_spares_on
 
 def test_rolling_friction_never_reverses_the_rotation():
     # a spinning disk resting on the flat bottom with huge rolling friction stops spinning, then stays still
-    big = 100.0
-    sag = M_SMALL * G / DEFAULT_STIFFNESS_N_M
-    _, vel, omg, _, _, _ = _run([[0.0, -big + R_SMALL - sag]], [[0.0, 0.0]], [5.0], int(0.3 / DEFAULT_DT_S),
-                                drum_r=big, mu_r=5.0, mu=0.0, g=G)
+    _, vel, omg, _, _, _ = _run([ON_BOTTOM], [[0.0, 0.0]], [5.0], int(0.3 / DEFAULT_DT_S),
+                                drum_r=BIG, mu_r=5.0, mu=0.0, g=G)
     assert abs(omg[0]) < 1e-9 and abs(vel[0, 0]) < 1e-9
 
 
