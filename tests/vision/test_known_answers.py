@@ -9,6 +9,7 @@ f(1/2) = 1/2, f(3/4) = 1 / (1 + e^2.5), f(0) = e^5 / (1 + e^5).
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -145,3 +146,30 @@ def test_glcm_two_halves_is_near_zero_and_below_stripes():
     # only the pairs straddling the boundary differ: about 180 rows of ~180 pairs per angle
     assert 0.0 < half.m < 0.03
     assert half.m < GLCMMeter(roi=DrumROI(100.0, 100.0, 90.0), levels=16, distances=(1,)).measure(_stripes(1)).m
+
+
+@pytest.mark.parametrize("which", range(7))
+def test_any_non_finite_input_gives_all_nan_outputs(which):
+    """A missing class (any NaN centroid coordinate, spread or radius) gives NaN in every field."""
+    args = [0.0, 0.0, 10.0, 0.0, 5.0, 7.0, R_PX]
+    args[which] = math.nan
+    out = mixing_indices((args[0], args[1]), (args[2], args[3]), args[4], args[5], args[6], d0=50.0)
+    assert all(math.isnan(v) for v in (out.mi, out.mi_sigmoid, out.mi_linear, out.d_px, out.dsigma_px))
+
+
+def test_small_radius_and_reference_are_valid_numbers():
+    """Sub-pixel radius and reference distance are legal (a strided grid, a tiny drum): finite outputs."""
+    out = mixing_indices((0.0, 0.0), (0.1, 0.0), 0.2, 0.2, 0.5, d0=0.5)
+    assert math.isfinite(out.mi) and out.mi_linear == pytest.approx(0.8, abs=1e-12)
+    zero_r = mixing_indices((0, 0), (1, 0), 1, 1, 0.0)
+    assert math.isnan(zero_r.mi) and math.isnan(zero_r.d_px)
+
+
+def test_sigmoid_far_tails_are_exact_and_silent():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tails = sigmoid_f(np.array([-1000.0, 1000.0]))
+        assert sigmoid_f(-1000.0) == 1.0 and sigmoid_f(1000.0) == pytest.approx(0.0, abs=1e-300)
+    assert tails[0] == 1.0 and tails[1] == pytest.approx(0.0, abs=1e-300)
+    ints = sigmoid_f(np.array([0, 1]))
+    assert ints.dtype == np.float64 and ints[0] == pytest.approx(F_ZERO, abs=1e-12)
