@@ -34,7 +34,7 @@ cat >> pyproject.toml <<TOML
 source_paths = ["$mod"]
 pytest_add_cli_args_test_selection = [${tests%, }]
 pytest_add_cli_args = ["-p", "no:xdist", "-q", "-o", "addopts=", "-x"]
-also_copy = ["vision", "sim", "control", "twin", "tests", "configs"]
+also_copy = ["vision", "sim", "control", "twin", "tests", "configs", "docs", "README.md"]
 TOML
 echo "mutation: $mod against ${TESTS[$mod]}" >&2
 "$venv/bin/mutmut" run --max-children "${MUTMUT_CHILDREN:-2}" >"$work/run.log" 2>&1 || { tail -20 "$work/run.log" >&2; exit 1; }
