@@ -139,9 +139,13 @@ def comm_loss_problem(profile: DriveProfile, setting: CommLossSetting, limit_s: 
 
 class ModbusMill:
     """A drive over Modbus RTU, presenting ``MillClient``'s interface (see module doc).
-    ``timeout_s`` per attempt, ``retries`` resends; ``connect``: open and check now."""
+    ``timeout_s`` per attempt, ``retries`` resends; ``connect``: open and check now;
+    ``enforce=False`` (``drumtwin mill URL check`` only: it reads, never controls) records
+    an unsafe comm-loss trip in ``safety_problem`` instead of refusing."""
 
-    def __init__(self, url: str, *, timeout_s: float = 0.2, retries: int = 2, connect: bool = True) -> None:
+    def __init__(
+        self, url: str, *, timeout_s: float = 0.2, retries: int = 2, connect: bool = True, enforce: bool = True
+    ) -> None:
         self.url = url
         self.spec = parse_modbus_url(url)
         self.profile = load_profile(self.spec.profile)
@@ -151,11 +155,13 @@ class ModbusMill:
         if isinstance(retries, bool) or not isinstance(retries, int) or not 0 <= retries <= 100:
             raise ControlError(f"retries must be an integer in 0..100 (got {retries})")
         self.retries = retries
+        self.enforce = enforce
         self.safety_override: str | None = None  # set when a bad comm-loss trip was overridden
+        self.safety_problem: str | None = None  # what is wrong with the drive's comm-loss trip
         self.comm_loss: CommLossSetting | None = None
         self.last_status: MillStatus | None = None
         self.last_error: str | None = None
-        self.stats = {"requests": 0, "timeouts": 0, "exceptions": 0, "reconnects": 0, "keepalives": 0}
+        self.stats = {"requests": 0, "timeouts": 0, "exceptions": 0, "reconnects": 0, "keepalives": 0, "resends": 0}
         self._lock = threading.RLock()
         self._client: Any = None
         self._checked = False
@@ -281,9 +287,11 @@ class ModbusMill:
 
     def _check_safety(self) -> None:
         setting = self.read_comm_loss()
-        why = comm_loss_problem(self.profile, setting, self.spec.comm_loss_limit_s)
+        why = self.safety_problem = comm_loss_problem(self.profile, setting, self.spec.comm_loss_limit_s)
         if why is None:
             self.safety_override = None
+            return
+        if not self.enforce:
             return
         if not self.spec.override:
             raise ControlError(f"{why} (or add override=comm-loss to the URL, logged)")
@@ -328,6 +336,7 @@ class ModbusMill:
             raise MillRefused(what, f"modbus exception {code}")
         self._connected = True
         self.last_error = None
+        self.stats["resends"] += int(getattr(rr, "retries", 0) or 0)
         return rr
 
     def _read(self, address: int, count: int, what: str) -> list[int]:
