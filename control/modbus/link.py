@@ -283,6 +283,7 @@ class ModbusMill:
                 self._check_safety()
             except BaseException:
                 self._checked = False
+                self._drop()  # release the port (pyserial locks it): the next request opens and checks again
                 raise
 
     def _check_safety(self) -> None:
