@@ -341,10 +341,24 @@ class ModbusMill:
         return rr
 
     def _read(self, address: int, count: int, what: str) -> list[int]:
-        return list(self._call(what, "read_holding_registers", address, count=count).registers)
+        regs = list(self._call(what, "read_holding_registers", address, count=count).registers)
+        if len(regs) != count:  # RTU has no transaction id: a late answer to another request
+            raise self._garbled(what, f"{len(regs)} registers for {count}")
+        return regs
 
     def _write(self, address: int, value: int, what: str) -> None:
-        self._call(what, "write_register", address, int(value) & 0xFFFF)
+        value = int(value) & 0xFFFF
+        rr = self._call(what, "write_register", address, value)
+        echo = (getattr(rr, "address", address), list(getattr(rr, "registers", [value]) or [value]))
+        if echo != (address, [value]):  # a write is answered with its own echo
+            raise self._garbled(what, f"echo {echo} for {(address, [value])}")
+
+    def _garbled(self, what: str, detail: str) -> TimeoutError:
+        self.stats["timeouts"] += 1
+        self._connected = False
+        self.last_error = f"garbled answer to {what}: {detail}"
+        where = f"drive unit {self.spec.unit} at {self.spec.port}"
+        return TimeoutError(f"no valid answer from {where} to {what} ({detail})")
 
     def _read_status_words(self) -> dict[int, int]:
         out: dict[int, int] = {}

@@ -260,3 +260,22 @@ def test_emulator_on_tcp(tmp_path) -> None:
 def test_an_unopenable_port_is_a_connection_error(tmp_path) -> None:
     with pytest.raises(ConnectionError, match="cannot open"):
         ModbusMill(f"modbus:{tmp_path / 'none'}?profile=generic")
+
+
+def test_a_late_answer_to_an_earlier_request_is_never_taken_for_this_one(drive: DriveEmulator) -> None:
+    """RTU has no transaction id: a slow drive's answer to a write can arrive while the host
+    waits for a read (the loop's worker crashed on it with a KeyError)."""
+    with ModbusMill(drive.mill_url(), timeout_s=0.05, retries=0) as mill:
+        mill.set_rpm(5.0)
+        drive.faults = DriveFaults(delay_s=0.08)
+        outcomes = []
+        for i in range(12):
+            try:
+                (mill.heartbeat if i % 2 else mill.status)()
+                outcomes.append("ok")
+            except TimeoutError:
+                outcomes.append("timeout")
+        assert "timeout" in outcomes  # and nothing but TimeoutError escaped
+        drive.faults = DriveFaults()
+        time.sleep(0.3)
+        assert mill.status().setpoint_rpm == 5.0
