@@ -179,9 +179,7 @@ class ModbusMill:
 
     def set_rpm(self, rpm: float) -> None:
         """Write the frequency setpoint for ``rpm`` drum rpm (``rpm * hz_per_rpm`` Hz)."""
-        rpm = float(rpm)
-        if not (rpm >= 0.0 and rpm < 1e5):
-            raise ControlError(f"rpm must be a number >= 0, got {rpm}")
+        rpm = check_number("rpm", rpm, at_least=0.0, at_most=1e5)
         hz = rpm * self.hz_per_rpm
         if hz > self.max_hz + 1e-9:
             raise MillRefused(f"SET {rpm:g}", f"RANGE ({hz:.2f} Hz > max {self.max_hz:g} Hz)")
