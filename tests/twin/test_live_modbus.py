@@ -181,3 +181,52 @@ def test_a_drive_without_a_comm_loss_trip_is_refused_and_runs_only_with_the_logg
 def test_drive_option_is_for_the_demo_only() -> None:
     assert_one_line_error(cli("run", "--drive", "nope", "--no-dashboard"), "unknown drive profile")
     assert_one_line_error(cli("run", "--drive", "abb-acs", "--mill", "/dev/x", "--no-dashboard"), "--drive")
+
+
+def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
+    """The same worker (nothing above the link changes) on ModbusMill and the drive emulator:
+    connecting reads only, the operator's start, an out-of-range set-rpm refused (event,
+    re-read, nothing written), an unplugged cable: fault, the pending command decided before
+    the re-read is dropped, the first exchange after the link is back is a read."""
+    from control.modbus.link import ModbusMill
+    from tests.twin.test_mill_worker import Sink
+    from twin.live.mill import MillWorker
+    from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill
+
+    emu = DriveEmulator(DELTA, unit=1, comm_loss_s=1.0)
+    emu.open_pty()
+    try:
+        emu.set_motor(setpoint_rpm=8.0, actual_rpm=8.0, running=True)
+        _wait(lambda: emu.motor.fault == "CE1", 5, "the comm-loss trip of a drive nobody controls")
+        link = ModbusMill(emu.mill_url(), timeout_s=0.3, retries=1)
+        sink, box = Sink(), Latest(MillSnapshot())
+        w = MillWorker(link, sink, box, now_s=lambda: 0.0)
+        for _ in range(5):
+            w.cycle()
+        assert box.get().connected and box.get().fault == "CE1" and not emu.motor.running
+        assert emu.writes == []
+        w.submit(StartMill(epoch=box.get().epoch))
+        w.cycle()
+        assert emu.motor.running and emu.fault_code == 0  # the start reset the latched comm fault
+        # reset (bit 1 up and down), run forward, then the poll's keep-alive: the held 8 Hz again
+        assert [(x.address, x.value) for x in emu.writes] == [(0x2002, 2), (0x2002, 0), (0x2000, 0x12), (0x2001, 800)]
+        n = len(emu.writes)
+        w.submit(SetRpm(90.0, epoch=box.get().epoch))  # 90 Hz > the drive's 60 Hz
+        snap = w.cycle()
+        assert snap.connected and sink.kinds("mill_refused")[0]["reason"].startswith("RANGE")
+        assert snap.refused == 1 and [x.address for x in emu.writes[n:]] == [0x2001]  # only the keep-alive
+        emu.disconnect()
+        old_epoch = box.get().epoch
+        for _ in range(3):
+            w.cycle()
+        assert not box.get().connected and "mill_link" in sink.faults
+        w.submit(SetRpm(20.0, epoch=old_epoch))
+        emu.reconnect()
+        _wait(lambda: w.cycle().connected, 10, "the link back")
+        w.cycle()
+        assert box.get().epoch == old_epoch + 1
+        assert sink.kinds("mill_command_dropped")[-1]["rpm"] == 20.0
+        assert 2000 not in [x.value for x in emu.writes if x.address == 0x2001]  # 20 rpm never written
+        link.close()
+    finally:
+        emu.close()
