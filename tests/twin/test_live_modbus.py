@@ -230,3 +230,18 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
         link.close()
     finally:
         emu.close()
+
+
+@pytest.mark.timeout(240)
+def test_run_drive_puts_the_embedded_demo_on_a_drive_emulator(tmp_path: Path) -> None:
+    """`drumtwin run --drive siemens-v20`: the demo's mill is that drive over Modbus RTU."""
+    r = cli("run", "--drive", "siemens-v20", "--no-dashboard", "--mode", "off", "--duration", "3", "--speed", "4",
+            "--log", tmp_path / "run", "--json")
+    assert r.code == 0, r.err[-2000:]
+    events = read_events(tmp_path / "run")
+    assert events[0]["kind"] == "start" and events[0]["mill"].startswith("modbus:")
+    assert "profile=siemens-v20" in events[0]["mill"]
+    synced = [e for e in events if e["kind"] == "mill_synced"]
+    assert synced and synced[0]["fault"] is None
+    cmds = [(e["command"], e["source"]) for e in events if e["kind"].startswith("mill_command")]
+    assert cmds == [("start", "operator")]  # the demo's operator; OFF sends nothing else
