@@ -161,6 +161,7 @@ class ModbusMill:
         self.comm_loss: CommLossSetting | None = None
         self.last_status: MillStatus | None = None
         self.last_error: str | None = None
+        self.last_ok_s: float | None = None  # time.monotonic() of the last decoded status
         self.stats = {"requests": 0, "timeouts": 0, "exceptions": 0, "reconnects": 0, "keepalives": 0, "resends": 0}
         self._lock = threading.RLock()
         self._client: Any = None
