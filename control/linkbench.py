@@ -2,7 +2,8 @@
 
 Round trip of one ``STATUS`` request (frame out, ACK with the status back, decoded)
 through :class:`control.driver.MillClient`, with the heartbeat thread off so only the
-measured requests are on the line.
+measured requests are on the line; beside it the Modbus link (``ModbusMill.status()``:
+the profile's status registers read with pymodbus, decoded) against the drive emulator.
 """
 
 from __future__ import annotations
@@ -15,6 +16,9 @@ import numpy as np
 
 from control.driver import MillClient
 from control.emulator import MillEmulator
+
+MODBUS_BENCH_PROFILE = "delta-ms300"
+"""The drive the Modbus round trip is timed on (its four status registers are one read)."""
 
 __all__ = ["LinkTiming", "run_link_bench", "time_link"]
 
@@ -36,18 +40,28 @@ class LinkTiming:
 
 
 def time_link(url: str, n: int, transport: str) -> LinkTiming:
-    """Time ``n`` status requests of a fresh driver on ``url`` (after 10 warm-up requests)."""
+    """Time ``n`` status requests of a fresh driver on ``url`` (after 10 warm-up requests);
+    a ``modbus:`` URL is timed through ``ModbusMill`` (its ``resends``: pymodbus's)."""
+    if url.startswith("modbus:"):
+        from control.modbus.link import ModbusMill
+
+        with ModbusMill(url, timeout_s=0.5, retries=3) as mill:
+            return _time_status(mill.status, n, transport, lambda: mill.stats["resends"])
     with MillClient(url, heartbeat_s=None, timeout_s=0.5, retries=3) as client:
-        for _ in range(10):
-            client.status()
-        rtt = np.empty(n)
-        for i in range(n):
-            t0 = time.perf_counter()
-            client.status()
-            rtt[i] = time.perf_counter() - t0
-        resends = client.stats["resends"]
+        return _time_status(client.status, n, transport, lambda: client.stats["resends"])
+
+
+def _time_status(status: Callable[[], object], n: int, transport: str, resends: Callable[[], int]) -> LinkTiming:
+    """Round trips of ``n`` calls of ``status`` (after 10 warm-up calls)."""
+    for _ in range(10):
+        status()
+    rtt = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        status()
+        rtt[i] = time.perf_counter() - t0
     ms = rtt * 1000.0
-    return LinkTiming(transport, n, float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max()), resends)
+    return LinkTiming(transport, n, float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max()), resends())
 
 
 def run_link_bench(n: int = 500, progress: Callable[[str], None] | None = None) -> list[LinkTiming]:
@@ -61,4 +75,15 @@ def run_link_bench(n: int = 500, progress: Callable[[str], None] | None = None) 
         say("tcp ...")
         emu.open_tcp(0)
         out.append(time_link(emu.url, n, "tcp"))
+    from control.modbus.emulator import DriveEmulator
+    from control.modbus.profile import load_profile
+
+    for kind in ("pty", "tcp"):
+        with DriveEmulator(load_profile(MODBUS_BENCH_PROFILE)) as drive:
+            say(f"modbus {kind} ...")
+            if kind == "pty":
+                drive.open_pty()
+            else:
+                drive.open_tcp(0)
+            out.append(time_link(drive.mill_url(), n, f"modbus_{kind}"))
     return out

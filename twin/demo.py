@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
+from control.modbus.emulator import DriveEmulator
+from control.modbus.profile import load_profile
 from control.motor import MotorConfig
 from sim.drum import DrumSim
 from sim.render import Realism, Renderer
@@ -41,6 +43,7 @@ class PlantConfig:
     rolling: float = PLANT_ROLLING
     realism: bool = True
     watchdog_s: float = 5.0  # emulator watchdog, wall seconds (a busy machine may stall the loop for seconds)
+    drive: str | None = None  # a drive profile: the mill is that inverter's emulator over Modbus RTU
 
 
 class DemoPlant:
@@ -58,8 +61,14 @@ class DemoPlant:
         motor = MotorConfig(
             max_rpm=motor.max_rpm, accel_rpm_per_s=motor.accel_rpm_per_s * speed, tau_s=motor.tau_s / speed
         )
-        self.emulator = MillEmulator(DeviceConfig(watchdog_s=config.watchdog_s, motor=motor), seed=config.seed)
-        self.url = self.emulator.open_pty()
+        self.emulator: MillEmulator | DriveEmulator
+        if config.drive is not None:  # a frequency inverter on Modbus RTU, its comm-loss trip the watchdog
+            self.emulator = DriveEmulator(load_profile(config.drive), comm_loss_s=config.watchdog_s, speed=speed)
+            self.emulator.open_pty()
+            self.url = self.emulator.mill_url()
+        else:
+            self.emulator = MillEmulator(DeviceConfig(watchdog_s=config.watchdog_s, motor=motor), seed=config.seed)
+            self.url = self.emulator.open_pty()
         self.emulator.set_motor(setpoint_rpm=float(config.start_rpm), actual_rpm=0.0, running=False)
         self.sim = DrumSim(
             case=config.case,

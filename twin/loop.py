@@ -98,7 +98,14 @@ class Summary:
 
 def open_mill(url: str) -> MillLink:
     """The run's mill client: opened now (``ConnectionError`` when it cannot be), with no
-    thread of its own (the mill worker is its one user and poller)."""
+    thread of its own (the mill worker is its one user and poller). A ``modbus:`` URL is a
+    frequency inverter (``control.modbus.link.ModbusMill``: its comm-loss trip is checked
+    now, a ``ControlError`` when it is unsafe and not overridden); anything else is the
+    line protocol's board."""
+    if url.startswith("modbus:"):
+        from control.modbus.link import ModbusMill
+
+        return ModbusMill(url, connect=True)
     from control.driver import MillClient
 
     return MillClient(url, heartbeat_s=None, connect=True)
@@ -191,6 +198,9 @@ class LiveLoop:
 
     def start(self) -> LiveLoop:
         self.events.event("start", 0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""))
+        override = getattr(self.mill_link, "safety_override", None)  # a drive run against its check
+        if override:
+            self.events.fault("mill_safety_override", f"operator override: {override}", 0.0)
         if self.config.mode == "auto":
             self.whatif.warm_up()
         for name, worker in (

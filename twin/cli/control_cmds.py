@@ -15,6 +15,7 @@ from control.device import DeviceConfig
 from control.driver import MillClient
 from control.emulator import Faults, MillEmulator
 from control.errors import ControlError, check_number
+from control.modbus.link import ModbusMill, comm_loss_problem, is_modbus_url, parse_modbus_url
 from control.motor import MotorConfig
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json
@@ -34,7 +35,10 @@ JSON_OPT = typer.Option(False, "--json", help="Print one JSON object on stdout."
 @mill_app.callback()
 def _mill(
     ctx: typer.Context,
-    url: str = typer.Argument(..., help="Port or URL: /dev/ttyUSB0, a pty path, socket://host:port, rfc2217://host:port."),
+    url: str = typer.Argument(
+        ..., help="Port or URL: /dev/ttyUSB0, a pty path, socket://host:port, rfc2217://host:port; "
+        "a drive: modbus:PORT?profile=NAME&unit=1 (docs/drives.md)."
+    ),
     timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
     retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
 ) -> None:
@@ -44,8 +48,10 @@ def _mill(
     ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries}
 
 
-def _client(ctx: typer.Context) -> MillClient:
+def _client(ctx: typer.Context) -> MillClient | ModbusMill:
     o = ctx.obj
+    if is_modbus_url(o["url"]):
+        return ModbusMill(o["url"], timeout_s=o["timeout_s"], retries=o["retries"])
     return MillClient(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], heartbeat_s=None)
 
 
@@ -59,7 +65,7 @@ def _check_hold(hold_s: float) -> float:
     return check_number("--hold", hold_s, at_least=0.0, at_most=86400.0)
 
 
-def _hold(c: MillClient, hold_s: float, as_json: bool) -> None:
+def _hold(c: MillClient | ModbusMill, hold_s: float, as_json: bool) -> None:
     if hold_s <= 0:
         return
     t_end = time.monotonic() + hold_s
@@ -128,6 +134,43 @@ def mill_stop(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
         _report(c.status(), as_json, "stop")
 
 
+@mill_app.command("check")
+def mill_check(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
+    """A drive (modbus: URL): print its identity and comm-loss parameters and what to change.
+    Exit 2 when its comm-loss trip would refuse a run (reads only: never counts as control)."""
+    url = ctx.obj["url"]
+    if not is_modbus_url(url):
+        raise ControlError("check reads a drive's parameters: give a modbus: URL (modbus:PORT?profile=NAME)")
+    spec = parse_modbus_url(url)
+    mill = ModbusMill(url, timeout_s=ctx.obj["timeout_s"], retries=ctx.obj["retries"], enforce=False)
+    with mill:  # not enforced: check reports the problem instead of refusing to read
+        ident = mill.read_identity()
+        setting = mill.read_comm_loss()
+        st = mill.status()
+    p = mill.profile
+    why = comm_loss_problem(p, setting, spec.comm_loss_limit_s)
+    if as_json:
+        print_json({"profile": p.name, "unit": spec.unit, "identity": ident, "comm_loss_s": setting.time_s,
+                    "comm_loss_action": setting.action, "safe": why is None, "change": why, **st.as_dict()})
+    else:
+        console.print(f"{p.title} (profile {p.name}), unit {spec.unit}", highlight=False)
+        for name, v in ident.items():
+            console.print(f"  {name}: {v} (0x{v:04X})", highlight=False)
+        cl = p.comm_loss
+        console.print(f"  comm-loss trip {cl.time_parameter}: {setting.time_s:g} s; action"
+                      f" {cl.action_parameter or '(fixed)'}: {setting.action}", highlight=False)
+        console.print(f"  hz_per_rpm {mill.hz_per_rpm:g}, max {mill.max_hz:g} Hz"
+                      f" = {mill.max_hz / mill.hz_per_rpm:.2f} drum rpm", highlight=False)
+        _report(st, False)
+        if why is None:
+            console.print(f"[green]ok[/] the drive trips within {spec.comm_loss_limit_s:g} s of comm loss",
+                          highlight=False)
+        else:
+            console.print(f"[bold red]change:[/] {why}", highlight=False)
+    if why is not None:
+        raise typer.Exit(2)
+
+
 @app.command("mill-emulator")
 def mill_emulator(
     pty: bool = typer.Option(False, "--pty", help="Serve on a pseudo-terminal (default)."),
@@ -143,8 +186,19 @@ def mill_emulator(
     tau_s: float = typer.Option(0.5, "--tau", help="Speed-loop time constant (s)."),
     duration_s: float | None = typer.Option(None, "--duration", help="Exit after this many seconds (default: Ctrl-C)."),
     seed: int | None = typer.Option(None, "--seed", help="Seed of the fault injection."),
+    modbus: str | None = typer.Option(
+        None, "--modbus", help="Emulate this drive profile over Modbus RTU instead (delta-ms300, abb-acs, ...)."
+    ),
+    unit: int = typer.Option(1, "--unit", help="--modbus: the drive's unit id (1..247)."),
+    comm_loss_s: float = typer.Option(
+        2.0, "--comm-loss", help="--modbus: comm-loss trip time (s; 0 disables it, to test the refusal)."
+    ),
 ) -> None:
-    """Run the motor-board emulator on a pty (prints its path) or a TCP port."""
+    """Run the motor-board emulator on a pty (prints its path) or a TCP port; with
+    --modbus PROFILE a frequency inverter's emulator (prints its modbus: URL)."""
+    if modbus is not None:
+        _drive_emulator(modbus, unit, comm_loss_s, tcp, link, faults, duration_s, seed)
+        return
     if pty and tcp is not None:
         raise ControlError("choose one of --pty and --tcp")
     if tcp is not None and not 0 <= tcp <= 65535:
@@ -180,6 +234,59 @@ def mill_emulator(
                     )
                     last = line
                 done.wait(0.5)
+        except KeyboardInterrupt:
+            pass
+    finally:
+        emu.close()
+
+
+def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None, link: str | None,
+                    faults: str, duration_s: float | None, seed: int | None) -> None:
+    """``mill-emulator --modbus``: a drive emulator until Ctrl-C / SIGTERM / --duration."""
+    from control.modbus.emulator import DriveEmulator, DriveFaults
+    from control.modbus.profile import load_profile
+
+    if tcp is not None and not 0 <= tcp <= 65535:
+        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
+    if not 1 <= unit <= 247:
+        raise ControlError(f"--unit must be in 1..247 (got {unit})")
+    check_number("--comm-loss", comm_loss_s, at_least=0.0, at_most=600.0)
+    f = DriveFaults()
+    for item in filter(None, (x.strip() for x in faults.split(","))):
+        key, _, val = item.partition("=")
+        try:
+            if key == "delay":
+                f.delay_s = check_number("fault delay", float(val), at_least=0.0, at_most=60.0)
+            elif key == "corrupt":
+                f.corrupt_p = check_number("fault corrupt", float(val), at_least=0.0, at_most=1.0)
+            elif key == "mute":
+                f.mute = True
+            else:
+                raise ControlError(f"unknown drive fault {key!r} (use delay=S, corrupt=P, mute)")
+        except ValueError as exc:
+            raise exc if isinstance(exc, ControlError) else ControlError(f"bad fault value in {item!r}") from None
+    emu = DriveEmulator(load_profile(profile), unit=unit, comm_loss_s=comm_loss_s, faults=f, seed=seed)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    try:
+        if tcp is not None:
+            emu.open_tcp(tcp)
+        else:
+            emu.open_pty(link)
+        print(emu.mill_url(), flush=True)
+        console_err.print(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
+                          f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop", highlight=False)
+        t_end = None if duration_s is None else time.monotonic() + duration_s
+        last = None
+        try:
+            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
+                m = emu.motor
+                line = (round(emu.output_hz, 1), m.running, m.fault)
+                if line != last:
+                    console_err.print(f"output {emu.output_hz:6.2f} Hz  {'running' if m.running else 'stopped'}"
+                                      f"  fault {m.fault or 'none'}", highlight=False)
+                    last = line
+                done.wait(0.25)
         except KeyboardInterrupt:
             pass
     finally:

@@ -189,6 +189,16 @@ def stdout_to_stderr() -> Iterator[None]:
             os.close(saved_fd)
 
 
+def _drive_profile(drive: str, *others: object) -> str:
+    """``--drive``: a loadable profile, and only for the embedded demo."""
+    from control.modbus.profile import load_profile
+
+    if any(o is not None for o in others):
+        raise TwinError("--drive only applies to the embedded demo (a real drive: --mill modbus:PORT?profile=...)")
+    load_profile(drive)  # a one-line error now for an unknown profile
+    return drive
+
+
 @app.command("run")
 def run(
     camera: str = typer.Option(None, "--camera", help="Camera index or stream URL (real hardware)."),
@@ -209,6 +219,9 @@ def run(
     ),
     scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address for what-if studies."),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary at the end (stdout)."),
+    drive: str = typer.Option(
+        None, "--drive", help="Demo only: the mill is this drive profile's emulator over Modbus RTU (e.g. delta-ms300)."
+    ),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
 
@@ -222,6 +235,7 @@ def run(
             camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
             host=host, control_token=control_token, scheduler=scheduler,
+            extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
         ).resolved()
         if json_out:
             with stdout_to_stderr():

@@ -1,0 +1,164 @@
+"""A frequency inverter's behaviour behind its registers, as a pure state machine (no I/O,
+no clock): what the drive emulator serves over pymodbus.
+
+``DriveModel.write(address, words, now_s)`` applies a register write the way the profile's
+manual says (run/stop command word, fault reset, frequency setpoint in counts, comm-loss
+parameters); ``read(address, count, now_s)`` answers with the live status. The motor is
+``control.motor.MotorModel`` in Hz (the drive's acceleration ramp, a short lag).
+
+Comm-loss trip (the drive's own watchdog): while running, no write to the command, reset
+or setpoint register for the comm-loss time trips the drive when its action is a safe one
+(fault latched, motor ramps to 0 Hz, a run command is ignored until a fault reset); an
+unsafe action (keep running, warn) only counts the event. Reads never feed it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from control.modbus.profile import DriveProfile, read_blocks
+from control.motor import MotorConfig, MotorModel
+
+ILLEGAL_ADDRESS = 2
+ILLEGAL_VALUE = 3
+
+
+@dataclass(frozen=True)
+class DriveWrite:
+    """A register write the drive applied (for audit and tests)."""
+
+    t_s: float
+    address: int
+    value: int
+
+
+class DriveModel:
+    """Registers + motor (Hz) + comm-loss trip of one drive. Not thread-safe."""
+
+    def __init__(self, profile: DriveProfile, *, comm_loss_s: float = 2.0, tau_s: float = 0.2, now_s: float = 0.0):
+        self.profile = profile
+        # the motor model in Hz: the drive's ramp (accel_hz_per_s) and a short speed-loop lag
+        self.motor = MotorModel(MotorConfig(profile.max_hz, profile.accel_hz_per_s, tau_s))
+        # every address of the blocks a host reads in one request (the gaps read as 0)
+        self.regs: dict[int, int] = {
+            a: 0 for start, n in read_blocks(profile.all_registers) for a in range(start, start + n)
+        }
+        self.regs.update(profile.emulator_identity)
+        self.fault_code = 0
+        self.writes: list[DriveWrite] = []
+        self.counters = {"reads": 0, "writes": 0, "comm_loss_trips": 0, "comm_loss_ignored": 0}
+        self._last_feed_s = now_s
+        self._t_s = now_s
+        self._lost = False  # the current silence was already acted upon
+        self.commission(comm_loss_s)
+
+    # -- commissioning ---------------------------------------------------------------------
+    def commission(self, comm_loss_s: float, safe: bool = True) -> None:
+        """Set the comm-loss parameters: trip after ``comm_loss_s`` (0: disabled) with a safe
+        action (``safe``) or an unsafe one (keep running)."""
+        cl = self.profile.comm_loss
+        if cl.code_register is not None:
+            want = [c for c, (s, _, ok) in cl.codes.items() if ok == safe and s > 0]
+            code = 0 if comm_loss_s <= 0 or not want else min(want, key=lambda c: abs(cl.codes[c][0] - comm_loss_s))
+            self.regs[cl.code_register] = (code << cl.code_shift) & cl.code_mask
+            return
+        assert cl.time_register is not None
+        self.regs[cl.time_register] = int(round(max(comm_loss_s, 0.0) * cl.time_counts_per_s))
+        if cl.action_register is not None:
+            unsafe = [a for a in cl.actions if a not in cl.safe_actions]
+            action = cl.recommended_action if safe else (unsafe[0] if unsafe else 0)
+            self.regs[cl.action_register] = int(action or 0)
+
+    def comm_loss_time_s(self) -> float:
+        """The trip time the parameters say now (0: disabled)."""
+        s = self.profile.comm_loss_setting(self.regs)
+        return s.time_s
+
+    # -- the drive's front panel (tests, demo) ----------------------------------------------
+    def set_fault(self, code: int | None) -> None:
+        """Raise fault ``code`` (motor coasts off) or clear it (None)."""
+        if code:
+            self.fault_code = int(code)
+            self.motor.running = False
+        else:
+            self.fault_code = 0
+
+    # -- the bus -------------------------------------------------------------------------
+    def write(self, address: int, words: list[int], now_s: float) -> int | None:
+        """Apply a write of ``words`` from ``address``; a Modbus exception code or None."""
+        self.tick(now_s)
+        p = self.profile
+        for i in range(len(words)):
+            if address + i not in self.regs:
+                return ILLEGAL_ADDRESS
+        for i, w in enumerate(words):
+            a = address + i
+            if a == p.setpoint_register and p.setpoint.to_hz(w) > p.max_hz + 1e-9:
+                return ILLEGAL_VALUE
+        for i, w in enumerate(words):
+            a = address + i
+            old = self.regs[a]
+            self.regs[a] = w
+            self.counters["writes"] += 1
+            self.writes.append(DriveWrite(now_s, a, w))
+            if a in (p.control_register, p.reset_register, p.setpoint_register):
+                self._last_feed_s = now_s
+                self._lost = False
+            if a == p.reset_register and p.reset_mask and (w & p.reset_mask) and not (old & p.reset_mask):
+                self.fault_code = 0
+            if a == p.setpoint_register:
+                self.motor.setpoint_rpm = max(0.0, p.setpoint.to_hz(w))
+            if a == p.control_register:
+                cmd = p.command_of(w)
+                if cmd == "run" and not self.fault_code:
+                    self.motor.running = True
+                elif cmd == "stop":
+                    self.motor.running = False
+        self._refresh()
+        return None
+
+    def read(self, address: int, count: int, now_s: float) -> list[int] | int:
+        """The words at ``address``.. (live status); a Modbus exception code when unmapped."""
+        self.tick(now_s)
+        self.counters["reads"] += 1
+        out = []
+        for a in range(address, address + count):
+            if a not in self.regs:
+                return ILLEGAL_ADDRESS
+            out.append(self.regs[a])
+        return out
+
+    def tick(self, now_s: float) -> None:
+        """Advance the motor and the comm-loss trip to ``now_s``."""
+        dt = now_s - self._t_s
+        if dt > 0:
+            self.motor.step(dt)
+            self._t_s = now_s
+        setting = self.profile.comm_loss_setting(self.regs)
+        if self.motor.running and setting.time_s > 0 and not self._lost and now_s - self._last_feed_s > setting.time_s:
+            self._lost = True
+            if setting.safe:
+                self.counters["comm_loss_trips"] += 1
+                self.fault_code = self.profile.comm_loss_fault_code
+                self.motor.running = False  # ramps to 0 Hz
+            else:
+                self.counters["comm_loss_ignored"] += 1
+        self._refresh()
+
+    def _refresh(self) -> None:
+        p = self.profile
+        m = self.motor
+        word = p.running_word if m.running else p.stopped_word
+        if self.fault_code and p.tripped_mask:
+            word = (word & ~p.tripped_mask) | p.tripped_value
+        regs = self.regs
+        if p.fault_register == p.status_register:  # packed (E3): fault code in its own bits
+            word = (word & ~p.fault_mask) | ((self.fault_code << p.fault_shift) & p.fault_mask)
+        else:
+            regs[p.fault_register] = (self.fault_code << p.fault_shift) & p.fault_mask
+        regs[p.status_register] = word & 0xFFFF
+        regs[p.readback_register] = p.setpoint.to_counts(m.setpoint_rpm) & 0xFFFF
+        regs[p.output_register] = p.output.to_counts(m.actual_rpm) & 0xFFFF
+
+
+__all__ = ["ILLEGAL_ADDRESS", "ILLEGAL_VALUE", "DriveModel", "DriveWrite"]
