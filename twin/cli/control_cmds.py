@@ -206,7 +206,7 @@ DRIFT_BLENDS = tuple(round(0.15 + 0.05 * i, 2) for i in range(12))  # 0.15 ... 0
 def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> RealFrameMI:
     """Measure a folder of real frames once (``config``: a meter TOML; None: classes learned
     from the frames, as ``classes suggest`` does) and sort their MI into the real bench's
-    pools: the lowest-MI frame is the segregated one, frames more than 0.1 below the median
+    pools: the lowest-MI frame is the segregated one, frames more than 0.05 below the median
     are the mix in progress (only in the looped sequence), the rest are mixed; the drift
     and the segregated pool's near-copies are blends (cv2.addWeighted) of the segregated
     frame with the first ``BLEND_PARTNERS`` mixed frames."""
@@ -237,7 +237,7 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
     raw = {n: mi(frames[n], f"frame {n}") for n in names}
     seg = min(raw, key=lambda n: raw[n])
     med = float(np.median(list(raw.values())))
-    mixed = [n for n in names if n != seg and raw[n] >= med - 0.1]
+    mixed = [n for n in names if n != seg and raw[n] >= med - 0.05]
     partners = [frames[n] for n in mixed[:BLEND_PARTNERS]]
 
     def blends(alpha: float) -> tuple[float, ...]:
