@@ -29,13 +29,18 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       ``reinit_share * reinit_window_s`` cannot re-initialise; an accepted sample now and
       then cannot prevent it (no lock-out). Lag after a real step: about
       ``reinit_share * reinit_window_s``.
-    - **Honest band.** The measurement noise is not a constant: it is estimated on line
-      (exponential mean of ``y^2 - HPH'`` over accepted samples, time constant
-      ``noise_tau_s``, floored at ``min_meas_sd``), and after a re-init from the robust
-      spread (MAD) of the samples it restarted on. While rejections pile up but have not
-      yet reached the re-init share (at least ``unsettle_share`` of the window), the
-      reported band ``lo95``/``hi95`` is widened to include the median of the rejected
-      samples: the level may be there, and the supervisor must not act on it.
+    - **Honest band.** The measurement noise is not a constant (camera MI of a mixed bed
+      varies by ~0.01, of a segregated bed by less, a synthetic model by 0.04): it is
+      estimated on line from consecutive accepted samples (half the mean squared
+      difference: the level cancels, and there is no feedback from the filter's own
+      covariance; time constant ``noise_tau_s``, floored at ``min_meas_sd``), and after a
+      re-init from the robust spread (MAD) of the samples it restarted on. ``rate_q`` and
+      ``ripple_q`` are given at the reference noise ``meas_sd`` and scale with the
+      estimate, so the filter's bandwidth (which depends on q/R only) stays the same.
+      While rejections pile up but have not yet reached the re-init share (at least
+      ``unsettle_share`` of the window), the reported band ``lo95``/``hi95`` is widened
+      to include the median of the rejected samples: the level may be there, and the
+      supervisor must not act on it.
     - **Bounded state.** After every predict and update the level is projected into
       ``[0, 1]`` (MI cannot leave it; the projection is the mode of the Gaussian
       truncated to the interval) and the rate into ``[-max_rate_per_s, max_rate_per_s]``;
@@ -43,7 +48,8 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       removes information, never adds it).
     - **Settled.** ``TrendEstimate.settled``: at least ``settle_frames`` accepted samples
       since the start or the last re-initialisation and a band no wider than
-      ``settle_band``. Decisions (segregation detection, AUTO what-if requests) wait for it.
+      ``settle_band`` (with hysteresis: it unsettles past ``SETTLE_HYSTERESIS`` times
+      that). Decisions (segregation detection, AUTO what-if requests) wait for it.
 
 - NaN MI (missing or invalid frame): predict only; a gap longer than ``max_dt_s``
   re-initialises on the next valid sample.
@@ -64,6 +70,7 @@ from control.errors import ControlError
 
 Z95 = 1.959963984540054
 MAD_SD = 1.482602218505602  # sd / MAD of a normal distribution
+SETTLE_HYSTERESIS = 1.5  # a settled trend unsettles when its band exceeds this times settle_band
 
 
 @dataclass(frozen=True)
@@ -81,7 +88,8 @@ class TrendConfig:
     ``max_rate_per_s``: bound of the rate (MI/s); ``init_rate_sd`` (MI/s) and
     ``init_ripple_sd`` (MI): initial uncertainty; ``max_dt_s``: longer gaps re-initialise;
     ``settle_frames``/``settle_band``: accepted samples since (re)init and widest band
-    (MI) of a settled trend.
+    (MI) of a trend that settles (it unsettles again on a re-init or when the band grows
+    past ``SETTLE_HYSTERESIS * settle_band``).
     """
 
     meas_sd: float = 0.05
@@ -192,6 +200,8 @@ class MITrend:
         self.kf.R = np.array([[self._r]])
         self._window: deque[tuple[float, float, bool]] = deque()  # (t_s, mi, rejected) of valid samples
         self._n_since_init = 0
+        self._last_accepted: tuple[float, float] | None = None  # (t_s, mi) for the noise estimate
+        self._settled = False
 
     def reset(self) -> None:
         """Forget everything; the next valid MI initialises the filter."""
@@ -201,6 +211,8 @@ class MITrend:
         self._r = self.config.meas_sd**2
         self._window.clear()
         self._n_since_init = 0
+        self._last_accepted = None
+        self._settled = False
 
     def _set_r(self, r: float) -> None:
         self._r = min(0.25, max(self.config.min_meas_sd**2, r))
@@ -217,6 +229,7 @@ class MITrend:
         self.rejections = 0
         self._window.clear()
         self._n_since_init = 1
+        self._last_accepted = (self._t, z) if self._t is not None else None
         self.n_reinit += 1
 
     def _project(self) -> None:
@@ -246,6 +259,18 @@ class MITrend:
                 [0.0, 0.0, 0.0, qr * dt],
             ]
         )
+
+    def _learn_noise(self, t_s: float, z: float) -> None:
+        """Measurement variance from consecutive accepted samples: ``E[(z_i - z_{i-1})^2] / 2``
+        (the level and the slow ripple cancel; no feedback from the filter's own P), an
+        exponential mean with time constant ``noise_tau_s``, a running mean at first."""
+        last = self._last_accepted
+        self._last_accepted = (t_s, z)
+        if last is None or not 0.0 < t_s - last[0] <= 1.0:
+            return
+        c = self.config
+        a = max(min(1.0, (t_s - last[0]) / c.noise_tau_s), 1.0 / (self._n_since_init + 1))
+        self._set_r((1.0 - a) * self._r + a * 0.5 * (z - last[1]) ** 2)
 
     def _window_at(self, t_s: float) -> tuple[int, list[float]]:
         """Valid samples in the re-init window ending at ``t_s`` and the rejected values."""
@@ -287,8 +312,7 @@ class MITrend:
                 self._window.append((t_s, z, rejected))
                 n, rej = self._window_at(t_s)
                 if not rejected:
-                    a = max(min(1.0, dt / c.noise_tau_s), 1.0 / (self._n_since_init + 1))  # running mean at first
-                    self._set_r((1.0 - a) * self._r + a * (y * y - hph))
+                    self._learn_noise(t_s, z)
                     self.kf.update(np.array([[z]]))
                     self._project()
                     accepted = True
@@ -301,7 +325,9 @@ class MITrend:
                         mad = float(np.median(np.abs(np.asarray(rej) - med)))
                         self._initialise(med, (MAD_SD * mad) ** 2)
                         reinit = accepted = True
-        return self.estimate(t_s, accepted=accepted, reinit=reinit, nis=nis)
+        est = self.estimate(t_s, accepted=accepted, reinit=reinit, nis=nis)
+        self._settled = est.settled
+        return est
 
     def estimate(
         self, t_s: float, *, accepted: bool = False, reinit: bool = False, nis: float = math.nan
@@ -320,7 +346,8 @@ class MITrend:
             med = float(np.median(rej))
             lo, hi = min(lo, med), max(hi, med)
         lo, hi = max(0.0, lo), min(1.0, hi)
-        settled = self._n_since_init >= c.settle_frames and hi - lo <= c.settle_band
+        widest = SETTLE_HYSTERESIS * c.settle_band if self._settled else c.settle_band
+        settled = self._n_since_init >= c.settle_frames and hi - lo <= widest
         return TrendEstimate(
             t_s, lvl, rate, lsd, rsd, lo, hi, accepted, reinit, float(x[2]), nis,
             self.rejections, self._n_since_init, math.sqrt(self._r), settled,
