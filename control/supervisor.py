@@ -265,6 +265,7 @@ class Decision:
                 "level": None if tr is None else tr.level,
                 "rate": None if tr is None else tr.rate,
                 "level_sd": None if tr is None else tr.level_sd,
+                "trend_settled": None if tr is None else tr.settled,
                 "actual_rpm": inp.actual_rpm,
                 "setpoint_rpm": inp.setpoint_rpm,
                 "mill_connected": inp.mill_connected,

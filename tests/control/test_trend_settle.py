@@ -67,3 +67,9 @@ def test_the_real_trend_starts_unsettled_and_settles_within_four_seconds_of_fram
     first = next(i for i, e in enumerate(out) if e.settled)
     assert first < 120 and all(e.settled for e in out[first:])
     assert out[first].hi95 - out[first].lo95 <= tr.config.settle_band < out[first - 1].hi95 - out[first - 1].lo95
+
+
+def test_a_decision_records_whether_the_trend_was_settled():
+    sup = Supervisor(CFG, mode=Mode.AUTO)
+    decisions, _ = drive(sup, 0.0, 10.0, level=0.2, settled=True)
+    assert decisions and decisions[0].as_dict()["inputs"]["trend_settled"] is True
