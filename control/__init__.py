@@ -5,7 +5,8 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
 ``control.trend``
     ``MITrend(config: TrendConfig | None = None)``;
     ``.update(t_s, mi, rpm) -> TrendEstimate(t_s, level, rate, level_sd, rate_sd, lo95, hi95,
-    accepted, reinit, ripple, nis, rejections)``; ``config_from_window(mi) -> TrendConfig``;
+    accepted, reinit, ripple, nis, rejections, n_since_init, meas_sd, settled)``: level in
+    [0, 1], ``settled`` gates the supervisor's decisions; ``config_from_window(mi) -> TrendConfig``;
     ``MovingAverage(window=150).update(x)`` and ``moving_average(x, window=150)``: the
     paper's baseline, the project's one moving average (NaN samples skipped).
 ``control.supervisor``
@@ -28,5 +29,6 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
     ``.open_tcp(port) -> port``, ``.url``, ``.motor`` (thread-safe ``MotorState``),
     ``.disconnect()``, ``.reconnect()``, ``.close()``.
 ``control.trendbench``
-    ``TrendSequence``, ``synthetic_sequence(seed)``, ``run_trend_bench(sequences)``.
+    ``TrendSequence``, ``synthetic_sequence(seed)``, ``real_sequences(RealFrameMI, seed)``
+    (sequences of real frames' MI, measured by the application), ``run_trend_bench(sequences)``.
 """

@@ -22,6 +22,13 @@ Segregation detection (on the Kalman trend and the radial factor)
     (hysteresis). The state turns *segregated* after ``detect_dwell_s`` of continuous
     bad, and *mixed* again after ``clear_dwell_s`` of continuous good.
 
+Settled trend
+    Detection and AUTO act only on a settled trend (``TrendEstimate.settled``: enough
+    accepted frames since the start or the last re-initialisation and a narrow enough
+    band, see ``control.trend``). While it is unsettled the detector's dwell does not run
+    (and restarts once settled) and AUTO neither asks for predictions nor moves; the
+    application logs the unsettled state (``trend_unsettled``/``trend_settled`` events).
+
 AUTO rpm choice
     With predictions (``Mapping[rpm, predicted MI at now + horizon]``, no older than
     ``prediction_max_age_s``): ``score(r) = MI(r) - move_penalty_per_rpm * |r - current|``
@@ -258,6 +265,7 @@ class Decision:
                 "level": None if tr is None else tr.level,
                 "rate": None if tr is None else tr.rate,
                 "level_sd": None if tr is None else tr.level_sd,
+                "trend_settled": None if tr is None else tr.settled,
                 "actual_rpm": inp.actual_rpm,
                 "setpoint_rpm": inp.setpoint_rpm,
                 "mill_connected": inp.mill_connected,
@@ -305,7 +313,7 @@ class SegregationDetector:
 
     def update(self, now_s: float, trend: TrendEstimate | None, radial: float | None) -> bool:
         """Advance; returns True when the state changed this step."""
-        if trend is None or not trend.valid:
+        if trend is None or not trend.valid or not trend.settled:  # decide nothing on an unsettled trend
             self._since = None
             return False
         if not self.segregated:
@@ -585,6 +593,8 @@ class Supervisor:
         c = self.config
         if not self.detector.segregated:
             self._due_since = None
+            return None
+        if inputs.trend is None or not inputs.trend.settled:  # no what-if, no move on an unsettled trend
             return None
         if now_s - self._last_eval_s < c.min_change_interval_s:
             return None

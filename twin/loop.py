@@ -389,11 +389,10 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
 )
 
 
-# Trend settings of the live loop: camera MI wanders slowly with the bed's motion
-# (frame-to-frame differences are small, deviations from the level are ~0.05-0.1, more
-# once the bed segregates), so the level must be slow (small rate and ripple noise) and
-# the outlier gate must not re-initialise on a long excursion.
-LOOP_TREND: dict[str, Any] = dict(meas_sd=0.08, rate_q=1e-7, ripple_q=1e-6, max_rejections=60)
+# Trend settings of the live loop: the defaults of ``control.trend.TrendConfig`` (the noise is
+# estimated on line and re-initialisation is decided on the share of rejections, so camera MI
+# needs no loop-specific tuning; issue 21). ``config.extra["trend"]`` overrides.
+LOOP_TREND: dict[str, Any] = {}
 
 
 def trend_config(config: RunConfig) -> TrendConfig:

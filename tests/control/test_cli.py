@@ -25,11 +25,15 @@ def cli(capsys, *args: str) -> tuple[int, str, str]:
 
 @pytest.mark.timeout(60)
 def test_bench_trend_json(capsys):
-    code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2")
+    code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2", "--real-seeds", "1")
     assert code == 0
     d = json.loads(out)
-    assert set(d) == {"kalman_rmse", "ma_rmse", "kalman_lag_s", "ma_lag_s"}
-    assert d["kalman_rmse"] < d["ma_rmse"] and d["kalman_lag_s"] < d["ma_lag_s"]
+    assert set(d) == {"synthetic", "real"}  # both benches, each both filters
+    for bench in d.values():
+        assert {"kalman_rmse", "ma_rmse", "kalman_lag_s", "ma_lag_s", "kalman_lockout_s",
+                "kalman_coverage"} <= set(bench)
+        assert bench["kalman_rmse"] < bench["ma_rmse"] and bench["kalman_lag_s"] < bench["ma_lag_s"]
+    assert 0.0 <= d["real"]["kalman_min"] <= d["real"]["kalman_max"] <= 1.0
 
 
 @pytest.mark.timeout(60)
@@ -44,8 +48,10 @@ def test_bench_link_times_both_transports(capsys):
 
 @pytest.mark.timeout(60)
 def test_bench_trend_table(capsys):
-    code, out, _ = cli(capsys, "bench", "trend", "--sequences", "1")
-    assert code == 0 and "Kalman" in out and "moving average (150)" in out
+    code, out, _ = cli(capsys, "bench", "trend", "--sequences", "1", "--real-seeds", "0")
+    assert code == 0 and "Kalman" in out and "moving average (150)" in out and "(real)" not in out
+    code, _, err = cli(capsys, "bench", "trend", "--sequences", "1", "--frames", "/nonexistent/frames")
+    assert code == 2 and "--frames" in err and "Traceback" not in err
 
 
 @pytest.mark.timeout(30)
@@ -163,9 +169,9 @@ def test_bench_trend_pluggable_source(capsys, monkeypatch):
         return TrendSequence(t, truth, truth + rng.normal(0, 0.03, t.size), np.full(t.size, 10.0), 20.0)
 
     monkeypatch.setitem(control_cmds.TREND_SOURCES, "step", step_source)
-    code, out, _ = cli(capsys, "bench", "trend", "--source", "step", "--sequences", "3", "--json")
+    code, out, _ = cli(capsys, "bench", "trend", "--source", "step", "--sequences", "3", "--json", "--real-seeds", "0")
     assert code == 0 and calls == [0, 1, 2]
-    d = json.loads(out)
+    d = json.loads(out)["step"]
     assert d["kalman_lag_s"] < d["ma_lag_s"]
     code, _, err = cli(capsys, "bench", "trend", "--source", "nope")
     assert code == 2 and "unknown trend source" in err

@@ -27,7 +27,7 @@ DT = 0.5
 
 
 def est(t: float, level: float, rate: float = 0.0) -> TrendEstimate:
-    return TrendEstimate(t, level, rate, 0.01, 0.001, level - 0.02, level + 0.02, True, False)
+    return TrendEstimate(t, level, rate, 0.01, 0.001, level - 0.02, level + 0.02, True, False, settled=True)
 
 
 def run(sup: Supervisor, t0: float, t1: float, level, rate=0.0, radial=None, predictor=None, requests=None, **inp):

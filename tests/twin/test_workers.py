@@ -58,7 +58,7 @@ class Boxes:
 
     def frame(self, t_s: float, level: float = 0.9, valid: bool = True) -> None:
         """A frame at run time t_s arriving now (wall), with a trend at ``level``."""
-        est = TrendEstimate(t_s, level, 0.0, 0.01, 0.001, level - 0.02, level + 0.02, True, False)
+        est = TrendEstimate(t_s, level, 0.0, 0.01, 0.001, level - 0.02, level + 0.02, True, False, settled=True)
         prev = self.frames.get()
         self.camera.set(CameraInfo(t_s, self.wall.t, None, None, prev.n_frames + 1, False))
         self.frames.set(FrameInfo(t_s, prev.n_frames + 1, t_s if valid else prev.last_valid_t_s, None, est))

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import threading
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 import typer
 from rich.progress import Progress
 from rich.table import Table
@@ -21,7 +24,7 @@ from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json
 
 if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
-    from control.trendbench import SequenceSource, TrendBenchResult
+    from control.trendbench import RealFrameMI, SequenceSource, TrendBenchResult
 
 mill_app = typer.Typer(
     help="Talk to the mill's motor board (commissioning): status, set-rpm, start, stop.",
@@ -294,9 +297,66 @@ def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None
 
 
 TREND_SOURCES: dict[str, SequenceSource] = {}
-"""Extra MI sequence sources for ``bench trend --source NAME`` (seed -> TrendSequence), e.g. a
-twin-generated one (truth = particle MI, measured = vision MI of rendered frames).
-``synthetic`` is built in (truth + noise + rotation ripple + outliers + dropouts)."""
+"""Extra MI sequence sources for ``bench trend --source NAME`` (seed -> TrendSequence), for
+applications and tests. Built in: ``synthetic`` (control.trendbench.synthetic_sequence: a
+noise model -- exponential step, white noise, rotation ripple, outliers, dropouts); the real
+bench (sequences of the real frames' MI, control.trendbench.real_sequences) always runs beside it."""
+
+REAL_FRAMES = Path(__file__).resolve().parents[2] / "tests" / "data" / "real-drum-pmma" / "images"
+"""The real PMMA frames that ship with the repository (CC BY 4.0, see its README)."""
+
+BLEND_PARTNERS = 4  # mixed frames blended with the segregated one (drift and segregated pools)
+SEGREGATED_BLENDS = (0.05, 0.1)  # mixed share of the segregated pool's near-copies
+DRIFT_BLENDS = tuple(round(0.15 + 0.05 * i, 2) for i in range(12))  # 0.15 ... 0.7: the drift's levels
+
+
+def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> RealFrameMI:
+    """Measure a folder of real frames once (``config``: a meter TOML; None: classes learned
+    from the frames, as ``classes suggest`` does) and sort their MI into the real bench's
+    pools: the lowest-MI frame is the segregated one, frames more than 0.05 below the median
+    are the mix in progress (only in the looped sequence), the rest are mixed; the drift
+    and the segregated pool's near-copies are blends (cv2.addWeighted) of the segregated
+    frame with the first ``BLEND_PARTNERS`` mixed frames."""
+    import cv2
+
+    from control.trendbench import RealFrameMI
+    from vision.config import load_config
+    from vision.errors import VisionError
+    from vision.sources import open_source
+    from vision.suggest import suggest_classes
+
+    try:
+        frames = {Path(str(fr.name)).stem: fr.image for fr in open_source(images)}
+    except (VisionError, OSError) as exc:
+        raise ControlError(f"cannot read the real frames in {images}: {exc} (use --frames DIR)") from None
+    if len(frames) < 3:
+        raise ControlError(f"the real trend bench needs at least 3 frames in {images}, found {len(frames)}")
+    cfg = load_config(config) if config is not None else suggest_classes(list(frames.values()))
+    meter = cfg.make_meter()
+
+    def mi(img: np.ndarray, what: str) -> float:
+        r = meter.measure(img)
+        if not (r.valid and math.isfinite(r.mi)):
+            raise ControlError(f"no valid MI in {what} ({', '.join(r.flags)}): not a frame for the trend bench")
+        return float(r.mi)
+
+    names = sorted(frames)
+    raw = {n: mi(frames[n], f"frame {n}") for n in names}
+    seg = min(raw, key=lambda n: raw[n])
+    med = float(np.median(list(raw.values())))
+    mixed = [n for n in names if n != seg and raw[n] >= med - 0.05]
+    partners = [frames[n] for n in mixed[:BLEND_PARTNERS]]
+
+    def blends(alpha: float) -> tuple[float, ...]:
+        return tuple(mi(cv2.addWeighted(frames[seg], 1.0 - alpha, p, alpha, 0.0), f"a blend of {seg}")
+                     for p in partners)
+
+    return RealFrameMI(
+        segregated=(raw[seg], *(v for a in SEGREGATED_BLENDS for v in blends(a))),
+        mixed=tuple(raw[n] for n in mixed),
+        looped=tuple(raw[n] for n in names),
+        drift=tuple(blends(a) for a in DRIFT_BLENDS),
+    )
 
 
 @bench_app.command("trend")
@@ -310,12 +370,20 @@ def bench_trend(
     noise_sd: float = typer.Option(0.04, "--noise", help="Measurement noise sd (MI)."),
     ripple: float = typer.Option(0.05, "--ripple", help="Rotation ripple amplitude (MI)."),
     window: int = typer.Option(150, "--window", help="Moving-average window (samples; the paper uses 150)."),
+    frames: Path = typer.Option(REAL_FRAMES, "--frames", help="Folder of real frames for the real bench."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Meter TOML for the real frames (default: classes learned from them)."
+    ),
+    real_seeds: int = typer.Option(2, "--real-seeds", help="Draws of the real sequences (0: no real bench)."),
 ) -> None:
-    """Kalman MI trend vs the paper's 150-sample moving average: RMSE and step lag."""
-    from control.trendbench import run_trend_bench, synthetic_sequence
+    """Kalman MI trend vs the paper's 150-sample moving average, on synthetic MI and on
+    sequences of the real frames' MI: RMSE, lags, overshoot, lock-out, band coverage."""
+    from control.trendbench import real_sequences, run_trend_bench, synthetic_sequence
 
     if sequences < 1 or window < 1:
         raise ControlError("--sequences and --window must be >= 1")
+    if not 0 <= real_seeds <= 100:
+        raise ControlError(f"--real-seeds must be in 0..100 (got {real_seeds})")
     check_number("--fps", fps, above=0.0, at_most=10000.0)
     check_number("--noise", noise_sd, at_least=0.0, at_most=1.0)
     check_number("--ripple", ripple, at_least=0.0, at_most=1.0)
@@ -325,14 +393,24 @@ def bench_trend(
         make = TREND_SOURCES[source]
     else:
         raise ControlError(f"unknown trend source {source!r} (known: {', '.join(['synthetic', *TREND_SOURCES])})")
+    results = []
     with Progress(console=console_err, transient=True) as prog:
         task = prog.add_task(f"trend sequences ({source})", total=sequences)
-        res = run_trend_bench(
+        results.append(run_trend_bench(
             (make(i) for i in range(sequences)),
             ma_window=window,
             progress=lambda i: prog.update(task, completed=i),
-        )
-    print_trend_result(res, as_json)
+            name=source,
+        ))
+        if real_seeds:
+            prog.update(task, description="measuring the real frames")
+            mi = real_frame_mi(frames, config)
+            real = [s for seed in range(real_seeds) for s in real_sequences(mi, seed, fps=fps)]
+            task = prog.add_task("trend sequences (real frames)", total=len(real))
+            results.append(run_trend_bench(
+                real, ma_window=window, progress=lambda i: prog.update(task, completed=i), name="real"
+            ))
+    print_trend_results(results, as_json)
 
 
 @bench_app.command("link")
@@ -360,15 +438,27 @@ def bench_link(
     console.print(t)
 
 
-def print_trend_result(res: TrendBenchResult, as_json: bool) -> None:
-    """Print a trend benchmark result as a table or one JSON object (reused by twin)."""
+def print_trend_results(results: list[TrendBenchResult], as_json: bool) -> None:
+    """Print trend benchmark results as tables or one JSON object ``{name: metrics}``."""
     if as_json:
-        print_json(res.as_dict())
+        print_json({r.name: r.as_dict() for r in results})
         return
-    t = Table(title=f"MI trend: Kalman vs {res.ma_window}-sample moving average ({len(res.per_sequence)} sequences)")
-    t.add_column("filter")
-    t.add_column("RMSE vs truth (MI)", justify="right")
-    t.add_column("lag after step, 63 % (s)", justify="right")
-    t.add_row("Kalman", f"{res.kalman_rmse:.4f}", f"{res.kalman_lag_s:.2f}")
-    t.add_row(f"moving average ({res.ma_window})", f"{res.ma_rmse:.4f}", f"{res.ma_lag_s:.2f}")
-    console.print(t)
+    for res in results:
+        t = Table(title=f"MI trend ({res.name}): Kalman vs {res.ma_window}-sample moving average "
+                        f"({len(res.per_sequence)} sequences)")
+        for col in ("filter", "RMSE (MI)", "lag 63 % (s)", "lag to 0.05 (s)", "overshoot (MI)",
+                    "longest lock-out (s)", "min..max", "95 % band covers"):
+            t.add_column(col, justify="left" if col == "filter" else "right")
+        for label, f in (("Kalman", res.kalman), (f"moving average ({res.ma_window})", res.ma)):
+            cover = "-" if math.isnan(f.coverage) else f"{100 * f.coverage:.1f} %"
+            t.add_row(label, f"{f.rmse:.4f}", f"{f.lag_s:.2f}", f"{f.lag05_s:.2f}", f"{f.overshoot:.3f}",
+                      f"{f.lockout_s:.2f}", f"{f.min:.3f}..{f.max:.3f}", cover)
+        console.print(t)
+        if res.name == "real":
+            p = Table(title="real frames, per sequence (Kalman / moving average)")
+            for col in ("sequence", "RMSE", "lock-out (s)", "band covers"):
+                p.add_column(col, justify="left" if col == "sequence" else "right")
+            for s in res.per_sequence:
+                p.add_row(s.name, f"{s.kalman.rmse:.4f} / {s.ma.rmse:.4f}",
+                          f"{s.kalman.lockout_s:.2f} / {s.ma.lockout_s:.2f}", f"{100 * s.kalman.coverage:.1f} %")
+            console.print(p)

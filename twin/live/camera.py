@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from control.trend import MITrend, MovingAverage
+from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
 from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
 from twin.state import FrameRow, LiveState
@@ -156,7 +156,10 @@ class CameraWorker:
 
 class ProcessWorker:
     """Readings -> trend, moving average, one :class:`FrameRow` (run log + plots) and the
-    newest :class:`FrameInfo`; camera slope angles go on to the twin (``slopes``)."""
+    newest :class:`FrameInfo`; camera slope angles go on to the twin (``slopes``). Each
+    change of the trend between unsettled and settled (``TrendEstimate.settled``: the
+    supervisor decides nothing on an unsettled trend) is a ``trend_unsettled`` /
+    ``trend_settled`` event (a logged state, not a fault) and the ``trend_state`` number."""
 
     def __init__(
         self,
@@ -181,6 +184,7 @@ class ProcessWorker:
         self.state = state
         self.slopes = slopes
         self.camera_fps = camera_fps
+        self._settled: bool | None = None  # the trend's state last logged (None: no valid trend yet)
 
     def run(self, stop: threading.Event) -> None:
         while not stop.is_set():
@@ -208,6 +212,7 @@ class ProcessWorker:
         mill = self.view.mill()
         rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
         est = self.trend.update(item.t_s, mi, rpm)
+        self._log_settled(est)
         ma = self.ma.update(mi)
         last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
@@ -230,3 +235,21 @@ class ProcessWorker:
             slope_deg=r.slope_deg, trend_mi=est.level, camera_fps=self.camera_fps(),
         )
         return row
+
+    def _log_settled(self, est: TrendEstimate) -> None:
+        """One event per change of the trend's settled state (see the class doc)."""
+        if not est.valid or est.settled == self._settled:
+            return
+        self._settled = est.settled
+        c = self.trend.config
+        band = est.hi95 - est.lo95
+        if est.settled:
+            why = f"band {band:.3f} <= {c.settle_band:g} after {est.n_since_init} accepted frames"
+        elif est.n_since_init < c.settle_frames:
+            why = f"{est.n_since_init} accepted frames since {'a re-init' if self.trend.n_reinit > 1 else 'start'}" \
+                  f" < {c.settle_frames}"
+        else:
+            why = f"band {band:.3f} > {c.settle_band:g}"
+        self.sink.event("trend_settled" if est.settled else "trend_unsettled", est.t_s, level=est.level,
+                        lo95=est.lo95, hi95=est.hi95, n_since_init=est.n_since_init, reason=why)
+        self.sink.numbers(trend_state="settled" if est.settled else "unsettled")

@@ -1,0 +1,102 @@
+"""The trend on sequences of the real PMMA frames (tests/data/real-drum-pmma, issue 21).
+
+Each frame is measured once (classes learned from the frames, as ``classes suggest``
+does); the sequences are composed from those raw MI values at 30 fps. The two issue
+reproductions run with the live loop's own trend settings (``twin.loop.trend_config``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from control.trend import MITrend, TrendEstimate
+from control.trendbench import RealFrameMI, real_sequences, run_trend_bench
+from twin.cli.control_cmds import real_frame_mi
+from twin.config import RunConfig
+from twin.loop import trend_config
+
+FPS = 30.0
+
+
+@pytest.fixture(scope="module")
+def frames_mi(real_drum_dir) -> RealFrameMI:
+    return real_frame_mi(real_drum_dir / "images")
+
+
+def run_loop_trend(mi: np.ndarray, rpm: float = 5.0) -> list[TrendEstimate]:
+    tr = MITrend(trend_config(RunConfig()))  # what `drumtwin run` uses
+    return [tr.update(i / FPS, float(v), rpm) for i, v in enumerate(mi)]
+
+
+def test_the_real_frames_are_what_the_issue_describes(frames_mi):
+    """0002 segregated (MI ~0.38), the mixed frames 0.94-0.99, 27 frames in the loop."""
+    assert len(frames_mi.looped) == 27 and len(frames_mi.mixed) >= 20
+    assert frames_mi.looped[0] == min(frames_mi.looped) < 0.45
+    assert 0.93 < min(frames_mi.mixed) and max(frames_mi.mixed) < 0.99
+
+
+def test_looped_real_frames_do_not_lock_the_trend_out(frames_mi):
+    """Issue 21, "locked out": the 27 frames looped for 60 s (0002 first). The old trend
+    stayed at 0.42-0.44 for the whole minute (raw median 0.971)."""
+    mi = np.resize(np.asarray(frames_mi.looped), int(60 * FPS))
+    est = run_loop_trend(mi)
+    med = float(np.median(mi))
+    late = [e for e in est if e.t_s >= 3.0]
+    assert max(abs(e.level - med) for e in late) <= 0.05
+    assert all(e.settled for e in late)  # and decisions may be made on it
+    assert max(abs(e.rate) for e in est) < 0.5  # the old rate swung to +-6 MI/s
+
+
+def test_real_step_reaches_the_new_level_within_2_s_and_stays_inside_0_1(frames_mi):
+    """Issue 21, "slow, then past the physical bound": 1 s of 0002, then 30 s of mixed
+    frames. The old trend re-initialised only after its cap of 60 consecutive rejections
+    (2.0 s here; 9 s and an overshoot to 1.07 in the issue's run) and its band went past 1.
+    The issue asks for <= 2 s; the share-of-rejections re-init takes ~0.4 s, so 1 s is the
+    bound that catches a regression to a rejection count."""
+    rng = np.random.default_rng(0)
+    seg = frames_mi.looped[0]
+    mixed = rng.choice(frames_mi.mixed, int(30 * FPS))
+    mi = np.concatenate([np.full(int(FPS), seg), mixed])
+    est = run_loop_trend(mi)
+    new = float(np.median(mixed))
+    after = [e for e in est if e.t_s >= 1.0]
+    first = next(e.t_s for e in after if abs(e.level - new) <= 0.05)
+    assert first - 1.0 <= 1.0
+    assert all(abs(e.level - new) <= 0.05 for e in after if e.t_s >= first)
+    assert all(0.0 <= e.lo95 <= e.level <= e.hi95 <= 1.0 for e in est)
+
+
+@pytest.fixture(scope="module")
+def real_bench(frames_mi):
+    return run_trend_bench([s for seed in range(2) for s in real_sequences(frames_mi, seed)], name="real")
+
+
+def test_real_bench_kalman_beats_the_moving_average_on_every_sequence(real_bench):
+    names = {s.name for s in real_bench.per_sequence}
+    assert names == {"real-step-up", "real-step-down", "real-glitches", "real-bursts", "real-dropouts",
+                     "real-drift", "real-looped"}
+    for s in real_bench.per_sequence:
+        assert s.kalman.rmse < s.ma.rmse, s.name
+        assert s.kalman.lockout_s <= 2.0, s.name
+        assert 0.0 <= s.kalman.min <= s.kalman.max <= 1.0, s.name
+    k, ma = real_bench.kalman, real_bench.ma
+    assert k.lag05_s <= 2.0 < ma.lag05_s  # steps: within 0.05 of the new level in <= 2 s
+    assert k.overshoot < 0.05
+
+
+def coverage_ok(res) -> bool:
+    """The bench's band criterion: the 95 % band holds the truth 90-99 % of the time."""
+    return 0.90 <= res.kalman.coverage <= 0.99
+
+
+def test_real_bench_band_is_honest_and_the_check_can_fail(real_bench, frames_mi, monkeypatch):
+    """Coverage measured on the real bench; a band shrunk to 30 % or inflated x3 fails it."""
+    assert coverage_ok(real_bench), real_bench.kalman.coverage
+    import control.trend as trend_mod
+
+    seqs = [s for seed in range(2) for s in real_sequences(frames_mi, seed)]
+    for factor in (0.3, 3.0):
+        monkeypatch.setattr(trend_mod, "Z95", trend_mod.Z95 * factor)
+        assert not coverage_ok(run_trend_bench(seqs)), factor
+        monkeypatch.undo()
