@@ -23,7 +23,7 @@ def cli(capsys, *args: str) -> tuple[int, str, str]:
     return r.code, r.out, r.err
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(300)  # a hang guard, not a speed check: it learns classes on 27 real frames
 def test_bench_trend_json(capsys):
     code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2", "--real-seeds", "1")
     assert code == 0
@@ -46,7 +46,7 @@ def test_bench_link_times_both_transports(capsys):
         assert d[f"{tr}_resends"] == 0  # a clean line needs no resend
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(300)
 def test_bench_trend_table(capsys):
     code, out, _ = cli(capsys, "bench", "trend", "--sequences", "1", "--real-seeds", "0")
     assert code == 0 and "Kalman" in out and "moving average (150)" in out and "(real)" not in out
