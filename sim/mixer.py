@@ -49,7 +49,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -580,6 +580,19 @@ def with_counts(mixer: Mixer, counts: Sequence[int]) -> Mixer:
                                           for p, n in zip(mixer.particles, counts, strict=True)))
 
 
+def mixer_from_config(cfg: Any, *, default: Mixer | None = None) -> Mixer | None:
+    """The mixer a vision ``MeterConfig`` carries (its ``[drum]``/``[[particles]]`` tables, named as
+    its counted colour classes and drawn in their display colours), else ``default``."""
+    tables = getattr(cfg, "mixer_tables", None) or {}
+    if not tables:
+        return default
+    source = str(getattr(cfg, "source", "config"))
+    base = Path(source).parent if source and not source.startswith("<") else Path.cwd()
+    counted = tuple(getattr(cfg, "counted", ()))
+    return parse_mixer(tables, [c.name for c in counted], base_dir=base,
+                       colours={c.name: tuple(c.display_bgr) for c in counted}, source=f"config {source}")
+
+
 # ------------------------------------------------------------------ writing
 def _f(v: float) -> str:
     return format(float(v), ".4g")
@@ -646,6 +659,7 @@ __all__ = [
     "check_fits",
     "disk_classes",
     "is_simple_polygon",
+    "mixer_from_config",
     "mixer_to_toml",
     "paper_mixer",
     "parse_mixer",
