@@ -16,6 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from sim.errors import SimError
 from sim.mixer import Mixer
+from sim.recipe import DrumSpec
 
 ENGINES: tuple[str, ...] = ("dem", "pymunk")
 
@@ -30,6 +31,11 @@ class Twin(Protocol):
     t_s: float
     n_steps: int
     mixer: Mixer | None
+
+    @property
+    def drum(self) -> DrumSpec:
+        """The drum (diameter, depth)."""
+        ...
 
     @property
     def rpm_actual(self) -> float:
