@@ -228,6 +228,7 @@ class TwinWorker:
 
     def _reseed(self) -> None:
         from sim.engine import make_twin
+        from sim.errors import SimError
         from sim.from_image import seed_from_frame
         from sim.mixer import paper_mixer
         from sim.render import Renderer
@@ -245,9 +246,13 @@ class TwinWorker:
             sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
             how = "recipe case"
         else:
-            sim = seed_from_frame(cam.image, Meter(roi=cam.roi, classes=s.classes), rpm=rpm, seed=s.seed,
-                                  mixer=mixer, engine=s.engine, **kw)
-            how = "live frame"
+            try:
+                sim = seed_from_frame(cam.image, Meter(roi=cam.roi, classes=s.classes), rpm=rpm, seed=s.seed,
+                                      mixer=mixer, engine=s.engine, **kw)
+                how = "live frame"
+            except SimError as exc:  # an engine that cannot place from a frame: a fresh bed, said in the log
+                sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
+                how = f"recipe case ({exc})"
         if self.renderer is None:
             self.renderer = Renderer(sim.drum, s.size_px)
             self.meter = Meter(roi=self.renderer.roi, classes=s.classes)
