@@ -289,13 +289,14 @@ def disk_classes(mixer: Mixer) -> tuple[DiskClass, ...]:
 
 # ------------------------------------------------------------------ the paper's mixer
 def paper_mixer() -> Mixer:
-    """The demo's mixer: the paper's 300 x 100 mm drum with 45 discs of 20 mm and 180 of 10 mm
-    (``sim.recipe.slice_2d`` of the paper's 250 + 2000 balls at fill 0.5), polyethylene."""
+    """The demo's mixer: the paper's 300 x 100 mm drum, 20 mm and 10 mm polyethylene discs at equal
+    shares of the bed's area (the 250 + 2000 balls' equal volumes), fill 0.5: 45 + 180 discs, the
+    very counts ``sim.recipe.slice_2d`` gives (at any other fill too: the same rule)."""
     return Mixer(
         drum=PAPER_DRUM,
         particles=(
-            ParticleKind("red", Shape("disc", 0.020), 931.0, count=45, colour_bgr=RED_BGR),
-            ParticleKind("blue", Shape("disc", 0.010), 931.0, count=180, colour_bgr=BLUE_BGR),
+            ParticleKind("red", Shape("disc", 0.020), 931.0, share=0.5, colour_bgr=RED_BGR),
+            ParticleKind("blue", Shape("disc", 0.010), 931.0, share=0.5, colour_bgr=BLUE_BGR),
         ),
         fill=0.5, direction=1, monolayer=False, baffles=None,
     )

@@ -241,6 +241,9 @@ def _check_jobs(jobs: Sequence[WhatIfJob]) -> list[WhatIfJob]:
             raise SimError(f"what-if duration must be > 0 s (got {j.duration_s})")
         if not (0 < j.sample_s <= j.duration_s):
             raise SimError(f"sample interval must be in (0, duration] (got {j.sample_s} s)")
+        if j.start is None and j.fill is not None and j.mixer is not None and any(
+                p.count is not None for p in j.mixer.particles):
+            raise SimError("a fill level needs a mixer whose classes are given by share (its counts fix the bed)")
     return jobs
 
 

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from sim.mixer import parse_mixer
+from sim.mixer import parse_mixer, resolve_counts
 from tests.cli import assert_one_line_error, cli
 
 REPO = Path(__file__).resolve().parents[2]
@@ -75,6 +75,21 @@ def test_the_same_errors_stop_whatif_calibrate_and_run_before_anything_runs(tmp_
     cfg.write_text(BAD[0][1])
     assert_one_line_error(cli("whatif", "--config", cfg, "--rpm", "5", "--duration", "1"), "does not fit")
     assert_one_line_error(cli("calibrate", "--config", cfg, "--rpm", "5", "--slope-deg", "30"), "does not fit")
+    assert_one_line_error(cli("run", "--config", cfg, "--no-dashboard", "--duration", "1"), "does not fit")
+    # a fill level cannot change a bed its counts fix
+    assert_one_line_error(cli("whatif", "--config", PMMA_RIG, "--rpm", "5", "--duration", "1", "--fill", "0.3"),
+                          "fill", "share")
+
+
+def test_whatif_fill_still_changes_the_paper_bed():
+    from sim.mixer import paper_mixer
+    from sim.recipe import PAPER_DRUM, PAPER_RECIPE, slice_2d, with_fill
+
+    for fill in (0.3, 0.5, 0.7):
+        from dataclasses import replace
+
+        assert resolve_counts(replace(paper_mixer(), fill=fill)) == tuple(
+            c.count for c in slice_2d(with_fill(PAPER_RECIPE, fill), PAPER_DRUM))
 
 
 def test_engine_dem_refuses_shaped_particles_and_an_unknown_engine_is_refused(tmp_path):
@@ -109,7 +124,8 @@ def test_the_example_config_describes_the_paper_mixer():
     m = mixer_from_config(load_config(REPO / "configs" / "example.toml"))
     p = paper_mixer()
     assert m is not None and m.drum == p.drum
-    assert [(k.name, k.count, k.shape) for k in m.particles] == [(k.name, k.count, k.shape) for k in p.particles]
+    assert [(k.name, k.shape) for k in m.particles] == [(k.name, k.shape) for k in p.particles]
+    assert resolve_counts(m) == resolve_counts(p) == (45, 180)
 
 
 # ------------------------------------------------------------------ the PMMA frames

@@ -67,7 +67,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
 
         mc = load_config(cfg.meter_config)
         classes, roi = mc.classes, mc.roi
-        mixer = None if cfg.demo else mixer_from_config(mc)  # the demo's plant and twin are the paper's
+        mixer = mixer_from_config(mc)  # checked in any case; the demo's plant and twin stay the paper's
+        mixer = None if cfg.demo else mixer
     if cfg.engine is not None:
         from sim.engine import engine_for
         from sim.mixer import paper_mixer
