@@ -201,7 +201,7 @@ def test_seeding_a_shaped_mixer_from_the_camera_is_a_clear_error_until_its_engin
     m = parse_mixer(_table(PMMA.replace('name = "white"', 'name = "white"\nshape = "polygon"')), None)
     labels = np.zeros((64, 64), np.uint8)
     labels[40:60, 10:54] = 1
-    with pytest.raises(SimError, match="pymunk|camera"):
+    with pytest.raises(SimError, match=r"pymunk|camera"):
         seed_from_labels(labels, DrumROI(32.0, 32.0, 30.0), ["blue", "white"], mixer=m, rpm=5.0)
 
 
