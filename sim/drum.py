@@ -3,7 +3,9 @@
 Frame: origin at the drum axis, x to the right, y up (as the camera sees the front
 face, before the renderer flips y for the image). Positive rpm turns the drum
 counter-clockwise as seen by the camera, so the bed climbs the right-hand wall
-and its free surface rises to the right (positive slope angle).
+and its free surface rises to the right (positive slope angle) -- for a twin of a
+``sim.mixer.Mixer`` (``mixer=``), the mixer's ``direction``: -1 turns it clockwise at
+positive rpm (``rpm_actual``/``rpm_target`` are the mixer's; ``SimState`` keeps the DEM's sign).
 
 Model (the compiled step loop and its contact laws are in ``sim.dem``):
 
