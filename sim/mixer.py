@@ -551,8 +551,11 @@ def parse_mixer(
         total = sum(float(k.share or 0.0) for k in kinds)
         if abs(total - 1.0) > 0.01:
             raise SimError(f"{source} [[particles]]: the shares add up to {total:g}, not 1")
-    depth = (max(k.thickness_m if k.thickness_m is not None else k.shape.diameter_m for k in kinds)
-             if monolayer else 1e-3 * _num(w, "depth_mm", drum_t["depth_mm"], 0.0, 1e4, lo_open=True))
+    thickest = max(k.thickness_m if k.thickness_m is not None else k.shape.diameter_m for k in kinds)
+    depth = thickest if monolayer else 1e-3 * _num(w, "depth_mm", drum_t["depth_mm"], 0.0, 1e4, lo_open=True)
+    if depth < thickest * (1.0 - 1e-9):
+        raise SimError(f"{w}: depth_mm = {depth * 1e3:g} is thinner than the particles ({thickest * 1e3:g} mm; "
+                       "give their thickness_mm)")
     mixer = Mixer(DrumSpec(d_m, depth, rho_drum), tuple(kinds), fill=fill, direction=1 if rotation == "ccw" else -1,
                   monolayer=monolayer, baffles=baffles)
     check_fits(mixer, source)

@@ -59,6 +59,7 @@ BAD = [
     ("wedge of 270 deg", GOOD.replace('name = "red"', 'name = "red"\nshape = "cut_disc"\nwedge_deg = 270'),
      ["wedge_deg"]),
     ("key of another shape", GOOD.replace('name = "red"', 'name = "red"\nsides = 5'), ["sides", "polygon"]),
+    ("drum thinner than the particles", GOOD.replace("depth_mm = 20", "depth_mm = 5"), ["depth_mm", "thinner"]),
 ]
 
 

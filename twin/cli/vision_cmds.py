@@ -431,9 +431,13 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
         notes[f"{w}.share"] = (f"{c.count:.0f} particles per frame x their area; the class's pixel share is "
                                f"{c.pixel_share:.3f}")
         notes[f"{w}.density_kg_m3"] = "PMMA (assumed: a camera cannot see density)"
+        thick = None
+        if drum_depth_mm is not None and drum_depth_mm < d_mm:  # flat discs: as thick as the drum is deep
+            thick = drum_depth_mm * 1e-3
+            notes[f"{w}.thickness_mm"] = "assumed: the drum's depth (the discs are wider than the drum is deep)"
         kinds.append(ParticleKind(c.name, Shape("disc", d_mm * 1e-3), SUGGEST_DENSITY_KG_M3,
-                                  share=round(c.share, 3), colour_bgr=next(k.display_bgr for _, k in counted
-                                                                           if k.name == c.name)))
+                                  share=round(c.share, 3), thickness_m=thick,
+                                  colour_bgr=next(k.display_bgr for _, k in counted if k.name == c.name)))
     fill = min(max(cen.fill, 0.05), MAX_FILL) if math.isfinite(cen.fill) else 0.5
     depth_m = (drum_depth_mm if drum_depth_mm is not None else max(k.shape.diameter_m * 1e3 for k in kinds)) * 1e-3
     mixer = Mixer(DrumSpec(drum_diameter_mm * 1e-3, depth_m), tuple(kinds), fill=round(fill, 3),
@@ -442,7 +446,7 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     if abs(total - 1.0) > 1e-9:  # rounding: the last class takes the rest
         last = kinds[-1]
         kinds[-1] = ParticleKind(last.name, last.shape, last.density_kg_m3, share=round(float(last.share or 0.0)
-                                 + 1.0 - total, 3), colour_bgr=last.colour_bgr)
+                                 + 1.0 - total, 3), thickness_m=last.thickness_m, colour_bgr=last.colour_bgr)
         mixer = Mixer(mixer.drum, tuple(kinds), mixer.fill, mixer.direction, mixer.monolayer)
     try:
         from sim.mixer import check_fits
