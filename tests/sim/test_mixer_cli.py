@@ -211,3 +211,15 @@ def test_the_pmma_twin_seeded_from_a_real_frame_holds_the_rigs_discs_and_predict
     level = float(np.median(camera))
     pred = run_job(WhatIfJob(rpm=10.0, duration_s=15.0, start=twin.snapshot(), sample_s=0.5))
     assert abs(pred.plateau_mi - level) <= 0.05, (pred.plateau_mi, level)
+
+
+@pytest.mark.timeout(300)
+def test_calibrate_fits_the_clockwise_pmma_rig_to_the_cameras_negative_slope():
+    r = cli("calibrate", "--config", PMMA_RIG, "--rpm", "10", "--slope-deg", "-32", "--spin-up-s", "1",
+            "--window-s", "1.5", "--max-evals", "4", "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    assert out["engine"] == "dem"
+    assert out["twin_slope_deg"] < 0 and abs(out["residual_deg"]) <= 2.0  # the twin leans the camera's way
+    lo, hi = out["range_deg"]
+    assert lo < 32 < hi
