@@ -24,12 +24,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from sim.drum import DrumSim, check_rpm
+from sim.engine import make_twin
 from sim.errors import SimError
 from sim.measure import free_surface
+from sim.mixer import Mixer
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 
 FRICTION_RANGE = (0.05, 1.0)  # sliding friction searched (geometric)
@@ -82,10 +85,19 @@ def twin_surface(
     spin_up_s: float = 3.0,
     window_s: float = 5.0,
     sample_s: float = 0.1,
+    mixer: Mixer | None = None,
+    engine: str | None = None,
     **sim_kwargs,
 ) -> tuple[float, float]:
-    """Mean free-surface slope (deg) and curvature of a fresh twin at ``rpm`` over ``window_s`` after ``spin_up_s``."""
-    sim = DrumSim(drum, recipe, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling, **sim_kwargs)
+    """Mean free-surface slope (deg) and curvature of a fresh twin at ``rpm`` over ``window_s`` after ``spin_up_s``
+    (of ``mixer`` on ``engine`` when given, else the ``drum`` + ``recipe`` DEM)."""
+    sim: Any
+    if mixer is not None:
+        drum = mixer.drum
+        sim = make_twin(mixer, engine, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling,
+                        **sim_kwargs)
+    else:
+        sim = DrumSim(drum, recipe, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling, **sim_kwargs)
     sim.advance(spin_up_s)
     slopes, curvs = [], []
     for _ in range(max(1, int(round(window_s / sample_s)))):
@@ -167,6 +179,8 @@ def calibrate(
     tol_deg: float = 0.4,
     max_evals: int = 8,
     progress: Callable[[int, int], None] | None = None,
+    mixer: Mixer | None = None,
+    engine: str | None = None,
     **sim_kwargs,
 ) -> Calibration:
     """Fit sliding and rolling friction so the twin's free surface at ``rpm`` matches the target.
@@ -176,6 +190,8 @@ def calibrate(
     ``SimError`` naming the range.
     """
     target = _check_target(target_slope_deg)
+    if mixer is not None:
+        drum = mixer.drum
     rpm = check_rpm(rpm, drum)
     if rpm == 0:
         raise SimError("calibration needs a turning drum (rpm > 0)")
@@ -194,7 +210,7 @@ def calibrate(
 
     def evaluate(f: float, r: float) -> float:
         s, c = twin_surface(f, r, abs(rpm), drum=drum, recipe=recipe, seed=seed, spin_up_s=spin_up_s,
-                            window_s=window_s, **sim_kwargs)
+                            window_s=window_s, mixer=mixer, engine=engine, **sim_kwargs)
         s = abs(s) if math.isfinite(s) else math.nan
         history.append((f, r, s))
         curv[(f, r)] = c

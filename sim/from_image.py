@@ -1,23 +1,29 @@
 """Seed a twin from what the camera sees: sample its particles from the observed class map.
 
-Each 2D disk class of the recipe is matched to a vision colour class by name (else by
-order). Its disks are placed, largest first, at pixels of that class inside the drum
-ROI (mapped to the drum frame: metres, origin at the axis, y up), by random sequential
+Each particle class of the mixer (or 2D disk class of the recipe) is matched to a vision
+colour class by name (else by order); a shaped particle is placed as its circumscribed
+disc. The disks are placed, largest first, at pixels of that class inside the drum ROI
+(mapped to the drum frame: metres, origin at the axis, y up), by random sequential
 addition at 80 % size with no overlaps; a disk that finds no free pixel of its class
 falls back to any particle pixel, then to anywhere in the drum. The disks are then
 inflated and settled exactly as a fresh ``DrumSim`` is, so the twin starts from the
-bed the camera shows (a what-if from "now" starts from the live state).
+bed the camera shows (a what-if from "now" starts from the live state). A mixer that needs
+the pymunk engine is seeded through ``PymunkDrumSim.from_placement`` (same arguments as
+``DrumSim.from_placement`` takes through its state: the mixer, centres, classes, angles).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from sim.drum import _SHRINK, DrumSim, SimParams, SimState, _check_params, check_rpm
+from sim.engine import engine_for, twin_class
 from sim.errors import SimError
+from sim.mixer import Mixer, disk_classes, resolve
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 _TRIES_PER_DISK = 400
@@ -109,8 +115,13 @@ def seed_from_labels(
     friction: float | None = None,
     rolling: float | None = None,
     settle_s: float = 0.3,
-) -> DrumSim:
-    """A new ``DrumSim`` whose particles are sampled from ``labels`` (see module doc)."""
+    mixer: Mixer | None = None,
+    engine: str | None = None,
+) -> Any:
+    """A new twin whose particles are sampled from ``labels`` (see module doc): a ``DrumSim`` of
+    ``drum`` + ``recipe``, or of ``mixer`` on ``engine`` (``sim.engine.engine_for``)."""
+    if mixer is not None:
+        drum = mixer.drum
     rpm = check_rpm(rpm, drum)
     base = SimParams()
     params = SimParams(
@@ -118,19 +129,32 @@ def seed_from_labels(
         rolling=base.rolling if rolling is None else float(rolling),
     )
     _check_params(params)
-    classes = tuple(slice_2d(recipe, drum))
+    name = "dem" if mixer is None else engine_for(mixer, engine)
+    if name == "dem":
+        classes = tuple(slice_2d(recipe, drum)) if mixer is None else disk_classes(mixer)
+    else:
+        assert mixer is not None
+        classes = tuple(DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer))
     rng = np.random.default_rng(seed)
     pos, cls = place_from_labels(labels, roi, classes, label_names, drum, rng)
     n = cls.size
+    angles = rng.uniform(0, 2 * math.pi, n)
+    if name != "dem":
+        engine_cls = twin_class(name)
+        if not hasattr(engine_cls, "from_placement"):
+            raise SimError(f"the {name} engine cannot be seeded from the camera yet")
+        return engine_cls.from_placement(mixer=mixer, pos_m=pos, cls=cls, angle_rad=angles, rpm=rpm,
+                                         settle_s=settle_s, seed=int(seed), friction=params.friction,
+                                         rolling=params.rolling)
     state = SimState(
-        drum=drum, recipe=recipe, classes=classes, case="image", seed=int(seed), params=params,
-        t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
-        vel_m_s=np.zeros((n, 2)), angle_rad=rng.uniform(0, 2 * math.pi, n), omega_rad_s=np.zeros(n),
+        drum=drum, recipe=None if mixer is not None else recipe, classes=classes, case="image", seed=int(seed),
+        params=params, t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
+        vel_m_s=np.zeros((n, 2)), angle_rad=angles, omega_rad_s=np.zeros(n), mixer=mixer,
     )
     return DrumSim.from_placement(state, rpm, settle_s)  # same construction as DrumSim.__init__
 
 
-def seed_from_frame(image_bgr: np.ndarray, meter, **kwargs) -> DrumSim:
+def seed_from_frame(image_bgr: np.ndarray, meter, **kwargs) -> Any:
     """Seed from a camera frame measured by a vision ``Meter`` (its classes and ROI)."""
     from vision.colours import classify
     from vision.roi import detect_drum, roi_mask

@@ -20,13 +20,16 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
+from sim.engine import from_state, make_twin
 from sim.errors import SimError
 from sim.measure import free_surface, particle_mi
+from sim.mixer import Mixer
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
 
 __all__ = [
@@ -103,6 +106,15 @@ class WhatIfJob:
     drum: DrumSpec = PAPER_DRUM
     recipe: Recipe = PAPER_RECIPE
     tag: str = ""
+    mixer: Mixer | None = None  # the user's mixer (replaces ``drum`` and ``recipe``); ``fill`` overrides its fill
+    engine: str | None = None  # "dem" | "pymunk"; None: the mixer's (``sim.engine.engine_for``)
+
+    @property
+    def bed_drum(self) -> DrumSpec:
+        """The drum this job runs in (the start state's, the mixer's, else ``drum``)."""
+        if self.start is not None:
+            return self.start.drum
+        return self.mixer.drum if self.mixer is not None else self.drum
 
 
 @dataclass(frozen=True)
@@ -172,10 +184,15 @@ def run_job(job: WhatIfJob) -> WhatIfResult:
     t0 = time.perf_counter()
     if job.duration_s <= 0 or not math.isfinite(job.duration_s):
         raise SimError(f"what-if duration must be > 0 s (got {job.duration_s})")
+    sim: Any
     if job.start is not None:
-        sim = DrumSim.from_state(job.start)
+        sim = from_state(job.start)
         sim.set_rpm(job.rpm)
         drum = sim.drum
+    elif job.mixer is not None:
+        mixer = job.mixer if job.fill is None else replace(job.mixer, fill=float(job.fill))
+        sim = make_twin(mixer, job.engine, case=job.case, seed=job.seed, rpm=job.rpm, **job.sim_kwargs)
+        drum = mixer.drum
     else:
         recipe = job.recipe if job.fill is None else with_fill(job.recipe, job.fill)
         sim = DrumSim(job.drum, recipe, case=job.case, seed=job.seed, rpm=job.rpm, **job.sim_kwargs)
@@ -219,11 +236,14 @@ def _check_jobs(jobs: Sequence[WhatIfJob]) -> list[WhatIfJob]:
     for j in jobs:
         if not isinstance(j, WhatIfJob):
             raise SimError(f"what-if jobs must be WhatIfJob (got {type(j).__name__})")
-        check_rpm(j.rpm, j.start.drum if j.start is not None else j.drum)
+        check_rpm(j.rpm, j.bed_drum)
         if not (j.duration_s > 0) or not math.isfinite(j.duration_s):
             raise SimError(f"what-if duration must be > 0 s (got {j.duration_s})")
         if not (0 < j.sample_s <= j.duration_s):
             raise SimError(f"sample interval must be in (0, duration] (got {j.sample_s} s)")
+        if j.start is None and j.fill is not None and j.mixer is not None and any(
+                p.count is not None for p in j.mixer.particles):
+            raise SimError("a fill level needs a mixer whose classes are given by share (its counts fix the bed)")
     return jobs
 
 

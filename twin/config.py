@@ -49,6 +49,7 @@ class RunConfig:
     whatif_horizon_s: float = 40.0  # AUTO's prediction horizon
     whatif_workers: int = 1
     dashboard_hz: float = 12.0
+    engine: str | None = None  # the twin's engine ("dem" | "pymunk"); None: the mixer's
     extra: dict = field(default_factory=dict)
 
     @property
@@ -102,6 +103,8 @@ class RunConfig:
             raise FileNotFoundError(f"video not found: {self.video}")
         if self.meter_config is not None and not Path(self.meter_config).is_file():
             raise FileNotFoundError(f"config not found: {self.meter_config}")
+        if self.engine is not None and self.engine not in ("dem", "pymunk"):
+            raise TwinError(f"--engine must be dem or pymunk, got {self.engine!r}")
         if not self.demo and self.speed != 1.0:
             raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
         token = self.control_token or os.environ.get(TOKEN_ENV) or None

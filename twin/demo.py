@@ -20,6 +20,7 @@ from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from control.motor import MotorConfig
 from sim.drum import DrumSim
+from sim.mixer import paper_mixer
 from sim.render import Realism, Renderer
 from twin.clock import RunClock
 from vision.sources import Frame
@@ -71,6 +72,7 @@ class DemoPlant:
             self.url = self.emulator.open_pty()
         self.emulator.set_motor(setpoint_rpm=float(config.start_rpm), actual_rpm=0.0, running=False)
         self.sim = DrumSim(
+            mixer=paper_mixer(),  # the demo's plant: the paper's drum and bed
             case=config.case,
             seed=config.seed + PLANT_SEED_OFFSET,
             rpm=config.start_rpm,

@@ -129,6 +129,7 @@ class LiveLoop:
         roi: Any = None,
         classes: Sequence[Any] | None = None,
         overlay: Callable[..., Any] | None = None,
+        mixer: Any = None,
     ) -> None:
         self.config = config
         self.clock = clock or RunClock(1.0)
@@ -166,8 +167,9 @@ class LiveLoop:
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
-                classes=self._classes,
-                calibrate_kwargs=config.extra.get("calibrate_kwargs", {}),
+                classes=self._classes, mixer=mixer, engine=config.engine,
+                calibrate_kwargs={"mixer": mixer, "engine": config.engine,
+                                  **config.extra.get("calibrate_kwargs", {})},
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
         )
@@ -176,7 +178,8 @@ class LiveLoop:
             study=config.extra.get("whatif_study"),
         )
         self.supervisor = SupervisorWorker(
-            Supervisor(supervisor_config(config), mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
+            Supervisor(supervisor_config(config, None if mixer is None else mixer.drum.critical_rpm),
+                       mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
             alive=self.supervisor_alive,
         )
@@ -400,13 +403,15 @@ def trend_config(config: RunConfig) -> TrendConfig:
     return TrendConfig(**{**LOOP_TREND, **config.extra.get("trend", {})})
 
 
-def supervisor_config(config: RunConfig) -> SupervisorConfig:
+def supervisor_config(config: RunConfig, critical_rpm: float | None = None) -> SupervisorConfig:
     """The supervisor's settings for this run (``config.extra["supervisor"]`` overrides);
-    the critical speed comes from the twin's drum (``sim.recipe``: the one formula)."""
+    the critical speed comes from the twin's drum (``critical_rpm``, the mixer's drum's;
+    default the paper's: ``sim.recipe``, the one formula)."""
     from sim.recipe import PAPER_DRUM
 
     overrides = config.extra.get("supervisor", {})
-    return SupervisorConfig(**{"critical_rpm": PAPER_DRUM.critical_rpm, **LOOP_SUPERVISOR, **overrides})
+    crit = PAPER_DRUM.critical_rpm if critical_rpm is None else float(critical_rpm)
+    return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **overrides})
 
 
 def _overlay(image: Any, reading: Any) -> Any:

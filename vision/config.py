@@ -45,7 +45,8 @@ __all__ = ["MeterConfig", "config_to_toml", "load_config", "parse_config"]
 _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
                "roi_kind", "half_w_px", "half_h_px", "opening", "erode"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
-_TOP_KEYS = {"meter", "classes"}
+_TOP_KEYS = {"meter", "classes", "drum", "particles"}
+MIXER_KEYS = ("drum", "particles")  # the twin's tables (sim.mixer parses them; vision only hands them over)
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,9 @@ class MeterConfig:
     opening: bool = False
     """Class opening before the sums (see ``vision.meter.Meter``): JPEG chroma blur between
     particles of one hue; ``classes suggest`` sets it when it matters on its frames."""
+    mixer_tables: dict = field(default_factory=dict, compare=False)
+    """The config's ``[drum]`` and ``[[particles]]`` tables as read (the twin's mixer, parsed by
+    ``sim.mixer.parse_mixer``); empty when the config has none."""
 
     @property
     def is_default(self) -> bool:
@@ -238,7 +242,7 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         " for a learned model)" for a, b in overlapping_classes(classes)
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
-                       warnings, opening)
+                       warnings, opening, {k: data[k] for k in MIXER_KEYS if k in data})
 
 
 def _nums(values, digits: int = 6) -> str:

@@ -52,6 +52,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from vision.census import run_diameter_px
 from vision.colours import ColourClass, LabComponent, bgr_to_lab, classify, counted_classes
 from vision.config import MeterConfig
 from vision.errors import VisionError
@@ -83,7 +84,6 @@ this share of R on a frame it learned from (a third of the 3% accuracy aim)."""
 OPENING_KEEP = 0.5
 """... and not when it would leave a class less than this share of its pixels."""
 
-_CHORD_MEDIAN = 0.91  # pixel-weighted median chord of a disc / its diameter: L = d sqrt(1 - u^2), weighted by L
 
 OPENING_GRID = 12.0
 """Grid pixels across a particle for the opening's stride (``opening_stride``)."""
@@ -408,28 +408,31 @@ def suggest_classes(
 
 
 def particle_diameter_px(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> float:
-    """A particle's diameter (px) in ``frame``, from the classified drum: the length of the
-    horizontal runs of each counted class that half of its pixels lie in (fragments of a few
-    pixels -- noise, highlights -- hardly count; for the chords of a disc at uniform offsets
-    it is ``_CHORD_MEDIAN`` d), the smallest over the classes (a class whose particles merge
-    through gaps of its colour gives longer runs). NaN when no class has runs."""
+    """A particle's diameter (px) in ``frame``, from the classified drum: each counted class's
+    ``vision.census.run_diameter_px`` (for the chords of a disc at uniform offsets it is d),
+    the smallest over the classes (a class whose particles merge through gaps of its colour
+    gives longer runs). NaN when no class has runs."""
+    sizes = class_diameters_px(cfg, frame, roi)
+    finite = [d for d in sizes if math.isfinite(d)]
+    return float(min(finite)) if finite else float("nan")
+
+
+def drum_labels(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> np.ndarray:
+    """The class map (0 = none, ``j + 1`` = ``cfg.classes[j]``) of the ROI's bounding box of
+    ``frame``, 0 outside the drum."""
     box = roi_bbox(roi, frame.shape[:2])
     x0, y0, x1, y1 = box
     lab = classify(np.ascontiguousarray(frame[y0:y1, x0:x1]), cfg.classes)
     lab[~_mask_in_box(roi, box)] = 0
-    best = np.nan
-    for c in range(1, len(cfg.classes) + 1):
-        if cfg.classes[c - 1].reject:
-            continue
-        m = np.pad(lab == c, ((0, 0), (1, 1)))
-        starts = np.nonzero(m[:, 1:] & ~m[:, :-1])
-        ends = np.nonzero(~m[:, 1:] & m[:, :-1])
-        if starts[0].size >= 20:
-            lengths = np.sort(ends[1] - starts[1])
-            cum = np.cumsum(lengths)  # the run length that half of the class's pixels lie in
-            run = float(lengths[np.searchsorted(cum, 0.5 * cum[-1])]) / _CHORD_MEDIAN
-            best = run if not best <= run else best
-    return float(best)
+    return lab
+
+
+def class_diameters_px(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> list[float]:
+    """``vision.census.run_diameter_px`` of every class of ``cfg`` in the drum of ``frame``
+    (NaN for a reject class or one without runs), in the config's class order."""
+    lab = drum_labels(cfg, frame, roi)
+    return [float("nan") if cls.reject else run_diameter_px(lab == c)
+            for c, cls in enumerate(cfg.classes, start=1)]
 
 
 def opening_stride(diameter_px: float) -> int:

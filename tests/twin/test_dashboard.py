@@ -4,6 +4,7 @@ token is read-only."""
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import urllib.request
@@ -390,3 +391,40 @@ def test_bench_dashboard_options_are_checked(kw, needle) -> None:
 
 def test_bench_dashboard_defaults_pass() -> None:
     check_bench_args(20.0, 0.0, 1.0, 8079)  # raises on failure
+
+
+def test_scene_draws_shaped_particles_as_turned_outlines_and_the_baffles() -> None:
+    """A shaped class is drawn as its outline turned by each particle's angle (not as round points),
+    and the baffles as closed polygons (``Particles.class_outline_m`` / ``baffles_m``)."""
+    from types import SimpleNamespace
+
+    import viser
+
+    from twin.dashboard.scene import TwinScene, outline_segments, polygon_segments
+
+    square = np.array([[0.01, 0.0], [0.0, 0.01], [-0.01, 0.0], [0.0, -0.01]])
+    seg = outline_segments(np.array([0.05]), np.array([0.0]), np.array([math.pi / 4]), square)
+    assert seg.shape == (4, 2, 3)
+    # turned by 45 deg: the corners sit on the axes' diagonals, 10 mm from the centre
+    assert np.allclose(np.hypot(seg[:, 0, 0] - 0.05, seg[:, 0, 1]), 0.01, atol=1e-6)
+    assert np.allclose(np.abs(seg[:, 0, 0] - 0.05), np.abs(seg[:, 0, 1]), atol=1e-6)
+    assert np.allclose(seg[1:, 0], seg[:-1, 1], atol=1e-7) and np.allclose(seg[-1, 1], seg[0, 0], atol=1e-7)
+    assert polygon_segments([square, square[:3]]).shape == (7, 2, 3)
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        scene = TwinScene(server)
+        class Parts(SimpleNamespace):  # sim.drum.Particles with the pymunk engine's outline and baffle fields
+            def __len__(self) -> int:
+                return len(self.x_m)
+
+        parts = Parts(
+            x_m=np.array([0.0, 0.05]), y_m=np.array([0.0, -0.05]), r_m=np.array([0.01, 0.01]),
+            cls=np.array([0, 1]), angle_rad=np.array([0.0, 0.3]), class_bgr=((0, 0, 220), (220, 60, 0)),
+            class_outline_m=(None, square), baffles_m=(np.array([[0.1, 0.0], [0.14, 0.0], [0.14, 0.005]]),),
+        )
+        scene.update(parts, 0.15)  # type: ignore[arg-type]
+        assert scene.clouds[0].visible and not scene.clouds[1].visible  # the square class: outlines only
+        assert scene.updates == 1
+    finally:
+        server.stop()

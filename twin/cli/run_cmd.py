@@ -60,11 +60,20 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     clock = RunClock(cfg.speed)
     classes = None
     roi = None
+    mixer = None
     if cfg.meter_config is not None:
+        from sim.mixer import mixer_from_config
         from vision.config import load_config
 
         mc = load_config(cfg.meter_config)
         classes, roi = mc.classes, mc.roi
+        mixer = mixer_from_config(mc)  # checked in any case; the demo's plant and twin stay the paper's
+        mixer = None if cfg.demo else mixer
+    if cfg.engine is not None:
+        from sim.engine import engine_for
+        from sim.mixer import paper_mixer
+
+        engine_for(paper_mixer() if mixer is None else mixer, cfg.engine)
     plant = None
     mill = None
     runlog = None
@@ -96,7 +105,14 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()
-        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes)
+        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, mixer=mixer)
+        if mixer is not None:
+            from sim.mixer import resolve
+
+            runlog.set_metadata(mixer={"classes": [{"name": k.name, "count": k.count, "diameter_mm": 1e3 *
+                                                    k.shape.diameter_m, "shape": k.shape.kind} for k in resolve(mixer)],
+                                       "drum_diameter_mm": 1e3 * mixer.drum.diameter_m, "fill": mixer.fill,
+                                       "direction": mixer.direction, "monolayer": mixer.monolayer})
         if cfg.dashboard:
             from twin.dashboard import Dashboard
 
@@ -204,7 +220,9 @@ def run(
     camera: str = typer.Option(None, "--camera", help="Camera index or stream URL (real hardware)."),
     video: Path = typer.Option(None, "--video", help="Replay a recorded video instead of a camera."),
     mill: str = typer.Option(None, "--mill", help="Mill serial URL: /dev/ttyUSB0, socket://host:port, rfc2217://..."),
-    config: Path = typer.Option(None, "--config", help="Meter TOML (colour classes, ROI)."),
+    config: Path = typer.Option(None, "--config", help="Meter TOML (colour classes, ROI; the twin's mixer: "
+                                "[drum], [[particles]])."),
+    engine: str = typer.Option(None, "--engine", help="Twin engine: dem or pymunk (default: the mixer's)."),
     no_dashboard: bool = typer.Option(False, "--no-dashboard", help="Run without the browser dashboard."),
     duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of run time."),
     log: Path = typer.Option(None, "--log", help="Run log directory (default runs/<timestamp>)."),
@@ -234,7 +252,7 @@ def run(
         cfg = RunConfig(
             camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
-            host=host, control_token=control_token, scheduler=scheduler,
+            host=host, control_token=control_token, scheduler=scheduler, engine=engine,
             extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
         ).resolved()
         if json_out:

@@ -14,7 +14,7 @@ import typer
 from sim.errors import SimError
 from twin.cli.app import app, bench_app, console, console_err, print_json
 
-SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_particles", "mi_sigmoid_particles", "slope_deg",
+SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_linear", "mi_particles", "mi_sigmoid_particles", "slope_deg",
                "slope_deg_particles", "valid")
 
 
@@ -47,6 +47,24 @@ def _check_seed(seed: int) -> int:
     return check_seed("--seed", seed)
 
 
+CONFIG_HELP = "TOML with the colour classes and the mixer ([drum], [[particles]]; default: the paper's drum)"
+ENGINE_HELP = "twin engine: dem (discs in a plain drum) or pymunk (any shape, baffles); default: the mixer's"
+
+
+def load_mixer(config: Path | None, engine: str | None = None) -> tuple[Any, Any]:
+    """(the mixer, the meter config) of ``--config`` (``sim.mixer.paper_mixer()`` and None without one or
+    when the config has no ``[drum]``); ``engine`` is checked against it (``sim.engine.engine_for``)."""
+    from sim.engine import engine_for
+    from sim.mixer import mixer_from_config, paper_mixer
+    from vision.config import load_config
+
+    cfg = load_config(config) if config is not None else None
+    mixer = mixer_from_config(cfg) if cfg is not None else None
+    mixer = paper_mixer() if mixer is None else mixer
+    engine_for(mixer, engine)
+    return mixer, (cfg if cfg is not None and cfg.mixer_tables else None)
+
+
 @app.command("sim")
 def sim_cmd(
     case: str = typer.Option("C", "--case", help="initial state: A (left/right), B (top/bottom), C (random)"),
@@ -63,12 +81,14 @@ def sim_cmd(
     end_friction: float | None = typer.Option(None, "--end-friction",
                                               help="friction of the drum's end plates (default: the wall's; 0: none)"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step, ms (default: the converged step)"),
+    config: Path | None = typer.Option(None, "--config", help=CONFIG_HELP),
+    engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
     as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
 ) -> None:
     """Run the twin and measure MI over time (vision meter on rendered frames + particle level)."""
     import cv2
 
-    from sim.drum import DEFAULT_DT_S, DrumSim
+    from sim.engine import engine_for, make_twin
     from sim.errors import check_number
     from sim.measure import free_surface, particle_mi, twin_meter
     from sim.render import Realism, Renderer
@@ -87,9 +107,10 @@ def sim_cmd(
         kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
     if dt_ms is not None:
         kw["dt_s"] = check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3
-    sim = DrumSim(case=case, seed=seed, rpm=rpm, **kw)
-    renderer = Renderer(sim, size, realism=Realism(seed=seed) if realism else None)
-    meter = twin_meter(renderer)
+    mixer, meter_cfg = load_mixer(config, engine)
+    sim: Any = make_twin(mixer, engine, case=case, seed=seed, rpm=rpm, **kw)
+    renderer = Renderer(sim.drum, size, realism=Realism(seed=seed) if realism else None)
+    meter = twin_meter(renderer) if meter_cfg is None else meter_cfg.make_meter(roi=renderer.roi)
     writer = None
     if video is not None:
         video.parent.mkdir(parents=True, exist_ok=True)
@@ -115,16 +136,16 @@ def sim_cmd(
                 air.append(sim.stats().airborne if i > 0 else float("nan"))
                 if frame is not None:
                     rd = meter.measure(frame)
-                    mi, mi_s, sl, valid = rd.mi, rd.mi_sigmoid, rd.slope_deg, rd.valid
+                    mi, mi_s, mi_l, sl, valid = rd.mi, rd.mi_sigmoid, rd.mi_linear, rd.slope_deg, rd.valid
                     last = frame
                 else:  # dropped frame
-                    mi = mi_s = sl = float("nan")
+                    mi = mi_s = mi_l = sl = float("nan")
                     valid = False
                 if writer is not None and last is not None:
                     writer.write(last)
                 rows.append({
                     "t_s": round(sim.t_s, 6), "rpm": sim.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
-                    "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
+                    "mi_linear": mi_l, "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
                     "slope_deg_particles": fs.slope_deg, "valid": int(bool(valid)),
                 })
                 prog.advance(task)
@@ -160,10 +181,11 @@ def sim_cmd(
     air_m, curv_m = mean(air[-third:]), mean(curv[-third:])
     summary = {
         "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
-        "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": DEFAULT_DT_S * 1e3,
+        "engine": engine_for(mixer, engine), "config": str(config) if config else None,
+        "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": _default_dt_ms(sim),
         "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.params.end_mu,
         "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
-        "mi_sigmoid_end": mean(mis[-tail:]),
+        "mi_sigmoid_end": mean(mis[-tail:]), "mi_linear_end": mean(np.array([r["mi_linear"] for r in rows])[-tail:]),
         "mi_particles_start": float(mip[0]), "mi_particles_end": mean(mip[-tail:]),
         "slope_deg": mean(sl_p[late]), "slope_deg_vision": mean(sl_v[late]), "surface_curvature": mean(curv[-third:]),
         "overlap_p99_r": st.overlap_p99_r, "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm,
@@ -182,6 +204,17 @@ def sim_cmd(
             f"{summary['regime']} (Fr {summary['froude']:.3f}); step {summary['dt_ms']:g} ms, "
             f"overlap p99 {summary['overlap_p99_r']:.3f} r, wall {summary['wall_max_mm']:.2f} mm"
         )
+
+
+def _default_dt_ms(sim: Any) -> float:
+    """The engine's default step for this bed (ms): the DEM's from its contact time, else the twin's
+    ``default_dt_s`` (or, lacking one, the step it runs)."""
+    from sim.drum import DrumSim, default_dt_s
+
+    if isinstance(sim, DrumSim):
+        return default_dt_s(sim.classes, sim.params.stiffness_n_m, sim.params.restitution) * 1e3
+    dflt = getattr(sim, "default_dt_s", None)
+    return float(dflt() if callable(dflt) else dflt if dflt is not None else sim.substep_s()) * 1e3
 
 
 def _measure_source_surface(source: str, max_frames: int, bed: str | None = None,
@@ -219,7 +252,8 @@ def calibrate_cmd(
                                            help="target free-surface S-shape (default: measured, if given)"),
     max_frames: int = typer.Option(300, "--max-frames", help="frames of SOURCE to measure"),
     bed: str | None = typer.Option(None, "--bed", help="bed for the slope: color (union of classes) or dark (backlit)"),
-    config: Path | None = typer.Option(None, "--config", help="vision TOML (colour classes, ROI, bed)"),
+    config: Path | None = typer.Option(None, "--config", help=CONFIG_HELP + "; its meter measures SOURCE"),
+    engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path, after the range runs (1..40)"),
     spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
@@ -232,14 +266,16 @@ def calibrate_cmd(
     Prints the slopes the twin can reach at this rpm; a target outside them is an error.
     """
     from sim.calibrate import calibrate
-    from sim.drum import PAPER_DRUM, check_rpm
+    from sim.drum import check_rpm
+    from sim.engine import engine_for
     from sim.errors import check_number
 
     if (source is None) == (slope_deg is None):
         raise SimError("give either SOURCE or --slope-deg (exactly one)")
     seed = _check_seed(seed)
-    check_rpm(rpm, PAPER_DRUM)
-    check_number("--rpm", rpm, 0.0, PAPER_DRUM.critical_rpm, lo_open=True)
+    mixer, _ = load_mixer(config, engine)
+    check_rpm(rpm, mixer.drum)
+    check_number("--rpm", rpm, 0.0, mixer.drum.critical_rpm, lo_open=True)
     check_number("--max-evals", max_evals, 1, 40, integer=True)
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
@@ -259,12 +295,13 @@ def calibrate_cmd(
     with _progress("calibrate") as prog:
         task = prog.add_task("calibrate", total=None)
         cal = calibrate(target, rpm, target_curvature=target_curv, seed=seed, max_evals=max_evals,
-                        spin_up_s=spin_up_s, window_s=window_s, **sim_kw,
+                        spin_up_s=spin_up_s, window_s=window_s, mixer=mixer, engine=engine, **sim_kw,
                         progress=lambda d, t: prog.update(task, completed=d, total=t))
     out = {"slope_deg": target, "twin_slope_deg": cal.twin_slope_deg, "friction": cal.friction,
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
-           "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source}
+           "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source,
+           "engine": engine_for(mixer, engine)}
     if as_json:
         print_json(out)
     else:
@@ -287,16 +324,20 @@ def whatif_cmd(
     sample_s: float = typer.Option(0.5, "--sample-s", help="MI sample interval, s"),
     csv_out: Path | None = typer.Option(None, "--csv", help="write all MI curves here"),
     plot: Path | None = typer.Option(None, "--plot", help="PNG of MI against time per rpm"),
+    config: Path | None = typer.Option(None, "--config", help=CONFIG_HELP),
+    engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Run the twin for several rpm values and report the plateau MI and regime of each."""
-    from sim.drum import PAPER_DRUM, check_rpm
+    from sim.drum import check_rpm
+    from sim.engine import engine_for
     from sim.errors import check_number
     from sim.whatif import WhatIfJob, run_study, summarize
 
+    mixer, _ = load_mixer(config, engine)
     rpms = _parse_list(rpm, "--rpm")
     for r in rpms:
-        check_rpm(r, PAPER_DRUM)
+        check_rpm(r, mixer.drum)
     check_number("--seeds", seeds, 1, MAX_SEEDS, integer=True)
     if len(rpms) * seeds > MAX_WHATIF_RUNS:
         raise SimError(f"a what-if study is at most {MAX_WHATIF_RUNS} runs (got {len(rpms)} rpm x {seeds} seeds)")
@@ -308,8 +349,8 @@ def whatif_cmd(
         check_number("--workers", workers, 1, 256, integer=True)
     if workers is not None and scheduler:
         raise SimError("give --workers or --scheduler, not both")
-    jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s)
-            for r in rpms for s in range(seeds)]
+    jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s,
+                      mixer=mixer, engine=engine) for r in rpms for s in range(seeds)]
     t0 = time.perf_counter()
     with _progress("whatif") as prog:
         task = prog.add_task("whatif", total=len(jobs))
@@ -329,7 +370,7 @@ def whatif_cmd(
         _plot_whatif(results, plot)
     summary = summarize(results)
     out = {"rpm": summary, "duration_s": duration, "case": case.upper(), "seeds": seeds, "wall_s": wall,
-           "scheduler": scheduler, "workers": workers}
+           "scheduler": scheduler, "workers": workers, "engine": engine_for(mixer, engine)}
     if as_json:
         print_json(out)
     else:

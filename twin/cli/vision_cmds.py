@@ -297,6 +297,12 @@ def suggest_cmd(
     roi: str | None = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
     n_frames: int = typer.Option(12, "--frames", help="Frames to learn from, spread over the source (1..500)."),
     preview: Path | None = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
+    drum_diameter_mm: float | None = typer.Option(
+        None, "--drum-diameter-mm", help="The drum's inner diameter (mm): also write the twin's mixer ([drum], "
+        "[[particles]]) measured in the frames."),
+    drum_depth_mm: float | None = typer.Option(
+        None, "--drum-depth-mm", help="With --drum-diameter-mm: the end plates' distance (mm); default a "
+        "monolayer drum (one particle thick)."),
 ) -> None:
     """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml
@@ -305,6 +311,12 @@ def suggest_cmd(
 
     _check_number("--k", k, 2, 6)
     _check_number("--frames", n_frames, 1, 500)
+    if drum_diameter_mm is not None:
+        _check_number("--drum-diameter-mm", drum_diameter_mm, 10.0, 1e4)
+    if drum_depth_mm is not None:
+        if drum_diameter_mm is None:
+            raise VisionError("--drum-depth-mm needs --drum-diameter-mm")
+        _check_number("--drum-depth-mm", drum_depth_mm, 0.1, 1e4)
     if preview is not None and not preview.parent.exists():
         raise VisionError(f"--preview folder does not exist: {preview.parent}")
     if preview is not None and preview.suffix.lower() not in (".png", ".jpg", ".jpeg"):
@@ -351,7 +363,100 @@ def suggest_cmd(
         if not cv2.imwrite(str(preview), class_preview(frames[0], cfg.classes, r0)):
             raise VisionError(f"cannot write {preview}")
         console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False)
-    sys.stdout.write(config_to_toml(cfg, comment))
+    text = config_to_toml(cfg, comment)
+    if drum_diameter_mm is not None:
+        text += "\n" + suggest_mixer_toml(cfg, frames, rois or [r0] * len(frames), float(drum_diameter_mm),
+                                          drum_depth_mm)
+    sys.stdout.write(text)
+
+
+SUGGEST_DENSITY_KG_M3 = 1190.0  # PMMA: a camera cannot see density
+
+
+def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm: float | None) -> str:
+    """The twin's ``[drum]`` and ``[[particles]]`` tables measured in ``frames`` (``vision.census``),
+    every number commented with where it came from; round particles (discs)."""
+    import numpy as np
+
+    from sim.errors import SimError
+    from sim.mixer import MAX_FILL, Mixer, ParticleKind, Shape, mixer_to_toml
+    from sim.recipe import PACKING_2D, DrumSpec
+    from vision.census import SAME_SIZE, census, count_particles, run_diameter_px, same_size, single_particles
+    from vision.suggest import drum_labels
+
+    counted = [(j + 1, c) for j, c in enumerate(cfg.classes) if not c.reject]
+    names = [c.name for _, c in counted]
+    labels, cpx, rpx, dia, slopes = [], [], [], [], []
+    for img, roi in zip(frames, rois, strict=True):
+        lab = drum_labels(cfg, img, roi)
+        labels.append(lab)
+        rd = cfg.make_meter(roi=roi).measure(img)
+        cpx.append([rd.cls(n).n_px for n in names])
+        rpx.append(roi.area_px)
+        dia.append([run_diameter_px(single_particles(lab == j, run_diameter_px(lab == j))) for j, _ in counted])
+        slopes.append(rd.slope_deg)
+    own = [float(np.nanmedian(col)) if np.isfinite(col).any() else math.nan for col in np.asarray(dia).T]
+    sizes, _ = same_size(own)
+    cnt = [[count_particles(lab == j, sizes[i]) for i, (j, _) in enumerate(counted)] for lab in labels]
+    r_px = float(np.median([r.r_px for r in rois]))
+    cen = census(names, np.asarray(cpx), np.asarray(rpx), np.asarray(dia), np.asarray(cnt), slopes, r_px,
+                 PACKING_2D)
+    if not all(math.isfinite(c.diameter_px) for c in cen.classes):
+        missing = next(c.name for c in cen.classes if not math.isfinite(c.diameter_px))
+        raise VisionError(f"class {missing!r}: too few particle pixels in the frames to measure a size")
+    px_mm = drum_diameter_mm / (2.0 * r_px)
+    notes: dict[str, str] = {
+        "drum.diameter_mm": f"--drum-diameter-mm (the drum is {2 * r_px:.0f} px across in the frames: "
+                            f"{px_mm:.3f} mm/px)",
+        "drum.fill": f"{sum(c.count for c in cen.classes):.0f} particles counted (median of {cen.frames} frames) "
+                     f"x their area / ({PACKING_2D:g} packing x the drum's area)",
+        "drum.rotation": (f"the free surface's median slope {cen.slope_deg:+.1f} deg "
+                          f"({'rises to the right' if cen.slope_deg > 0 else 'rises to the left'})"
+                          if cen.direction else "the surface is flat in the frames: direction unknown, set it"),
+        "drum.density_kg_m3": "acrylic (assumed; not used by the physics)",
+    }
+    if drum_depth_mm is None:
+        notes["drum.monolayer"] = "assumed: one particle between the plates (give --drum-depth-mm otherwise)"
+    else:
+        notes["drum.depth_mm"] = "--drum-depth-mm"
+    kinds = []
+    for c in cen.classes:
+        w = f"particles.{c.name}"
+        d_mm = c.diameter_px * px_mm
+        why = (f"; its own {c.run_diameter_px:.1f} px, the classes within {100 * SAME_SIZE:.0f}%: one size"
+               if cen.same_size else "")
+        notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px (median horizontal run / 0.91 of its single "
+                                     f"particles, {cen.frames} frames){why}")
+        notes[f"{w}.shape"] = "round assumed; edit for polygons, pellets, cut discs"
+        notes[f"{w}.share"] = (f"{c.count:.0f} particles per frame x their area; the class's pixel share is "
+                               f"{c.pixel_share:.3f}")
+        notes[f"{w}.density_kg_m3"] = "PMMA (assumed: a camera cannot see density)"
+        thick = None
+        if drum_depth_mm is not None and drum_depth_mm < d_mm:  # flat discs: as thick as the drum is deep
+            thick = drum_depth_mm * 1e-3
+            notes[f"{w}.thickness_mm"] = "assumed: the drum's depth (the discs are wider than the drum is deep)"
+        kinds.append(ParticleKind(c.name, Shape("disc", d_mm * 1e-3), SUGGEST_DENSITY_KG_M3,
+                                  share=round(c.share, 3), thickness_m=thick,
+                                  colour_bgr=next(k.display_bgr for _, k in counted if k.name == c.name)))
+    fill = min(max(cen.fill, 0.05), MAX_FILL) if math.isfinite(cen.fill) else 0.5
+    depth_m = (drum_depth_mm if drum_depth_mm is not None else max(k.shape.diameter_m * 1e3 for k in kinds)) * 1e-3
+    mixer = Mixer(DrumSpec(drum_diameter_mm * 1e-3, depth_m), tuple(kinds), fill=round(fill, 3),
+                  direction=-1 if cen.direction < 0 else 1, monolayer=drum_depth_mm is None)
+    total = sum(k.share or 0.0 for k in kinds)
+    if abs(total - 1.0) > 1e-9:  # rounding: the last class takes the rest
+        last = kinds[-1]
+        kinds[-1] = ParticleKind(last.name, last.shape, last.density_kg_m3, share=round(float(last.share or 0.0)
+                                 + 1.0 - total, 3), thickness_m=last.thickness_m, colour_bgr=last.colour_bgr)
+        mixer = Mixer(mixer.drum, tuple(kinds), mixer.fill, mixer.direction, mixer.monolayer)
+    try:
+        from sim.mixer import check_fits
+
+        check_fits(mixer, "suggested mixer")
+    except SimError as exc:
+        raise VisionError(str(exc)) from None
+    head = ("# The twin's mixer, measured in the same frames by `drumtwin classes suggest --drum-diameter-mm`;\n"
+            "# edit what is wrong (shape, density, depth).\n")
+    return head + mixer_to_toml(mixer, notes)
 
 
 @bench_app.command("vision")

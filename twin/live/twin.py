@@ -43,6 +43,8 @@ class TwinSettings:
     start_rpm: float = 5.0
     size_px: int = 240
     classes: tuple[Any, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
+    mixer: Any = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
+    engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -225,8 +227,10 @@ class TwinWorker:
         close_pool(pool)
 
     def _reseed(self) -> None:
-        from sim.drum import DrumSim
+        from sim.engine import make_twin
+        from sim.errors import SimError
         from sim.from_image import seed_from_frame
+        from sim.mixer import paper_mixer
         from sim.render import Renderer
         from vision.meter import Meter
 
@@ -237,12 +241,18 @@ class TwinWorker:
         kw = {} if cal is None else {"friction": cal.friction, "rolling": cal.rolling}
         rpm = self.view.mill().actual_rpm
         rpm = rpm if math.isfinite(rpm) else s.start_rpm
+        mixer = paper_mixer() if s.mixer is None else s.mixer
         if cam.image is None:
-            sim = DrumSim(case=s.case, seed=s.seed, rpm=rpm, **kw)
+            sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
             how = "recipe case"
         else:
-            sim = seed_from_frame(cam.image, Meter(roi=cam.roi, classes=s.classes), rpm=rpm, seed=s.seed, **kw)
-            how = "live frame"
+            try:
+                sim = seed_from_frame(cam.image, Meter(roi=cam.roi, classes=s.classes), rpm=rpm, seed=s.seed,
+                                      mixer=mixer, engine=s.engine, **kw)
+                how = "live frame"
+            except SimError as exc:  # an engine that cannot place from a frame: a fresh bed, said in the log
+                sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
+                how = f"recipe case ({exc})"
         if self.renderer is None:
             self.renderer = Renderer(sim.drum, s.size_px)
             self.meter = Meter(roi=self.renderer.roi, classes=s.classes)
