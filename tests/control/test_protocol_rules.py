@@ -210,6 +210,7 @@ def test_valid_bodies_decode_to_their_frame(body, frame):
     [
         (b"65536,STA", None),  # one past the last sequence number: not readable
         (b"123456,STA", None),  # six digits
+        (b"012345,STA", None),  # six digits, even when the number would fit
         (b"x5,STA", None),
         (b",STA", None),
         (b"5,sta", 5),  # lower-case command: syntax, the number still readable
@@ -229,7 +230,7 @@ def test_checksum_valid_lines_that_break_the_grammar_are_syntax_errors(body, seq
 
 def test_a_wrong_checksum_is_a_crc_error_with_the_seq_when_readable():
     for body, seq in ((b"99,SET,5.00", 99), (b"0,STA", 0), (b"65535,STA", 65535), (b"65536,STA", None),
-                      (b"x,STA", None), (b"5,sta", 5)):
+                      (b"000001,STA", None), (b"x,STA", None), (b"5,sta", 5)):
         raw = b"$" + body + f"*{p.crc16(body) ^ 1:04X}".encode()
         assert p.decode_line(raw) == p.BadFrame("crc", raw, seq), body
 
