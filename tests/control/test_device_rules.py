@@ -283,3 +283,36 @@ def test_the_motor_advances_from_the_boards_start_time():
     d.receive(p.encode_frame(1, p.SET, 30.0) + p.encode_frame(2, p.RUN), 100.0)
     d.tick(100.5)
     assert d.motor.actual_rpm == pytest.approx(5.0)
+
+
+def test_the_counters_count_every_event():
+    """The audit counters add up: two of each kind give 2, not 1."""
+    d = MillDevice(DeviceConfig(watchdog_s=0.5, motor=MotorConfig(max_rpm=50.0)))
+    body = b"7,STA"
+    bad_crc = b"$" + body + f"*{p.crc16(body) ^ 1:04X}\n".encode()
+    d.receive(bad_crc + bad_crc + b"$1,SET\n" + b"$2,SET\n", 0.0)  # two NAK,CRC; two silent drops
+    d.receive(p.encode_frame(3, p.SET, 80.0) + p.encode_frame(4, "FOO"), 0.0)  # two NAKs by _execute
+    set5 = p.encode_frame(5, p.SET, 5.0)
+    d.receive(set5 + set5 + set5, 0.0)  # one SET and two resends
+    for k in range(2):  # two watchdog trips
+        d.receive(p.encode_frame(10 + k, p.RUN), 1.0 + k)
+        d.tick(1.75 + k)
+    assert d.counters == {"frames": 7, "resends": 2, "nak": 4, "bad_crc": 2, "bad_other": 2, "watchdog_trips": 2}
+
+
+def test_the_status_says_running_false_not_just_falsy():
+    """``MillStatus.running`` is a bool (the CLI's --json prints it): false after STP and after a trip."""
+    d = running_device(watchdog_s=0.5)
+    d.receive(p.encode_frame(3, p.STP), 0.25)
+    assert d.status().running is False and d.status().as_dict()["running"] is False
+    d = running_device(watchdog_s=0.5)
+    d.tick(1.0)
+    assert d.status().running is False and d.status().fault == p.FAULT_WATCHDOG
+
+
+def test_the_status_rounds_the_actual_speed_to_two_decimals():
+    d = MillDevice(DeviceConfig(watchdog_s=0.0))
+    d.receive(p.encode_frame(1, p.SET, 30.0) + p.encode_frame(2, p.RUN), 0.0)
+    d.tick(0.0625)  # 10 rpm/s for 1/16 s: 0.625 rpm exactly
+    assert d.motor.actual_rpm == 0.625
+    assert d.status().actual_rpm == 0.62  # round half to even, as the 2-decimal wire field
