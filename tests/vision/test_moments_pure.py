@@ -159,7 +159,7 @@ def test_class_tables_accepts_a_classifier_a_list_or_a_tuple_and_builds_once():
 
 
 def test_the_kernels_are_compiled_once_per_variant():
-    assert moments._compiled(False) is moments._compiled(False)
+    assert moments._compiled() is moments._compiled(False) is moments._compiled(False)
     assert moments._compiled(True) is moments._compiled(True)
     assert moments._compiled(True) is not moments._compiled(False)
 
@@ -205,3 +205,48 @@ def test_dark_v_max_zero_makes_the_occupancy_count_the_dark_pixels():
         want = np.zeros((2, 2), np.int32)
         np.add.at(want, tuple(np.nonzero(bed)[i] >> 3 for i in (0, 1)), 1)
         assert (occ == want).all(), dark
+
+
+def test_frame_moments_does_not_open_by_default():
+    img = _stripe_image()
+    tables = class_tables(DEFAULT_CLASSES)
+    inside = np.ones((9, 12), bool)
+    first, last = row_spans(inside)
+    got = frame_moments(img, tables, (0, 0), first, last)
+    lab = kernel_labels(img, tables.fine, inside)
+    assert lab[4, 3] == 2 and got[1].tolist() == _moments_of(lab == 2, 0, 0)
+    assert got[3].tolist() == [0] * 6  # dark_v_max < 0: no dark sums
+
+
+def test_frame_moments_of_an_empty_roi_is_all_zero():
+    tables = class_tables(DEFAULT_CLASSES)
+    none = np.zeros(0, np.int64)
+    for opening in (False, True):
+        got = frame_moments(np.zeros((4, 4, 3), np.uint8), tables, (0, 0), none, none, opening=opening)
+        assert got.shape == (4, 6) and not got.any()
+
+
+@pytest.mark.slow
+def test_a_fresh_compile_with_bounds_checks_gives_the_label_maps_sums(monkeypatch, tmp_path):
+    """The kernels compiled from source now (an empty numba cache, bounds checking forced on): no index
+    leaves frame_moments' own buffers, and the sums are the label map's. Otherwise the kernels kept in
+    the process and numba's disk cache would hide a broken compile step (a mutant of ``_compiled``)."""
+    import numba
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(numba.config, "BOUNDSCHECK", 1)
+    monkeypatch.setattr(moments, "_kernels", {})
+    monkeypatch.setattr(moments, "_add_run", moments._add_run_py)
+    monkeypatch.setattr(moments, "_add_cells", moments._add_cells_py)
+    img = _stripe_image()
+    img[2:4, 7:9] = BLACK
+    tables = class_tables(DEFAULT_CLASSES)
+    inside = np.ones((9, 12), bool)
+    first, last = row_spans(inside)
+    for opening in (False, True):
+        got = frame_moments(img, tables, (0, 0), first, last, dark_v_max=0, opening=opening)
+        lab = kernel_labels(img, tables.fine, inside, opening)
+        for k in (1, 2):
+            assert got[k - 1].tolist() == _moments_of(lab == k, 0, 0), (opening, k)
+        assert got[3].tolist() == _moments_of(img.max(axis=2) == 0, 0, 0)
+    assert set(moments._kernels) == {False, True}
