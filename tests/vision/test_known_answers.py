@@ -173,3 +173,11 @@ def test_sigmoid_far_tails_are_exact_and_silent():
     assert tails[0] == 1.0 and tails[1] == pytest.approx(0.0, abs=1e-300)
     ints = sigmoid_f(np.array([0, 1]))
     assert ints.dtype == np.float64 and ints[0] == pytest.approx(F_ZERO, abs=1e-12)
+
+
+def test_sigmoid_computes_in_float64_whatever_the_input_dtype():
+    x32 = np.array([0.25, 0.3], dtype=np.float32)
+    out = sigmoid_f(x32)
+    assert out.dtype == np.float64
+    assert out[0] == pytest.approx(F_QUARTER, abs=1e-12)  # float32 arithmetic would be ~1e-8 off
+    assert out[1] == sigmoid_f(float(np.float32(0.3)))
