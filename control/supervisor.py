@@ -71,6 +71,7 @@ from enum import StrEnum
 from typing import NamedTuple
 
 from control.errors import ControlError
+from control.limits import Limits
 from control.trend import TrendEstimate
 
 
@@ -131,25 +132,21 @@ class SupervisorConfig:
     recover_s: float = 5.0
 
     def __post_init__(self) -> None:
-        if not 0 <= self.min_rpm < self.max_rpm:
-            raise ControlError(f"rpm limits must satisfy 0 <= min < max (got {self.min_rpm}, {self.max_rpm})")
-        if not 0 < self.max_critical_frac <= 1:
-            raise ControlError("max_critical_frac must be in (0, 1]")
-        if self.critical_rpm is not None and not (math.isfinite(self.critical_rpm) and self.critical_rpm > 0):
-            raise ControlError(f"critical_rpm must be a positive number, got {self.critical_rpm}")
+        self.limits  # noqa: B018 -- validates the rpm limits (control.limits: the one set)
         if not (math.isfinite(self.vision_timeout_s) and self.vision_timeout_s > 0):
             raise ControlError(f"vision_timeout_s must be > 0, got {self.vision_timeout_s}")
         if self.clear_level < self.seg_level:
             raise ControlError("clear_level must be >= seg_level (hysteresis)")
-        if self.rpm_limits[1] <= self.min_rpm:
-            raise ControlError("the critical-speed limit leaves no rpm above min_rpm")
+
+    @property
+    def limits(self) -> Limits:
+        """The one set of rpm limits (``control.limits``) these settings describe."""
+        return Limits(self.min_rpm, self.max_rpm, self.critical_rpm, self.max_critical_frac, self.max_rate_rpm_per_s)
 
     @property
     def rpm_limits(self) -> tuple[float, float]:
         """(lowest, highest) rpm the supervisor will ever command."""
-        if self.critical_rpm is None:
-            return self.min_rpm, self.max_rpm
-        return self.min_rpm, min(self.max_rpm, self.max_critical_frac * self.critical_rpm)
+        return self.limits.rpm_range
 
     def vision_lost(self, now_s: float, last_valid_mi_s: float | None) -> bool:
         """True when no valid MI has been seen for more than ``vision_timeout_s`` (the one
@@ -157,8 +154,7 @@ class SupervisorConfig:
         return last_valid_mi_s is not None and now_s - last_valid_mi_s > self.vision_timeout_s
 
     def clamp(self, rpm: float) -> float:
-        lo, hi = self.rpm_limits
-        return min(hi, max(lo, float(rpm)))
+        return self.limits.clamp(rpm)
 
     def candidates(self, current: float | None = None) -> tuple[float, ...]:
         """Evenly spaced candidate rpms over the limits (plus ``current``), rounded to 0.1."""

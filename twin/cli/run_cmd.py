@@ -42,6 +42,22 @@ def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
         yield f
 
 
+def check_scheduler_answers(address: str, timeout_s: float = 3.0) -> None:
+    """TwinError (one line) unless something accepts a TCP connection at the Dask
+    scheduler ``address`` within ``timeout_s`` (a dead or garbage address is refused at
+    the start of the run, not found by the first what-if study in AUTO)."""
+    import socket
+
+    from twin.config import check_scheduler
+
+    host, port = check_scheduler(address)
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise TwinError(f"--scheduler {address}: no Dask scheduler answers ({exc.strerror or exc})") from None
+
+
 def run_live(cfg, *, progress: bool = True, on_started=None):
     """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
 
@@ -57,6 +73,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     from twin.runlog import RunLog
     from twin.state import FRAME_ROW_COLUMNS, LiveState
 
+    if cfg.scheduler is not None:
+        check_scheduler_answers(cfg.scheduler)  # before anything starts: one line, exit 2
     clock = RunClock(cfg.speed)
     classes = None
     roi = None
@@ -104,6 +122,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
             dash = Dashboard(
                 state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
                 update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
+                limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
             ).start()
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
@@ -208,6 +227,9 @@ def run(
         None, "--control-token", help="Token that unlocks the controls (or $DRUMTWIN_CONTROL_TOKEN)."
     ),
     scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address for what-if studies."),
+    estop_needs_token: bool = typer.Option(
+        False, "--estop-needs-token", help="EMERGENCY STOP only for viewers with the token (open networks)."
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary at the end (stdout)."),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
@@ -221,7 +243,7 @@ def run(
         cfg = RunConfig(
             camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
-            host=host, control_token=control_token, scheduler=scheduler,
+            host=host, control_token=control_token, scheduler=scheduler, estop_needs_token=estop_needs_token,
         ).resolved()
         if json_out:
             with stdout_to_stderr():

@@ -106,45 +106,65 @@ def tokens_match(given: object, expected: str | None) -> bool:
 
 @dataclass(frozen=True)
 class UnlockPolicy:
-    """Limits on token guessing: one attempt per ``per_client_s`` per viewer, and at most
-    ``max_failures`` failed attempts over all viewers within ``window_s`` (then every
-    attempt waits, so opening many viewers does not help)."""
+    """Limits on token guessing, per viewer and per client address, never global (one
+    viewer's or one host's failures never lock out another with the right token):
+    one attempt per ``per_client_s`` per viewer; a viewer with ``max_failures`` failed
+    attempts within ``window_s`` waits, and so does every viewer of an address with
+    ``max_failures_per_address`` failures within ``window_s`` (opening many viewers from
+    one host does not help)."""
 
     per_client_s: float = 1.0
     max_failures: int = 5
+    max_failures_per_address: int = 20
     window_s: float = 60.0
 
 
 class UnlockLimiter:
-    """Rate limiter of control-token attempts (pure: the caller passes the time, s)."""
+    """Rate limiter of control-token attempts (pure: the caller passes the time, s).
+    Keys: the viewer (``client_id``) and its client address (``address``, any string)."""
 
     def __init__(self, policy: UnlockPolicy | None = None) -> None:
         self.policy = policy or UnlockPolicy()
         self._last_try: dict[int, float] = {}
-        self._failures: deque[float] = deque()
+        self._by_client: dict[int, deque[float]] = {}
+        self._by_address: dict[str, deque[float]] = {}
 
-    def wait_s(self, client_id: int, now_s: float) -> float:
-        """Seconds ``client_id`` must wait before its next attempt (0: may try now)."""
+    def _recent(self, failures: deque[float] | None, now_s: float) -> deque[float]:
+        if failures is None:
+            return deque()
+        while failures and now_s - failures[0] >= self.policy.window_s:
+            failures.popleft()
+        return failures
+
+    def wait_s(self, client_id: int, now_s: float, address: str = "") -> float:
+        """Seconds ``client_id`` (at ``address``) must wait before its next attempt (0: may try now)."""
         p = self.policy
-        while self._failures and now_s - self._failures[0] >= p.window_s:
-            self._failures.popleft()
         wait = 0.0
         last = self._last_try.get(client_id)
         if last is not None:
             wait = max(wait, p.per_client_s - (now_s - last))
-        if len(self._failures) >= p.max_failures:
-            wait = max(wait, p.window_s - (now_s - self._failures[0]))
+        for failures, limit in (
+            (self._recent(self._by_client.get(client_id), now_s), p.max_failures),
+            (self._recent(self._by_address.get(address), now_s), p.max_failures_per_address),
+        ):
+            if len(failures) >= limit:
+                wait = max(wait, p.window_s - (now_s - failures[-limit]))
+        if not self._by_address.get(address):
+            self._by_address.pop(address, None)  # no empty entries left behind
         return max(0.0, wait)
 
-    def attempt(self, client_id: int, now_s: float, ok: bool) -> None:
+    def attempt(self, client_id: int, now_s: float, ok: bool, address: str = "") -> None:
         """Record an attempt that was allowed (``wait_s`` was 0) and its outcome."""
         self._last_try[client_id] = now_s
         if not ok:
-            self._failures.append(now_s)
+            self._by_client.setdefault(client_id, deque()).append(now_s)
+            self._by_address.setdefault(address, deque()).append(now_s)
 
     def forget(self, client_id: int) -> None:
-        """A viewer left (its per-client slot is dropped; global failures stay)."""
+        """A viewer left: its own slots are dropped (its address keeps its failures, so
+        reconnecting does not reset the address limit)."""
         self._last_try.pop(client_id, None)
+        self._by_client.pop(client_id, None)
 
 
 def _find_ws_server(port: int) -> Any:
