@@ -4,6 +4,7 @@ token is read-only."""
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 import urllib.request
@@ -436,3 +437,65 @@ def test_bench_dashboard_options_are_checked(kw, needle) -> None:
 
 def test_bench_dashboard_defaults_pass() -> None:
     check_bench_args(20.0, 0.0, 1.0, 8079)  # raises on failure
+
+
+# -- issue 26 item 10: an accurate security log; malformed messages as one line ----------
+@pytest.fixture
+def fresh_dash() -> Iterator[tuple[Dashboard, list]]:
+    events: list = []
+    dash = Dashboard(LiveState(), RecordingControls(), port=0, update_hz=4,
+                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+    try:
+        yield dash, events
+    finally:
+        dash.stop()
+
+
+@pytest.mark.timeout(60)
+def test_suppressed_refusals_are_counted_in_the_log(fresh_dash) -> None:
+    dash, events = fresh_dash
+    for _ in range(12):
+        with pytest.raises(websockets.exceptions.InvalidStatus):
+            open_viewer(dash.url, origin="http://evil.example")
+    dash.flush_throttled(force=True)  # also done by the update thread once 5 s passed, and at stop
+    refused = [f for k, f in events if k == "dashboard_refused"]
+    assert len(refused) == 2 and refused[1]["summary"] is True
+    assert 1 + sum(f["suppressed"] for f in refused) == 12 == dash.refused_handshakes
+
+
+@pytest.mark.timeout(60)
+def test_quick_disconnects_are_not_refusals(fresh_dash) -> None:
+    dash, events = fresh_dash
+
+    class Gone:  # a viewer whose websocket closed before its controls were built
+        client_id = 10_000
+
+    dash._on_connect(Gone())  # type: ignore[arg-type]
+    for _ in range(8):  # real viewers that leave at once
+        open_viewer(dash.url).close()
+    with open_viewer(dash.url) as ws:
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+    time.sleep(0.5)
+    assert [k for k, _ in events if k == "dashboard_refused"] == []
+
+
+@pytest.mark.timeout(60)
+def test_malformed_websocket_messages_are_one_log_line(fresh_dash, capfd, caplog) -> None:
+    dash, events = fresh_dash
+    for junk in (b"\x00\x01garbage", None):
+        with open_viewer(dash.url) as ws:
+            assert wait_for_label(ws, "EMERGENCY STOP", 20)
+            if junk is None:
+                send_message(ws, "GuiUpdateMessage", uuid=5)  # valid msgpack, wrong fields
+            else:
+                ws.send(junk)
+            wait_until(lambda: ws.protocol.close_code is not None or dash.bad_messages > 0, 10, "the drop")
+        wait_until(lambda n=(1 if junk else 2): dash.bad_messages >= n, 10, "the malformed message reported")
+    assert "Traceback" not in capfd.readouterr().err
+    records = [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.WARNING]
+    dropped = "dashboard: dropped a viewer after a malformed message"
+    assert [r.getMessage().split(" (")[0] for r in records] == [dropped] * 2
+    assert all(r.exc_info is None and "\n" not in r.getMessage() for r in records)  # one line, no traceback
+    assert [k for k, _ in events].count("dashboard_bad_message") == 1  # throttled; the second is counted
+    dash.flush_throttled(force=True)
+    assert [f.get("suppressed") for k, f in events if k == "dashboard_bad_message"] == [0, 1]

@@ -160,3 +160,26 @@ def test_writing_into_a_read_only_directory_is_one_line(tmp_path, what) -> None:
     assert "Traceback" not in p.stderr
     lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and "read-only" in lines[0].lower(), p.stderr
+
+
+@pytest.mark.timeout(30)
+def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
+    """Issue 25 item 5: ``MillClient(url)`` starts no heartbeat thread; only a caller that
+    controls the motor passes ``heartbeat_s``. A started motor with a silent default
+    client is stopped by the board's watchdog (0.3 s here)."""
+    import threading
+    import time
+
+    from control.driver import MillClient
+
+    with MillEmulator(DeviceConfig(watchdog_s=0.3)) as emu:
+        emu.open_tcp(0)
+        before = {t.name for t in threading.enumerate()}
+        with MillClient(emu.url) as c:
+            assert c.heartbeat_s is None
+            c.set_rpm(10.0)
+            c.start()
+            assert emu.motor.running
+            assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
+            time.sleep(0.8)  # silent host: the watchdog stops the motor
+            assert not emu.motor.running and emu.motor.fault is not None

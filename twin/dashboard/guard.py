@@ -32,6 +32,7 @@ import gc
 import hashlib
 import hmac
 import http
+import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -214,3 +215,50 @@ def install_handshake_guard(
 
     server.process_request = process_request
     server.process_response = process_response
+
+
+_HANDLER_FAILURES = ("connection handler failed", "opening handshake failed")
+
+
+class OneLineConnectionErrors(logging.Filter):
+    """Turns the ``websockets`` server's traceback for a connection whose handler failed
+    (viser raises on a malformed message from a viewer: msgpack junk, a wrong field) into
+    one log line, and reports it to ``on_error(kind, detail)``. Only records of the
+    connections on ``port`` are touched (the logger is shared by every server)."""
+
+    def __init__(self, port: int, on_error: Callable[[str, str], None] | None = None) -> None:
+        super().__init__()
+        self.port = port
+        self.on_error = on_error
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.exc_info or record.msg not in _HANDLER_FAILURES:
+            return True
+        ws = getattr(record, "websocket", None)
+        try:
+            local = ws.local_address if ws is not None else None
+        except Exception:
+            local = None
+        if not (isinstance(local, tuple) and len(local) >= 2 and local[1] == self.port):
+            return True
+        exc = record.exc_info[1]
+        detail = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0][:200]}"
+        record.msg, record.args = "dashboard: dropped a viewer after a malformed message (%s)", (detail,)
+        record.exc_info, record.exc_text, record.levelno, record.levelname = None, None, logging.WARNING, "WARNING"
+        if self.on_error is not None:
+            try:
+                self.on_error("dashboard_bad_message", detail)
+            except Exception:
+                pass
+        return True
+
+
+def install_connection_error_filter(
+    port: int, on_error: Callable[[str, str], None] | None = None
+) -> Callable[[], None]:
+    """Install :class:`OneLineConnectionErrors` on the ``websockets.server`` logger; returns
+    the function that removes it again (the dashboard calls it when it stops)."""
+    flt = OneLineConnectionErrors(port, on_error)
+    logger = logging.getLogger("websockets.server")
+    logger.addFilter(flt)
+    return lambda: logger.removeFilter(flt)

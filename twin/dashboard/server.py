@@ -32,7 +32,14 @@ import viser
 
 from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
-from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, install_handshake_guard, origin_allowed, tokens_match
+from twin.dashboard.guard import (
+    UnlockLimiter,
+    UnlockPolicy,
+    install_connection_error_filter,
+    install_handshake_guard,
+    origin_allowed,
+    tokens_match,
+)
 from twin.dashboard.scene import TwinScene
 from twin.state import Controls, LiveState, Snapshot, forward_fill
 
@@ -188,6 +195,8 @@ class Dashboard:
         except Exception:
             self._server.stop()
             raise
+        self.bad_messages = 0
+        self._remove_error_filter = install_connection_error_filter(self.port, self._bad_message)
         self._disable_share_tunnel()
         self._build_shared(title)
         self.scene = TwinScene(self._server)
@@ -217,6 +226,24 @@ class Dashboard:
             self._throttle[kind] = (now, 0)
         self._event(kind, suppressed=suppressed, **fields)
 
+    def flush_throttled(self, force: bool = False) -> None:
+        """Write the counts of throttled events suppressed since their last report once
+        their window has passed (``force``: now, e.g. when the dashboard stops), so the
+        log says how many refused handshakes or limited unlocks there were."""
+        now = time.monotonic()
+        due: list[tuple[str, int]] = []
+        with self._limiter_lock:
+            for kind, (last, suppressed) in self._throttle.items():
+                if suppressed and (force or now - last >= EVENT_THROTTLE_S):
+                    due.append((kind, suppressed))
+                    self._throttle[kind] = (now, 0)
+        for kind, suppressed in due:
+            self._event(kind, suppressed=suppressed, summary=True)
+
+    def _bad_message(self, kind: str, detail: str) -> None:
+        self.bad_messages += 1
+        self._event_throttled(kind, error=detail)
+
     def _refused(self, origin: str | None, host: str | None) -> None:
         self.refused_handshakes += 1
         self._event_throttled("dashboard_refused", origin=origin, host=host)
@@ -235,10 +262,13 @@ class Dashboard:
 
         self._server.request_share_url = no_share  # type: ignore[method-assign]
 
-    def _client_origin_ok(self, client: viser.ClientHandle) -> bool:
+    def _client_origin_ok(self, client: viser.ClientHandle) -> bool | None:
         """Second check of a viewer's handshake headers (the guard refuses foreign Origins
-        at the door; this covers the moment before the guard was installed)."""
+        at the door; this covers the moment before the guard was installed). None when
+        the viewer has already disconnected (a quick reload, a closed tab)."""
         conn = self._server._websock_server._live_connections.get(client.client_id)
+        if conn is None:
+            return None
         request = getattr(conn, "request", None)
         if request is None:
             return False
@@ -348,7 +378,10 @@ class Dashboard:
         self._whatif_seq = -1
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        if not self._client_origin_ok(client):
+        ok = self._client_origin_ok(client)
+        if ok is None:  # the viewer left before its controls were built: not a refusal
+            return
+        if not ok:
             self._event("dashboard_refused", client=client.client_id, origin="(after connect)")
             self._close(client)
             return
@@ -543,6 +576,8 @@ class Dashboard:
                 if self._stop.is_set():
                     break
             tick += 1
+            if tick % 8 == 0:
+                self.flush_throttled()
             next_t += period
             delay = next_t - time.monotonic()
             if delay < 0:
@@ -625,4 +660,6 @@ class Dashboard:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
+        self.flush_throttled(force=True)
+        self._remove_error_filter()
         self._server.stop()
