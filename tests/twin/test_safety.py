@@ -183,3 +183,37 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
             assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
             time.sleep(0.8)  # silent host: the watchdog stops the motor
             assert not emu.motor.running and emu.motor.fault is not None
+
+
+@pytest.mark.timeout(120)
+def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -> None:
+    """Ten emulators on a pty killed with -9 leave ten ``drumtwin-mill-*`` directories
+    with a dangling link; the next emulator's start removes them (a live one's stays)."""
+    import signal
+    import tempfile
+
+    from control.emulator import PTY_DIR_PREFIX
+
+    env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd())}
+    code = ("import time; from control.emulator import MillEmulator; e = MillEmulator(); "
+            "print(e.open_pty(), flush=True); time.sleep(60)")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
+             for _ in range(11)]
+    links = [Path(p.stdout.readline().strip()) for p in procs]  # type: ignore[union-attr]
+    assert all(link.is_symlink() for link in links)
+    alive = procs.pop()
+    try:
+        for p in procs:
+            p.send_signal(signal.SIGKILL)
+            p.wait(10)
+        assert len(list(tmp_path.glob(PTY_DIR_PREFIX + "*"))) == 11
+        assert not links[0].exists()  # the pty died with its owner: a dangling link
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+        with MillEmulator() as emu:
+            url = emu.open_pty()
+            left = sorted(tmp_path.glob(PTY_DIR_PREFIX + "*"))
+            assert left == sorted([links[-1].parent, Path(url).parent])  # the live owner's and ours
+    finally:
+        alive.kill()
+        alive.wait(10)
+    assert not Path(url).parent.exists()  # a clean close removes its own
