@@ -177,7 +177,9 @@ class SupervisorInputs:
     ``radial_factor``: MI(eq. 4)/MI(eq. 3) of the latest valid reading (None: not used);
     ``last_valid_mi_s``: time of the last valid MI; ``camera_ended``: the frame source has
     ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
-    (None: no twin).
+    (None: no twin); ``twin_doubt``: why the application does not trust the twin now (it
+    disagrees with the camera, its what-if study failed; "" = trusted): AUTO treats a
+    twin in doubt as stale (safe state) until it is trusted again.
     """
 
     trend: TrendEstimate | None = None
@@ -191,6 +193,7 @@ class SupervisorInputs:
     last_valid_mi_s: float | None = None
     camera_ended: bool = False
     twin_updated_s: float | None = None
+    twin_doubt: str = ""
 
 
 @dataclass(frozen=True)
@@ -264,6 +267,7 @@ class Decision:
                 "radial_factor": inp.radial_factor,
                 "last_valid_mi_s": inp.last_valid_mi_s,
                 "twin_updated_s": inp.twin_updated_s,
+                "twin_doubt": inp.twin_doubt,
             },
         }
 
@@ -491,6 +495,8 @@ class Supervisor:
                 tw = inputs.twin_updated_s if inputs.twin_updated_s is not None else t0
                 if now_s - tw > c.twin_timeout_s:
                     out.append(f"twin stale for {now_s - tw:.1f} s")
+            if inputs.twin_doubt:  # the application does not trust the twin: stale too
+                out.append(f"twin stale: {inputs.twin_doubt}")
         return out
 
     @property

@@ -41,6 +41,7 @@ from twin.config import RunConfig
 from twin.errors import TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
+from twin.live.mismatch import MismatchMonitor, MismatchTolerance
 from twin.live.records import (
     CameraInfo,
     FrameInfo,
@@ -175,7 +176,10 @@ class LiveLoop:
             Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
             alive=self.supervisor_alive,
+            mismatch=MismatchMonitor(MismatchTolerance(**config.extra.get("mismatch", {}))),
+            on_twin_mismatch=lambda: self.twin.request("calibrate"),
         )
+        self.whatif.on_auto_result = self._auto_study_result
         self._threads: list[threading.Thread] = []
         self.state.update_numbers(mode=config.mode, mill_state="connecting")
 
@@ -353,6 +357,17 @@ class LiveLoop:
         self.events.event("operator", t, action="whatif", rpms=rpm_list, duration_s=duration)
         if not self.whatif.submit(rpm_list, duration, reason="operator"):
             self.events.event("operator_rejected", t, action="whatif", error="a study is already running")
+
+    def _auto_study_result(self, error: str | None) -> None:
+        """A failed AUTO what-if study is a fault: an alarm, and AUTO's safe state (the twin
+        in doubt) until a study succeeds or the operator sets a mode again."""
+        t = self.now_s()
+        if error is not None:
+            self.events.fault("whatif_failed", f"AUTO's what-if study failed: {error}", t)
+            self.supervisor.doubt_twin("whatif", f"what-if study failed ({error})")
+        else:
+            self.supervisor.trust_twin("whatif")
+            self.events.clear_fault("whatif_failed", "an AUTO what-if study succeeded", t)
 
     def cancel_whatif(self) -> bool:
         """Abandon the operator's running or waiting what-if study; True when there was one."""

@@ -217,3 +217,94 @@ def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -
         alive.kill()
         alive.wait(10)
     assert not Path(url).parent.exists()  # a clean close removes its own
+
+
+# -- twin versus reality (issue 26 item 8) and a failed AUTO study (item 4) -----------------
+def test_residual_flags_direction_slope_and_mi() -> None:
+    from twin.live.mismatch import MismatchTolerance, residual
+
+    tol = MismatchTolerance(slope_deg=15.0, mi=0.3)
+    assert not residual(30.0, 36.0, 0.9, 0.8, tol).bad
+    r = residual(-33.8, 53.7, 0.9, 0.9, tol)  # the issue's video: clockwise drum, twin the other way
+    assert r.bad and not r.direction_agrees and "rotation direction" in r.reasons[0]
+    assert residual(30.0, 50.0, 0.9, 0.9, tol).reasons[0].startswith("slope")
+    assert residual(30.0, 30.0, 0.3, 0.9, tol).reasons[0].startswith("MI")
+    assert not residual(float("nan"), 30.0, 0.9, 0.9, tol).known  # no camera slope: no verdict
+
+
+def _mismatch_rig(camera_slope: float, twin_slope: float):
+    from tests.twin.test_workers import Boxes, _reading
+    from twin.live.mismatch import MismatchMonitor
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    recal: list[float] = []
+    from control.supervisor import Mode, Supervisor, SupervisorConfig
+    from tests.twin.test_mill_worker import Sink
+    from twin.live.supervise import SupervisorWorker
+
+    sink = Sink()
+    w = SupervisorWorker(Supervisor(SupervisorConfig(vision_timeout_s=3.0, recover_s=2.0), mode=Mode.AUTO),
+                         b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(),
+                         on_twin_mismatch=lambda: recal.append(b.view.now_s()))
+
+    def run(t0: float, t1: float, twin_slope_deg: float) -> None:
+        from control.trend import TrendEstimate
+        from twin.live.records import CameraInfo, FrameInfo, TwinInfo
+
+        t = t0
+        while t < t1 - 1e-9:
+            b.wall.t += 0.5
+            est = TrendEstimate(t, 0.9, 0.0, 0.01, 0.001, 0.88, 0.92, True, False)
+            b.camera.set(CameraInfo(t, b.wall.t, None, None, int(t * 2) + 1, False))
+            b.frames.set(FrameInfo(t, int(t * 2) + 1, t, _reading(0.9, slope=camera_slope), est))
+            b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg))
+            w.tick(b.view.now_s())
+            t += 0.5
+
+    return w, sink, recal, run
+
+
+@pytest.mark.parametrize(("twin_slope", "what"), [(-31.0, "rotation direction"), (58.0, "slope")])
+def test_a_twin_calibrated_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_safe(twin_slope, what) -> None:
+    w, sink, recal, run = _mismatch_rig(camera_slope=31.0, twin_slope=twin_slope)
+    run(0.0, 20.0, 33.0)  # twin and camera agree: no alarm
+    assert "twin_mismatch" not in sink.faults and not w.safe
+    run(20.0, 30.0, twin_slope)  # the twin goes wrong at t = 20 s
+    raised = [d for k, d in sink.events if k == "fault" and d["fault"] == "twin_mismatch"]
+    assert raised and what in raised[0]["message"]
+    assert w.safe and "twin stale: twin disagrees with the camera" in w.supervisor.safe_reason
+    assert recal and 20.0 < recal[0] <= 30.0  # a recalibration was asked for, within 10 s
+    run(30.0, 45.0, 33.0)  # agrees again: cleared, trusted, AUTO recovers
+    assert "twin_mismatch" not in sink.faults and w.twin_doubt == "" and not w.safe
+
+
+def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_chooses() -> None:
+    from control.supervisor import Mode, PredictionRequest
+    from tests.twin.test_mill_worker import Sink
+    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from twin.live.records import SetMode, TwinInfo
+    from twin.live.whatif import WhatIfWorker
+    from twin.state import LiveState
+
+    def dead_cluster(jobs):
+        raise OSError("no Dask scheduler answers at tcp://127.0.0.1:1")
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    w, sink, _sent = sup_worker(b, Mode.AUTO, twin_timeout_s=None)
+    results: list = []
+    wi = WhatIfWorker(b.view, Sink(), LiveState(), study=dead_cluster)
+    wi.on_auto_result = results.append
+    b.twin.set(TwinInfo(updated_s=0.0, state=object()))
+    wi.request(PredictionRequest(1.0, (5.0, 25.0), 40.0))
+    assert wi.serve_once() and wi.poll() is None
+    assert results and results[0] is not None and "no Dask scheduler" in results[0]
+    # the loop's wiring (LiveLoop._auto_study_result): fault + doubt
+    w.doubt_twin("whatif", f"what-if study failed ({results[0]})")
+    sink.fault("whatif_failed", results[0], 1.0)
+    advance(b, w, 0.0, 3.0)
+    assert w.safe and "what-if study failed" in w.supervisor.safe_reason
+    w.handle(SetMode("auto"))  # the operator chooses again
+    advance(b, w, 3.0, 12.0)
+    assert not w.safe and "whatif_failed" not in sink.faults

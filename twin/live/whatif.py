@@ -65,6 +65,9 @@ class WhatIfWorker:
         self._running_reason: str | None = None
         self._cancelled = False
         self._seq = 0
+        self.on_auto_result: Callable[[str | None], None] | None = None
+        """Called after each AUTO prediction study: None when it succeeded, else the error
+        (the loop makes a failure a ``whatif_failed`` alarm and AUTO's safe state)."""
 
     # -- any thread ------------------------------------------------------------------------
     def request(self, req: PredictionRequest) -> None:
@@ -147,10 +150,12 @@ class WhatIfWorker:
             if pred is not None:
                 try:
                     preds = self._study(pred.rpms, pred.horizon_s, "AUTO")
-                except Exception:
+                except Exception as exc:
+                    self._report_auto(f"{type(exc).__name__}: {exc}")
                     return True
                 with self._lock:
                     self._result = PredictionResult(pred.t_s, pred.horizon_s, preds)
+                self._report_auto(None)
             elif study is not None:
                 try:
                     self._study(study.rpms, study.duration_s, study.reason)
@@ -161,6 +166,13 @@ class WhatIfWorker:
             with self._lock:
                 self._busy = False
                 self._running_reason = None
+
+    def _report_auto(self, error: str | None) -> None:
+        if self.on_auto_result is not None:
+            try:
+                self.on_auto_result(error)
+            except Exception:
+                pass
 
     def _get_pool(self) -> Executor:
         if self._closed:
