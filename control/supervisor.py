@@ -41,7 +41,8 @@ Limits
     ``max_rpm`` limits). The setpoint moves
     at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
     ``ramp`` decision); a ramp from a board found outside the limits (started from its
-    front panel) steps inside them at once.
+    front panel) steps inside them at once; a board found above them in MANUAL or AUTO (at
+    a resync) is brought down to the upper limit that way, even before any decision.
 
 Board resync
     ``inputs.mill_epoch`` changes whenever the application has (re)read the board after a
@@ -475,6 +476,8 @@ class Supervisor:
         if not ramping or self.safe:
             self.target_rpm = self.commanded_rpm
         lo, hi = self.config.rpm_limits
+        if self._mode is not Mode.OFF and self.commanded_rpm > hi:  # found above the limits (another host,
+            self.target_rpm = hi  # the front panel): this run controls it, so it is brought inside at once
         if self.manual_rpm is None and self._mode is Mode.MANUAL and lo <= self.commanded_rpm <= hi:
             self.manual_rpm = self.commanded_rpm  # (a board outside the limits: no operator rpm until one is given)
 

@@ -308,3 +308,82 @@ def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_c
     w.handle(SetMode("auto"))  # the operator chooses again
     advance(b, w, 3.0, 12.0)
     assert not w.safe and "whatif_failed" not in sink.faults
+
+
+# -- no stale value is a measurement (issue 26 item 7) ------------------------------------
+def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
+    import queue
+
+    from control.trend import MITrend
+    from tests.twin.test_mill_worker import RUNNING, Sink, make
+    from tests.twin.test_workers import Boxes, _reading
+    from twin.live.camera import CameraReading, ProcessWorker
+    from twin.live.supervise import inputs_of
+    from twin.state import LiveState
+
+    w, link, _sink, box = make(RUNNING)
+    w.cycle()
+    b = Boxes("auto")
+    b.mill = box
+    b.view.mill = box.get  # type: ignore[method-assign]
+    rows: list = []
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), None)
+    pw.process(CameraReading(0.0, 0, _reading(0.8)))
+    link.up = False  # the outage: the board's last report (5 rpm) is history now
+    w.cycle()
+    pw.process(CameraReading(0.1, 1, _reading(0.8)))
+    assert box.get().status is not None and box.get().status.actual_rpm == 5.0  # kept for the resync
+    assert inputs_of(b.view, 0.1).actual_rpm is None and inputs_of(b.view, 0.1).setpoint_rpm is None
+    link.up = True
+    w.cycle()
+    pw.process(CameraReading(0.2, 2, _reading(0.8)))
+    assert [(r["rpm_actual"], r["rpm_setpoint"]) for r in rows] == [(5.0, 5.0), (None, None), (5.0, 5.0)]
+    assert [r["flags"] for r in rows] == [(), ("link_lost:mill",), ()]
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("mode", ["auto", "off"])
+def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_control_it(mode) -> None:
+    """Another host sets the board to 55 rpm (limits 2-40 here): the mill worker reads it
+    again (a new epoch, no stale belief), the supervisor worker alarms; in AUTO the
+    supervisor brings it to 40 rpm at once, in OFF it keeps its hands off."""
+    import time
+
+    from control.driver import MillClient
+    from control.supervisor import Mode
+    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from twin.live.mill import MillWorker
+
+    fast = MotorConfig(max_rpm=200.0, accel_rpm_per_s=200.0, tau_s=0.05)
+    with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=fast)) as emu:
+        port = emu.open_tcp(0)
+        emu.set_motor(setpoint_rpm=30.0, actual_rpm=30.0, running=True)
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1)
+        try:
+            b = Boxes(mode)
+            sup, sink, _ = sup_worker(b, Mode(mode))
+            mill = MillWorker(link, sink, b.mill, now_s=lambda: 0.0)
+            sup.send = mill.submit
+            mill.cycle()
+            advance(b, sup, 0.0, 2.0)
+            assert "mill_above_limits" not in sink.faults
+            emu.set_motor(setpoint_rpm=55.0, actual_rpm=55.0, running=True)  # another host
+            mill.cycle()
+            assert sink.kinds("mill_changed_elsewhere") and b.mill.get().epoch == 2
+            advance(b, sup, 2.0, 3.0)
+            assert "mill_above_limits" in sink.faults
+            mill.cycle()  # the command goes out
+            if mode == "auto":
+                assert emu.motor.setpoint_rpm == 40.0
+                assert any(d["rpm"] == 40.0 for d in sink.kinds("decision"))
+                t = 3.0
+                while "mill_above_limits" in sink.faults and t < 20.0:  # the motor slows down (real time)
+                    time.sleep(0.1)
+                    mill.cycle()
+                    advance(b, sup, t, t + 0.5)
+                    t += 0.5
+                assert "mill_above_limits" not in sink.faults and emu.motor.actual_rpm <= 40.5
+            else:
+                assert emu.motor.setpoint_rpm == 55.0 and sink.kinds("decision") == []
+        finally:
+            link.close()

@@ -35,6 +35,8 @@ from twin.live.records import (
     SupervisorCommand,
 )
 
+RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
+
 
 class Predictions(Protocol):
     """The application's predictor: takes requests, hands results back later (never blocks)."""
@@ -214,6 +216,17 @@ class SupervisorWorker:
                 self.sink.fault("camera_stopped", f"camera stopped: no frame for {silent:.0f} s", now)
             else:
                 self.sink.clear_fault("camera_stopped", "camera frames again", now)
+        mill = self.view.mill()
+        if mill.connected:  # fresh reads only (unknown values are NaN)
+            hi = c.rpm_limits[1]
+            over = [f"{name} {v:g}" for name, v in (("setpoint", mill.setpoint_rpm), ("actual", mill.actual_rpm))
+                    if math.isfinite(v) and v > hi + RPM_LIMIT_SLACK]
+            if over:
+                acting = "; it is brought inside" if self.supervisor.mode.value != "off" else " (mode OFF: hands off)"
+                self.sink.fault("mill_above_limits", f"the mill runs above the limits ({', '.join(over)} rpm > "
+                                f"{hi:g} rpm){acting}", now)
+            else:
+                self.sink.clear_fault("mill_above_limits", "the mill is inside the limits", now)
         last = frames.last_valid_t_s
         if last is not None:
             if c.vision_lost(now, last):

@@ -168,6 +168,8 @@ class WhatIfWorker:
                 self._running_reason = None
 
     def _report_auto(self, error: str | None) -> None:
+        if self._closed:  # the run is ending: its pool was shut down under the study
+            return
         if self.on_auto_result is not None:
             try:
                 self.on_auto_result(error)
