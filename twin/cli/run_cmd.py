@@ -371,3 +371,29 @@ def bench_dashboard(
             f"dashboard in headless chromium over {rate.seconds:g} s: camera {rate.camera_hz:.1f} updates/s, "
             f"twin {rate.twin_hz:.1f} updates/s (target 10)", highlight=False
         )
+
+
+@bench_app.command("memory")
+def bench_memory(
+    seconds: float = typer.Option(30.0, "--seconds", help="Run time of the measured run (s)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON: main_hwm_mb, tree_rss_mb, tree_pss_mb, ..."),
+) -> None:
+    """Peak resident memory of `drumtwin run` without the dashboard on a 640x640, 30 fps
+    video (the mill emulator on a pty): the run process, and its whole process tree."""
+    from rich.table import Table
+
+    from control.errors import check_number
+    from twin.cli.app import console
+    from twin.membench import measure_run_memory
+
+    check_number("--seconds", seconds, at_least=5.0, at_most=600.0)
+    with console_err.status(f"measuring a {seconds:g} s run ..."):
+        res = measure_run_memory(seconds)
+    if as_json:
+        print_json(asdict(res))
+        return
+    t = Table(title=f"peak memory of `drumtwin run --no-dashboard`, 640x640 video at 30 fps, {seconds:g} s")
+    for col in ("run process VmHWM MB", "process tree RSS MB", "process tree PSS MB", "processes"):
+        t.add_column(col, justify="right")
+    t.add_row(f"{res.main_hwm_mb:.0f}", f"{res.tree_rss_mb:.0f}", f"{res.tree_pss_mb:.0f}", str(res.processes))
+    console.print(t)
