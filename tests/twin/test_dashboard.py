@@ -499,3 +499,22 @@ def test_malformed_websocket_messages_are_one_log_line(fresh_dash, capfd, caplog
     assert [k for k, _ in events].count("dashboard_bad_message") == 1  # throttled; the second is counted
     dash.flush_throttled(force=True)
     assert [f.get("suppressed") for k, f in events if k == "dashboard_bad_message"] == [0, 1]
+
+
+def test_the_viser_internals_the_dashboard_relies_on(fresh_dash) -> None:
+    """Issue 25 item 6: the versions are the checked ones, and each internal exists."""
+    import inspect
+
+    import viser
+    import websockets.asyncio.server as ws_server
+
+    from twin.dashboard.guard import CHECKED_VERSIONS
+
+    assert viser.__version__ in CHECKED_VERSIONS["viser"]
+    assert websockets.__version__ in CHECKED_VERSIONS["websockets"]
+    assert "connection handler failed" in inspect.getsource(ws_server)  # OneLineConnectionErrors' record
+    dash, _ = fresh_dash
+    with open_viewer(dash.url) as ws:
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+        (cid,) = list(dash._server._websock_server._live_connections)
+        assert dash._client_address(cid) == "127.0.0.1"  # the per-address unlock limit's key

@@ -10,11 +10,12 @@ one; a script must send the dashboard's). On a loopback bind the ``Host`` must a
 loopback name (``127.0.0.1``, ``localhost``, ``[::1]``), which defeats DNS rebinding (an
 attacker's name re-pointed at 127.0.0.1 has the attacker's name as ``Host``).
 
-Decision: the default 127.0.0.1 dashboard still authorises every client that gets
-through this door without a token. A client that passes is either the operator's own
-browser tab on the dashboard's origin or a local process, which could talk to the mill
-in other ways anyway; the hostile page is stopped by the Origin check, not by a token.
-A dashboard bound beyond loopback needs the control token for every control.
+Decision: a dashboard started without a control token (allowed on loopback only)
+authorises every client that gets through this door; with ``--control-token`` the token
+is enforced on any host, loopback included. EMERGENCY STOP is enabled for every viewer
+(a stop is always safe) unless the dashboard is told otherwise (``estop_needs_token``,
+for open networks). Token attempts are limited per viewer and per client address,
+never globally, so nobody can lock the operator out (:class:`UnlockLimiter`).
 
 Every HTTP response (the page, its scripts, the refused handshake) carries
 ``X-Frame-Options: DENY`` and ``Content-Security-Policy: frame-ancestors 'none'`` so the
@@ -40,6 +41,13 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from twin.errors import TwinError
+
+CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {"viser": ("1.1.1",), "websockets": ("16.1.1",)}
+"""Versions whose internals the dashboard relies on were checked against (the websocket
+server found by :func:`install_handshake_guard`, ``_live_connections`` and a connection's
+``remote_address`` for the per-address unlock limit, the ``websockets.server`` log record
+of a failed handler for :class:`OneLineConnectionErrors`); ``tests/twin/test_dashboard.py``
+tests each assumption and fails on a version not listed here."""
 
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 FRAME_HEADERS: tuple[tuple[str, str], ...] = (

@@ -6,10 +6,13 @@ no image published at ``update_hz`` is missed, and redraws the plots at a quarte
 that poll rate (uPlot redraws cost the browser more than images); it never touches
 the loop's threads. Controls are built per viewer (per viser client), one viewer at a
 time (a lock: viser's shared folder context admits one builder), so every viewer gets
-them and EMERGENCY STOP however many connect at once. When the server binds beyond
-loopback a viewer must enter the control token before its controls are enabled, so
-remote viewers without it are read-only; token attempts are rate-limited and failures
+them and EMERGENCY STOP however many connect at once. With a control token (required
+beyond loopback, enforced on loopback too) a viewer must enter it before its controls
+are enabled; without it a viewer has EMERGENCY STOP only (``estop_needs_token``: not
+even that). Token attempts are rate-limited per viewer and per address and failures
 are reported as events. Every control callback re-checks that its viewer is authorised.
+The rpm slider spans the run's limits (``control.limits``); a clamped rpm or a refused
+what-if is told to the viewer who asked.
 
 Security (see ``twin.dashboard.guard``): websocket handshakes from a foreign ``Origin``
 are refused, every response forbids framing, and viser's share-URL tunnel is disabled
