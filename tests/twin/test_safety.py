@@ -422,3 +422,65 @@ def test_chunked_colour_table_equals_the_classifier() -> None:
         want[masks[k] != 0] = k + 1
     idx = (img[..., 0].astype(np.int64) << 16) | (img[..., 1].astype(np.int64) << 8) | img[..., 2]
     assert np.array_equal(lut[idx], want) and want.any()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("wrong", ["direction", "slope"])
+def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_safe(tmp_path, wrong) -> None:
+    """The whole loop (embedded demo, AUTO): from run time ``t_wrong`` on, the twin's
+    published bed turns the other way (its slope negated) or 30 deg steeper, as a twin
+    calibrated to the wrong direction or slope would; ``twin_mismatch`` follows within
+    10 s of run time and the supervisor is safe with the twin stale."""
+    import dataclasses
+    import math
+    import threading
+    import time
+
+    from twin.cli.run_cmd import run_live
+    from twin.runlog import read_events
+
+    cfg = RunConfig(dashboard=False, duration_s=600, speed=4.0, mode="auto", log_dir=tmp_path / "run").resolved()
+    report: dict = {}
+
+    def script(loop, plant, dash) -> None:
+        box = loop.twin_box
+        inner_set = box.set
+
+        def wrong_set(info) -> None:
+            if report.get("t_wrong") is not None and math.isfinite(info.slope_deg):
+                s = -info.slope_deg if wrong == "direction" else info.slope_deg + 30.0
+                info = dataclasses.replace(info, slope_deg=s)
+            inner_set(info)
+
+        box.set = wrong_set
+
+        def run() -> None:
+            try:
+                end = time.monotonic() + 120
+                while time.monotonic() < end and not (box.get().updated_s and loop.now_s() > 15.0):
+                    time.sleep(0.1)
+                report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
+                report["t_wrong"] = loop.now_s()
+                end = time.monotonic() + 60
+                while time.monotonic() < end and not loop.supervisor.safe:
+                    time.sleep(0.05)
+                report["t_safe"] = loop.now_s()
+                report["safe_reason"] = loop.supervisor.supervisor.safe_reason
+            except BaseException as exc:
+                report["error"] = exc
+            finally:
+                loop.stop_event.set()
+
+        threading.Thread(target=run, daemon=True).start()
+
+    run_live(cfg, progress=False, on_started=script)
+    if "error" in report:
+        raise report["error"]
+    events = read_events(tmp_path / "run")
+    raised = [e for e in events if e["kind"] == "fault" and e["fault"] == "twin_mismatch"]
+    assert report["quiet_before"] and raised
+    assert report["t_wrong"] < raised[0]["t_s"] <= report["t_wrong"] + 10.0
+    assert ("rotation direction" if wrong == "direction" else "slope") in raised[0]["message"]
+    assert report["t_safe"] <= report["t_wrong"] + 10.5 and "twin stale: twin disagrees" in report["safe_reason"]
+    assert any(e["kind"] == "decision" and e["safe"] and "twin stale" in e["reason"] for e in events)
