@@ -484,3 +484,47 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
     assert ("rotation direction" if wrong == "direction" else "slope") in raised[0]["message"]
     assert report["t_safe"] <= report["t_wrong"] + 10.5 and "twin stale: twin disagrees" in report["safe_reason"]
     assert any(e["kind"] == "decision" and e["safe"] and "twin stale" in e["reason"] for e in events)
+
+
+def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_path) -> None:
+    """Issue 26 item 3: 1e9 s or 10,000 rpm values are refused with the limit named (the
+    dashboard's callback and a script calling the loop alike); a running study is cancelled."""
+    import threading
+
+    from control.limits import WHATIF_MAX_RUNS
+    from control.protocol import MillStatus
+    from tests.twin.test_mill_worker import FakeLink
+    from twin.live.records import TwinInfo
+    from twin.loop import LiveLoop
+    from twin.runlog import RunLog, read_events
+
+    started, release = threading.Event(), threading.Event()
+
+    def slow_study(jobs):
+        started.set()
+        release.wait(30)
+        raise RuntimeError("pool terminated")
+
+    cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run",
+                    extra={"whatif_study": slow_study}).resolved()
+    with RunLog(tmp_path / "run") as log:
+        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log)
+        loop.run_whatif([5.0], 1e9)
+        loop.run_whatif([5.0 + i * 0.001 for i in range(WHATIF_MAX_RUNS + 1)], 60.0)
+        loop.run_whatif([10000.0], 60.0)
+        errors = [e["error"] for e in read_events(tmp_path / "run") if e["kind"] == "operator_rejected"]
+        assert len(errors) == 3 and "(0, 3600] s" in errors[0] and "at most 2000 runs" in errors[1]
+        assert "10000 outside (0, 77.23] rpm" in errors[2]  # the demo drum's critical speed
+        assert not loop.cancel_whatif()  # nothing to cancel
+        loop.twin_box.set(TwinInfo(updated_s=1.0, state=object()))
+        loop.run_whatif([5.0, 25.0], 60.0)
+        t = threading.Thread(target=loop.whatif.serve_once)
+        t.start()
+        assert started.wait(10)
+        assert loop.cancel_whatif()  # running: abandoned (the local pool is terminated)
+        release.set()
+        t.join(10)
+        kinds = [e["kind"] for e in read_events(tmp_path / "run")]
+        assert "whatif_cancelled" in kinds and "whatif_error" not in kinds
+        assert loop.state.snapshot().whatif.status == "cancelled by the operator"
+        loop.whatif.close()
