@@ -491,11 +491,16 @@ def test_malformed_websocket_messages_are_one_log_line(fresh_dash, capfd, caplog
                 ws.send(junk)
             wait_until(lambda: ws.protocol.close_code is not None or dash.bad_messages > 0, 10, "the drop")
         wait_until(lambda n=(1 if junk else 2): dash.bad_messages >= n, 10, "the malformed message reported")
+
+    def records() -> list[logging.LogRecord]:
+        return [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.WARNING]
+
+    wait_until(lambda: len(records()) >= 2, 10, "both records (the filter counts before the handler logs)")
     assert "Traceback" not in capfd.readouterr().err
-    records = [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.WARNING]
+    got = records()
     dropped = "dashboard: dropped a viewer after a malformed message"
-    assert [r.getMessage().split(" (")[0] for r in records] == [dropped] * 2
-    assert all(r.exc_info is None and "\n" not in r.getMessage() for r in records)  # one line, no traceback
+    assert [r.getMessage().split(" (")[0] for r in got] == [dropped] * 2
+    assert all(r.exc_info is None and "\n" not in r.getMessage() for r in got)  # one line, no traceback
     assert [k for k, _ in events].count("dashboard_bad_message") == 1  # throttled; the second is counted
     dash.flush_throttled(force=True)
     assert [f.get("suppressed") for k, f in events if k == "dashboard_bad_message"] == [0, 1]
