@@ -81,6 +81,7 @@ SWEEP: list[tuple[tuple[str, ...], str]] = [
     (("mill", "socket://127.0.0.1:9", "set-rpm", "100"), "outside the limits 5-45 rpm"),
     (("mill", "socket://127.0.0.1:9", "set-rpm", "2"), "outside the limits"),
     (("mill-emulator", "--max-rpm", "inf"), "--max-rpm"),
+    (("mill-emulator", "--duration", "1e308"), "--duration"),
     (("compare", "/nonexistent-run", "--plot", "x.png"), ""),
 ]
 

@@ -170,7 +170,7 @@ def mill_emulator(
     check_number("--accel", accel, above=0.0, at_most=1e4)
     check_number("--tau", tau_s, at_least=0.0, at_most=60.0)
     if duration_s is not None:
-        check_number("--duration", duration_s, above=0.0)
+        check_number("--duration", duration_s, above=0.0, at_most=30 * 86400.0)  # 1e308 would never end
     cfg = DeviceConfig(watchdog_s=watchdog_s, motor=MotorConfig(max_rpm=max_rpm, accel_rpm_per_s=accel, tau_s=tau_s))
     emu = MillEmulator(cfg, Faults.parse(faults), seed=seed)
     done = threading.Event()
