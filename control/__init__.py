@@ -17,7 +17,7 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
     ``.set_manual_rpm(rpm)``; ``.events``. ``SupervisorConfig(critical_rpm=...)``: the
     application hands in the drum's critical speed (``sim.recipe.DrumSpec.critical_rpm``).
 ``control.driver``
-    ``MillClient(url, *, timeout_s=0.2, retries=5, heartbeat_s=0.25, ...)``:
+    ``MillClient(url, *, timeout_s=0.2, retries=5, heartbeat_s=None, ...)``:
     ``.set_rpm(rpm)``, ``.start()``, ``.stop()``, ``.status() -> MillStatus``, ``.heartbeat()``,
     ``.connected``, ``.last_status``, ``.close()``. A NAK raises ``control.errors.MillRefused``
     (``.command``, ``.reason``: the link is fine, the command was not applied); a lost link

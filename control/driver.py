@@ -44,7 +44,8 @@ class MillClient:
     """Drive the mill: ``set_rpm``, ``start``, ``stop``, ``status``; ``connected`` flag.
 
     Parameters: ``timeout_s`` per attempt; ``retries`` resends after the first attempt;
-    ``heartbeat_s`` period of the heartbeat thread (``None``: no thread);
+    ``heartbeat_s`` period of the heartbeat thread (default ``None``: no thread; only a
+    caller that controls the motor in this run passes a period, e.g. 0.25 s);
     ``backoff_s``/``backoff_max_s`` first and longest wait between reconnect attempts;
     ``reconnect_wait_s`` longest time one request waits for a lost link to come back
     (so a request blocks at most about ``(retries + 1) * timeout_s + reconnect_wait_s``;
@@ -63,7 +64,7 @@ class MillClient:
         baudrate: int = 115200,
         timeout_s: float = 0.2,
         retries: int = 5,
-        heartbeat_s: float | None = 0.25,
+        heartbeat_s: float | None = None,
         backoff_s: float = 0.05,
         backoff_max_s: float = 2.0,
         reconnect_wait_s: float = 1.0,

@@ -89,6 +89,53 @@ class Faults:
         return f
 
 
+PTY_DIR_PREFIX = "drumtwin-mill-"
+OWNER_FILE = "owner"  # "<pid> <start time in clock ticks>" of the emulator's process
+
+
+def _owner_id(pid: int) -> str | None:
+    """``"<pid> <start ticks>"`` of a live process (the start time tells a reused pid
+    apart), None when there is no such process."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return None
+    fields = stat.rsplit(")", 1)[-1].split()
+    return f"{pid} {fields[19]}" if len(fields) > 19 else None
+
+
+def remove_stale_pty_dirs(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove ``drumtwin-mill-*`` directories in ``tmp`` (default: the temp directory)
+    whose owner process is gone (a ``kill -9`` leaves them with a dangling pty link).
+    A directory is only touched when it is ours (same uid), holds nothing but the link
+    and the owner file, and its owner file names a dead process, or (older emulators
+    wrote none) its link dangles. Returns the directories removed."""
+    base = Path(tmp if tmp is not None else tempfile.gettempdir())
+    removed: list[Path] = []
+    for d in base.glob(PTY_DIR_PREFIX + "*"):
+        try:
+            if not d.is_dir() or d.is_symlink() or d.lstat().st_uid != os.getuid():
+                continue
+            names = {e.name for e in d.iterdir()}
+            if not names <= {"mill", "mill.new", OWNER_FILE}:
+                continue
+            owner = d / OWNER_FILE
+            if owner.exists():
+                text = owner.read_text(encoding="ascii", errors="replace").strip()
+                pid = int(text.split()[0]) if text.split() and text.split()[0].isdigit() else -1
+                if pid > 0 and _owner_id(pid) == text:
+                    continue  # its owner still runs
+            elif (d / "mill").exists() or time.time() - d.lstat().st_mtime < 60.0:
+                continue  # no owner file: an old emulator whose pty is alive, or one starting now
+            for name in names:
+                (d / name).unlink(missing_ok=True)
+            d.rmdir()
+            removed.append(d)
+        except (OSError, ValueError):
+            continue  # raced with its owner or another start: leave it
+    return removed
+
+
 class MillEmulator:
     """The board's firmware behind a real pty or TCP port, in a background thread."""
 
@@ -203,7 +250,9 @@ class MillEmulator:
         if self._kind is not None:
             raise ControlError("the mill emulator is already open")
         if link is None:
-            self._tmpdir = tempfile.TemporaryDirectory(prefix="drumtwin-mill-")
+            remove_stale_pty_dirs()  # the leftovers of emulators killed with -9
+            self._tmpdir = tempfile.TemporaryDirectory(prefix=PTY_DIR_PREFIX)
+            (Path(self._tmpdir.name) / OWNER_FILE).write_text(_owner_id(os.getpid()) or "", encoding="ascii")
             link = Path(self._tmpdir.name) / "mill"
         self._link_path = Path(link)
         self._kind = "pty"

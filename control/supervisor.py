@@ -48,7 +48,8 @@ Limits
     ``max_rpm`` limits). The setpoint moves
     at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
     ``ramp`` decision); a ramp from a board found outside the limits (started from its
-    front panel) steps inside them at once.
+    front panel) steps inside them at once; a board found above them in MANUAL or AUTO (at
+    a resync) is brought down to the upper limit that way, even before any decision.
 
 Board resync
     ``inputs.mill_epoch`` changes whenever the application has (re)read the board after a
@@ -78,6 +79,7 @@ from enum import StrEnum
 from typing import NamedTuple
 
 from control.errors import ControlError
+from control.limits import Limits
 from control.trend import TrendEstimate
 
 
@@ -138,25 +140,21 @@ class SupervisorConfig:
     recover_s: float = 5.0
 
     def __post_init__(self) -> None:
-        if not 0 <= self.min_rpm < self.max_rpm:
-            raise ControlError(f"rpm limits must satisfy 0 <= min < max (got {self.min_rpm}, {self.max_rpm})")
-        if not 0 < self.max_critical_frac <= 1:
-            raise ControlError("max_critical_frac must be in (0, 1]")
-        if self.critical_rpm is not None and not (math.isfinite(self.critical_rpm) and self.critical_rpm > 0):
-            raise ControlError(f"critical_rpm must be a positive number, got {self.critical_rpm}")
+        self.limits  # noqa: B018 -- validates the rpm limits (control.limits: the one set)
         if not (math.isfinite(self.vision_timeout_s) and self.vision_timeout_s > 0):
             raise ControlError(f"vision_timeout_s must be > 0, got {self.vision_timeout_s}")
         if self.clear_level < self.seg_level:
             raise ControlError("clear_level must be >= seg_level (hysteresis)")
-        if self.rpm_limits[1] <= self.min_rpm:
-            raise ControlError("the critical-speed limit leaves no rpm above min_rpm")
+
+    @property
+    def limits(self) -> Limits:
+        """The one set of rpm limits (``control.limits``) these settings describe."""
+        return Limits(self.min_rpm, self.max_rpm, self.critical_rpm, self.max_critical_frac, self.max_rate_rpm_per_s)
 
     @property
     def rpm_limits(self) -> tuple[float, float]:
         """(lowest, highest) rpm the supervisor will ever command."""
-        if self.critical_rpm is None:
-            return self.min_rpm, self.max_rpm
-        return self.min_rpm, min(self.max_rpm, self.max_critical_frac * self.critical_rpm)
+        return self.limits.rpm_range
 
     def vision_lost(self, now_s: float, last_valid_mi_s: float | None) -> bool:
         """True when no valid MI has been seen for more than ``vision_timeout_s`` (the one
@@ -164,8 +162,7 @@ class SupervisorConfig:
         return last_valid_mi_s is not None and now_s - last_valid_mi_s > self.vision_timeout_s
 
     def clamp(self, rpm: float) -> float:
-        lo, hi = self.rpm_limits
-        return min(hi, max(lo, float(rpm)))
+        return self.limits.clamp(rpm)
 
     def candidates(self, current: float | None = None) -> tuple[float, ...]:
         """Evenly spaced candidate rpms over the limits (plus ``current``), rounded to 0.1."""
@@ -188,7 +185,9 @@ class SupervisorInputs:
     ``radial_factor``: MI(eq. 4)/MI(eq. 3) of the latest valid reading (None: not used);
     ``last_valid_mi_s``: time of the last valid MI; ``camera_ended``: the frame source has
     ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
-    (None: no twin).
+    (None: no twin); ``twin_doubt``: why the application does not trust the twin now (it
+    disagrees with the camera, its what-if study failed; "" = trusted): AUTO treats a
+    twin in doubt as stale (safe state) until it is trusted again.
     """
 
     trend: TrendEstimate | None = None
@@ -202,6 +201,7 @@ class SupervisorInputs:
     last_valid_mi_s: float | None = None
     camera_ended: bool = False
     twin_updated_s: float | None = None
+    twin_doubt: str = ""
 
 
 @dataclass(frozen=True)
@@ -276,6 +276,7 @@ class Decision:
                 "radial_factor": inp.radial_factor,
                 "last_valid_mi_s": inp.last_valid_mi_s,
                 "twin_updated_s": inp.twin_updated_s,
+                "twin_doubt": inp.twin_doubt,
             },
         }
 
@@ -483,6 +484,8 @@ class Supervisor:
         if not ramping or self.safe:
             self.target_rpm = self.commanded_rpm
         lo, hi = self.config.rpm_limits
+        if self._mode is not Mode.OFF and self.commanded_rpm > hi:  # found above the limits (another host,
+            self.target_rpm = hi  # the front panel): this run controls it, so it is brought inside at once
         if self.manual_rpm is None and self._mode is Mode.MANUAL and lo <= self.commanded_rpm <= hi:
             self.manual_rpm = self.commanded_rpm  # (a board outside the limits: no operator rpm until one is given)
 
@@ -503,6 +506,8 @@ class Supervisor:
                 tw = inputs.twin_updated_s if inputs.twin_updated_s is not None else t0
                 if now_s - tw > c.twin_timeout_s:
                     out.append(f"twin stale for {now_s - tw:.1f} s")
+            if inputs.twin_doubt:  # the application does not trust the twin: stale too
+                out.append(f"twin stale: {inputs.twin_doubt}")
         return out
 
     @property

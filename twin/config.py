@@ -16,6 +16,43 @@ CASES = ("A", "B", "C")
 TOKEN_ENV = "DRUMTWIN_CONTROL_TOKEN"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 MAX_SPEED = 100.0  # run seconds per wall second: beyond this the demo only drops frames
+MIN_SPEED = 0.01  # slower than this a demo run never gets anywhere
+MAX_DURATION_S = 30 * 86400.0  # one run's --duration, s (a month; none: until Ctrl-C)
+
+
+def check_host(host: str) -> str:
+    """``host`` when it is an IP address or a host name (RFC 1123 syntax), else a
+    one-line TwinError: ``999.1.1.1`` or ``a b`` never reach the socket layer."""
+    import ipaddress
+    import re
+
+    h = str(host).strip().strip("[]")
+    try:
+        ipaddress.ip_address(h)
+        return h
+    except ValueError:
+        pass
+    label = r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)"
+    if len(h) <= 253 and re.fullmatch(rf"{label}(\.{label})*", h) and not re.fullmatch(r"[0-9.]+", h):
+        return h
+    raise TwinError(f"--host must be an IP address or a host name, got {host!r}")
+
+
+def check_scheduler(address: str) -> tuple[str, int]:
+    """A Dask scheduler address ``tcp://HOST:PORT`` (or ``HOST:PORT``) as (host, port), else
+    a one-line TwinError (the run checks that it answers before it starts)."""
+    from urllib.parse import urlsplit
+
+    text = str(address).strip()
+    parts = urlsplit(text if "://" in text else "tcp://" + text)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme not in ("tcp", "tls") or not parts.hostname or port is None or port <= 0 or parts.path:
+        raise TwinError(f"--scheduler must be tcp://HOST:PORT, got {address!r}")
+    check_host(parts.hostname)
+    return parts.hostname, port
 
 
 @dataclass(frozen=True)
@@ -41,6 +78,7 @@ class RunConfig:
     host: str = "127.0.0.1"
     port: int = 8080
     control_token: str | None = None
+    estop_needs_token: bool = False  # True: EMERGENCY STOP only for unlocked viewers (open networks)
     scheduler: str | None = None  # Dask scheduler address for what-if studies
     start_rpm: float = 5.0
     camera_fps: float = 10.0  # demo camera frame rate (run time)
@@ -70,10 +108,15 @@ class RunConfig:
         case = self.case.upper()
         if case not in CASES:
             raise TwinError(f"--case must be one of A, B, C, got {self.case!r}")
-        if not (math.isfinite(self.speed) and 0 < self.speed <= MAX_SPEED):
-            raise TwinError(f"--speed must be a number in (0, {MAX_SPEED:g}], got {self.speed}")
-        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise TwinError(f"--duration must be a number > 0 (s), got {self.duration_s}")
+        if not (math.isfinite(self.speed) and MIN_SPEED <= self.speed <= MAX_SPEED):
+            raise TwinError(f"--speed must be a number in [{MIN_SPEED:g}, {MAX_SPEED:g}], got {self.speed}")
+        if self.duration_s is not None and not (
+            math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S
+        ):
+            raise TwinError(f"--duration must be a number in (0, {MAX_DURATION_S:g}] s, got {self.duration_s}")
+        check_host(self.host)
+        if self.scheduler is not None:
+            check_scheduler(self.scheduler)
         if not (0 < self.port < 65536):
             raise TwinError(f"--port must be 1..65535, got {self.port}")
         if not (0 <= self.seed < 2**32):

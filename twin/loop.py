@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from control.errors import ControlError
+from control.limits import Limits
 from control.supervisor import Mode, Supervisor, SupervisorConfig
 from control.trend import MITrend, TrendConfig
 from sim.errors import SimError
@@ -40,6 +41,7 @@ from twin.config import RunConfig
 from twin.errors import TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
+from twin.live.mismatch import MismatchMonitor, MismatchTolerance
 from twin.live.records import (
     CameraInfo,
     FrameInfo,
@@ -177,12 +179,16 @@ class LiveLoop:
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
             study=config.extra.get("whatif_study"),
         )
+        sup_config = supervisor_config(config, None if mixer is None else mixer.drum.critical_rpm)
+        self._limits = sup_config.limits
         self.supervisor = SupervisorWorker(
-            Supervisor(supervisor_config(config, None if mixer is None else mixer.drum.critical_rpm),
-                       mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
+            Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
             alive=self.supervisor_alive,
+            mismatch=MismatchMonitor(MismatchTolerance(**config.extra.get("mismatch", {}))),
+            on_twin_mismatch=lambda: self.twin.request("calibrate"),
         )
+        self.whatif.on_auto_result = self._auto_study_result
         self._threads: list[threading.Thread] = []
         self.state.update_numbers(mode=config.mode, mill_state="connecting")
 
@@ -355,20 +361,36 @@ class LiveLoop:
         """Queue an operator study (bad input is an ``operator_rejected`` event, never an
         exception in the dashboard's callback)."""
         t = self.now_s()
-        try:
-            rpm_list = [float(r) for r in rpms]
-            duration = float(duration_s)
-        except (TypeError, ValueError):
-            rpm_list, duration = [], math.nan
-        if not rpm_list or not all(math.isfinite(r) and r >= 0 for r in rpm_list) or not (
-            math.isfinite(duration) and duration > 0
-        ):
-            error = f"bad what-if: rpms {rpms}, {duration_s} s"
-            self.events.event("operator_rejected", t, action="whatif", error=error)
+        try:  # the one set of limits (control.limits): the ``whatif`` command's caps
+            rpm_list, duration = self.limits.check_whatif(rpms, duration_s)
+        except ControlError as exc:
+            self.events.event("operator_rejected", t, action="whatif", error=str(exc))
             return
         self.events.event("operator", t, action="whatif", rpms=rpm_list, duration_s=duration)
         if not self.whatif.submit(rpm_list, duration, reason="operator"):
             self.events.event("operator_rejected", t, action="whatif", error="a study is already running")
+
+    def _auto_study_result(self, error: str | None) -> None:
+        """A failed AUTO what-if study is a fault: an alarm, and AUTO's safe state (the twin
+        in doubt) until a study succeeds or the operator sets a mode again."""
+        t = self.now_s()
+        if error is not None:
+            self.events.fault("whatif_failed", f"AUTO's what-if study failed: {error}", t)
+            self.supervisor.doubt_twin("whatif", f"what-if study failed ({error})")
+        else:
+            self.supervisor.trust_twin("whatif")
+            self.events.clear_fault("whatif_failed", "an AUTO what-if study succeeded", t)
+
+    def cancel_whatif(self) -> bool:
+        """Abandon the operator's running or waiting what-if study; True when there was one."""
+        cancelled = self.whatif.cancel()
+        self.events.event("operator", self.now_s(), action="whatif_cancel", cancelled=cancelled)
+        return cancelled
+
+    @property
+    def limits(self) -> Limits:
+        """The run's one set of limits (the supervisor's): dashboard and what-if read them."""
+        return self._limits
 
 
 # Supervisor settings of the live loop. The camera MI of a well-mixed bed is ~0.93-0.95;

@@ -46,8 +46,8 @@ class FrameRow:
     ma_mi: float  # the paper's 150-sample moving average
     twin_mi: float | None
     twin_slope_deg: float | None
-    rpm_setpoint: float
-    rpm_actual: float
+    rpm_setpoint: float | None  # None (an empty cell): unknown, the mill link is lost (flag link_lost:)
+    rpm_actual: float | None
     mode: str
     flags: tuple[str, ...]
 

@@ -402,10 +402,12 @@ def bgr_to_lab(bgr: np.ndarray) -> np.ndarray:
     return out.reshape(a.shape)
 
 
-def _every_bgr() -> np.ndarray:
-    """All 2^24 BGR colours as a (4096, 4096, 3) image; colour index = B << 16 | G << 8 | R."""
-    every = np.arange(1 << 24, dtype=np.uint32).view(np.uint8).reshape(-1, 4)  # little-endian: R, G, B, 0
-    return np.ascontiguousarray(every[:, 2::-1]).reshape(4096, 4096, 3)
+def _every_bgr(row0: int = 0, rows: int = 4096) -> np.ndarray:
+    """All 2^24 BGR colours as a (4096, 4096, 3) image (colour index = B << 16 | G << 8 | R
+    = row * 4096 + column), or its rows ``row0 .. row0 + rows`` (tables built in chunks
+    peak at a fraction of the memory)."""
+    every = np.arange(row0 << 12, (row0 + rows) << 12, dtype=np.uint32).view(np.uint8).reshape(-1, 4)  # R, G, B, 0
+    return np.ascontiguousarray(every[:, 2::-1]).reshape(rows, 4096, 3)
 
 
 @lru_cache(maxsize=1)
@@ -491,11 +493,15 @@ def class_lut(classes: tuple[ColourClass, ...]) -> np.ndarray:
     classes = check_class_set(classes)
     if is_learned(classes):
         return _lab_lut(classes)
-    h, s, v = cv2.split(cv2.cvtColor(_every_bgr(), cv2.COLOR_BGR2HSV))
-    masks = Classifier(classes).class_masks(h, s, v)
     fine = np.zeros(1 << 24, np.uint8)
-    for k in range(len(masks) - 1, -1, -1):  # exclusive: the first class wins, so it is written last
-        fine[masks[k].ravel() != 0] = k + 1
+    clf = Classifier(classes)
+    step = 256  # rows of 4096 colours per chunk: 1 M colours (the whole table at once peaked at ~200 MB)
+    for r0 in range(0, 4096, step):
+        h, s, v = cv2.split(cv2.cvtColor(_every_bgr(r0, step), cv2.COLOR_BGR2HSV))
+        masks = clf.class_masks(h, s, v)
+        part = fine[r0 << 12:(r0 + step) << 12]
+        for k in range(len(masks) - 1, -1, -1):  # exclusive: the first class wins, so it is written last
+            part[masks[k].ravel() != 0] = k + 1
     return fine
 
 

@@ -17,6 +17,9 @@ from vision.errors import VisionError
 __all__ = ["DrumROI", "detect_drum", "parse_roi", "roi_bbox", "roi_mask"]
 
 
+MAX_ROI_PX = 1e6  # no camera frame is larger: beyond this an ROI is a typo, not a drum
+
+
 @dataclass(frozen=True, slots=True)
 class DrumROI:
     """Drum region in image pixels.
@@ -39,13 +42,15 @@ class DrumROI:
         vals = [self.cx_px, self.cy_px, self.r_px]
         if not all(isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) for v in vals):
             raise VisionError(f"ROI needs finite cx, cy, r in px, got {vals}")
+        if not all(abs(v) <= MAX_ROI_PX for v in vals):  # 1e308: finite, but cx + r overflows
+            raise VisionError(f"ROI cx, cy, r must be within +-{MAX_ROI_PX:g} px, got {vals}")
         if self.r_px <= 0:
             raise VisionError(f"ROI radius must be > 0 px, got {self.r_px}")
         if self.kind == "rect":
             hw = self.r_px if self.half_w_px is None else self.half_w_px
             hh = self.r_px if self.half_h_px is None else self.half_h_px
-            if hw <= 0 or hh <= 0:
-                raise VisionError(f"rectangular ROI needs positive half sizes, got {hw}, {hh}")
+            if not (0 < hw <= MAX_ROI_PX and 0 < hh <= MAX_ROI_PX):
+                raise VisionError(f"rectangular ROI needs half sizes in (0, {MAX_ROI_PX:g}] px, got {hw}, {hh}")
             object.__setattr__(self, "half_w_px", float(hw))
             object.__setattr__(self, "half_h_px", float(hh))
 

@@ -67,8 +67,8 @@ def test_mill_commands_against_emulator(capsys):
         assert code == 0 and "running" in out and emu.motor.running
         code, out, _ = cli(capsys, "mill", emu.url, "stop", "--json")
         assert code == 0 and json.loads(out)["running"] is False
-        code, out, err = cli(capsys, "mill", emu.url, "set-rpm", "500")
-        assert code == 2 and "RANGE" in err and emu.motor.setpoint_rpm == 14.5
+        code, out, err = cli(capsys, "mill", emu.url, "set-rpm", "500", "--commission")  # past our limits
+        assert code == 2 and "RANGE" in err and emu.motor.setpoint_rpm == 14.5  # and the board's
 
 
 def test_bad_url_and_bad_faults_are_one_line_errors():

@@ -4,6 +4,7 @@ token is read-only."""
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -15,7 +16,9 @@ import numpy as np
 import pytest
 import websockets
 
+from control.supervisor import Supervisor
 from sim.drum import Particles
+from sim.recipe import PAPER_DRUM
 from tests.twin.dashboard_helpers import (
     IMG,
     button,
@@ -27,16 +30,19 @@ from tests.twin.dashboard_helpers import (
     open_viewer,
     plot_pixels,
     send_message,
+    slider,
     slider_enabled,
     slider_value,
     wait_for_label,
     wait_until,
 )
+from twin.config import RunConfig
 from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
 from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origin_allowed, tokens_match
 from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
+from twin.loop import supervisor_config
 from twin.state import LiveState, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
@@ -155,7 +161,8 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     state = LiveState()
     state.update_numbers(mode="auto", rpm_setpoint=5.0)
     controls = RecordingControls()
-    dash = Dashboard(state, controls, port=0, update_hz=12).start()
+    limits = supervisor_config(RunConfig()).limits  # what the run's supervisor enforces
+    dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
     try:
         with Feeder(state):
             page.goto(dash.url)
@@ -168,6 +175,10 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             wait_until(lambda: plot_pixels(page)["Mixing index"] != mi_plot, 10, "the MI plot to redraw")
 
             assert not slider_enabled(page)  # AUTO: the operator rpm is inactive
+            lo, hi = limits.rpm_range  # the slider shows what is allowed: the supervisor's limits
+            assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=0.5)
+            assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo)
+            assert hi == Supervisor(supervisor_config(RunConfig())).config.rpm_limits[1]
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")
@@ -179,6 +190,15 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
                 "set_manual_rpm with the slider's final value",
             )
             assert 15.0 < controls.args_of("set_manual_rpm")[-1][0] < 45.0
+            drag_slider_to(page, 1.2)  # past the end of the track: the slider stops at the limit
+            wait_until(lambda: controls.args_of("set_manual_rpm")[-1][0] == slider_value(page), 10, "slider max")
+            assert controls.args_of("set_manual_rpm")[-1][0] <= hi
+
+            input_by_label(page, "What-if rpm list").fill("5, 10000")  # refused, the limit shown
+            button(page, "Run what-if").click()
+            page.get_by_text("what-if refused").wait_for()
+            assert page.get_by_text(f"outside (0, {PAPER_DRUM.critical_rpm:.4g}] rpm").count() >= 1
+            assert controls.args_of("run_whatif") == []
 
             button(page, "EMERGENCY STOP").click()
             button(page, "Re-seed twin from camera").click()
@@ -201,39 +221,60 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
 
 
 def remote_viewer_without_token_is_read_only(page) -> None:
-    """Part two of the browser test (one chromium start): a dashboard bound beyond
-    loopback, its viewer read-only until the token; a quick retry is rate-limited."""
+    """Part two of the browser test (one chromium start): a dashboard with a control
+    token on loopback (the token is enforced there too). A viewer without it has
+    EMERGENCY STOP and nothing else; six wrong attempts lock that viewer only: a new
+    viewer with the right token operates the mill at once."""
     state = LiveState()
     state.update_numbers(mode="auto")
     controls = RecordingControls()
     with pytest.raises(ValueError, match="token"):
         Dashboard(state, controls, host="127.0.0.2", port=0)
     events: list[str] = []
-    dash = Dashboard(state, controls, host="127.0.0.2", port=0, control_token="s3cret",
+    dash = Dashboard(state, controls, host="127.0.0.1", port=0, control_token="s3cret",
+                     unlock_policy=UnlockPolicy(per_client_s=0.05, max_failures=5, window_s=60.0),
                      on_event=lambda kind, fields: events.append(kind)).start()
     try:
         page.goto(dash.url)
         manual = mode_selector(page)
         manual.wait_for()
-        assert manual.is_disabled() and button(page, "EMERGENCY STOP").is_disabled()
-        button(page, "EMERGENCY STOP").click(force=True)
-        input_by_label(page, "Control token").fill("wrong ünïcode ✓")  # any input is safe
-        button(page, "Unlock controls").click()
-        page.get_by_text("wrong token").wait_for()
-        assert manual.is_disabled()
-        input_by_label(page, "Control token").fill("s3cret")
-        button(page, "Unlock controls").click()  # within a second of the failure: refused
+        assert manual.is_disabled() and button(page, "Stop mill").is_disabled()
+        assert button(page, "Run what-if").is_disabled()
+        assert not button(page, "EMERGENCY STOP").is_disabled()  # a stop is always safe
+        button(page, "EMERGENCY STOP").click()
+        wait_until(lambda: "emergency_stop" in controls.names(), 10, "EMERGENCY STOP of a read-only viewer")
+        button(page, "Stop mill").click(force=True)  # a disabled control: nothing happens
+        for i in range(5):
+            input_by_label(page, "Control token").fill(f"wrong ünïcode ✓ {i}")  # any input is safe
+            button(page, "Unlock controls").click()
+            wait_until(lambda i=i: dash.failed_unlocks == i + 1, 10, f"wrong attempt {i + 1}")
+            time.sleep(0.1)
+        input_by_label(page, "Control token").fill("also wrong")
+        button(page, "Unlock controls").click()  # the sixth: this viewer is limited
         page.get_by_text("too many attempts").wait_for()
-        assert manual.is_disabled()
-        time.sleep(1.1)
-        button(page, "Unlock controls").click()
-        wait_until(lambda: not manual.is_disabled(), 10, "controls to unlock")
-        choose_mode(page, "MANUAL")
-        wait_until(lambda: controls.args_of("set_mode"), 10, "set_mode after unlocking")
-        assert controls.args_of("set_mode") == [("manual",)]
-        assert "emergency_stop" not in controls.names()  # the locked click did nothing
-        assert events == ["dashboard_unlock_failed", "dashboard_unlock_limited", "dashboard_unlocked"]
-        assert dash.failed_unlocks == 1 and dash.refused_handshakes == 0  # chromium: own origin
+        input_by_label(page, "Control token").fill("s3cret")
+        button(page, "Unlock controls").click()  # still limited: the limit is this viewer's
+        wait_until(lambda: events.count("dashboard_unlock_limited") == 1 and dash.failed_unlocks == 5, 5,
+                   "the limited viewer's attempts")
+        time.sleep(0.5)
+        assert manual.is_disabled() and controls.args_of("set_mode") == []
+
+        other = page.context.new_page()  # a new viewer (same address) with the right token
+        try:
+            other.goto(dash.url)
+            mode_selector(other).wait_for()
+            input_by_label(other, "Control token").fill("s3cret")
+            button(other, "Unlock controls").click()
+            wait_until(lambda: not mode_selector(other).is_disabled(), 10, "the new viewer to unlock at once")
+            choose_mode(other, "MANUAL")
+            wait_until(lambda: controls.args_of("set_mode"), 10, "set_mode after unlocking")
+            assert controls.args_of("set_mode") == [("manual",)]
+        finally:
+            other.close()
+        assert "stop_mill" not in controls.names()  # the locked click did nothing
+        assert events[:6] == ["dashboard_unlock_failed"] * 5 + ["dashboard_unlock_limited"]
+        assert events[-1] == "dashboard_unlocked" and "dashboard_refused" not in events
+        assert dash.failed_unlocks == 5 and dash.refused_handshakes == 0  # chromium: own origin
     finally:
         dash.stop()
 
@@ -269,19 +310,25 @@ def test_token_compare_is_safe_for_any_input() -> None:
     assert not tokens_match("anything", None) and not tokens_match("", "")
 
 
-def test_unlock_limiter() -> None:
-    lim = UnlockLimiter(UnlockPolicy(per_client_s=1.0, max_failures=3, window_s=60.0))
-    assert lim.wait_s(1, 0.0) == 0.0
-    lim.attempt(1, 0.0, ok=False)
-    assert lim.wait_s(1, 0.5) == pytest.approx(0.5) and lim.wait_s(2, 0.5) == 0.0
-    lim.attempt(2, 0.5, ok=False)
-    lim.attempt(3, 0.6, ok=False)  # three failures from three viewers: everybody waits
-    assert lim.wait_s(4, 1.0) == pytest.approx(59.0) and lim.wait_s(1, 30.0) == pytest.approx(30.0)
-    assert lim.wait_s(4, 60.01) == 0.0  # the oldest failure left the window
-    lim.attempt(4, 61.0, ok=True)
-    assert lim.wait_s(4, 61.5) == pytest.approx(0.5)
-    lim.forget(4)
-    assert lim.wait_s(4, 61.5) == 0.0
+def test_unlock_limiter_is_per_viewer_and_per_address_never_global() -> None:
+    lim = UnlockLimiter(UnlockPolicy(per_client_s=1.0, max_failures=3, max_failures_per_address=5, window_s=60.0))
+    assert lim.wait_s(1, 0.0, "10.0.0.9") == 0.0
+    lim.attempt(1, 0.0, ok=False, address="10.0.0.9")
+    assert lim.wait_s(1, 0.5, "10.0.0.9") == pytest.approx(0.5) and lim.wait_s(2, 0.5, "10.0.0.9") == 0.0
+    for t in (1.0, 2.0):
+        lim.attempt(1, t, ok=False, address="10.0.0.9")
+    assert lim.wait_s(1, 3.0, "10.0.0.9") == pytest.approx(57.0)  # viewer 1: three failures, it waits
+    assert lim.wait_s(2, 3.0, "10.0.0.9") == 0.0  # another viewer of the same host does not
+    assert lim.wait_s(7, 3.0, "10.0.0.1") == 0.0  # nor one elsewhere: never a global lock-out
+    lim.attempt(2, 3.0, ok=False, address="10.0.0.9")
+    lim.attempt(3, 3.0, ok=False, address="10.0.0.9")  # five from one address: that address waits
+    assert lim.wait_s(4, 4.0, "10.0.0.9") == pytest.approx(56.0)
+    assert lim.wait_s(7, 4.0, "10.0.0.1") == 0.0  # the operator's address is untouched
+    lim.forget(1)  # reconnecting clears the viewer's own slot, not its address's failures
+    assert lim.wait_s(1, 4.0, "10.0.0.9") == pytest.approx(56.0)
+    assert lim.wait_s(4, 60.01, "10.0.0.9") == 0.0  # the oldest failures left the window
+    lim.attempt(7, 61.0, ok=True, address="10.0.0.1")
+    assert lim.wait_s(7, 61.5, "10.0.0.1") == pytest.approx(0.5)
 
 
 @pytest.fixture(scope="module")
@@ -428,3 +475,89 @@ def test_scene_draws_shaped_particles_as_turned_outlines_and_the_baffles() -> No
         assert scene.updates == 1
     finally:
         server.stop()
+
+
+# -- issue 26 item 10: an accurate security log; malformed messages as one line ----------
+@pytest.fixture
+def fresh_dash() -> Iterator[tuple[Dashboard, list]]:
+    events: list = []
+    dash = Dashboard(LiveState(), RecordingControls(), port=0, update_hz=4,
+                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+    try:
+        yield dash, events
+    finally:
+        dash.stop()
+
+
+@pytest.mark.timeout(60)
+def test_suppressed_refusals_are_counted_in_the_log(fresh_dash) -> None:
+    dash, events = fresh_dash
+    for _ in range(12):
+        with pytest.raises(websockets.exceptions.InvalidStatus):
+            open_viewer(dash.url, origin="http://evil.example")
+    dash.flush_throttled(force=True)  # also done by the update thread once 5 s passed, and at stop
+    refused = [f for k, f in events if k == "dashboard_refused"]
+    assert len(refused) == 2 and refused[1]["summary"] is True
+    assert 1 + sum(f["suppressed"] for f in refused) == 12 == dash.refused_handshakes
+
+
+@pytest.mark.timeout(60)
+def test_quick_disconnects_are_not_refusals(fresh_dash) -> None:
+    dash, events = fresh_dash
+
+    class Gone:  # a viewer whose websocket closed before its controls were built
+        client_id = 10_000
+
+    dash._on_connect(Gone())  # type: ignore[arg-type]
+    for _ in range(8):  # real viewers that leave at once
+        open_viewer(dash.url).close()
+    with open_viewer(dash.url) as ws:
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+    time.sleep(0.5)
+    assert [k for k, _ in events if k == "dashboard_refused"] == []
+
+
+@pytest.mark.timeout(60)
+def test_malformed_websocket_messages_are_one_log_line(fresh_dash, capfd, caplog) -> None:
+    dash, events = fresh_dash
+    for junk in (b"\x00\x01garbage", None):
+        with open_viewer(dash.url) as ws:
+            assert wait_for_label(ws, "EMERGENCY STOP", 20)
+            if junk is None:
+                send_message(ws, "GuiUpdateMessage", uuid=5)  # valid msgpack, wrong fields
+            else:
+                ws.send(junk)
+            wait_until(lambda: ws.protocol.close_code is not None or dash.bad_messages > 0, 10, "the drop")
+        wait_until(lambda n=(1 if junk else 2): dash.bad_messages >= n, 10, "the malformed message reported")
+
+    def records() -> list[logging.LogRecord]:
+        return [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.WARNING]
+
+    wait_until(lambda: len(records()) >= 2, 10, "both records (the filter counts before the handler logs)")
+    assert "Traceback" not in capfd.readouterr().err
+    got = records()
+    dropped = "dashboard: dropped a viewer after a malformed message"
+    assert [r.getMessage().split(" (")[0] for r in got] == [dropped] * 2
+    assert all(r.exc_info is None and "\n" not in r.getMessage() for r in got)  # one line, no traceback
+    assert [k for k, _ in events].count("dashboard_bad_message") == 1  # throttled; the second is counted
+    dash.flush_throttled(force=True)
+    assert [f.get("suppressed") for k, f in events if k == "dashboard_bad_message"] == [0, 1]
+
+
+def test_the_viser_internals_the_dashboard_relies_on(fresh_dash) -> None:
+    """Issue 25 item 6: the versions are the checked ones, and each internal exists."""
+    import inspect
+
+    import viser
+    import websockets.asyncio.server as ws_server
+
+    from twin.dashboard.guard import CHECKED_VERSIONS
+
+    assert viser.__version__ in CHECKED_VERSIONS["viser"]
+    assert websockets.__version__ in CHECKED_VERSIONS["websockets"]
+    assert "connection handler failed" in inspect.getsource(ws_server)  # OneLineConnectionErrors' record
+    dash, _ = fresh_dash
+    with open_viewer(dash.url) as ws:
+        assert wait_for_label(ws, "EMERGENCY STOP", 20)
+        (cid,) = list(dash._server._websock_server._live_connections)
+        assert dash._client_address(cid) == "127.0.0.1"  # the per-address unlock limit's key

@@ -361,6 +361,13 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     assert any("no valid MI" in e["reason"] for e in safe) and report["safe_with_alarm"]
     t0, t1 = report["pause"]
     assert not [e for e in events if e["kind"] == "mill_command" and e["command"] == "set_rpm" and t0 <= e["t_s"] <= t1]
+    import csv  # issue 26 item 7: during the outage the rpm is unknown (empty), never the last known value
+
+    with (tmp_path / "run" / "frames.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    lost = [r for r in rows if "link_lost:mill" in r["flags"].split(";")]
+    assert len(lost) >= 5 and all(r["rpm_actual"] == "" and r["rpm_setpoint"] == "" for r in lost)
+    assert all(r["rpm_actual"] != "" for r in rows[rows.index(lost[-1]) + 1:])  # known again after it
 
 
 @pytest.mark.timeout(120)

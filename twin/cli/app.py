@@ -44,4 +44,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     NotADirectoryError,
     ConnectionError,
     TimeoutError,
+    OSError,  # a read-only or full directory, a device that went away: the environment, in one line
+    RecursionError,  # a TOML nested thousands deep
+    OverflowError,  # a number too large for its use (roi = [1e308, ...])
 )

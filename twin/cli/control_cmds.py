@@ -108,9 +108,25 @@ def mill_set_rpm(
     rpm: float = typer.Argument(..., help="Absolute setpoint (rpm)."),
     as_json: bool = JSON_OPT,
     hold_s: float = HOLD_OPT,
+    commission: bool = typer.Option(
+        False, "--commission", help="Commissioning override: allow an rpm outside the run's limits (logged)."
+    ),
 ) -> None:
-    """Set the speed setpoint (rpm)."""
+    """Set the speed setpoint (rpm), inside the run's limits (the demo drum's: the same
+    limits the supervisor enforces) unless --commission is given."""
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
     check_number("rpm", rpm, at_least=0.0)
+    limits = supervisor_config(RunConfig()).limits  # the one set of limits (control.limits)
+    if not commission:
+        limits.refuse_rpm(rpm, "set-rpm")  # ControlError: one line naming the limit, exit 2
+    elif limits.check_rpm(rpm).clamped and rpm != 0:
+        import logging
+
+        msg = f"commissioning override: set-rpm {rpm:g} outside the limits {limits.describe()}"
+        logging.getLogger("drumtwin.mill").warning(msg)
+        console_err.print(f"[bold yellow]warning:[/] {msg}", highlight=False)
     _check_hold(hold_s)
     with _client(ctx) as c:
         c.set_rpm(rpm)
@@ -211,7 +227,7 @@ def mill_emulator(
     check_number("--accel", accel, above=0.0, at_most=1e4)
     check_number("--tau", tau_s, at_least=0.0, at_most=60.0)
     if duration_s is not None:
-        check_number("--duration", duration_s, above=0.0)
+        check_number("--duration", duration_s, above=0.0, at_most=30 * 86400.0)  # 1e308 would never end
     cfg = DeviceConfig(watchdog_s=watchdog_s, motor=MotorConfig(max_rpm=max_rpm, accel_rpm_per_s=accel, tau_s=tau_s))
     emu = MillEmulator(cfg, Faults.parse(faults), seed=seed)
     done = threading.Event()

@@ -42,6 +42,22 @@ def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
         yield f
 
 
+def check_scheduler_answers(address: str, timeout_s: float = 3.0) -> None:
+    """TwinError (one line) unless something accepts a TCP connection at the Dask
+    scheduler ``address`` within ``timeout_s`` (a dead or garbage address is refused at
+    the start of the run, not found by the first what-if study in AUTO)."""
+    import socket
+
+    from twin.config import check_scheduler
+
+    host, port = check_scheduler(address)
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise TwinError(f"--scheduler {address}: no Dask scheduler answers ({exc.strerror or exc})") from None
+
+
 def run_live(cfg, *, progress: bool = True, on_started=None):
     """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
 
@@ -57,6 +73,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     from twin.runlog import RunLog
     from twin.state import FRAME_ROW_COLUMNS, LiveState
 
+    if cfg.scheduler is not None:
+        check_scheduler_answers(cfg.scheduler)  # before anything starts: one line, exit 2
     clock = RunClock(cfg.speed)
     classes = None
     roi = None
@@ -120,6 +138,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
             dash = Dashboard(
                 state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
                 update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
+                limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
             ).start()
             console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
             runlog.set_metadata(dashboard_url=dash.url)
@@ -236,6 +255,9 @@ def run(
         None, "--control-token", help="Token that unlocks the controls (or $DRUMTWIN_CONTROL_TOKEN)."
     ),
     scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address for what-if studies."),
+    estop_needs_token: bool = typer.Option(
+        False, "--estop-needs-token", help="EMERGENCY STOP only for viewers with the token (open networks)."
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary at the end (stdout)."),
     drive: str = typer.Option(
         None, "--drive", help="Demo only: the mill is this drive profile's emulator over Modbus RTU (e.g. delta-ms300)."
@@ -253,6 +275,7 @@ def run(
             camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
             host=host, control_token=control_token, scheduler=scheduler, engine=engine,
+            estop_needs_token=estop_needs_token,
             extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
         ).resolved()
         if json_out:
@@ -381,3 +404,29 @@ def bench_dashboard(
             f"dashboard in headless chromium over {rate.seconds:g} s: camera {rate.camera_hz:.1f} updates/s, "
             f"twin {rate.twin_hz:.1f} updates/s (target 10)", highlight=False
         )
+
+
+@bench_app.command("memory")
+def bench_memory(
+    seconds: float = typer.Option(30.0, "--seconds", help="Run time of the measured run (s)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON: main_hwm_mb, tree_rss_mb, tree_pss_mb, ..."),
+) -> None:
+    """Peak resident memory of `drumtwin run` without the dashboard on a 640x640, 30 fps
+    video (the mill emulator on a pty): the run process, and its whole process tree."""
+    from rich.table import Table
+
+    from control.errors import check_number
+    from twin.cli.app import console
+    from twin.membench import measure_run_memory
+
+    check_number("--seconds", seconds, at_least=5.0, at_most=600.0)
+    with console_err.status(f"measuring a {seconds:g} s run ..."):
+        res = measure_run_memory(seconds)
+    if as_json:
+        print_json(asdict(res))
+        return
+    t = Table(title=f"peak memory of `drumtwin run --no-dashboard`, 640x640 video at 30 fps, {seconds:g} s")
+    for col in ("run process VmHWM MB", "process tree RSS MB", "process tree PSS MB", "processes"):
+        t.add_column(col, justify="right")
+    t.add_row(f"{res.main_hwm_mb:.0f}", f"{res.tree_rss_mb:.0f}", f"{res.tree_pss_mb:.0f}", str(res.processes))
+    console.print(t)

@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 import typer
 
+from control.limits import WHATIF_MAX_RUNS as MAX_WHATIF_RUNS  # the one set of limits: study size
+from control.limits import WHATIF_MAX_S as MAX_SIM_S  # and the longest simulated run of one command, s
 from sim.errors import SimError
 from twin.cli.app import app, bench_app, console, console_err, print_json
 
@@ -35,8 +37,6 @@ def _parse_list(text: str, what: str) -> list[float]:
     return vals
 
 
-MAX_SIM_S = 3600.0  # longest simulated run of one command, s
-MAX_WHATIF_RUNS = 2000  # rpm values x seeds of one study
 MAX_SEEDS = 1000
 SLOPE_AFTER_S = 5.0  # ``slope_deg`` averages the free surface after this start-up
 

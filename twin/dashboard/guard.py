@@ -10,11 +10,12 @@ one; a script must send the dashboard's). On a loopback bind the ``Host`` must a
 loopback name (``127.0.0.1``, ``localhost``, ``[::1]``), which defeats DNS rebinding (an
 attacker's name re-pointed at 127.0.0.1 has the attacker's name as ``Host``).
 
-Decision: the default 127.0.0.1 dashboard still authorises every client that gets
-through this door without a token. A client that passes is either the operator's own
-browser tab on the dashboard's origin or a local process, which could talk to the mill
-in other ways anyway; the hostile page is stopped by the Origin check, not by a token.
-A dashboard bound beyond loopback needs the control token for every control.
+Decision: a dashboard started without a control token (allowed on loopback only)
+authorises every client that gets through this door; with ``--control-token`` the token
+is enforced on any host, loopback included. EMERGENCY STOP is enabled for every viewer
+(a stop is always safe) unless the dashboard is told otherwise (``estop_needs_token``,
+for open networks). Token attempts are limited per viewer and per client address,
+never globally, so nobody can lock the operator out (:class:`UnlockLimiter`).
 
 Every HTTP response (the page, its scripts, the refused handshake) carries
 ``X-Frame-Options: DENY`` and ``Content-Security-Policy: frame-ancestors 'none'`` so the
@@ -32,6 +33,7 @@ import gc
 import hashlib
 import hmac
 import http
+import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -39,6 +41,13 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from twin.errors import TwinError
+
+CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {"viser": ("1.1.1",), "websockets": ("16.1.1",)}
+"""Versions whose internals the dashboard relies on were checked against (the websocket
+server found by :func:`install_handshake_guard`, ``_live_connections`` and a connection's
+``remote_address`` for the per-address unlock limit, the ``websockets.server`` log record
+of a failed handler for :class:`OneLineConnectionErrors`); ``tests/twin/test_dashboard.py``
+tests each assumption and fails on a version not listed here."""
 
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 FRAME_HEADERS: tuple[tuple[str, str], ...] = (
@@ -106,45 +115,65 @@ def tokens_match(given: object, expected: str | None) -> bool:
 
 @dataclass(frozen=True)
 class UnlockPolicy:
-    """Limits on token guessing: one attempt per ``per_client_s`` per viewer, and at most
-    ``max_failures`` failed attempts over all viewers within ``window_s`` (then every
-    attempt waits, so opening many viewers does not help)."""
+    """Limits on token guessing, per viewer and per client address, never global (one
+    viewer's or one host's failures never lock out another with the right token):
+    one attempt per ``per_client_s`` per viewer; a viewer with ``max_failures`` failed
+    attempts within ``window_s`` waits, and so does every viewer of an address with
+    ``max_failures_per_address`` failures within ``window_s`` (opening many viewers from
+    one host does not help)."""
 
     per_client_s: float = 1.0
     max_failures: int = 5
+    max_failures_per_address: int = 20
     window_s: float = 60.0
 
 
 class UnlockLimiter:
-    """Rate limiter of control-token attempts (pure: the caller passes the time, s)."""
+    """Rate limiter of control-token attempts (pure: the caller passes the time, s).
+    Keys: the viewer (``client_id``) and its client address (``address``, any string)."""
 
     def __init__(self, policy: UnlockPolicy | None = None) -> None:
         self.policy = policy or UnlockPolicy()
         self._last_try: dict[int, float] = {}
-        self._failures: deque[float] = deque()
+        self._by_client: dict[int, deque[float]] = {}
+        self._by_address: dict[str, deque[float]] = {}
 
-    def wait_s(self, client_id: int, now_s: float) -> float:
-        """Seconds ``client_id`` must wait before its next attempt (0: may try now)."""
+    def _recent(self, failures: deque[float] | None, now_s: float) -> deque[float]:
+        if failures is None:
+            return deque()
+        while failures and now_s - failures[0] >= self.policy.window_s:
+            failures.popleft()
+        return failures
+
+    def wait_s(self, client_id: int, now_s: float, address: str = "") -> float:
+        """Seconds ``client_id`` (at ``address``) must wait before its next attempt (0: may try now)."""
         p = self.policy
-        while self._failures and now_s - self._failures[0] >= p.window_s:
-            self._failures.popleft()
         wait = 0.0
         last = self._last_try.get(client_id)
         if last is not None:
             wait = max(wait, p.per_client_s - (now_s - last))
-        if len(self._failures) >= p.max_failures:
-            wait = max(wait, p.window_s - (now_s - self._failures[0]))
+        for failures, limit in (
+            (self._recent(self._by_client.get(client_id), now_s), p.max_failures),
+            (self._recent(self._by_address.get(address), now_s), p.max_failures_per_address),
+        ):
+            if len(failures) >= limit:
+                wait = max(wait, p.window_s - (now_s - failures[-limit]))
+        if not self._by_address.get(address):
+            self._by_address.pop(address, None)  # no empty entries left behind
         return max(0.0, wait)
 
-    def attempt(self, client_id: int, now_s: float, ok: bool) -> None:
+    def attempt(self, client_id: int, now_s: float, ok: bool, address: str = "") -> None:
         """Record an attempt that was allowed (``wait_s`` was 0) and its outcome."""
         self._last_try[client_id] = now_s
         if not ok:
-            self._failures.append(now_s)
+            self._by_client.setdefault(client_id, deque()).append(now_s)
+            self._by_address.setdefault(address, deque()).append(now_s)
 
     def forget(self, client_id: int) -> None:
-        """A viewer left (its per-client slot is dropped; global failures stay)."""
+        """A viewer left: its own slots are dropped (its address keeps its failures, so
+        reconnecting does not reset the address limit)."""
         self._last_try.pop(client_id, None)
+        self._by_client.pop(client_id, None)
 
 
 def _find_ws_server(port: int) -> Any:
@@ -194,3 +223,50 @@ def install_handshake_guard(
 
     server.process_request = process_request
     server.process_response = process_response
+
+
+_HANDLER_FAILURES = ("connection handler failed", "opening handshake failed")
+
+
+class OneLineConnectionErrors(logging.Filter):
+    """Turns the ``websockets`` server's traceback for a connection whose handler failed
+    (viser raises on a malformed message from a viewer: msgpack junk, a wrong field) into
+    one log line, and reports it to ``on_error(kind, detail)``. Only records of the
+    connections on ``port`` are touched (the logger is shared by every server)."""
+
+    def __init__(self, port: int, on_error: Callable[[str, str], None] | None = None) -> None:
+        super().__init__()
+        self.port = port
+        self.on_error = on_error
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.exc_info or record.msg not in _HANDLER_FAILURES:
+            return True
+        ws = getattr(record, "websocket", None)
+        try:
+            local = ws.local_address if ws is not None else None
+        except Exception:
+            local = None
+        if not (isinstance(local, tuple) and len(local) >= 2 and local[1] == self.port):
+            return True
+        exc = record.exc_info[1]
+        detail = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0][:200]}"
+        record.msg, record.args = "dashboard: dropped a viewer after a malformed message (%s)", (detail,)
+        record.exc_info, record.exc_text, record.levelno, record.levelname = None, None, logging.WARNING, "WARNING"
+        if self.on_error is not None:
+            try:
+                self.on_error("dashboard_bad_message", detail)
+            except Exception:
+                pass
+        return True
+
+
+def install_connection_error_filter(
+    port: int, on_error: Callable[[str, str], None] | None = None
+) -> Callable[[], None]:
+    """Install :class:`OneLineConnectionErrors` on the ``websockets.server`` logger; returns
+    the function that removes it again (the dashboard calls it when it stops)."""
+    flt = OneLineConnectionErrors(port, on_error)
+    logger = logging.getLogger("websockets.server")
+    logger.addFilter(flt)
+    return lambda: logger.removeFilter(flt)

@@ -6,10 +6,13 @@ no image published at ``update_hz`` is missed, and redraws the plots at a quarte
 that poll rate (uPlot redraws cost the browser more than images); it never touches
 the loop's threads. Controls are built per viewer (per viser client), one viewer at a
 time (a lock: viser's shared folder context admits one builder), so every viewer gets
-them and EMERGENCY STOP however many connect at once. When the server binds beyond
-loopback a viewer must enter the control token before its controls are enabled, so
-remote viewers without it are read-only; token attempts are rate-limited and failures
+them and EMERGENCY STOP however many connect at once. With a control token (required
+beyond loopback, enforced on loopback too) a viewer must enter it before its controls
+are enabled; without it a viewer has EMERGENCY STOP only (``estop_needs_token``: not
+even that). Token attempts are rate-limited per viewer and per address and failures
 are reported as events. Every control callback re-checks that its viewer is authorised.
+The rpm slider spans the run's limits (``control.limits``); a clamped rpm or a refused
+what-if is told to the viewer who asked.
 
 Security (see ``twin.dashboard.guard``): websocket handshakes from a foreign ``Origin``
 are refused, every response forbids framing, and viser's share-URL tunnel is disabled
@@ -30,12 +33,20 @@ import cv2
 import numpy as np
 import viser
 
-from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, install_handshake_guard, origin_allowed, tokens_match
+from control.errors import ControlError
+from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
+from twin.dashboard.guard import (
+    UnlockLimiter,
+    UnlockPolicy,
+    install_connection_error_filter,
+    install_handshake_guard,
+    origin_allowed,
+    tokens_match,
+)
 from twin.dashboard.scene import TwinScene
 from twin.state import Controls, LiveState, Snapshot, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
-RPM_MAX = 70.0
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
 _log = logging.getLogger("drumtwin.dashboard")
 EVENT_THROTTLE_S = 5.0  # noisy security events (refused handshakes, limited unlocks): at most one per 5 s
@@ -64,15 +75,17 @@ def _fmt(value: Any, spec: str = ".3f") -> str:
     return str(value)
 
 
-def parse_rpm_list(text: str) -> list[float]:
-    """``"5, 20,40"`` -> ``[5.0, 20.0, 40.0]``; raises ValueError on junk or values outside 0..RPM_MAX."""
-    rpms = [float(p) for p in text.replace(";", ",").split(",") if p.strip()]
-    if not rpms:
-        raise ValueError("give at least one rpm")
-    for r in rpms:
-        if not (0 < r <= RPM_MAX):
-            raise ValueError(f"rpm {r:g} outside 0..{RPM_MAX:g}")
-    return rpms
+def parse_rpm_list(text: str, limits: Limits | None = None) -> list[float]:
+    """``"5, 20,40"`` -> ``[5.0, 20.0, 40.0]``; raises ValueError on junk, and on a list the
+    what-if limits refuse (``control.limits``: the ``whatif`` command's caps), naming them."""
+    try:
+        rpms = [float(p) for p in str(text).replace(";", ",").split(",") if p.strip()]
+    except ValueError:
+        raise ValueError(f"rpm list must be numbers separated by commas (got {str(text)[:40]!r})") from None
+    try:
+        return (limits or Limits()).check_whatif(rpms, 1.0)[0]
+    except ControlError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def numbers_markdown(numbers: dict[str, Any]) -> str:
@@ -151,10 +164,14 @@ class Dashboard:
         title: str = "drumtwin",
         on_event: EventSink | None = None,
         unlock_policy: UnlockPolicy | None = None,
+        limits: Limits | None = None,
+        estop_needs_token: bool = False,
     ) -> None:
         local = host in ("127.0.0.1", "localhost", "::1")
         if not local and not control_token:
             raise ValueError(f"binding the dashboard to {host} needs a control token")
+        self.limits = limits or Limits()
+        self.estop_needs_token = bool(estop_needs_token)
         self._on_event = on_event
         self._limiter = UnlockLimiter(unlock_policy)
         self._limiter_lock = threading.Lock()
@@ -167,7 +184,7 @@ class Dashboard:
         self.host = host
         self.update_hz = float(update_hz)
         self._token = control_token
-        self._token_required = bool(control_token) and not local
+        self._token_required = bool(control_token)  # on any host, loopback too
         self._clients: dict[int, _ClientControls] = {}
         self._clients_lock = threading.Lock()
         self._stop = threading.Event()
@@ -181,6 +198,8 @@ class Dashboard:
         except Exception:
             self._server.stop()
             raise
+        self.bad_messages = 0
+        self._remove_error_filter = install_connection_error_filter(self.port, self._bad_message)
         self._disable_share_tunnel()
         self._build_shared(title)
         self.scene = TwinScene(self._server)
@@ -210,6 +229,24 @@ class Dashboard:
             self._throttle[kind] = (now, 0)
         self._event(kind, suppressed=suppressed, **fields)
 
+    def flush_throttled(self, force: bool = False) -> None:
+        """Write the counts of throttled events suppressed since their last report once
+        their window has passed (``force``: now, e.g. when the dashboard stops), so the
+        log says how many refused handshakes or limited unlocks there were."""
+        now = time.monotonic()
+        due: list[tuple[str, int]] = []
+        with self._limiter_lock:
+            for kind, (last, suppressed) in self._throttle.items():
+                if suppressed and (force or now - last >= EVENT_THROTTLE_S):
+                    due.append((kind, suppressed))
+                    self._throttle[kind] = (now, 0)
+        for kind, suppressed in due:
+            self._event(kind, suppressed=suppressed, summary=True)
+
+    def _bad_message(self, kind: str, detail: str) -> None:
+        self.bad_messages += 1
+        self._event_throttled(kind, error=detail)
+
     def _refused(self, origin: str | None, host: str | None) -> None:
         self.refused_handshakes += 1
         self._event_throttled("dashboard_refused", origin=origin, host=host)
@@ -228,30 +265,44 @@ class Dashboard:
 
         self._server.request_share_url = no_share  # type: ignore[method-assign]
 
-    def _client_origin_ok(self, client: viser.ClientHandle) -> bool:
+    def _client_origin_ok(self, client: viser.ClientHandle) -> bool | None:
         """Second check of a viewer's handshake headers (the guard refuses foreign Origins
-        at the door; this covers the moment before the guard was installed)."""
+        at the door; this covers the moment before the guard was installed). None when
+        the viewer has already disconnected (a quick reload, a closed tab)."""
         conn = self._server._websock_server._live_connections.get(client.client_id)
+        if conn is None:
+            return None
         request = getattr(conn, "request", None)
         if request is None:
             return False
         h = request.headers
         return origin_allowed(h.get("Origin"), h.get("Host"), bind_host=self.host, port=self.port)
 
-    def _try_unlock(self, client_id: int, given: object) -> tuple[bool, str]:
-        """Check a token attempt under the rate limit; returns (authorised, message)."""
+    def _client_address(self, client_id: int) -> str:
+        """The viewer's client address (IP), "" when unknown."""
+        conn = self._server._websock_server._live_connections.get(client_id)
+        try:
+            addr = conn.remote_address if conn is not None else None
+        except Exception:
+            addr = None
+        return str(addr[0]) if isinstance(addr, tuple) and addr else ""
+
+    def _try_unlock(self, client_id: int, given: object, address: str = "") -> tuple[bool, str]:
+        """Check a token attempt under the per-viewer and per-address rate limits;
+        returns (authorised, message)."""
         now = time.monotonic()
         with self._limiter_lock:
-            wait = self._limiter.wait_s(client_id, now)
+            wait = self._limiter.wait_s(client_id, now, address)
             ok = wait <= 0 and tokens_match(given, self._token)
             if wait <= 0:
-                self._limiter.attempt(client_id, now, ok)
+                self._limiter.attempt(client_id, now, ok, address)
         if wait > 0:
-            self._event_throttled("dashboard_unlock_limited", client=client_id, wait_s=round(wait, 1))
+            self._event_throttled("dashboard_unlock_limited", client=client_id, address=address,
+                                  wait_s=round(wait, 1))
             return False, f"**too many attempts: wait {math.ceil(wait)} s**"
         if not ok:
             self.failed_unlocks += 1
-            self._event("dashboard_unlock_failed", client=client_id)
+            self._event("dashboard_unlock_failed", client=client_id, address=address)
             return False, "**wrong token: read-only**"
         self._event("dashboard_unlocked", client=client_id)
         return True, "controls unlocked"
@@ -330,7 +381,10 @@ class Dashboard:
         self._whatif_seq = -1
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        if not self._client_origin_ok(client):
+        ok = self._client_origin_ok(client)
+        if ok is None:  # the viewer left before its controls were built: not a refusal
+            return
+        if not ok:
             self._event("dashboard_refused", client=client.client_id, origin="(after connect)")
             self._close(client)
             return
@@ -364,10 +418,15 @@ class Dashboard:
 
                 @unlock.on_click
                 def _(event: viser.GuiEvent) -> None:
-                    ok, message = self._try_unlock(client.client_id, token.value)
+                    if event.client is None:
+                        return
+                    address = self._client_address(client.client_id)
+                    ok, message = self._try_unlock(client.client_id, token.value, address)
                     cc.authorised = ok
                     for h in cc.handles:
                         h.disabled = not ok
+                    if cc.estop is not None:
+                        cc.estop.disabled = not self._estop_allowed(cc)
                     self._sync_rpm_enabled(cc, str(self.state.numbers.get("mode", "off")))
                     cc.status.content = message
 
@@ -376,28 +435,32 @@ class Dashboard:
                 "Mode", MODE_LABELS, initial_value=mode_now if mode_now in MODE_LABELS else "OFF",
                 disabled=not cc.authorised,
             )
+            lo, hi = self.limits.rpm_range  # the slider shows what the supervisor allows
             cc.rpm = gui.add_slider(
                 "rpm (MANUAL)",
-                min=1.0,
-                max=RPM_MAX,
+                min=lo,
+                max=hi,
                 step=0.5,
-                initial_value=float(numbers.get("rpm_setpoint") or 5.0),
+                initial_value=self.limits.clamp(float(numbers.get("rpm_setpoint") or lo)),
                 disabled=not cc.authorised or mode_now != "MANUAL",
+                hint=f"limits {self.limits.describe()}",
             )
             start = gui.add_button("Start mill", icon=viser.Icon.PLAYER_PLAY, disabled=not cc.authorised)
             stop = gui.add_button("Stop mill", icon=viser.Icon.PLAYER_STOP, disabled=not cc.authorised)
-            estop = gui.add_button(
-                "EMERGENCY STOP", color="red", icon=viser.Icon.ALERT_OCTAGON, disabled=not cc.authorised
+            estop = gui.add_button(  # a stop is always safe: every viewer has it unless configured off
+                "EMERGENCY STOP", color="red", icon=viser.Icon.ALERT_OCTAGON, disabled=not self._estop_allowed(cc)
             )
             recal = gui.add_button("Recalibrate twin", icon=viser.Icon.ADJUSTMENTS, disabled=not cc.authorised)
             reseed = gui.add_button("Re-seed twin from camera", icon=viser.Icon.CAMERA, disabled=not cc.authorised)
         with self._whatif_folder:
             rpms = gui.add_text("What-if rpm list", "5, 20, 40, 60", disabled=not cc.authorised, order=-2)
             dur = gui.add_number(
-                "What-if duration s", 60.0, min=5.0, max=600.0, step=5.0, disabled=not cc.authorised, order=-1.5
+                "What-if duration s", 60.0, min=1.0, max=WHATIF_MAX_S, step=5.0, disabled=not cc.authorised,
+                order=-1.6, hint=f"at most {WHATIF_MAX_S:g} s, {WHATIF_MAX_RUNS} rpm values",
             )
-            run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1)
-        cc.handles = [cc.mode, start, stop, estop, recal, reseed, rpms, dur, run]
+            run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1.5)
+            cancel = gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=not cc.authorised, order=-1)
+        cc.handles = [cc.mode, start, stop, recal, reseed, rpms, dur, run, cancel]
         cc.estop = estop
 
         def guarded(fn):
@@ -425,11 +488,28 @@ class Dashboard:
         @cc.rpm.on_update
         @guarded
         def _(event: viser.GuiEvent) -> None:
-            self.controls.set_manual_rpm(float(cc.rpm.value))
+            try:
+                check = self.limits.check_rpm(cc.rpm.value)
+            except ControlError as exc:
+                cc.status.content = f"**rpm refused: {exc}**"
+                return
+            if check.clamped:  # the person who asked is told (the supervisor clamps the same way)
+                cc.status.content = f"**{check.message}**"
+                self._event("operator_clamped", client=client.client_id, requested=check.requested, rpm=check.rpm)
+            self.controls.set_manual_rpm(check.rpm)
+
+        @estop.on_click
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
+            if not self._estop_allowed(cc):
+                cc.status.content = "*read-only viewer: action refused*"
+                return
+            self.controls.emergency_stop()
 
         start.on_click(guarded(lambda e: self.controls.start_mill()))
         stop.on_click(guarded(lambda e: self.controls.stop_mill()))
-        estop.on_click(guarded(lambda e: self.controls.emergency_stop()))
+        cancel.on_click(guarded(lambda e: self._cancel_whatif(cc)))
         recal.on_click(guarded(lambda e: self.controls.recalibrate()))
         reseed.on_click(guarded(lambda e: self.controls.reseed_twin()))
 
@@ -437,11 +517,25 @@ class Dashboard:
         @guarded
         def _(event: viser.GuiEvent) -> None:
             try:
-                rpm_list = parse_rpm_list(str(rpms.value))
-            except ValueError as exc:
-                cc.status.content = f"**what-if: {exc}**"
+                rpm_list = parse_rpm_list(str(rpms.value), self.limits)
+                rpm_list, duration = self.limits.check_whatif(rpm_list, dur.value)
+            except (ValueError, ControlError) as exc:  # refused, with the limit, to the person who asked
+                cc.status.content = f"**what-if refused: {exc}**"
+                self._event("operator_rejected", client=client.client_id, action="whatif", error=str(exc))
                 return
-            self.controls.run_whatif(rpm_list, float(dur.value))
+            cc.status.content = f"what-if queued: {len(rpm_list)} rpm x {duration:g} s"
+            self.controls.run_whatif(rpm_list, duration)
+
+    def _estop_allowed(self, cc: _ClientControls) -> bool:
+        """EMERGENCY STOP for every viewer (a stop is always safe) unless ``estop_needs_token``."""
+        return cc.authorised or not self.estop_needs_token
+
+    def _cancel_whatif(self, cc: _ClientControls) -> None:
+        cancel = getattr(self.controls, "cancel_whatif", None)
+        if cancel is None:
+            cc.status.content = "**cancel: not supported by this loop**"
+            return
+        cc.status.content = "what-if cancelled" if cancel() else "no what-if to cancel"
 
     def _sync_rpm_enabled(self, cc: _ClientControls, mode: str) -> None:
         """Show ``mode`` in the viewer's selector; the rpm slider is live only in MANUAL."""
@@ -485,6 +579,8 @@ class Dashboard:
                 if self._stop.is_set():
                     break
             tick += 1
+            if tick % 8 == 0:
+                self.flush_throttled()
             next_t += period
             delay = next_t - time.monotonic()
             if delay < 0:
@@ -567,4 +663,6 @@ class Dashboard:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
+        self.flush_throttled(force=True)
+        self._remove_error_filter()
         self._server.stop()

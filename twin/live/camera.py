@@ -154,6 +154,11 @@ class CameraWorker:
             raise VisionError(f"no drum in any camera frame: {missed}")
 
 
+def _known(value: float) -> float | None:
+    """A measurement for the frame row: None (an empty cell) when unknown (NaN)."""
+    return value if math.isfinite(value) else None
+
+
 class ProcessWorker:
     """Readings -> trend, moving average, one :class:`FrameRow` (run log + plots) and the
     newest :class:`FrameInfo`; camera slope angles go on to the twin (``slopes``). Each
@@ -225,11 +230,12 @@ class ProcessWorker:
             valid=valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
             ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
-            rpm_setpoint=mill.setpoint_rpm, rpm_actual=mill.actual_rpm, mode=self.view.mode(), flags=tuple(r.flags),
+            rpm_setpoint=_known(mill.setpoint_rpm), rpm_actual=_known(mill.actual_rpm), mode=self.view.mode(),
+            flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ()),
         )
         values = row.as_dict()
         self.write_row(values)
-        self.state.publish_point(values)
+        self.state.publish_point({**values, "rpm_setpoint": mill.setpoint_rpm, "rpm_actual": mill.actual_rpm})
         self.sink.numbers(
             t_s=item.t_s, mi=r.mi, d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration,
             slope_deg=r.slope_deg, trend_mi=est.level, camera_fps=self.camera_fps(),

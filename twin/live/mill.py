@@ -87,6 +87,7 @@ class MillWorker:
         self._run: StartMill | StopMill | None = None
         self._refused = 0  # refusals and set-rpms not taken, so far
         self._expect_rpm: float | None = None  # the setpoint an ACKed set-rpm must show
+        self._sent_run = False  # a start/stop went out since the last poll (running may change)
         self._controlling = False  # a command of this run went through: feed the watchdog
 
     # -- any thread ------------------------------------------------------------------------
@@ -161,8 +162,10 @@ class MillWorker:
             self._expect_rpm = cmd.rpm
         elif isinstance(cmd, StartMill):
             self.link.start()
+            self._sent_run = True
         else:
             self.link.stop()
+            self._sent_run = True
 
     def _drop(self, cmd: MillCommand, why: str) -> None:
         self.sink.event("mill_command_dropped", self.now_s(), reason=why, **_describe(cmd))
@@ -174,10 +177,17 @@ class MillWorker:
             return self._lost(snap, exc)
         t = self.now_s()
         expect, self._expect_rpm = self._expect_rpm, None
+        sent_run, self._sent_run = self._sent_run, False
         if expect is not None and abs(st.setpoint_rpm - round(expect, 2)) > 0.011:
             self._refused += 1
             new_epoch = True
             self.sink.event("mill_mismatch", t, rpm=expect, **st.as_dict())
+        elif expect is None and snap.connected and snap.status is not None and (
+            abs(st.setpoint_rpm - snap.status.setpoint_rpm) > 0.011
+            or (not sent_run and st.running != snap.status.running)
+        ):  # the board changed without us (another host, its front panel): read it again, as after a loss
+            new_epoch = True
+            self.sink.event("mill_changed_elsewhere", t, was=snap.status.as_dict(), **st.as_dict())
         epoch = snap.epoch + 1 if new_epoch else snap.epoch
         new = MillSnapshot(status=st, connected=True, epoch=epoch, polled=True, refused=self._refused)
         self.box.set(new)

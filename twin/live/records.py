@@ -70,11 +70,20 @@ class MillSnapshot:
 
     @property
     def actual_rpm(self) -> float:
-        return math.nan if self.status is None else float(self.status.actual_rpm)
+        """The board's actual rpm, NaN when unknown: never read, or the link is lost (the
+        last report is then history, not a measurement; ``status`` keeps it)."""
+        return math.nan if self.status is None or not self.connected else float(self.status.actual_rpm)
 
     @property
     def setpoint_rpm(self) -> float:
-        return math.nan if self.status is None else float(self.status.setpoint_rpm)
+        """The board's setpoint (rpm), NaN when unknown (as :attr:`actual_rpm`)."""
+        return math.nan if self.status is None or not self.connected else float(self.status.setpoint_rpm)
+
+    @property
+    def link_flag(self) -> str | None:
+        """``"link_lost:mill"`` while the link is lost after it was polled (the frame row's
+        flag beside the empty rpm columns), else None."""
+        return "link_lost:mill" if self.polled and not self.connected else None
 
     @property
     def running(self) -> bool:

@@ -22,6 +22,7 @@ from typing import Any, Protocol
 from control.errors import ControlError
 from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
 from twin.live.camera import is_valid_mi
+from twin.live.mismatch import MismatchMonitor
 from twin.live.records import (
     EventSink,
     Latest,
@@ -34,6 +35,8 @@ from twin.live.records import (
     SupervisorCommand,
 )
 
+RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
+
 
 class Predictions(Protocol):
     """The application's predictor: takes requests, hands results back later (never blocks)."""
@@ -42,8 +45,9 @@ class Predictions(Protocol):
     def poll(self) -> PredictionResult | None: ...
 
 
-def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
-    """What the supervisor sees now, from the newest snapshots."""
+def inputs_of(view: RunView, now_s: float, twin_doubt: str = "") -> SupervisorInputs:
+    """What the supervisor sees now, from the newest snapshots (``twin_doubt``: why the
+    twin is not trusted now, "" when it is)."""
     frames, mill, twin, cam = view.frames(), view.mill(), view.twin(), view.camera()
     r = frames.reading
     radial = r.mi / r.mi_sigmoid if r is not None and is_valid_mi(r) and r.mi_sigmoid > 0 else None
@@ -60,6 +64,7 @@ def inputs_of(view: RunView, now_s: float) -> SupervisorInputs:
         last_valid_mi_s=frames.last_valid_t_s,
         camera_ended=cam.ended,
         twin_updated_s=twin.updated_s,
+        twin_doubt=twin_doubt,
     )
 
 
@@ -78,6 +83,8 @@ class SupervisorWorker:
         period_s: float = 1.0,
         speed: float = 1.0,
         alive: Latest[float] | None = None,
+        mismatch: MismatchMonitor | None = None,
+        on_twin_mismatch: Callable[[], None] | None = None,
     ) -> None:
         self.supervisor = supervisor
         self.view = view
@@ -91,11 +98,31 @@ class SupervisorWorker:
         self._inbox: queue.SimpleQueue[SupervisorCommand] = queue.SimpleQueue()
         self._epoch = 0  # the mill epoch of the inputs of the latest step
         self.safe = False  # mirrors supervisor.safe after each tick (read by tests and the CLI)
+        self.mismatch = mismatch  # twin vs camera (None: not compared)
+        self.on_twin_mismatch = on_twin_mismatch  # e.g. request a recalibration
+        self._doubts: dict[str, str] = {}  # why the twin is not trusted (key -> reason)
+        self._doubts_lock = threading.Lock()
         mode_box.set(supervisor.mode.value)
 
     # -- any thread ------------------------------------------------------------------------
     def submit(self, cmd: SupervisorCommand) -> None:
         self._inbox.put(cmd)
+
+    def doubt_twin(self, key: str, reason: str) -> None:
+        """The twin is not to be trusted (``key``: what says so): AUTO treats it as stale."""
+        with self._doubts_lock:
+            self._doubts[key] = reason
+
+    def trust_twin(self, key: str) -> None:
+        """``key`` no longer doubts the twin."""
+        with self._doubts_lock:
+            self._doubts.pop(key, None)
+
+    @property
+    def twin_doubt(self) -> str:
+        """Why the twin is not trusted now ("" when it is)."""
+        with self._doubts_lock:
+            return "; ".join(self._doubts.values())
 
     # -- the worker thread -----------------------------------------------------------------
     def run(self, stop: threading.Event) -> None:
@@ -122,6 +149,9 @@ class SupervisorWorker:
                 return
             self.mode_box.set(sup.mode.value)
             self.sink.numbers(mode=sup.mode.value)
+            if "whatif" in self._doubts:  # the operator chose again: a failed study is acknowledged
+                self.trust_twin("whatif")
+                self.sink.clear_fault("whatif_failed", "mode set by the operator", now)
             self._apply(d)
         elif isinstance(cmd, SetManualRpm):
             try:
@@ -137,8 +167,9 @@ class SupervisorWorker:
         if not self.view.mill().polled:
             return None  # nothing is known about the board yet: decide nothing
         self._alarms(now_s)
+        self._compare_twin(now_s)
         res = self.predictions.poll() if self.predictions is not None else None
-        inputs = inputs_of(self.view, now_s)
+        inputs = inputs_of(self.view, now_s, self.twin_doubt)
         self._epoch = inputs.mill_epoch
         decision, request = self.supervisor.step(now_s, inputs, res)
         self.safe = self.supervisor.safe
@@ -147,6 +178,29 @@ class SupervisorWorker:
         if decision is not None:
             self._apply(decision)
         return decision
+
+    def _compare_twin(self, now: float) -> None:
+        """Twin against camera (``twin.live.mismatch``): beyond tolerance a ``twin_mismatch``
+        alarm, a recalibration request, and the twin in doubt until they agree again."""
+        if self.mismatch is None:
+            return
+        r, twin = self.view.frames().reading, self.view.twin()
+        if twin.updated_s is None:
+            return
+        valid = r is not None and is_valid_mi(r)
+        change = self.mismatch.observe(
+            now, r.slope_deg if r is not None else math.nan, twin.slope_deg,
+            r.mi if r is not None and valid else math.nan, twin.mi,
+        )
+        if change == "raise":
+            reason = f"twin disagrees with the camera: {self.mismatch.reason}"
+            self.sink.fault("twin_mismatch", reason, now)
+            self.doubt_twin("mismatch", reason)
+            if self.on_twin_mismatch is not None:
+                self.on_twin_mismatch()
+        elif change == "clear":
+            self.trust_twin("mismatch")
+            self.sink.clear_fault("twin_mismatch", "twin and camera agree again", now)
 
     def _alarms(self, now: float) -> None:
         c = self.supervisor.config
@@ -162,6 +216,17 @@ class SupervisorWorker:
                 self.sink.fault("camera_stopped", f"camera stopped: no frame for {silent:.0f} s", now)
             else:
                 self.sink.clear_fault("camera_stopped", "camera frames again", now)
+        mill = self.view.mill()
+        if mill.connected:  # fresh reads only (unknown values are NaN)
+            hi = c.rpm_limits[1]
+            over = [f"{name} {v:g}" for name, v in (("setpoint", mill.setpoint_rpm), ("actual", mill.actual_rpm))
+                    if math.isfinite(v) and v > hi + RPM_LIMIT_SLACK]
+            if over:
+                acting = "; it is brought inside" if self.supervisor.mode.value != "off" else " (mode OFF: hands off)"
+                self.sink.fault("mill_above_limits", f"the mill runs above the limits ({', '.join(over)} rpm > "
+                                f"{hi:g} rpm){acting}", now)
+            else:
+                self.sink.clear_fault("mill_above_limits", "the mill is inside the limits", now)
         last = frames.last_valid_t_s
         if last is not None:
             if c.vision_lost(now, last):

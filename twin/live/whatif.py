@@ -62,7 +62,12 @@ class WhatIfWorker:
         self._pending_study: _OperatorStudy | None = None
         self._result: PredictionResult | None = None
         self._busy = False
+        self._running_reason: str | None = None
+        self._cancelled = False
         self._seq = 0
+        self.on_auto_result: Callable[[str | None], None] | None = None
+        """Called after each AUTO prediction study: None when it succeeded, else the error
+        (the loop makes a failure a ``whatif_failed`` alarm and AUTO's safe state)."""
 
     # -- any thread ------------------------------------------------------------------------
     def request(self, req: PredictionRequest) -> None:
@@ -83,6 +88,23 @@ class WhatIfWorker:
             self._pending_study = _OperatorStudy(tuple(float(r) for r in rpms), float(duration_s), reason)
         self._wake.set()
         return True
+
+    def cancel(self) -> bool:
+        """Abandon the operator's waiting or running study (the local pool's workers are
+        terminated; a new pool starts with the next study); an AUTO prediction is left
+        alone. True when there was one. A study on a Dask cluster is only dropped here."""
+        with self._lock:
+            waiting = self._pending_study is not None
+            self._pending_study = None
+            running = self._busy and self._running_reason not in (None, "AUTO")
+            if running:
+                self._cancelled = True
+                pool, self._pool = self._pool, None
+        if running:
+            from sim.whatif import close_pool
+
+            close_pool(pool)
+        return waiting or running
 
     @property
     def busy(self) -> bool:
@@ -122,14 +144,18 @@ class WhatIfWorker:
             else:
                 return False
             self._busy = True
+            self._running_reason = "AUTO" if pred is not None else study.reason if study is not None else None
+            self._cancelled = False
         try:
             if pred is not None:
                 try:
                     preds = self._study(pred.rpms, pred.horizon_s, "AUTO")
-                except Exception:
+                except Exception as exc:
+                    self._report_auto(f"{type(exc).__name__}: {exc}")
                     return True
                 with self._lock:
                     self._result = PredictionResult(pred.t_s, pred.horizon_s, preds)
+                self._report_auto(None)
             elif study is not None:
                 try:
                     self._study(study.rpms, study.duration_s, study.reason)
@@ -139,6 +165,16 @@ class WhatIfWorker:
         finally:
             with self._lock:
                 self._busy = False
+                self._running_reason = None
+
+    def _report_auto(self, error: str | None) -> None:
+        if self._closed:  # the run is ending: its pool was shut down under the study
+            return
+        if self.on_auto_result is not None:
+            try:
+                self.on_auto_result(error)
+            except Exception:
+                pass
 
     def _get_pool(self) -> Executor:
         if self._closed:
@@ -175,6 +211,10 @@ class WhatIfWorker:
             results = list(self._run_jobs(jobs))
         except Exception as exc:
             self._seq += 1
+            if self._cancelled:
+                self.state.set_whatif(WhatIfView(status="cancelled by the operator", seq=self._seq))
+                self.sink.event("whatif_cancelled", self.view.now_s(), reason=reason)
+                raise
             self.state.set_whatif(WhatIfView(status=f"error: {exc}", seq=self._seq))
             self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
             raise

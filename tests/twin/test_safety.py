@@ -1,0 +1,533 @@
+"""Issue 26: every entry point refuses bad input in one line (exit 2, no traceback), the
+mill CLI enforces the run's limits, a dead Dask scheduler is refused at the start."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import pytest
+
+from control.device import DeviceConfig
+from control.emulator import MillEmulator
+from control.motor import MotorConfig
+from tests.cli import assert_one_line_error, cli
+from twin.config import RunConfig
+from twin.loop import supervisor_config
+
+DRUMTWIN = Path(sys.executable).with_name("drumtwin")
+REAL = Path(__file__).resolve().parents[1] / "data" / "real-drum-pmma" / "images"
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]  # nothing listens there once closed
+
+
+@pytest.fixture(scope="module")
+def bad_files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("bad")
+    deep = d / "deep.toml"
+    deep.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    roi = d / "roi.toml"
+    roi.write_text("[meter]\nroi = [1e308, 1e308, 1e308]\n")
+    video = d / "v.avi"  # a file that exists (the run refuses before it reads it)
+    video.write_bytes(b"not a video")
+    return {"deep": deep, "roi": roi, "video": video}
+
+
+IMG = str(REAL / "0002.jpg")
+SWEEP: list[tuple[tuple[str, ...], str]] = [
+    # run: every option class bounded (numbers, host, scheduler, files, choices)
+    (("run", "--duration", "1e308"), "--duration"),
+    (("run", "--duration", "nan"), "--duration"),
+    (("run", "--duration", "-1"), "--duration"),
+    (("run", "--speed", "1e-9"), "--speed"),
+    (("run", "--speed", "inf"), "--speed"),
+    (("run", "--speed", "0"), "--speed"),
+    (("run", "--host", "999.1.1.1"), "--host"),
+    (("run", "--host", "a b"), "--host"),
+    (("run", "--host", ""), "--host"),
+    (("run", "--port", "0"), "--port"),
+    (("run", "--port", "70000"), "--port"),
+    (("run", "--seed", "-1"), "--seed"),
+    (("run", "--mode", "turbo"), "--mode"),
+    (("run", "--case", "Z"), "--case"),
+    (("run", "--scheduler", "garbage"), "--scheduler"),
+    (("run", "--scheduler", "tcp://127.0.0.1:notaport"), "--scheduler"),
+    (("run", "--host", "0.0.0.0"), "control token"),
+    (("run", "--config", "{deep}"), "nested too deeply"),
+    (("run", "--video", "{video}", "--mill", "socket://127.0.0.1:9", "--config", "{roi}"), "roi"),
+    (("run", "--video", "/nonexistent.mp4", "--mill", "socket://127.0.0.1:9"), "not found"),
+    # mi: configs, ROI, numbers
+    (("mi", IMG, "--config", "{deep}"), "nested too deeply"),
+    (("mi", IMG, "--config", "{roi}"), "roi"),
+    (("mi", IMG, "--roi", "1e308,1e308,1e308"), "roi"),
+    (("mi", IMG, "--roi", "1,2"), "--roi"),
+    (("mi", IMG, "--window", "0"), "window"),
+    (("mi", IMG, "--fps", "nan"), "fps"),
+    # what-if / sim: the same caps as the dashboard's what-if
+    (("whatif", "--duration", "1e9"), "--duration"),
+    (("whatif", "--rpm", "10000"), "critical speed"),
+    (("whatif", "--rpm", "5,10", "--seeds", "1001"), "--seeds"),
+    (("sim", "--duration", "1e308"), "--duration"),
+    # the mill CLI: the run's limits (issue 26 item 5) before any port is opened
+    (("mill", "socket://127.0.0.1:9", "set-rpm", "100"), "outside the limits 5-45 rpm"),
+    (("mill", "socket://127.0.0.1:9", "set-rpm", "2"), "outside the limits"),
+    (("mill-emulator", "--max-rpm", "inf"), "--max-rpm"),
+    (("mill-emulator", "--duration", "1e308"), "--duration"),
+    (("compare", "/nonexistent-run", "--plot", "x.png"), ""),
+]
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(("args", "needle"), SWEEP, ids=[" ".join(a)[:60] for a, _ in SWEEP])
+def test_bad_input_sweep_is_one_line_exit_2(args, needle, bad_files) -> None:
+    argv = [a.format(**{k: str(v) for k, v in bad_files.items()}) for a in args]
+    assert_one_line_error(cli(*argv), *([needle] if needle else []))
+
+
+def test_run_refuses_a_dead_scheduler_at_the_start(tmp_path) -> None:
+    port = _closed_port()
+    r = cli("run", "--no-dashboard", "--duration", "5", "--log", tmp_path / "log",
+            "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert_one_line_error(r, "--scheduler", "no Dask scheduler answers")
+    assert not (tmp_path / "log").exists()  # refused before any log or thread exists
+
+
+@pytest.mark.timeout(30)
+def test_mill_set_rpm_refuses_past_the_limits_unless_commissioning() -> None:
+    """A board whose own maximum is 200 rpm: the CLI's limit is the run's (5-45 rpm on
+    the demo drum, 0.6 x its 77.2 rpm critical speed), not the board's."""
+    limits = supervisor_config(RunConfig()).limits
+    with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=200.0))) as emu:
+        emu.open_tcp(0)
+        r = cli("mill", emu.url, "set-rpm", "100")
+        assert_one_line_error(r, "100", limits.describe())
+        assert emu.motor.setpoint_rpm == 0.0  # nothing reached the board
+        assert cli("mill", emu.url, "set-rpm", "30").code == 0 and emu.motor.setpoint_rpm == 30.0
+        r = cli("mill", emu.url, "set-rpm", "100", "--commission")
+        assert r.code == 0 and emu.motor.setpoint_rpm == 100.0
+        assert "commissioning override: set-rpm 100 outside the limits" in r.err  # said, not silent
+        assert cli("mill", emu.url, "set-rpm", "0").code == 0  # stopping is always allowed
+
+
+def _frames(d: Path) -> Path:
+    from vision.synthetic import drum_frame
+
+    d.mkdir()
+    for i, mix in enumerate([0.0, 0.5, 1.0]):
+        cv2.imwrite(str(d / f"f{i}.png"), drum_frame(mix=mix, seed=i))
+    return d
+
+
+def _in_read_only_dir(tmp_path: Path, args: list[str]) -> subprocess.CompletedProcess:
+    """Run ``drumtwin ARGS`` with ``{ro}`` a read-only directory: a read-only tmpfs in a
+    private mount namespace when we are root (permission bits do not stop root), else a
+    directory without write permission."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    argv = [a.replace("{ro}", str(ro)) for a in args]
+    env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd()), "COLUMNS": "400"}
+    env.pop("DRUMTWIN_DEBUG", None)
+    if os.geteuid() == 0:
+        unshare = shutil.which("unshare")
+        assert unshare, "root without unshare(1): no way to make a read-only directory here"
+        cmd = [unshare, "-rm", "sh", "-c", f'mount -t tmpfs -o ro tmpfs "{ro}" && exec "$@"', "sh",
+               str(DRUMTWIN), *argv]
+    else:
+        ro.chmod(0o555)
+        cmd = [str(DRUMTWIN), *argv]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
+
+
+@pytest.mark.timeout(240)
+@pytest.mark.parametrize("what", ["mi --csv", "mi --plot", "mill-emulator --link"])
+def test_writing_into_a_read_only_directory_is_one_line(tmp_path, what) -> None:
+    frames = str(_frames(tmp_path / "frames")) if what.startswith("mi") else ""
+    args = {
+        "mi --csv": ["mi", frames, "--csv", "{ro}/mi.csv"],
+        "mi --plot": ["mi", frames, "--csv", str(tmp_path / "ok.csv"), "--plot", "{ro}/mi.png"],
+        "mill-emulator --link": ["mill-emulator", "--link", "{ro}/mill", "--duration", "0.5"],
+    }[what]
+    p = _in_read_only_dir(tmp_path, args)
+    assert p.returncode == 2, (p.returncode, p.stderr[-2000:])
+    assert "Traceback" not in p.stderr
+    lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "read-only" in lines[0].lower(), p.stderr
+
+
+@pytest.mark.timeout(30)
+def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
+    """Issue 25 item 5: ``MillClient(url)`` starts no heartbeat thread; only a caller that
+    controls the motor passes ``heartbeat_s``. A started motor with a silent default
+    client is stopped by the board's watchdog (0.3 s here)."""
+    import threading
+    import time
+
+    from control.driver import MillClient
+
+    with MillEmulator(DeviceConfig(watchdog_s=0.3)) as emu:
+        emu.open_tcp(0)
+        before = {t.name for t in threading.enumerate()}
+        with MillClient(emu.url) as c:
+            assert c.heartbeat_s is None
+            c.set_rpm(10.0)
+            c.start()
+            assert emu.motor.running
+            assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
+            time.sleep(0.8)  # silent host: the watchdog stops the motor
+            assert not emu.motor.running and emu.motor.fault is not None
+
+
+@pytest.mark.timeout(120)
+def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -> None:
+    """Ten emulators on a pty killed with -9 leave ten ``drumtwin-mill-*`` directories
+    with a dangling link; the next emulator's start removes them (a live one's stays)."""
+    import signal
+    import tempfile
+
+    from control.emulator import PTY_DIR_PREFIX
+
+    env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd())}
+    code = ("import time; from control.emulator import MillEmulator; e = MillEmulator(); "
+            "print(e.open_pty(), flush=True); time.sleep(60)")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
+             for _ in range(11)]
+    links = [Path(p.stdout.readline().strip()) for p in procs]  # type: ignore[union-attr]
+    assert all(link.is_symlink() for link in links)
+    alive = procs.pop()
+    try:
+        for p in procs:
+            p.send_signal(signal.SIGKILL)
+            p.wait(10)
+        assert len(list(tmp_path.glob(PTY_DIR_PREFIX + "*"))) == 11
+        assert not links[0].exists()  # the pty died with its owner: a dangling link
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+        with MillEmulator() as emu:
+            url = emu.open_pty()
+            left = sorted(tmp_path.glob(PTY_DIR_PREFIX + "*"))
+            assert left == sorted([links[-1].parent, Path(url).parent])  # the live owner's and ours
+    finally:
+        alive.kill()
+        alive.wait(10)
+    assert not Path(url).parent.exists()  # a clean close removes its own
+
+
+# -- twin versus reality (issue 26 item 8) and a failed AUTO study (item 4) -----------------
+def test_residual_flags_direction_slope_and_mi() -> None:
+    from twin.live.mismatch import MismatchTolerance, residual
+
+    tol = MismatchTolerance(slope_deg=15.0, mi=0.3)
+    assert not residual(30.0, 36.0, 0.9, 0.8, tol).bad
+    r = residual(-33.8, 53.7, 0.9, 0.9, tol)  # the issue's video: clockwise drum, twin the other way
+    assert r.bad and not r.direction_agrees and "rotation direction" in r.reasons[0]
+    assert residual(30.0, 50.0, 0.9, 0.9, tol).reasons[0].startswith("slope")
+    assert residual(30.0, 30.0, 0.3, 0.9, tol).reasons[0].startswith("MI")
+    assert not residual(float("nan"), 30.0, 0.9, 0.9, tol).known  # no camera slope: no verdict
+
+
+def _mismatch_rig(camera_slope: float, twin_slope: float):
+    from tests.twin.test_workers import Boxes, _reading
+    from twin.live.mismatch import MismatchMonitor
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    recal: list[float] = []
+    from control.supervisor import Mode, Supervisor, SupervisorConfig
+    from tests.twin.test_mill_worker import Sink
+    from twin.live.supervise import SupervisorWorker
+
+    sink = Sink()
+    w = SupervisorWorker(Supervisor(SupervisorConfig(vision_timeout_s=3.0, recover_s=2.0), mode=Mode.AUTO),
+                         b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(),
+                         on_twin_mismatch=lambda: recal.append(b.view.now_s()))
+
+    def run(t0: float, t1: float, twin_slope_deg: float) -> None:
+        from control.trend import TrendEstimate
+        from twin.live.records import CameraInfo, FrameInfo, TwinInfo
+
+        t = t0
+        while t < t1 - 1e-9:
+            b.wall.t += 0.5
+            est = TrendEstimate(t, 0.9, 0.0, 0.01, 0.001, 0.88, 0.92, True, False)
+            b.camera.set(CameraInfo(t, b.wall.t, None, None, int(t * 2) + 1, False))
+            b.frames.set(FrameInfo(t, int(t * 2) + 1, t, _reading(0.9, slope=camera_slope), est))
+            b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg))
+            w.tick(b.view.now_s())
+            t += 0.5
+
+    return w, sink, recal, run
+
+
+@pytest.mark.parametrize(("twin_slope", "what"), [(-31.0, "rotation direction"), (58.0, "slope")])
+def test_a_twin_calibrated_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_safe(twin_slope, what) -> None:
+    w, sink, recal, run = _mismatch_rig(camera_slope=31.0, twin_slope=twin_slope)
+    run(0.0, 20.0, 33.0)  # twin and camera agree: no alarm
+    assert "twin_mismatch" not in sink.faults and not w.safe
+    run(20.0, 30.0, twin_slope)  # the twin goes wrong at t = 20 s
+    raised = [d for k, d in sink.events if k == "fault" and d["fault"] == "twin_mismatch"]
+    assert raised and what in raised[0]["message"]
+    assert w.safe and "twin stale: twin disagrees with the camera" in w.supervisor.safe_reason
+    assert recal and 20.0 < recal[0] <= 30.0  # a recalibration was asked for, within 10 s
+    run(30.0, 45.0, 33.0)  # agrees again: cleared, trusted, AUTO recovers
+    assert "twin_mismatch" not in sink.faults and w.twin_doubt == "" and not w.safe
+
+
+def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_chooses() -> None:
+    from control.supervisor import Mode, PredictionRequest
+    from tests.twin.test_mill_worker import Sink
+    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from twin.live.records import SetMode, TwinInfo
+    from twin.live.whatif import WhatIfWorker
+    from twin.state import LiveState
+
+    def dead_cluster(jobs):
+        raise OSError("no Dask scheduler answers at tcp://127.0.0.1:1")
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    w, sink, _sent = sup_worker(b, Mode.AUTO, twin_timeout_s=None)
+    results: list = []
+    wi = WhatIfWorker(b.view, Sink(), LiveState(), study=dead_cluster)
+    wi.on_auto_result = results.append
+    b.twin.set(TwinInfo(updated_s=0.0, state=object()))
+    wi.request(PredictionRequest(1.0, (5.0, 25.0), 40.0))
+    assert wi.serve_once() and wi.poll() is None
+    assert results and results[0] is not None and "no Dask scheduler" in results[0]
+    # the loop's wiring (LiveLoop._auto_study_result): fault + doubt
+    w.doubt_twin("whatif", f"what-if study failed ({results[0]})")
+    sink.fault("whatif_failed", results[0], 1.0)
+    advance(b, w, 0.0, 3.0)
+    assert w.safe and "what-if study failed" in w.supervisor.safe_reason
+    w.handle(SetMode("auto"))  # the operator chooses again
+    advance(b, w, 3.0, 12.0)
+    assert not w.safe and "whatif_failed" not in sink.faults
+
+
+# -- no stale value is a measurement (issue 26 item 7) ------------------------------------
+def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
+    import queue
+
+    from control.trend import MITrend
+    from tests.twin.test_mill_worker import RUNNING, Sink, make
+    from tests.twin.test_workers import Boxes, _reading
+    from twin.live.camera import CameraReading, ProcessWorker
+    from twin.live.supervise import inputs_of
+    from twin.state import LiveState
+
+    w, link, _sink, box = make(RUNNING)
+    w.cycle()
+    b = Boxes("auto")
+    b.mill = box
+    b.view.mill = box.get  # type: ignore[method-assign]
+    rows: list = []
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), None)
+    pw.process(CameraReading(0.0, 0, _reading(0.8)))
+    link.up = False  # the outage: the board's last report (5 rpm) is history now
+    w.cycle()
+    pw.process(CameraReading(0.1, 1, _reading(0.8)))
+    assert box.get().status is not None and box.get().status.actual_rpm == 5.0  # kept for the resync
+    assert inputs_of(b.view, 0.1).actual_rpm is None and inputs_of(b.view, 0.1).setpoint_rpm is None
+    link.up = True
+    w.cycle()
+    pw.process(CameraReading(0.2, 2, _reading(0.8)))
+    assert [(r["rpm_actual"], r["rpm_setpoint"]) for r in rows] == [(5.0, 5.0), (None, None), (5.0, 5.0)]
+    assert [r["flags"] for r in rows] == [(), ("link_lost:mill",), ()]
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("mode", ["auto", "off"])
+def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_control_it(mode) -> None:
+    """Another host sets the board to 55 rpm (limits 2-40 here): the mill worker reads it
+    again (a new epoch, no stale belief), the supervisor worker alarms; in AUTO the
+    supervisor brings it to 40 rpm at once, in OFF it keeps its hands off."""
+    import time
+
+    from control.driver import MillClient
+    from control.supervisor import Mode
+    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from twin.live.mill import MillWorker
+
+    fast = MotorConfig(max_rpm=200.0, accel_rpm_per_s=200.0, tau_s=0.05)
+    with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=fast)) as emu:
+        port = emu.open_tcp(0)
+        emu.set_motor(setpoint_rpm=30.0, actual_rpm=30.0, running=True)
+        link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1)
+        try:
+            b = Boxes(mode)
+            sup, sink, _ = sup_worker(b, Mode(mode))
+            mill = MillWorker(link, sink, b.mill, now_s=lambda: 0.0)
+            sup.send = mill.submit
+            mill.cycle()
+            advance(b, sup, 0.0, 2.0)
+            assert "mill_above_limits" not in sink.faults
+            emu.set_motor(setpoint_rpm=55.0, actual_rpm=55.0, running=True)  # another host
+            mill.cycle()
+            assert sink.kinds("mill_changed_elsewhere") and b.mill.get().epoch == 2
+            advance(b, sup, 2.0, 3.0)
+            assert "mill_above_limits" in sink.faults
+            mill.cycle()  # the command goes out
+            if mode == "auto":
+                assert emu.motor.setpoint_rpm == 40.0
+                assert any(d["rpm"] == 40.0 for d in sink.kinds("decision"))
+                t = 3.0
+                while "mill_above_limits" in sink.faults and t < 20.0:  # the motor slows down (real time)
+                    time.sleep(0.1)
+                    mill.cycle()
+                    advance(b, sup, t, t + 0.5)
+                    t += 0.5
+                assert "mill_above_limits" not in sink.faults and emu.motor.actual_rpm <= 40.5
+            else:
+                assert emu.motor.setpoint_rpm == 55.0 and sink.kinds("decision") == []
+        finally:
+            link.close()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_bench_memory_measures_the_run_and_its_process_tree() -> None:
+    """``drumtwin bench memory``: a real run on a 640x640 video; the tree includes the
+    what-if and calibration pool processes, so it is at least the run process itself."""
+    import json
+
+    r = cli("bench", "memory", "--seconds", "8", "--json")
+    assert r.code == 0, r.err
+    d = json.loads(r.out)
+    assert d["processes"] >= 2 and 50 < d["main_hwm_mb"] < 2000
+    assert d["tree_rss_mb"] >= d["tree_pss_mb"] > 0 and d["tree_rss_mb"] >= d["main_hwm_mb"] * 0.8
+    assert_one_line_error(cli("bench", "memory", "--seconds", "1e9"), "--seconds")
+
+
+def test_chunked_colour_table_equals_the_classifier() -> None:
+    """The HSV lookup table is now built in 16 chunks (peak memory): every colour still gets
+    the class the pixel classifier gives it."""
+    import numpy as np
+
+    from vision.colours import DEFAULT_CLASSES, Classifier, class_lut
+
+    lut = class_lut(DEFAULT_CLASSES)
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (64, 4096, 3), dtype=np.uint8)
+    img[0, :256] = [[b, 0, 255] for b in range(256)]  # a chunk border (B = 15/16) is in there too
+    h, s, v = cv2.split(cv2.cvtColor(img, cv2.COLOR_BGR2HSV))
+    masks = Classifier(DEFAULT_CLASSES).class_masks(h, s, v)
+    want = np.zeros(img.shape[:2], np.uint8)
+    for k in range(len(masks) - 1, -1, -1):
+        want[masks[k] != 0] = k + 1
+    idx = (img[..., 0].astype(np.int64) << 16) | (img[..., 1].astype(np.int64) << 8) | img[..., 2]
+    assert np.array_equal(lut[idx], want) and want.any()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("wrong", ["direction", "slope"])
+def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_safe(tmp_path, wrong) -> None:
+    """The whole loop (embedded demo, AUTO): from run time ``t_wrong`` on, the twin's
+    published bed turns the other way (its slope negated) or 30 deg steeper, as a twin
+    calibrated to the wrong direction or slope would; ``twin_mismatch`` follows within
+    10 s of run time and the supervisor is safe with the twin stale."""
+    import dataclasses
+    import math
+    import threading
+    import time
+
+    from twin.cli.run_cmd import run_live
+    from twin.runlog import read_events
+
+    cfg = RunConfig(dashboard=False, duration_s=600, speed=4.0, mode="auto", log_dir=tmp_path / "run").resolved()
+    report: dict = {}
+
+    def script(loop, plant, dash) -> None:
+        box = loop.twin_box
+        inner_set = box.set
+
+        def wrong_set(info) -> None:
+            if report.get("t_wrong") is not None and math.isfinite(info.slope_deg):
+                s = -info.slope_deg if wrong == "direction" else info.slope_deg + 30.0
+                info = dataclasses.replace(info, slope_deg=s)
+                report.setdefault("t_first_wrong", loop.now_s())  # the twin's first wrong publish
+            inner_set(info)
+
+        box.set = wrong_set
+
+        def run() -> None:
+            try:
+                end = time.monotonic() + 120
+                while time.monotonic() < end and not (box.get().updated_s and loop.now_s() > 15.0):
+                    time.sleep(0.1)
+                report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
+                report["t_wrong"] = loop.now_s()
+                end = time.monotonic() + 60
+                while time.monotonic() < end and not loop.supervisor.safe:
+                    time.sleep(0.05)
+                report["t_safe"] = loop.now_s()
+                report["safe_reason"] = loop.supervisor.supervisor.safe_reason
+            except BaseException as exc:
+                report["error"] = exc
+            finally:
+                loop.stop_event.set()
+
+        threading.Thread(target=run, daemon=True).start()
+
+    run_live(cfg, progress=False, on_started=script)
+    if "error" in report:
+        raise report["error"]
+    events = read_events(tmp_path / "run")
+    raised = [e for e in events if e["kind"] == "fault" and e["fault"] == "twin_mismatch"]
+    assert report["quiet_before"] and raised
+    t_wrong = report["t_first_wrong"]  # (a busy machine's twin publishes less often: from its first wrong state)
+    assert t_wrong < raised[0]["t_s"] <= t_wrong + 10.0
+    assert ("rotation direction" if wrong == "direction" else "slope") in raised[0]["message"]
+    assert report["t_safe"] <= t_wrong + 10.5 and "twin stale: twin disagrees" in report["safe_reason"]
+    assert any(e["kind"] == "decision" and e["safe"] and "twin stale" in e["reason"] for e in events)
+
+
+def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_path) -> None:
+    """Issue 26 item 3: 1e9 s or 10,000 rpm values are refused with the limit named (the
+    dashboard's callback and a script calling the loop alike); a running study is cancelled."""
+    import threading
+
+    from control.limits import WHATIF_MAX_RUNS
+    from control.protocol import MillStatus
+    from tests.twin.test_mill_worker import FakeLink
+    from twin.live.records import TwinInfo
+    from twin.loop import LiveLoop
+    from twin.runlog import RunLog, read_events
+
+    started, release = threading.Event(), threading.Event()
+
+    def slow_study(jobs):
+        started.set()
+        release.wait(30)
+        raise RuntimeError("pool terminated")
+
+    cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run",
+                    extra={"whatif_study": slow_study}).resolved()
+    with RunLog(tmp_path / "run") as log:
+        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log)
+        loop.run_whatif([5.0], 1e9)
+        loop.run_whatif([5.0 + i * 0.001 for i in range(WHATIF_MAX_RUNS + 1)], 60.0)
+        loop.run_whatif([10000.0], 60.0)
+        errors = [e["error"] for e in read_events(tmp_path / "run") if e["kind"] == "operator_rejected"]
+        assert len(errors) == 3 and "(0, 3600] s" in errors[0] and "at most 2000 runs" in errors[1]
+        assert "10000 outside (0, 77.23] rpm" in errors[2]  # the demo drum's critical speed
+        assert not loop.cancel_whatif()  # nothing to cancel
+        loop.twin_box.set(TwinInfo(updated_s=1.0, state=object()))
+        loop.run_whatif([5.0, 25.0], 60.0)
+        t = threading.Thread(target=loop.whatif.serve_once)
+        t.start()
+        assert started.wait(10)
+        assert loop.cancel_whatif()  # running: abandoned (the local pool is terminated)
+        release.set()
+        t.join(10)
+        kinds = [e["kind"] for e in read_events(tmp_path / "run")]
+        assert "whatif_cancelled" in kinds and "whatif_error" not in kinds
+        assert loop.state.snapshot().whatif.status == "cancelled by the operator"
+        loop.whatif.close()
