@@ -396,8 +396,10 @@ class Supervisor:
         self.safe, self.safe_reason, self._latched_stop = False, "", False
         self._clear_since = self._due_since = None
         self.target_rpm = self.commanded_rpm
-        if new is Mode.MANUAL and self.manual_rpm is None:
-            self.manual_rpm = self.commanded_rpm
+        lo, hi = self.config.rpm_limits
+        if new is Mode.MANUAL and self.manual_rpm is None and self.commanded_rpm is not None \
+                and lo <= self.commanded_rpm <= hi:
+            self.manual_rpm = self.commanded_rpm  # a board outside the limits: no operator rpm until one is given
         return self._emit(now_s, Action.NONE, "mode", f"mode {old.value} -> {new.value} ({reason})")
 
     def set_manual_rpm(self, rpm: float) -> float:
