@@ -1,0 +1,58 @@
+"""AUTO through the real twin-prediction path end to end (issue 27): the embedded demo in AUTO with
+the what-if study run on the DEM twin (a short horizon), not a stand-in. The choice of rpm is the
+twin's; what is checked is that the predictions came from DEM runs of the live twin's state and that
+the decision quotes them."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from twin.cli.run_cmd import run_live
+from twin.config import RunConfig
+from twin.runlog import read_events
+
+pytestmark = pytest.mark.xdist_group("live")
+
+REAL_AUTO = {
+    "supervisor": {"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
+                   "min_change_interval_s": 60.0, "max_rpm": 15.0, "horizon_s": 6.0, "n_candidates": 2},
+    "calibrate_kwargs": {"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_auto_decides_on_the_dem_twins_predictions(tmp_path: Path) -> None:
+    log = tmp_path / "auto"
+
+    def until_a_decision_quotes_the_twin(loop, plant, dash) -> None:
+        def watch() -> None:
+            end = time.monotonic() + 300
+            while not loop.stop_event.is_set() and time.monotonic() < end:
+                if any(e["kind"] == "decision" and e["decision"] in ("move", "hold") and e.get("predictions")
+                       for e in read_events(log)):
+                    loop.stop_event.wait(1.0)
+                    loop.stop_event.set()
+                time.sleep(0.5)
+
+        threading.Thread(target=watch, daemon=True).start()
+
+    cfg = RunConfig(dashboard=False, duration_s=600.0, speed=4.0, case="C", seed=0, mode="auto", log_dir=log,
+                    extra=REAL_AUTO).resolved()
+    run_live(cfg, progress=False, on_started=until_a_decision_quotes_the_twin)
+    events = read_events(log)
+    studies = [e for e in events if e["kind"] == "whatif" and e["reason"] == "AUTO"]
+    assert studies, sorted({e["kind"] for e in events})
+    decisions = [e for e in events if e["kind"] == "decision" and e["decision"] in ("move", "hold")
+                 and e.get("predictions")]
+    assert decisions, [e for e in events if e["kind"] == "decision"]
+    preds = {float(k): v for k, v in decisions[0]["predictions"].items()}
+    assert set(preds) <= {5.0, 15.0} and len(preds) >= 2  # the candidates over the limits (+ the current speed)
+    assert all(0.0 <= v <= 1.0 and math.isfinite(v) for v in preds.values())
+    assert not all(abs(v - r / 100.0) < 1e-9 for r, v in preds.items())  # not the stand-in's MI = rpm/100
+    assert "twin predicts" in decisions[0]["reason"] or "best" in decisions[0]["reason"]
