@@ -52,9 +52,11 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from vision.colours import ColourClass, LabComponent, bgr_to_lab, classify, counted_classes
+from vision.colours import ColourClass, LabComponent, bgr_to_lab, class_lut, classify, counted_classes
 from vision.config import MeterConfig
 from vision.errors import VisionError
+from vision.meter import gravity_matrix
+from vision.photometric import class_reference_from_frames, reference_from_frames
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
 __all__ = [
@@ -69,6 +71,7 @@ __all__ = [
     "needs_opening",
     "opening_stride",
     "particle_diameter_px",
+    "propose_rotation_deg",
     "sample_drum_pixels",
     "suggest_classes",
 ]
@@ -125,9 +128,12 @@ class DrumSamples:
 
 def sample_drum_pixels(
     frames: Sequence[np.ndarray], rois: Sequence[DrumROI], per_frame: int = 12000, seed: int = 0,
-    r_max: float = 0.94,
+    r_max: float = 0.94, camera_rotation_deg: float = 0.0, mirror: bool = False,
 ) -> DrumSamples:
-    """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum."""
+    """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum; their height
+    is measured in gravity's frame (``camera_rotation_deg``, ``mirror``: see ``vision.meter.Meter``)."""
+    t = gravity_matrix(camera_rotation_deg, mirror)
+    up = np.array([0.0, -1.0]) if t is None else -t[1]  # image offset . up = height
     rng = np.random.default_rng(seed)
     labs, heights, clipped = [], [], []
     for img, roi in zip(frames, rois, strict=True):
@@ -144,7 +150,7 @@ def sample_drum_pixels(
             yy, xx = yy[pick], xx[pick]
         px = img[y0:y1, x0:x1][yy, xx]
         labs.append(bgr_to_lab(px))
-        heights.append((roi.cy_px - (yy + y0)) / roi.r_px)
+        heights.append(((xx + x0 - roi.cx_px) * up[0] + (yy + y0 - roi.cy_px) * up[1]) / roi.r_px)
         clipped.append(px.max(axis=1) >= _CLIP_LEVEL)
     if not labs:
         raise VisionError("no drum pixels to learn colours from")
@@ -367,8 +373,12 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
 def suggest_classes(
     frames: Sequence[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
     per_frame: int | None = None, rois: Sequence[DrumROI] | None = None,
+    camera_rotation_deg: float | None = None, mirror: bool = False,
 ) -> MeterConfig:
-    """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames.
+    """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames, the light
+    they were seen in (``light_reference``, ``vision.photometric``) and the camera's turn
+    (``camera_rotation_deg``; None: proposed by :func:`propose_rotation_deg`; a mirror
+    cannot be seen in the frames, so ``mirror`` is the caller's).
 
     ``roi`` fixes the drum for every frame; ``rois`` gives each frame's (already found);
     with neither, it is detected in each frame. The ROI is not written into the config
@@ -387,10 +397,16 @@ def suggest_classes(
         rois = [roi if roi is not None else detect_drum(img) for img in frames]
     elif len(rois) != len(frames):
         raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
+    rot = propose_rotation_deg(frames, rois) if camera_rotation_deg is None else float(camera_rotation_deg)
     per = per_frame or max(2000, 40000 // len(frames))
-    samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
+    samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed, camera_rotation_deg=rot, mirror=mirror)
     classes, notes = _fit_colour_model(samples, k, seed)
-    cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
+    light = tuple(tuple(round(float(v), 2) for v in row) for row in reference_from_frames(frames, list(rois)))
+    n_labels = len(counted_classes(classes)) + 1
+    per_class = class_reference_from_frames(frames, list(rois), class_lut(tuple(classes)), n_labels)
+    light_cls = tuple(tuple(round(float(v), 2) for v in row.ravel()) for row in per_class)
+    cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes, light_reference=light,
+                      light_reference_classes=light_cls, camera_rotation_deg=rot, mirror=mirror)
     # the smallest estimate over (up to 8 of) the frames: in a segregated bed touching
     # particles of one class merge into longer runs, a mixed frame shows them one by one
     d = min((particle_diameter_px(cfg, img, roi) for img, roi in list(zip(frames, rois, strict=True))[:8]),
@@ -405,6 +421,37 @@ def suggest_classes(
             return replace(cfg, opening=True, stride=stride) if verdict or stride > 1 else cfg
         stride //= 2
     return cfg
+
+
+def propose_rotation_deg(frames: Sequence[np.ndarray], rois: Sequence[DrumROI]) -> float:
+    """The camera's turn (0, 90, 180 or 270 deg) from where the bed lies in the drum.
+
+    The bed is where the drum is textured (particle edges): the centroid of the textured
+    pixels of the drum's inside (to 0.85 R) lies off its centre towards gravity's down, turned
+    by at most the bed's slope, so the nearest quarter turn is the camera's. 0 when the
+    offset is under 5% of R (a full or empty drum shows no direction). Any other angle
+    is the user's to write."""
+    off = np.zeros(2)
+    for img, roi in zip(frames, rois, strict=True):
+        box = roi_bbox(roi, img.shape[:2])
+        x0, y0, x1, y1 = box
+        inner = DrumROI(roi.cx_px, roi.cy_px, 0.85 * roi.r_px)
+        gray = cv2.cvtColor(np.ascontiguousarray(img[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY).astype(np.float32)
+        mag = np.hypot(cv2.Sobel(gray, cv2.CV_32F, 1, 0), cv2.Sobel(gray, cv2.CV_32F, 0, 1))
+        inside = _mask_in_box(inner, box)
+        # textured: well above the noise floor (the quietest fifth of the drum), whatever the
+        # particles' contrast -- unweighted, so a bright class does not pull the centroid
+        floor = float(np.percentile(mag[inside], 20)) if inside.any() else 0.0
+        ys, xs = np.nonzero(inside & (mag > max(12.0, 4.0 * floor)))
+        if ys.size < 50:
+            continue
+        off += ((xs.mean() + x0 - roi.cx_px) / roi.r_px, (ys.mean() + y0 - roi.cy_px) / roi.r_px)
+    off /= max(len(frames), 1)
+    if math.hypot(*off) < 0.05:
+        return 0.0
+    # gravity's down (0, 1) turned counter-clockwise on screen by a lies along (sin a, cos a)
+    a = math.degrees(math.atan2(off[0], off[1]))
+    return float((round(a / 90.0) * 90) % 360)
 
 
 def particle_diameter_px(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> float:
