@@ -195,41 +195,22 @@ def sample_labels(lut: np.ndarray, pixels_bgr: np.ndarray, n_labels: int,
     return np.where(lab < n_labels, lab, 0)
 
 
-def estimate_light(ref: np.ndarray, cur: np.ndarray) -> LightEstimate:
-    """Per-channel linear gains of quantiles ``cur`` against ``ref`` (both (3, L) display values)."""
-    gains = []
+def _fit_gains(ref3: np.ndarray, cur3: np.ndarray, start: tuple[float, float, float] | None,
+               max_spread: float) -> LightEstimate:
+    """One linear gain per channel from matched values (3, M) of the reference and the frame:
+    the median log ratio over the entries both see unclipped and above the black level. A
+    channel with fewer than ``MIN_LEVELS`` such entries keeps its ``start`` gain, or (no
+    start) ends the estimate as saturated or too dark."""
+    gains = list(start) if start is not None else [math.nan] * 3
     spread = 0.0
     for c in range(3):
-        r, q = ref[c], cur[c]
+        r, q = ref3[c], cur3[c]
         ok = (r > FLOOR) & (r < CEIL) & (q > FLOOR) & (q < CEIL)
         if ok.sum() < MIN_LEVELS:
+            if start is not None:
+                continue
             hi = (q >= CEIL).sum() > (r >= CEIL).sum()
             return LightEstimate((math.nan,) * 3, math.nan, f"{'saturated' if hi else 'too_dark'}:{_NAMES[c]}")
-        lr = GAMMA * (np.log(q[ok]) - np.log(r[ok]))
-        lg = float(np.median(lr))
-        spread = max(spread, float(np.median(np.abs(lr - lg))))
-        gains.append(math.exp(lg))
-    g = (gains[0], gains[1], gains[2])
-    if not all(GAIN_RANGE[0] <= v <= GAIN_RANGE[1] for v in g):
-        return LightEstimate(g, spread, "gain:" + "/".join(f"{v:.2f}" for v in g))
-    if spread > MAX_SPREAD:
-        return LightEstimate(g, spread, f"unexplained_cast:{spread:.2f}")
-    return LightEstimate(g, spread, None)
-
-
-def refine_light(ref_cls: np.ndarray, cur_cls: np.ndarray, first: LightEstimate) -> LightEstimate:
-    """Gains from per-class quantiles (:func:`class_quantiles` of the frame's pixels, grouped by
-    their class in the reference's terms) against the per-class reference: unlike the whole
-    drum's quantiles, they do not move when the bed's mix of colours in view does. Pools every
-    (class, level) both see unclipped per channel; keeps ``first`` for a channel with fewer
-    than ``MIN_LEVELS`` such entries."""
-    gains = list(first.gains_bgr)
-    spread = 0.0
-    for c in range(3):
-        r, q = ref_cls[:, c, :].ravel(), cur_cls[:, c, :].ravel()
-        ok = (r > FLOOR) & (r < CEIL) & (q > FLOOR) & (q < CEIL)
-        if ok.sum() < MIN_LEVELS:
-            continue
         lr = GAMMA * (np.log(q[ok]) - np.log(r[ok]))
         lg = float(np.median(lr))
         spread = max(spread, float(np.median(np.abs(lr - lg))))
@@ -237,9 +218,24 @@ def refine_light(ref_cls: np.ndarray, cur_cls: np.ndarray, first: LightEstimate)
     g = (gains[0], gains[1], gains[2])
     if not all(GAIN_RANGE[0] <= v <= GAIN_RANGE[1] for v in g):
         return LightEstimate(g, spread, "gain:" + "/".join(f"{v:.2f}" for v in g))
-    if spread > MAX_CLASS_SPREAD:
+    if spread > max_spread:
         return LightEstimate(g, spread, f"unexplained_cast:{spread:.2f}")
     return LightEstimate(g, spread, None)
+
+
+def estimate_light(ref: np.ndarray, cur: np.ndarray) -> LightEstimate:
+    """Per-channel linear gains of quantiles ``cur`` against ``ref`` (both (3, L) display values)."""
+    return _fit_gains(ref, cur, None, MAX_SPREAD)
+
+
+def refine_light(ref_cls: np.ndarray, cur_cls: np.ndarray, first: LightEstimate) -> LightEstimate:
+    """Gains from per-class quantiles (:func:`class_quantiles` of the frame's pixels, grouped by
+    their class in the reference's terms) against the per-class reference: unlike the whole
+    drum's quantiles, they do not move when the bed's mix of colours in view does. Pools every
+    (class, level) both see unclipped per channel; keeps ``first``'s gain for a channel with
+    fewer than ``MIN_LEVELS`` such entries."""
+    return _fit_gains(ref_cls.transpose(1, 0, 2).reshape(3, -1), cur_cls.transpose(1, 0, 2).reshape(3, -1),
+                      first.gains_bgr, MAX_CLASS_SPREAD)
 
 
 def channel_maps(gains_bgr: tuple[float, float, float]) -> np.ndarray:
