@@ -28,12 +28,8 @@ from vision.photometric import (
     channel_maps,
     check_class_reference,
     check_reference,
-    class_quantiles,
-    estimate_light,
-    light_quantiles,
-    refine_light,
     roi_sample_index,
-    sample_labels,
+    track_light,
 )
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
@@ -231,20 +227,8 @@ class Meter:
         assert self._light_ref is not None
         if g.sample is None:
             g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
-        px = np.ascontiguousarray(img).reshape(-1, 3)[g.sample]
-        est = estimate_light(self._light_ref, light_quantiles(px))
-        ref = self._class_ref
-        start_ok = est.cause is None or est.cause.startswith(("gain", "unexpl"))  # not saturated or black
-        if ref is not None and start_ok:
-            # the whole drum's quantiles are a start: refine on each class's own pixels, classified
-            # in the reference's terms (twice: the first classes are those of the first guess)
-            n = ref.shape[0]
-            lut = self._base_tables.fine
-            for _ in range(2):
-                lab = sample_labels(lut, px, n, channel_maps(est.gains_bgr))
-                est = refine_light(ref, class_quantiles(px, lab, n), est)
-                if est.cause is not None and not est.cause.startswith("unexpl"):
-                    break
+        flat = np.ascontiguousarray(img).reshape(-1, 3)
+        est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine)
         self._light = est
         if est.cause is not None:
             return
