@@ -24,11 +24,13 @@ from vision.glare import HALO, RING, glare_fill
 from vision.mixing import mixing_indices
 from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables, row_spans
 from vision.photometric import (
+    JUMP,
     LightEstimate,
     channel_maps,
     check_class_reference,
     check_reference,
     roi_sample_index,
+    sample_means,
     track_light,
 )
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
@@ -204,6 +206,8 @@ class Meter:
         self._baked_gains = (1.0, 1.0, 1.0)
         self._light: LightEstimate | None = None
         self._n_frames = 0
+        self._means_now = np.zeros(3)
+        self._means_then = np.full(3, -1e9)  # no estimate yet
         self.rebakes = 0
         self._sums = np.zeros((len(self.classes) + 2, 6), np.int64)
         self._roi = roi
@@ -223,11 +227,8 @@ class Meter:
         """The last light estimate (None without a light reference or before the first frame)."""
         return self._light
 
-    def _track_light(self, img: np.ndarray, g: _Geometry) -> None:
-        assert self._light_ref is not None
-        if g.sample is None:
-            g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
-        flat = np.ascontiguousarray(img).reshape(-1, 3)
+    def _track_light(self, flat: np.ndarray, g: _Geometry) -> None:
+        assert self._light_ref is not None and g.sample is not None
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine)
         self._light = est
         if est.cause is not None:
@@ -303,8 +304,15 @@ class Meter:
         shape_hw = (int(img.shape[0]), int(img.shape[1]))
         g = self._geometry(img, shape_hw)
         self._roi = g.roi
-        if self._light_ref is not None and self._n_frames % self.track_every == 0:
-            self._track_light(img, g)
+        if self._light_ref is not None:
+            if g.sample is None:
+                g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
+            flat = np.ascontiguousarray(img).reshape(-1, 3)
+            means = sample_means(flat, g.sample, self._means_now)
+            if self._n_frames % self.track_every == 0 or np.any(
+                    np.abs(means - self._means_then) > np.maximum(3.0, JUMP * self._means_then)):
+                self._track_light(flat, g)
+                self._means_then[:] = means
         self._n_frames += 1
         dark = self.dark_v_max if self.bed == "dark" else -1
         sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,

@@ -55,6 +55,7 @@ __all__ = [
     "refine_light",
     "roi_sample_index",
     "sample_labels",
+    "sample_means",
     "track_light",
 ]
 
@@ -76,6 +77,9 @@ real PMMA frames, unperturbed, reach 0.11 against a reference from another frame
 share of the drum moves the levels near the bed/background step)."""
 MAX_CLASS_SPREAD = 0.16
 """The same for the per-class quantiles (:func:`refine_light`), which one gain explains closely."""
+JUMP = 0.03
+"""Between two full estimates, a frame whose sampled mean moved by more than this share in a
+channel (or 3 display levels) since the last estimate is estimated at once (``Meter``)."""
 SAMPLES = 2000
 """About this many ROI pixels per frame for the estimate."""
 CLASS_LEVELS = np.array([0.1, 0.25, 0.5, 0.75, 0.9])
@@ -349,6 +353,32 @@ def _maps_py(gains, lin, bounds, out):  # pragma: no cover - compiled
             out[c, 255] = (out[c, 255] + 256) // 2
 
 
+def _means_py(flat, sample, step, out):  # pragma: no cover - compiled
+    """out = mean B, G, R of every ``step``-th sampled pixel."""
+    s0 = 0
+    s1 = 0
+    s2 = 0
+    n = 0
+    for i in range(0, sample.shape[0], step):
+        k = sample[i]
+        s0 += flat[k, 0]
+        s1 += flat[k, 1]
+        s2 += flat[k, 2]
+        n += 1
+    out[0] = s0 / max(n, 1)
+    out[1] = s1 / max(n, 1)
+    out[2] = s2 / max(n, 1)
+
+
+def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Mean B, G, R (display values) of every 8th sampled pixel: the meter's per-frame check
+    for a sudden light change (an auto-exposure jump) between two full estimates (~1 us)."""
+    if out is None:
+        out = np.empty(3)
+    _kernels()[4](flat_bgr, sample, 8, out)
+    return out
+
+
 _LIN = (np.arange(256) / 255.0) ** GAMMA
 _BOUNDS = ((np.arange(255) + 0.5) / 255.0) ** GAMMA
 _compiled: tuple | None = None
@@ -365,7 +395,8 @@ def _kernels() -> tuple:
         _quantiles = numba.njit(nogil=True, cache=True)(_quantiles_py)
         _fit = numba.njit(nogil=True, cache=True)(_fit_py)
         _maps = numba.njit(nogil=True, cache=True)(_maps_py)
-        _compiled = (_quantiles, _fit, numba.njit(nogil=True, cache=True)(_track_py), _maps)
+        _compiled = (_quantiles, _fit, numba.njit(nogil=True, cache=True)(_track_py), _maps,
+                     numba.njit(nogil=True, cache=True)(_means_py))
     return _compiled
 
 

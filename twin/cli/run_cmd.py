@@ -60,6 +60,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     clock = RunClock(cfg.speed)
     classes = None
     roi = None
+    mc = None
     if cfg.meter_config is not None:
         from vision.config import load_config
 
@@ -96,7 +97,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()
-        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes)
+        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, meter_config=mc)
         if cfg.dashboard:
             from twin.dashboard import Dashboard
 

@@ -290,6 +290,9 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
     return out
 
 
+_SIDE = ("bottom", "right", "top", "left")  # where gravity's down lies in the image per quarter turn
+
+
 @classes_app.command("suggest")
 def suggest_cmd(
     source: list[str] = typer.Argument(..., help="Frames with both particle kinds: images, a folder, a video."),
@@ -297,6 +300,10 @@ def suggest_cmd(
     roi: str | None = typer.Option(None, "--roi", help="Drum circle cx,cy,r in px (overrides detection)."),
     n_frames: int = typer.Option(12, "--frames", help="Frames to learn from, spread over the source (1..500)."),
     preview: Path | None = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
+    rotation: float | None = typer.Option(
+        None, "--camera-rotation-deg",
+        help="How far the camera is turned (deg, counter-clockwise as seen); default: from where the bed lies."),
+    mirror: bool = typer.Option(False, "--mirror", help="The drum is filmed through a mirror."),
 ) -> None:
     """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml
@@ -305,6 +312,8 @@ def suggest_cmd(
 
     _check_number("--k", k, 2, 6)
     _check_number("--frames", n_frames, 1, 500)
+    if rotation is not None:
+        _check_number("--camera-rotation-deg", rotation, -360, 360)
     if preview is not None and not preview.parent.exists():
         raise VisionError(f"--preview folder does not exist: {preview.parent}")
     if preview is not None and preview.suffix.lower() not in (".png", ".jpg", ".jpeg"):
@@ -331,7 +340,7 @@ def suggest_cmd(
             raise VisionError(f"none of the {len(picked)} frames shows a drum that can be found; pass --roi cx,cy,r")
         picked = kept
     frames = [img for _, img in picked]
-    cfg = suggest_classes(frames, manual, k=k, rois=rois or None)
+    cfg = suggest_classes(frames, manual, k=k, rois=rois or None, camera_rotation_deg=rotation, mirror=mirror)
     r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
@@ -343,6 +352,11 @@ def suggest_cmd(
         comment += (f"\nopening = true ({why}): it drops the thin rims and gaps that colour blur gives a class,\n"
                     "and keeps whole particles.")
         console_err.print(f"class opening on ({why})", highlight=False)
+    if rotation is None and cfg.camera_rotation_deg:
+        why = (f"camera_rotation_deg = {cfg.camera_rotation_deg:g}: the bed lies towards the image's "
+               f"{_SIDE[int(cfg.camera_rotation_deg) // 90]}, so gravity points there (nearest quarter turn)")
+        comment += f"\n{why}"
+        console_err.print(why, highlight=False)
     comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
     _warn(cfg.warnings)
     if preview is not None:
