@@ -17,6 +17,7 @@ import pytest
 from vision.colours import classify
 from vision.sources import read_image
 from vision.suggest import suggest_classes
+from tests.vision.helpers import paired_errors
 from vision.synthetic import PERTURBATIONS, particle_drum, perturb
 
 PAIRS = {
@@ -38,23 +39,6 @@ def scenes():
     return {name: [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
                    for i, (m, sl) in enumerate([(0.0, 25.0), (0.4, 35.0)])]
             for name, cols in PAIRS.items()}
-
-
-def paired_errors(readings, truths):
-    """Error / R of the class matched to colour 0 (classes matched to colours by the
-    assignment with the smaller total error)."""
-    best = None
-    for order in ((0, 1), (1, 0)):
-        errs = []
-        for r, tru in zip(readings, truths, strict=True):
-            st = r.classes[order[0]]
-            errs.append(math.hypot(st.cx_px - tru[0][0], st.cy_px - tru[0][1]) / r.roi.r_px)
-        other = sum(math.hypot(r.classes[order[1]].cx_px - t[1][0], r.classes[order[1]].cy_px - t[1][1])
-                    for r, t in zip(readings, truths, strict=True))
-        total = sum(errs) + other / readings[0].roi.r_px
-        if best is None or total < best[0]:
-            best = (total, errs)
-    return best[1]
 
 
 @pytest.mark.parametrize("kind", PERTURBATIONS)
