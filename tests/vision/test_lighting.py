@@ -165,7 +165,7 @@ def test_light_too_far_to_map_back_gives_no_mi_and_a_flag(real, setups):
 
 
 def test_the_gains_are_estimated_and_the_table_rebaked_only_when_the_light_moves(setups):
-    scenes, images, cfg, _ = setups["palepink-white"]
+    _, images, cfg, _ = setups["palepink-white"]
     meter = cfg.make_meter()
     for _ in range(6):
         meter.measure(images[0])

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.vision.helpers import paired_errors
 from vision.colours import classify
 from vision.sources import read_image
 from vision.suggest import suggest_classes
-from tests.vision.helpers import paired_errors
 from vision.synthetic import PERTURBATIONS, particle_drum, perturb
 
 PAIRS = {
