@@ -270,12 +270,12 @@ class Meter:
             if roi is None:
                 roi = self._rois[shape_hw] = detect_drum(img)
         assert roi is not None
-        box = roi_bbox(roi, shape_hw)
         s = self.stride
+        shift = occupancy_shift(roi.r_px, s)
+        box = _anchored_box(roi_bbox(roi, shape_hw), roi, 1 << shift)
         in_box = _mask_in_box(roi, box)  # the ROI's pixels in the image
         inside = in_box[::s, ::s]
         first, last = row_spans(inside)
-        shift = occupancy_shift(roi.r_px, s)
         area = cell_areas(inside, s, shift)
         full = float(((1 << shift) + s - 1) // s) ** 2
         in_view = float(in_box.sum())
@@ -418,6 +418,17 @@ class Meter:
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
             tuple(flags), tuple(stats), roi, axis, curv, mid, image_deg,
         )
+
+
+def _anchored_box(box: tuple[int, int, int, int], roi: DrumROI, cell: int) -> tuple[int, int, int, int]:
+    """The box grown up and left (by less than a cell, while it stays in the image) so that
+    occupancy cell edges fall on the pixel edge nearest the drum centre: then a camera turned
+    by a quarter turn or mirrored bins the bed into the same cells, turned (the free surface
+    is the same fit, not one on cells shifted by a fraction)."""
+    x0, y0, x1, y1 = box
+    ex, ey = round(roi.cx_px + 0.5), round(roi.cy_px + 0.5)  # pixel index right of / below that edge
+    ax, ay = x0 - (x0 - ex) % cell, y0 - (y0 - ey) % cell
+    return (ax if ax >= 0 else x0, ay if ay >= 0 else y0, x1, y1)
 
 
 def gravity_matrix(camera_rotation_deg: float, mirror: bool) -> np.ndarray | None:

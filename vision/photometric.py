@@ -147,8 +147,11 @@ def roi_sample_index(roi: DrumROI, shape_hw: tuple[int, int], n: int = SAMPLES) 
     x0, y0 = box[:2]
     inside = _mask_in_box(roi, box)
     step = max(1, int(math.sqrt(max(float(inside.sum()), 1.0) / n)))
-    ys, xs = np.nonzero(inside[::step, ::step])
-    return ((ys * step + y0) * shape_hw[1] + xs * step + x0).astype(np.intp)
+    # the grid through the pixel nearest the drum centre: a camera turned by quarter turns or
+    # mirrored samples the same pixels of the drum, so it estimates the same light
+    ox, oy = (round(roi.cx_px) - x0) % step, (round(roi.cy_px) - y0) % step
+    ys, xs = np.nonzero(inside[oy::step, ox::step])
+    return ((ys * step + oy + y0) * shape_hw[1] + xs * step + ox + x0).astype(np.intp)
 
 
 def light_quantiles(pixels_bgr: np.ndarray) -> np.ndarray:
