@@ -16,10 +16,10 @@ class clips in its brightest channel(s) but not its weakest, while white clips i
 import dataclasses
 import math
 
-import cv2
 import numpy as np
 import pytest
 
+from tests.vision.helpers import jpeg
 from tests.vision.test_real_frames import label_centroid
 from vision.colours import classify
 from vision.config import config_to_toml, parse_config
@@ -43,10 +43,6 @@ SCENES = [(0.0, 25.0), (0.4, 35.0), (0.8, 30.0), (0.2, 28.0)]  # (mix, slope_deg
 SETUP = 1  # the classes are learned on this frame alone (partly mixed: from the segregated frame 0
 # alone, red/blue under JPEG misses the purple blend of red-blue contacts, 4% of R on mixed
 # frames with no light change at all -- a limit of learning from one segregated frame)
-
-
-def jpeg(img: np.ndarray, quality: int = 90) -> np.ndarray:
-    return cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)
 
 
 def lighting_flagged(r) -> bool:
