@@ -15,6 +15,10 @@ from twin.cli.app import app, bench_app, console, console_err, print_json
 from vision.errors import VisionError
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+    import numpy as np
+
     from vision.glcm import GLCMMeter
     from vision.lacey import LaceyMeter
 
@@ -250,8 +254,22 @@ def _plot(path: Path, ts: list[float], mis: list[float], avgs: list[float], meth
     plt.close(fig)
 
 
-def _pick_frames(source: list[str], n_frames: int) -> list:
-    """Up to ``n_frames`` readable frames spread evenly over the source (sources.Frame list)."""
+def _pick_count(source: list[str], n_frames: int) -> int:
+    """How many frames :func:`_pick_frames` will try to give (images: exact; a video: at most)."""
+    from vision.sources import _image_paths, source_kind
+
+    spec = source if len(source) > 1 else source[0]
+    kind = source_kind(spec)
+    if kind == "image":
+        return 1
+    if kind in ("folder", "images"):
+        return max(1, min(n_frames, len(_image_paths(spec))))
+    return n_frames
+
+
+def _pick_frames(source: list[str], n_frames: int) -> Iterator[tuple[str, np.ndarray]]:
+    """Up to ``n_frames`` readable frames spread evenly over the source, as (name, image), read
+    one at a time (``classes suggest --frames 500`` holds no more than it must)."""
     from vision.sources import _image_paths, open_source, read_image, source_kind
 
     spec = source if len(source) > 1 else source[0]
@@ -264,15 +282,14 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
             raise FileNotFoundError(f"no such file: {paths[0]}")
         m = min(n_frames, len(paths))
         idx = sorted({round(i * (len(paths) - 1) / max(m - 1, 1)) for i in range(m)})
-        out = []
         for i in idx:
             img, err = read_image(paths[i])
             if err:
                 if kind == "image":
                     raise VisionError(err)
                 continue
-            out.append((paths[i].name, img))
-        return out
+            yield paths[i].name, img
+        return
     total = 0
     if kind == "video":
         import cv2
@@ -281,13 +298,13 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
         total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         cap.release()
     step = max(1, total // n_frames) if total > 0 else 10
-    out = []
+    got = 0
     for fr in open_source(spec, reconnect=False):
         if fr.index % step == 0 and not fr.error:
-            out.append((fr.name or str(fr.index), fr.image))
-        if len(out) >= n_frames:
+            yield fr.name or str(fr.index), fr.image
+            got += 1
+        if got >= n_frames:
             break
-    return out
 
 
 _SIDE = ("bottom", "right", "top", "left")  # where gravity's down lies in the image per quarter turn
@@ -319,28 +336,45 @@ def suggest_cmd(
     if preview is not None and preview.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise VisionError(f"--preview must be a .png or .jpg file, got {preview.name}")
     manual = parse_roi(roi) if roi else None
-    picked = _pick_frames(source, n_frames)
-    if not picked:
-        raise VisionError("no readable frames in the source")
-    for name, img in picked:
-        if img.ndim != 3:
-            raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
-    rois = []
-    if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
-        kept = []
-        for name, img in picked:
-            try:
-                rois.append(detect_drum(img))
-                kept.append((name, img))
-            except VisionError as exc:
-                if len(picked) == 1:
-                    raise VisionError(f"{name}: {exc}") from None
-                _warn([f"{name} left out: {exc}"])
-        if not kept:
-            raise VisionError(f"none of the {len(picked)} frames shows a drum that can be found; pass --roi cx,cy,r")
-        picked = kept
-    frames = [img for _, img in picked]
-    cfg = suggest_classes(frames, manual, k=k, rois=rois or None, camera_rotation_deg=rotation, mirror=mirror)
+    seen: list[str] = []  # names of the frames used (the first frame is kept for the preview)
+    rois: list = []
+    first: list[np.ndarray] = []
+    skipped: list[str] = []
+    done: list[bool] = []  # the source read to its end
+
+    def stream() -> Iterator[np.ndarray]:
+        """The picked frames, one at a time; frames without a drum are left out (and named)."""
+        for name, img in _pick_frames(source, n_frames):
+            if img.ndim != 3:
+                raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
+            if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
+                try:
+                    rois.append(detect_drum(img))
+                except VisionError as exc:
+                    skipped.append(f"{name}: {exc}")
+                    continue
+            seen.append(name)
+            if not first:
+                first.append(img)
+            yield img
+        done.append(True)
+
+    try:  # (``rois`` grows as the stream goes: each frame's drum is found before it is handed over)
+        cfg = suggest_classes(stream(), manual, k=k, rois=None if manual else rois, camera_rotation_deg=rotation,
+                              mirror=mirror, n_frames=_pick_count(source, n_frames))
+    except VisionError as exc:
+        if seen or not done:  # an error of a frame or of the fit, not an empty source
+            raise
+        if not skipped:
+            raise VisionError("no readable frames in the source") from None
+        if len(skipped) == 1:
+            raise VisionError(skipped[0]) from None
+        _warn([f"{w.split(': ', 1)[0]} left out: {w.split(': ', 1)[1]}" for w in skipped])
+        raise VisionError(f"none of the {len(skipped)} frames shows a drum that can be found; "
+                          "pass --roi cx,cy,r") from exc
+    _warn([f"{w.split(': ', 1)[0]} left out: {w.split(': ', 1)[1]}" for w in skipped])
+    picked = [(seen[0], first[0])]
+    frames = seen  # (only their number is used below)
     r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
@@ -362,7 +396,7 @@ def suggest_cmd(
     if preview is not None:
         import cv2
 
-        if not cv2.imwrite(str(preview), class_preview(frames[0], cfg.classes, r0)):
+        if not cv2.imwrite(str(preview), class_preview(picked[0][1], cfg.classes, r0)):
             raise VisionError(f"cannot write {preview}")
         console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False)
     sys.stdout.write(config_to_toml(cfg, comment))
