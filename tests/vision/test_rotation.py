@@ -148,3 +148,21 @@ def test_rotation_config_is_checked():
                      ("camera_rotation_deg = nan", "camera_rotation_deg"), ('mirror = "yes"', "mirror")):
         with pytest.raises(VisionError, match=key):
             parse_config(f"[meter]\n{bad}\n" + base)
+
+
+def test_the_live_loop_measures_with_the_configs_turn_and_light(tmp_path, particles):
+    """``drumtwin run --config``: the live loop's meter is the config's (camera turn, mirror,
+    light reference), not a bare one from its classes."""
+    from control.protocol import MillStatus
+    from tests.twin.test_mill_worker import FakeLink
+    from twin.config import RunConfig
+    from twin.loop import LiveLoop
+    from twin.runlog import RunLog
+
+    _, cfg = particles
+    turned = dataclasses.replace(cfg, camera_rotation_deg=90.0, mirror=True)
+    run = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run").resolved()
+    with RunLog(tmp_path / "run") as log:
+        loop = LiveLoop(run, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log, meter_config=turned)
+        m = loop.camera.meter
+        assert m.camera_rotation_deg == 90.0 and m.mirror and m._light_ref is not None
