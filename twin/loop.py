@@ -132,6 +132,7 @@ class LiveLoop:
         classes: Sequence[Any] | None = None,
         overlay: Callable[..., Any] | None = None,
         mixer: Any = None,
+        meter_config: Any = None,
     ) -> None:
         self.config = config
         self.clock = clock or RunClock(1.0)
@@ -142,7 +143,10 @@ class LiveLoop:
         self.failure: str | None = None  # why the run had to end (see _fail)
         self._fail_lock = threading.Lock()
         self.events = RunEvents(runlog, self.state, on_failure=self._fail)
-        meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
+        if meter_config is not None:  # a vision.config.MeterConfig: its camera turn, light reference, opening
+            meter = meter_config.make_meter(roi=roi)
+        else:
+            meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
         self._classes = tuple(meter.colour_classes)
         # snapshots (one writer each)
         self.camera_box: Latest[CameraInfo] = Latest(CameraInfo())

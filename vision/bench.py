@@ -15,7 +15,9 @@ import numpy as np
 from vision.glcm import GLCMMeter
 from vision.lacey import LaceyMeter
 from vision.meter import Meter
-from vision.synthetic import drum_frame, perturb
+from vision.moments import remapped_tables
+from vision.photometric import channel_maps, class_reference_from_frames, reference_from_frames
+from vision.synthetic import drum_frame, light_change, perturb
 
 __all__ = ["frames_per_second", "run_vision_bench"]
 
@@ -38,7 +40,14 @@ def frames_per_second(
 def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = None) -> dict:
     """Run the benchmark and return the numbers (frames/s); ``centroid_fps_opening`` is the
     centroid path with the class opening (``[meter] opening = true``), ``centroid_fps_glare``
-    on the same frames with three glare spots each (filled, ``vision.glare``)."""
+    on the same frames with three glare spots each (filled, ``vision.glare``).
+
+    ``centroid_fps_tracked``: photometric tracking on (``vision.photometric``; a light
+    reference from the first frame, the light estimated every 4th frame as the meter does by
+    default), the same frames under unchanged light; ``centroid_fps_light_moved``: frames
+    whose exposure alternates x1 and x0.8, so each tracked frame re-bakes the table;
+    ``rebake_s``: one re-bake of the 2^24 table (the cost of a light change);
+    ``tracked_ratio``: tracked / plain frames/s in this run."""
     prev = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -57,6 +66,20 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         res["centroid_fps_opening"] = frames_per_second(Meter(roi=roi, opening=True).measure, vga, seconds)
         glare = [perturb(f, "glare", seed=i)[0] for i, f in enumerate(vga)]
         res["centroid_fps_glare"] = frames_per_second(Meter(roi=roi).measure, glare, seconds)
+        say("centroid 640x480, photometric tracking ...")
+        assert roi is not None
+        ref = reference_from_frames(vga[:1], [roi])
+        plain = Meter(roi=roi)
+        ref_cls = class_reference_from_frames(vga[:1], [roi], plain._base_tables.fine, len(plain.classes) + 1)
+        res["centroid_fps_tracked"] = frames_per_second(
+            Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls).measure, vga, seconds)
+        moved = [light_change(f, 0.8) if i % 2 else f for i, f in enumerate(vga)]
+        tracked = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls, track_every=1)
+        res["centroid_fps_light_moved"] = frames_per_second(tracked.measure, moved, seconds)
+        t0 = time.perf_counter()
+        remapped_tables(plain.colour_classes, channel_maps((0.8, 0.8, 0.8)))
+        res["rebake_s"] = time.perf_counter() - t0
+        res["tracked_ratio"] = res["centroid_fps_tracked"] / res["centroid_fps"]
         say("GLCM 640x480 ...")
         res["glcm_fps"] = frames_per_second(GLCMMeter(roi).measure, vga, seconds)
         say("Lacey 640x480 ...")

@@ -26,6 +26,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from vision.colours import (
     DEFAULT_CLASSES,
     Classifier,
@@ -38,12 +40,15 @@ from vision.colours import (
 )
 from vision.errors import VisionError
 from vision.meter import BED_MODES, Meter
+from vision.photometric import check_class_reference, check_reference
 from vision.roi import DrumROI
 
 __all__ = ["MeterConfig", "config_to_toml", "load_config", "parse_config"]
 
 _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
-               "roi_kind", "half_w_px", "half_h_px", "opening", "erode"}  # erode: a clear error
+               "roi_kind", "half_w_px", "half_h_px", "opening", "erode", "light_reference", "camera_rotation_deg",
+               "light_reference_classes",
+               "mirror"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
 _TOP_KEYS = {"meter", "classes", "drum", "particles"}
 MIXER_KEYS = ("drum", "particles")  # the twin's tables (sim.mixer parses them; vision only hands them over)
@@ -70,6 +75,16 @@ class MeterConfig:
     opening: bool = False
     """Class opening before the sums (see ``vision.meter.Meter``): JPEG chroma blur between
     particles of one hue; ``classes suggest`` sets it when it matters on its frames."""
+    light_reference: tuple[tuple[float, ...], ...] | None = None
+    """The light at set-up (``vision.photometric``: per-channel quantiles B, G, R of the drum's
+    pixels); given, the meter tracks exposure and white balance against it."""
+    light_reference_classes: tuple[tuple[float, ...], ...] | None = None
+    """The same per class (no class, then each counted class; B, G, R quantiles; -1 = not seen)."""
+    camera_rotation_deg: float = 0.0
+    """How far the camera is turned: the image is gravity's view turned counter-clockwise by
+    this (deg); the slope, curvature and overlay are given in gravity's frame."""
+    mirror: bool = False
+    """True when the drum is filmed through a mirror (the image is gravity's view flipped left-right, then turned)."""
     mixer_tables: dict = field(default_factory=dict, compare=False)
     """The config's ``[drum]`` and ``[[particles]]`` tables as read (the twin's mixer, parsed by
     ``sim.mixer.parse_mixer``); empty when the config has none."""
@@ -90,6 +105,10 @@ class MeterConfig:
             self.classes, roi if roi is not None else self.roi, bed or self.bed, self.min_pixels,
             dark_v_max=self.dark_v_max, stride=self.stride, min_share=self.min_share,
             collapse_ratio=self.collapse_ratio, history=self.history, opening=self.opening,
+            light_reference=None if self.light_reference is None else np.asarray(self.light_reference),
+            light_reference_classes=(None if self.light_reference_classes is None
+                                     else np.asarray(self.light_reference_classes)),
+            camera_rotation_deg=self.camera_rotation_deg, mirror=self.mirror,
         )
 
 
@@ -207,6 +226,17 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     opening = meter.get("opening", False)
     if not isinstance(opening, bool):
         raise VisionError(f"{where}: opening must be true or false, got {opening!r}")
+    light_ref = None
+    if "light_reference" in meter:
+        try:
+            arr = check_reference(meter["light_reference"], "light_reference")
+        except VisionError as exc:
+            raise VisionError(f"{where}: {exc}") from None
+        light_ref = tuple(tuple(float(v) for v in row) for row in arr)
+    rot = _float(where, "camera_rotation_deg", meter.get("camera_rotation_deg", 0.0), -360.0, 360.0)
+    mirror = meter.get("mirror", False)
+    if not isinstance(mirror, bool):
+        raise VisionError(f"{where}: mirror must be true or false, got {mirror!r}")
     roi = None
     if "roi" in meter:
         r = meter["roi"]
@@ -231,6 +261,16 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         classes = tuple(_parse_class(f"config {source} classes[{i}]", c) for i, c in enumerate(raw))
     if len(counted_classes(classes)) < 2:
         raise VisionError(f"config {source}: at least two counted [[classes]] are needed for a mixing index")
+    light_cls = None
+    if "light_reference_classes" in meter:
+        if light_ref is None:
+            raise VisionError(f"{where}: light_reference_classes needs light_reference")
+        n_labels = len(counted_classes(classes)) + 1
+        try:
+            arr = check_class_reference(meter["light_reference_classes"], n_labels, "light_reference_classes")
+        except VisionError as exc:
+            raise VisionError(f"{where}: {exc}") from None
+        light_cls = tuple(tuple(float(v) for v in row.ravel()) for row in arr)
     try:
         check_class_set(classes)
         if not is_learned(classes):
@@ -242,7 +282,8 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         " for a learned model)" for a, b in overlapping_classes(classes)
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
-                       warnings, opening, {k: data[k] for k in MIXER_KEYS if k in data})
+                       warnings, opening, light_ref, light_cls, rot, mirror,
+                       {k: data[k] for k in MIXER_KEYS if k in data})
 
 
 def _nums(values, digits: int = 6) -> str:
@@ -263,6 +304,17 @@ def config_to_toml(cfg: MeterConfig, comment: str = "") -> str:
         lines.append(f"stride = {cfg.stride}")
     if cfg.opening:
         lines.append("opening = true")
+    if cfg.camera_rotation_deg != 0.0:
+        lines.append(f"camera_rotation_deg = {cfg.camera_rotation_deg:g}  # the image is gravity's view turned "
+                     "counter-clockwise by this")
+    if cfg.mirror:
+        lines.append("mirror = true")
+    if cfg.light_reference is not None:
+        lines.append("# the light at set-up: per-channel quantiles (B, G, R) of the drum ROI (photometric tracking)")
+        lines.append("light_reference = [" + ", ".join(_nums(row) for row in cfg.light_reference) + "]")
+    if cfg.light_reference_classes is not None:
+        lines.append("# the same per class: no class, then each counted class; B, G, R quantiles (-1: not seen)")
+        lines.append("light_reference_classes = [" + ", ".join(_nums(r) for r in cfg.light_reference_classes) + "]")
     if cfg.roi is not None:
         r = cfg.roi
         lines.append(f"roi = [{r.cx_px:.1f}, {r.cy_px:.1f}, {r.r_px:.1f}]")

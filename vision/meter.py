@@ -15,17 +15,28 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
 from vision.errors import VisionError
 from vision.glare import HALO, RING, glare_fill
 from vision.mixing import mixing_indices
-from vision.moments import class_tables, frame_moments, kernel_labels, row_spans
+from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables, row_spans
+from vision.photometric import (
+    JUMP,
+    LightEstimate,
+    channel_maps,
+    check_class_reference,
+    check_reference,
+    roi_sample_index,
+    sample_means,
+    track_light,
+)
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
 
-__all__ = ["BED_MODES", "MAX_OUTSIDE", "ClassStats", "Meter", "Reading", "check_meter_numbers"]
+__all__ = ["BED_MODES", "MAX_OUTSIDE", "ClassStats", "Meter", "Reading", "check_meter_numbers", "gravity_matrix"]
 
 BED_MODES = ("color", "dark")
 MAX_OUTSIDE = 0.05
@@ -80,6 +91,9 @@ class Reading:
     slope_axis_deg: float = _NAN
     surface_curvature: float = _NAN
     surface_mid_px: tuple[float, float] = (_NAN, _NAN)
+    surface_image_deg: float = _NAN
+    """The fitted surface line's angle in the image itself (= ``slope_deg`` for a camera not
+    turned or mirrored; what the overlay draws through ``surface_mid_px``)."""
 
     def cls(self, name: str) -> ClassStats:
         """The stats of the class called ``name``."""
@@ -103,6 +117,7 @@ class _Geometry:
     work: np.ndarray
     gocc: np.ndarray  # glare pixels per cell (filled by the kernel)
     outside: float = 0.0  # share of the ROI's area outside the image
+    sample: np.ndarray | None = None  # flat indices of the ROI pixels the light is estimated from
 
 
 class Meter:
@@ -149,6 +164,12 @@ class Meter:
         history: int = 25,
         opening: bool = False,
         glare_fill: bool = True,
+        light_reference: np.ndarray | None = None,
+        light_reference_classes: np.ndarray | None = None,
+        camera_rotation_deg: float = 0.0,
+        mirror: bool = False,
+        track_every: int = 4,
+        rebake_threshold: float = 0.03,
     ) -> None:
         self.colour_classes = check_class_set(classes)
         self.classes = counted_classes(self.colour_classes)
@@ -169,7 +190,25 @@ class Meter:
             raise VisionError(f"opening must be true or false, got {opening!r}")
         self.opening = bool(opening)
         self.glare_fill = bool(glare_fill)
-        self._tables = class_tables(self.colour_classes)
+        self._tables = self._base_tables = class_tables(self.colour_classes)
+        self._light_ref = None if light_reference is None else check_reference(light_reference)
+        self._class_ref = (None if light_reference_classes is None or self._light_ref is None
+                           else check_class_reference(light_reference_classes, len(self.classes) + 1))
+        check_meter_numbers(track_every=track_every, rebake_threshold=rebake_threshold,
+                            camera_rotation_deg=camera_rotation_deg)
+        if not isinstance(mirror, (bool, np.bool_)):
+            raise VisionError(f"mirror must be true or false, got {mirror!r}")
+        self.camera_rotation_deg = float(camera_rotation_deg)
+        self.mirror = bool(mirror)
+        self._gravity = gravity_matrix(self.camera_rotation_deg, self.mirror)
+        self.track_every = int(track_every)
+        self.rebake_threshold = float(rebake_threshold)
+        self._baked_gains = (1.0, 1.0, 1.0)
+        self._light: LightEstimate | None = None
+        self._n_frames = 0
+        self._means_now = np.zeros(3)
+        self._means_then = np.full(3, -1e9)  # no estimate yet
+        self.rebakes = 0
         self._sums = np.zeros((len(self.classes) + 2, 6), np.int64)
         self._roi = roi
         self._roi_given = roi is not None
@@ -182,6 +221,23 @@ class Meter:
     def roi(self) -> DrumROI | None:
         """The ROI of the last measured frame (None until the first frame when auto-detecting)."""
         return self._roi
+
+    @property
+    def light(self) -> LightEstimate | None:
+        """The last light estimate (None without a light reference or before the first frame)."""
+        return self._light
+
+    def _track_light(self, flat: np.ndarray, g: _Geometry) -> None:
+        assert self._light_ref is not None and g.sample is not None
+        est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine)
+        self._light = est
+        if est.cause is not None:
+            return
+        if max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True)) \
+                > math.log1p(self.rebake_threshold):
+            self._tables = remapped_tables(self.colour_classes, channel_maps(est.gains_bgr))
+            self._baked_gains = est.gains_bgr
+            self.rebakes += 1
 
     @property
     def d0_px(self) -> float | None:
@@ -214,12 +270,12 @@ class Meter:
             if roi is None:
                 roi = self._rois[shape_hw] = detect_drum(img)
         assert roi is not None
-        box = roi_bbox(roi, shape_hw)
         s = self.stride
+        shift = occupancy_shift(roi.r_px, s)
+        box = _anchored_box(roi_bbox(roi, shape_hw), roi, 1 << shift)
         in_box = _mask_in_box(roi, box)  # the ROI's pixels in the image
         inside = in_box[::s, ::s]
         first, last = row_spans(inside)
-        shift = occupancy_shift(roi.r_px, s)
         area = cell_areas(inside, s, shift)
         full = float(((1 << shift) + s - 1) // s) ** 2
         in_view = float(in_box.sum())
@@ -248,6 +304,16 @@ class Meter:
         shape_hw = (int(img.shape[0]), int(img.shape[1]))
         g = self._geometry(img, shape_hw)
         self._roi = g.roi
+        if self._light_ref is not None:
+            if g.sample is None:
+                g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
+            flat = np.ascontiguousarray(img).reshape(-1, 3)
+            means = sample_means(flat, g.sample, self._means_now)
+            if self._n_frames % self.track_every == 0 or np.any(
+                    np.abs(means - self._means_then) > np.maximum(3.0, JUMP * self._means_then)):
+                self._track_light(flat, g)
+                self._means_then[:] = means
+        self._n_frames += 1
         dark = self.dark_v_max if self.bed == "dark" else -1
         sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
                              occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc)
@@ -305,6 +371,10 @@ class Meter:
             var = max(sxx / n - cx * cx, 0.0) + max(syy / n - cy * cy, 0.0)
             stats.append(ClassStats(cls.name, cx, cy, math.sqrt(var), n_px, frac, share))
         a, b = stats[0], stats[1]
+        light = self._light
+        if light is not None and light.cause is not None:  # the classes cannot be trusted in this light
+            flags.append(f"lighting_changed:{light.cause}")
+            a = b = ClassStats(a.name, _NAN, _NAN, _NAN, 0, _NAN)
         if g.outside > MAX_OUTSIDE:  # the centroids are those of the part in view, not the bed's
             flags.append(f"roi_outside_frame:{100.0 * g.outside:.0f}%")
             a = b = ClassStats(a.name, _NAN, _NAN, _NAN, 0, _NAN)
@@ -318,18 +388,110 @@ class Meter:
         bed = rows[k + 1] if self.bed == "dark" else [sum(c) for c in zip(*rows[:k], strict=True)]
         m00, m10, m01, m20, m02, m11 = (float(v) for v in bed)
         min_bed = max(1.0, self.min_pixels / area, self.min_share * g.roi_px)
+        t = self._gravity
+        if t is not None:
+            m10, m01, m20, m11, m02 = _turn_moments(t, m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px)
         axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)
+        image_deg = _NAN
         if m00 >= min_bed:
-            surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.box[:2], g.shift, roi.r_px, g.work)
-            slope, curv, mid = surf.slope_deg, surf.curvature, surf.mid_px
+            if t is None:
+                surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.box[:2], g.shift, roi.r_px, g.work)
+                mid = surf.mid_px
+                image_deg = surf.slope_deg
+            else:
+                occ, cell_area, origin = _turn_grid(t, g, g.occ)
+                surf = surface_from_occupancy(occ, cell_area, g.full_area, origin, g.shift, roi.r_px)
+                mid, image_deg = _from_gravity(t, surf.mid_px, surf.slope_deg, roi)
+            slope, curv = surf.slope_deg, surf.curvature
+            if not math.isfinite(slope):
+                flags.append("no_surface:no free surface found (too few surface points)")
+            elif not math.isfinite(curv):
+                flags.append("no_curvature:surface points too few or collinear for the S-shape")
+            if not math.isfinite(axis):
+                flags.append("no_axis:the bed has no principal axis (isotropic)")
         else:
             slope = curv = _NAN
             mid = (_NAN, _NAN)
+            flags.append(f"no_surface:bed of {int(m00 * area)} px")
         valid = math.isfinite(mix.mi)
         return Reading(
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
-            tuple(flags), tuple(stats), roi, axis, curv, mid,
+            tuple(flags), tuple(stats), roi, axis, curv, mid, image_deg,
         )
+
+
+def _anchored_box(box: tuple[int, int, int, int], roi: DrumROI, cell: int) -> tuple[int, int, int, int]:
+    """The box grown up and left (by less than a cell, while it stays in the image) so that
+    occupancy cell edges fall on the pixel edge nearest the drum centre: then a camera turned
+    by a quarter turn or mirrored bins the bed into the same cells, turned (the free surface
+    is the same fit, not one on cells shifted by a fraction)."""
+    x0, y0, x1, y1 = box
+    ex, ey = round(roi.cx_px + 0.5), round(roi.cy_px + 0.5)  # pixel index right of / below that edge
+    ax, ay = x0 - (x0 - ex) % cell, y0 - (y0 - ey) % cell
+    return (ax if ax >= 0 else x0, ay if ay >= 0 else y0, x1, y1)
+
+
+def gravity_matrix(camera_rotation_deg: float, mirror: bool) -> np.ndarray | None:
+    """2x2 map of image offsets (px, y down) to gravity's frame, or None for the identity.
+
+    The image is gravity's view mirrored (x -> -x, when ``mirror``), then turned
+    counter-clockwise on screen by ``camera_rotation_deg``; this undoes both."""
+    a = math.radians(camera_rotation_deg % 360.0)
+    if a == 0.0 and not mirror:
+        return None
+    c, s = round(math.cos(a), 12), round(math.sin(a), 12)  # exact 0/1 for multiples of 90 deg
+    turn_back = np.array([[c, -s], [s, c]])  # clockwise on screen by the angle (y down)
+    flip = np.diag([-1.0, 1.0]) if mirror else np.eye(2)
+    return flip @ turn_back
+
+
+def _turn_moments(t: np.ndarray, m00: float, m10: float, m01: float, m20: float, m11: float, m02: float,
+                  cx: float, cy: float) -> tuple[float, float, float, float, float]:
+    """Raw moments of the bed in gravity's frame (about the same drum centre)."""
+    if not m00 > 0:
+        return m10, m01, m20, m11, m02
+    xb, yb = m10 / m00, m01 / m00
+    cov = np.array([[m20 / m00 - xb * xb, m11 / m00 - xb * yb], [m11 / m00 - xb * yb, m02 / m00 - yb * yb]])
+    gx, gy = t @ np.array([xb - cx, yb - cy]) + (cx, cy)
+    cg = t @ cov @ t.T
+    return (m00 * gx, m00 * gy, m00 * (cg[0, 0] + gx * gx), m00 * (cg[0, 1] + gx * gy),
+            m00 * (cg[1, 1] + gy * gy))
+
+
+def _turn_grid(t: np.ndarray, g: _Geometry, occ: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+    """The occupancy and area cells turned into gravity's frame (same cell size, about the
+    drum centre): exact cell moves for multiples of 90 deg, bilinear otherwise. Returns the
+    cells, their ROI areas and the new grid's origin (px in gravity's frame)."""
+    cs = float(1 << g.shift)
+    roi = g.roi
+    c = np.array([roi.cx_px, roi.cy_px])
+    o = np.array([g.box[0] + 0.5 * cs, g.box[1] + 0.5 * cs])  # centre of cell (0, 0)
+    span = roi.r_px + max(roi.half_w_px or 0.0, roi.half_h_px or 0.0)
+    n = int(math.ceil(2.0 * span / cs)) + 4
+    nominal = c - (0.5 * n) * cs
+    shift = np.round((c + t @ (o - c) - nominal - 0.5 * cs) / cs)  # whole cells: exact for 90 deg turns
+    go = c + t @ (o - c) - shift * cs  # centre of the new cell (0, 0)
+    m = np.hstack([t, shift[:, None]])
+    flags = cv2.INTER_LINEAR
+    area = cv2.warpAffine(g.area.astype(np.float32), m, (n, n), flags=flags, borderValue=0).astype(np.float64)
+    cells = cv2.warpAffine(occ[: g.area.shape[0], : g.area.shape[1]].astype(np.float32), m, (n, n), flags=flags,
+                           borderValue=0).astype(np.float64)
+    return cells, area, (float(go[0] - 0.5 * cs), float(go[1] - 0.5 * cs))
+
+
+def _from_gravity(t: np.ndarray, mid: tuple[float, float], slope_deg: float,
+                  roi: DrumROI) -> tuple[tuple[float, float], float]:
+    """A point and a line angle (deg, y up) of gravity's frame back in the image."""
+    if not (math.isfinite(mid[0]) and math.isfinite(slope_deg)):
+        return (_NAN, _NAN), _NAN
+    inv = np.linalg.inv(t)
+    c = np.array([roi.cx_px, roi.cy_px])
+    p = inv @ (np.array(mid) - c) + c
+    a = math.radians(slope_deg)
+    dx, dy = inv @ np.array([math.cos(a), -math.sin(a)])
+    ang = math.degrees(math.atan2(-dy, dx))
+    ang = ang + 180.0 if ang <= -90.0 else ang - 180.0 if ang > 90.0 else ang
+    return (float(p[0]), float(p[1])), ang
 
 
 def _median(values: deque[float]) -> float:
@@ -343,6 +505,8 @@ def check_meter_numbers(**values: float) -> None:
     limits = {
         "min_pixels": (1, 10**9, True), "dark_v_max": (0, 255, True), "stride": (1, 16, True),
         "min_share": (0.0, 0.5, False), "collapse_ratio": (0.0, 1.0, False), "history": (1, 10_000, True),
+        "track_every": (1, 10_000, True), "rebake_threshold": (0.001, 1.0, False),
+        "camera_rotation_deg": (-360.0, 360.0, False),
     }
     for key, v in values.items():
         lo, hi, integer = limits[key]

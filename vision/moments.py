@@ -26,9 +26,10 @@ from functools import lru_cache
 import numpy as np
 
 from vision.colours import Classifier, ColourClass, class_lut, counted_classes, lut_labels
+from vision.errors import VisionError
 
 __all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "kernel_labels", "open_labels",
-           "row_spans"]
+           "remapped_tables", "row_spans"]
 
 MOMENT_FIELDS = ("n", "sx", "sy", "sxx", "syy", "sxy")
 """Columns of :func:`frame_moments`'s result: pixel count and raw sums in px, px^2."""
@@ -77,10 +78,49 @@ def _coarse_py(fine, out):  # pragma: no cover - compiled
 _coarse_kernel = None
 
 
+def _remap_py(base, mb, mg, mr, out):  # pragma: no cover - compiled
+    """out[b, g, r] = base[mb[b], mg[g], mr[r]] over every BGR colour (2^24 entries)."""
+    for b in range(256):
+        ib = np.int64(mb[b]) << 16
+        for g in range(256):
+            ig = ib | (np.int64(mg[g]) << 8)
+            o = (b << 16) | (g << 8)
+            for r in range(256):
+                out[o | r] = base[ig | mr[r]]
+
+
+_remap_kernel = None
+
+
 @lru_cache(maxsize=8)
 def _tables(classes: tuple[ColourClass, ...]) -> ClassTables:
+    # (the cached table stays as it is: Lacey and classify share it)
+    return _finish_tables(class_lut(classes).copy(), classes)
+
+
+def remapped_tables(classes: Sequence[ColourClass], maps_bgr: np.ndarray) -> ClassTables:
+    """The lookup tables of a class set read through per-channel maps: a colour (b, g, r) of
+    the frame gets the class of (maps[0][b], maps[1][g], maps[2][r]) -- the colour it had in
+    the reference light (``vision.photometric``). Glare is judged on the frame's own values.
+    ``maps_bgr``: uint8 (3, 256). One re-bake of the 2^24 table (~0.1 s; ``drumtwin bench
+    vision`` measures it)."""
+    global _remap_kernel
+    maps = np.ascontiguousarray(maps_bgr, np.uint8)
+    if maps.shape != (3, 256):
+        raise VisionError(f"channel maps must be 3 x 256, got {maps.shape}")
+    classes = tuple(classes)
+    if _remap_kernel is None:
+        import numba
+
+        _remap_kernel = numba.njit(nogil=True, cache=True, boundscheck=False)(_remap_py)
+    fine = np.empty(1 << 24, np.uint8)
+    _remap_kernel(class_lut(classes), maps[0], maps[1], maps[2], fine)
+    return _finish_tables(fine, classes)
+
+
+def _finish_tables(fine: np.ndarray, classes: tuple[ColourClass, ...]) -> ClassTables:
+    """The glare label and the coarse table over a fine class table (changed in place)."""
     global _coarse_kernel
-    fine = class_lut(classes).copy()  # (the cached table stays as it is: Lacey and classify share it)
     counted = counted_classes(classes)
     sat = np.arange(GLARE_MIN, 256, dtype=np.int64)
     idx = ((sat[:, None, None] << 16) | (sat[None, :, None] << 8) | sat[None, None, :]).ravel()

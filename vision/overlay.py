@@ -46,8 +46,8 @@ def draw_overlay(
             p1 = (int(roi.cx_px + hw), int(roi.cy_px + hh))
             cv2.rectangle(out, p0, p1, (0, 255, 255), th, cv2.LINE_AA)
     mx, my = reading.surface_mid_px
-    if math.isfinite(reading.slope_deg) and math.isfinite(mx) and math.isfinite(my) and roi is not None:
-        a = math.radians(reading.slope_deg)
+    if math.isfinite(reading.surface_image_deg) and math.isfinite(mx) and math.isfinite(my) and roi is not None:
+        a = math.radians(reading.surface_image_deg)  # the line as it lies in the image (turned camera)
         half = 0.5 * roi.r_px  # the central chord the angle is fitted over
         dx, dy = half * math.cos(a), -half * math.sin(a)
         p0 = (int(round(mx - dx)), int(round(my - dy)))

@@ -325,7 +325,7 @@ def _surface_fn():
 
 
 def surface_from_occupancy(
-    occ: np.ndarray, area: np.ndarray, full_area: float, origin_xy: tuple[int, int], shift: int, r_px: float,
+    occ: np.ndarray, area: np.ndarray, full_area: float, origin_xy: tuple[float, float], shift: int, r_px: float,
     work: np.ndarray | None = None,
 ) -> SurfaceFit:
     """Free surface from bed pixels per cell ``occ`` and ROI pixels per cell ``area``.

@@ -46,19 +46,22 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
 from vision.census import run_diameter_px
-from vision.colours import ColourClass, LabComponent, bgr_to_lab, classify, counted_classes
+from vision.colours import ColourClass, LabComponent, bgr_to_lab, class_lut, classify, counted_classes
 from vision.config import MeterConfig
 from vision.errors import VisionError
+from vision.meter import gravity_matrix
+from vision.photometric import class_quantiles, light_quantiles, roi_sample_index, sample_labels
 from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
 
 __all__ = [
+    "KEEP_FRAMES",
     "MAX_DISTANCE",
     "OPENING_GRID",
     "OPENING_KEEP",
@@ -70,6 +73,7 @@ __all__ = [
     "needs_opening",
     "opening_stride",
     "particle_diameter_px",
+    "propose_rotation_deg",
     "sample_drum_pixels",
     "suggest_classes",
 ]
@@ -125,30 +129,44 @@ class DrumSamples:
 
 def sample_drum_pixels(
     frames: Sequence[np.ndarray], rois: Sequence[DrumROI], per_frame: int = 12000, seed: int = 0,
-    r_max: float = 0.94,
+    r_max: float = 0.94, camera_rotation_deg: float = 0.0, mirror: bool = False,
 ) -> DrumSamples:
-    """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum."""
+    """Up to ``per_frame`` random pixels inside ``r_max`` R of each frame's drum; their height
+    is measured in gravity's frame (``camera_rotation_deg``, ``mirror``: see ``vision.meter.Meter``)."""
     rng = np.random.default_rng(seed)
-    labs, heights, clipped = [], [], []
-    for img, roi in zip(frames, rois, strict=True):
-        box = roi_bbox(roi, img.shape[:2])
-        x0, y0, x1, y1 = box
-        inner = DrumROI(roi.cx_px, roi.cy_px, roi.r_px * r_max, roi.kind,
-                        None if roi.half_w_px is None else roi.half_w_px * r_max,
-                        None if roi.half_h_px is None else roi.half_h_px * r_max)
-        yy, xx = np.nonzero(_mask_in_box(inner, box))
-        if yy.size == 0:
-            continue
-        if yy.size > per_frame:
-            pick = rng.choice(yy.size, per_frame, replace=False)
-            yy, xx = yy[pick], xx[pick]
-        px = img[y0:y1, x0:x1][yy, xx]
-        labs.append(bgr_to_lab(px))
-        heights.append((roi.cy_px - (yy + y0)) / roi.r_px)
-        clipped.append(px.max(axis=1) >= _CLIP_LEVEL)
-    if not labs:
+    parts = [p for p in (_frame_samples(img, roi, per_frame, rng, r_max) for img, roi in zip(frames, rois, strict=True))
+             if p is not None]
+    return _samples_in_gravity(parts, camera_rotation_deg, mirror)
+
+
+def _frame_samples(img: np.ndarray, roi: DrumROI, per_frame: int, rng: np.random.Generator,
+                   r_max: float = 0.94) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """One frame's random drum pixels: CIELAB (N, 3), offsets from the drum centre in R (N, 2),
+    clipped (N,); None when the drum has no pixels in the frame."""
+    box = roi_bbox(roi, img.shape[:2])
+    x0, y0, x1, y1 = box
+    inner = DrumROI(roi.cx_px, roi.cy_px, roi.r_px * r_max, roi.kind,
+                    None if roi.half_w_px is None else roi.half_w_px * r_max,
+                    None if roi.half_h_px is None else roi.half_h_px * r_max)
+    yy, xx = np.nonzero(_mask_in_box(inner, box))
+    if yy.size == 0:
+        return None
+    if yy.size > per_frame:
+        pick = rng.choice(yy.size, per_frame, replace=False)
+        yy, xx = yy[pick], xx[pick]
+    px = img[y0:y1, x0:x1][yy, xx]
+    off = np.stack([(xx + x0 - roi.cx_px) / roi.r_px, (yy + y0 - roi.cy_px) / roi.r_px], axis=1)
+    return bgr_to_lab(px), off, px.max(axis=1) >= _CLIP_LEVEL
+
+
+def _samples_in_gravity(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], camera_rotation_deg: float,
+                        mirror: bool) -> DrumSamples:
+    if not parts:
         raise VisionError("no drum pixels to learn colours from")
-    return DrumSamples(np.concatenate(labs).astype(np.float64), np.concatenate(heights), np.concatenate(clipped))
+    t = gravity_matrix(camera_rotation_deg, mirror)
+    up = np.array([0.0, -1.0]) if t is None else -t[1]  # image offset . up = height
+    return DrumSamples(np.concatenate([p[0] for p in parts]).astype(np.float64),
+                       np.concatenate([p[1] for p in parts]) @ up, np.concatenate([p[2] for p in parts]))
 
 
 def _em(x: np.ndarray, n: int, seed: int, iters: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -364,40 +382,82 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
     )
 
 
-def suggest_classes(
-    frames: Sequence[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
-    per_frame: int | None = None, rois: Sequence[DrumROI] | None = None,
-) -> MeterConfig:
-    """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames.
+KEEP_FRAMES = 24
+"""``suggest_classes`` keeps at most this many frames (spread evenly over the source) for the
+checks that need whole frames (particle size, the class opening); of the others it keeps
+only their pixel samples, so ``classes suggest --frames 500`` is bounded in memory."""
 
-    ``roi`` fixes the drum for every frame; ``rois`` gives each frame's (already found);
-    with neither, it is detected in each frame. The ROI is not written into the config
-    (the meter finds the drum per frame size). ``warnings``
+
+def suggest_classes(
+    frames: Iterable[np.ndarray] | np.ndarray, roi: DrumROI | None = None, k: int = 2, seed: int = 0,
+    per_frame: int | None = None, rois: Sequence[DrumROI] | None = None,
+    camera_rotation_deg: float | None = None, mirror: bool = False, n_frames: int | None = None,
+) -> MeterConfig:
+    """A ``MeterConfig`` with ``k`` learned classes from one or many BGR frames, the light
+    they were seen in (``light_reference``, ``vision.photometric``) and the camera's turn
+    (``camera_rotation_deg``; None: proposed by :func:`propose_rotation_deg`; a mirror
+    cannot be seen in the frames, so ``mirror`` is the caller's).
+
+    ``frames`` may be a stream (any iterable, read once: each frame's pixel samples are taken
+    as it comes, and at most ``KEEP_FRAMES`` frames are held; ``n_frames`` = how many to
+    expect, for the samples per frame). ``roi`` fixes the drum for every frame; ``rois``
+    gives each frame's (already found); with neither, it is detected in each frame. The ROI
+    is not written into the config (the meter finds the drum per frame size). ``warnings``
     names classes with no valley between their colours (see the module's step 6)."""
     if isinstance(frames, np.ndarray):
         frames = [frames]
-    frames = list(frames)
-    if not frames:
-        raise VisionError("classes suggest needs at least one frame")
-    for img in frames:
+    total = len(frames) if isinstance(frames, Sequence) else n_frames
+    if rois is not None and isinstance(frames, Sequence) and len(rois) != len(frames):
+        raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
+    per = per_frame or max(2000, 40000 // max(total or 12, 1))
+    rng = np.random.default_rng(seed)
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    light_px: list[np.ndarray] = []
+    texture = np.zeros(2)
+    kept: list[tuple[np.ndarray, DrumROI]] = []
+    step = 1  # keep every step-th frame; doubled (and every other kept frame dropped) when full
+    n = 0
+    for i, img in enumerate(frames):
         if not (isinstance(img, np.ndarray) and img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8):
             shape = getattr(img, "shape", None)
             raise VisionError(f"classes suggest needs colour (BGR, 8-bit) frames, got shape {shape}")
-    if rois is None:
-        rois = [roi if roi is not None else detect_drum(img) for img in frames]
-    elif len(rois) != len(frames):
-        raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
-    per = per_frame or max(2000, 40000 // len(frames))
-    samples = sample_drum_pixels(frames, rois, per_frame=per, seed=seed)
+        if rois is not None:
+            if i >= len(rois):
+                raise VisionError(f"{len(rois)} drum ROIs for more frames")
+            r = rois[i]
+        else:
+            r = roi if roi is not None else detect_drum(img)
+        part = _frame_samples(img, r, per, rng)
+        if part is not None:
+            parts.append(part)
+        light_px.append(np.ascontiguousarray(img).reshape(-1, 3)[roi_sample_index(r, img.shape[:2])])
+        texture += _texture_offset(img, r)
+        if i % step == 0:
+            kept.append((img, r))
+            if len(kept) > KEEP_FRAMES:
+                kept = kept[::2]
+                step *= 2
+        n += 1
+    if n == 0:
+        raise VisionError("classes suggest needs at least one frame")
+    rot = _quarter_turn(texture / n) if camera_rotation_deg is None else float(camera_rotation_deg)
+    samples = _samples_in_gravity(parts, rot, mirror)
     classes, notes = _fit_colour_model(samples, k, seed)
-    cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes)
+    px = np.concatenate(light_px)
+    light = tuple(tuple(round(float(v), 2) for v in row) for row in light_quantiles(px))
+    n_labels = len(counted_classes(classes)) + 1
+    per_class = class_quantiles(px, sample_labels(class_lut(tuple(classes)), px, n_labels), n_labels)
+    light_cls = tuple(tuple(round(float(v), 2) for v in row.ravel()) for row in per_class)
+    cfg = MeterConfig(classes, None, "color", source="<suggested>", warnings=notes, light_reference=light,
+                      light_reference_classes=light_cls, camera_rotation_deg=rot, mirror=mirror)
+    kf, kr = [f for f, _ in kept], [r for _, r in kept]
     # the smallest estimate over (up to 8 of) the frames: in a segregated bed touching
     # particles of one class merge into longer runs, a mixed frame shows them one by one
-    d = min((particle_diameter_px(cfg, img, roi) for img, roi in list(zip(frames, rois, strict=True))[:8]),
+    d = min((particle_diameter_px(cfg, img, r) for img, r in kept[:8]),
             key=lambda v: v if math.isfinite(v) else math.inf)
     stride = opening_stride(d)
     while stride >= 1:  # from the particle size's grid down, while the opening eats particles
-        verdict = needs_opening(cfg, frames, rois, stride)
+        verdict = needs_opening(cfg, kf, kr, stride)
         if verdict is not None:
             # on a coarse grid the opening is always on: it costs nothing there (the grid is
             # faster than the full one), and the blurred gaps it drops may not move a centroid
@@ -405,6 +465,43 @@ def suggest_classes(
             return replace(cfg, opening=True, stride=stride) if verdict or stride > 1 else cfg
         stride //= 2
     return cfg
+
+
+def propose_rotation_deg(frames: Sequence[np.ndarray], rois: Sequence[DrumROI]) -> float:
+    """The camera's turn (0, 90, 180 or 270 deg) from where the bed lies in the drum.
+
+    The bed is where the drum is textured (particle edges): the centroid of the textured
+    pixels of the drum's inside (to 0.85 R) lies off its centre towards gravity's down, turned
+    by at most the bed's slope, so the nearest quarter turn is the camera's (the mean offset
+    over the frames). 0 when the offset is under 5% of R (a full or empty drum shows no
+    direction). Any other angle is the user's to write."""
+    off = sum((_texture_offset(img, roi) for img, roi in zip(frames, rois, strict=True)), np.zeros(2))
+    return _quarter_turn(off / max(len(frames), 1))
+
+
+def _texture_offset(img: np.ndarray, roi: DrumROI) -> np.ndarray:
+    """Offset (in R) of the textured pixels' centroid from the drum centre; zero for none."""
+    box = roi_bbox(roi, img.shape[:2])
+    x0, y0, x1, y1 = box
+    inner = DrumROI(roi.cx_px, roi.cy_px, 0.85 * roi.r_px)
+    gray = cv2.cvtColor(np.ascontiguousarray(img[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    mag = np.hypot(cv2.Sobel(gray, cv2.CV_32F, 1, 0), cv2.Sobel(gray, cv2.CV_32F, 0, 1))
+    inside = _mask_in_box(inner, box)
+    # textured: well above the noise floor (the quietest fifth of the drum), whatever the
+    # particles' contrast -- unweighted, so a bright class does not pull the centroid
+    floor = float(np.percentile(mag[inside], 20)) if inside.any() else 0.0
+    ys, xs = np.nonzero(inside & (mag > max(12.0, 4.0 * floor)))
+    if ys.size < 50:
+        return np.zeros(2)
+    return np.array([(xs.mean() + x0 - roi.cx_px) / roi.r_px, (ys.mean() + y0 - roi.cy_px) / roi.r_px])
+
+
+def _quarter_turn(off: np.ndarray) -> float:
+    if math.hypot(*off) < 0.05:
+        return 0.0
+    # gravity's down (0, 1) turned counter-clockwise on screen by a lies along (sin a, cos a)
+    a = math.degrees(math.atan2(off[0], off[1]))
+    return float((round(a / 90.0) * 90) % 360)
 
 
 def particle_diameter_px(cfg: MeterConfig, frame: np.ndarray, roi: DrumROI) -> float:

@@ -10,7 +10,8 @@ import numpy as np
 
 from vision.roi import DrumROI
 
-__all__ = ["BLUE_BGR", "PERTURBATIONS", "RED_BGR", "DrumScene", "drum_frame", "particle_drum", "perturb"]
+__all__ = ["BLUE_BGR", "LIGHT_CHANGES", "PERTURBATIONS", "RED_BGR", "DrumScene", "colour_temperature_gains",
+           "drum_frame", "light_change", "particle_drum", "perturb"]
 
 RED_BGR = (0, 0, 220)
 BLUE_BGR = (220, 60, 0)
@@ -190,6 +191,36 @@ def _draw_particle(img: np.ndarray, lab: np.ndarray, x: float, y: float, pr: flo
     lab[y0:y1, x0:x1][alpha[..., 0] >= 0.5] = k
 
 
+LIGHT_CHANGES = ("exposure0.7", "exposure1.3", "ct+1000", "ct-1000")
+"""The light changes after set-up of issue 22 (:func:`perturb` kinds): exposure x0.7 and x1.3,
+colour temperature +-1000 K."""
+
+_BGR_NM = (455.0, 540.0, 605.0)  # dominant wavelengths of a webcam's B, G, R filters, nm
+
+
+def colour_temperature_gains(delta_k: float, base_k: float = 5500.0) -> tuple[float, float, float]:
+    """Linear-light gains (B, G, R) of a black-body light going from ``base_k`` to ``base_k +
+    delta_k`` kelvin, seen through narrow B, G, R filters (Planck's law), green kept at 1 (the
+    exposure does not follow the white balance). +1000 K from 5500 K: blue up ~11%, red down ~9%."""
+    def planck(nm: float, t: float) -> float:
+        lam = nm * 1e-9
+        return 1.0 / (lam**5 * math.expm1(1.4388e-2 / (lam * t)))
+
+    t1 = base_k + delta_k
+    if not (base_k > 0 and t1 > 0):
+        raise ValueError(f"colour temperatures must be > 0 K, got {base_k} and {t1}")
+    g = [planck(nm, t1) / planck(nm, base_k) for nm in _BGR_NM]
+    return (g[0] / g[1], 1.0, g[2] / g[1])
+
+
+def light_change(image_bgr: np.ndarray, gains_bgr: tuple[float, float, float] | float) -> np.ndarray:
+    """A frame under other light: linear light (sRGB-like gamma 2.2 decoded) times per-channel
+    gains, clipped channel by channel as a sensor clips, encoded again."""
+    g = np.broadcast_to(np.asarray(gains_bgr, np.float32), (3,))
+    lin = (np.asarray(image_bgr, np.float32) / 255.0) ** 2.2 * g
+    return (np.clip(lin, 0, 1) ** (1 / 2.2) * 255.0 + 0.5).astype(np.uint8)
+
+
 PERTURBATIONS = ("none", "exposure0.7", "exposure1.3", "noise", "jpeg30", "glare", "rotate10", "half")
 """The robustness perturbations of :func:`perturb`."""
 
@@ -201,7 +232,8 @@ def perturb(image_bgr: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray
     ``exposure0.7``/``exposure1.3`` scale linear light (sRGB decoded, clipped), ``noise``
     adds gaussian noise (sigma 8), ``jpeg30`` re-encodes at JPEG quality 30, ``glare``
     adds three saturated specular spots, ``rotate10`` turns the frame 10 deg about its
-    centre, ``half`` halves the resolution."""
+    centre, ``half`` halves the resolution; ``ct+1000``/``ct-1000`` (any ``ct<kelvin>``)
+    shift the light's colour temperature (:func:`colour_temperature_gains`)."""
     img = np.asarray(image_bgr)
     h, w = img.shape[:2]
     ident = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -209,9 +241,9 @@ def perturb(image_bgr: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray
     if kind == "none":
         return img.copy(), ident
     if kind.startswith("exposure"):
-        f = float(kind[len("exposure"):])
-        lin = (img.astype(np.float32) / 255.0) ** 2.2 * f
-        return (np.clip(lin, 0, 1) ** (1 / 2.2) * 255.0 + 0.5).astype(np.uint8), ident
+        return light_change(img, float(kind[len("exposure"):])), ident
+    if kind.startswith("ct") and kind[2:].lstrip("+-").isdigit():
+        return light_change(img, colour_temperature_gains(float(kind[2:]))), ident
     if kind == "noise":
         return np.clip(img + rng.normal(0, 8.0, img.shape), 0, 255).astype(np.uint8), ident
     if kind == "jpeg30":

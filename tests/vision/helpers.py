@@ -90,3 +90,25 @@ def tilted_bed(
     img[bed & (along < 0)] = RED
     img[bed & (along >= 0)] = BLUE
     return img, roi
+
+
+def paired_errors(readings, truths):
+    """Error / R of the class matched to colour 0 (classes matched to colours by the
+    assignment with the smaller total error)."""
+    best = None
+    for order in ((0, 1), (1, 0)):
+        errs = []
+        for r, tru in zip(readings, truths, strict=True):
+            st = r.classes[order[0]]
+            errs.append(math.hypot(st.cx_px - tru[0][0], st.cy_px - tru[0][1]) / r.roi.r_px)
+        other = sum(math.hypot(r.classes[order[1]].cx_px - t[1][0], r.classes[order[1]].cy_px - t[1][1])
+                    for r, t in zip(readings, truths, strict=True))
+        total = sum(errs) + other / readings[0].roi.r_px
+        if best is None or total < best[0]:
+            best = (total, errs)
+    return best[1]
+
+
+def jpeg(img: np.ndarray, quality: int = 90) -> np.ndarray:
+    """The frame through a camera's JPEG (4:2:0 chroma) at ``quality``."""
+    return cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_COLOR)

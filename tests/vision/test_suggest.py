@@ -44,3 +44,33 @@ def test_classes_without_a_valley_between_them_are_a_warning(tmp_path):
     assert r.code == 0 and r.err.count("warning:") == 1 and "valley" in r.err
     assert "# warning: classes" in r.out
     assert parse_config(r.out).warnings == ()  # a comment: the config itself reads back as before
+
+
+def test_suggest_streams_its_frames_and_holds_few(monkeypatch):
+    """``classes suggest --frames 500``: the frames are a stream, read once; only
+    ``KEEP_FRAMES`` of them (spread over the source) are held, the rest leave their pixel
+    samples only. 60 VGA frames, at most 4 kept: while they stream in, the memory held grows by
+    a tenth of a frame per frame (its samples), not by the frame."""
+    import tracemalloc
+
+    import vision.suggest as sg
+    from vision.synthetic import particle_drum
+
+    monkeypatch.setattr(sg, "KEEP_FRAMES", 4)
+    base = particle_drum((640, 480), mix=0.5, seed=1).image
+    n = 60
+    held = []  # memory traced as each frame is handed over
+
+    def stream():
+        for i in range(n):
+            held.append(tracemalloc.get_traced_memory()[0])
+            yield np.roll(base, i % 3, axis=1)  # a new array per frame, as a decoder gives
+
+    tracemalloc.start()
+    try:
+        cfg = sg.suggest_classes(stream(), n_frames=n, per_frame=2000)
+    finally:
+        tracemalloc.stop()
+    assert len(held) == n and len(cfg.counted) == 2
+    growth = held[-1] - held[10]
+    assert growth < 0.25 * (n - 11) * base.nbytes, (growth, (n - 11) * base.nbytes)

@@ -79,6 +79,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     classes = None
     roi = None
     mixer = None
+    mc = None
     if cfg.meter_config is not None:
         from sim.mixer import mixer_from_config
         from vision.config import load_config
@@ -123,7 +124,8 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()
-        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, mixer=mixer)
+        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, mixer=mixer,
+                        meter_config=mc)
         if mixer is not None:
             from sim.mixer import resolve
 

@@ -15,6 +15,10 @@ from twin.cli.app import app, bench_app, console, console_err, print_json
 from vision.errors import VisionError
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+    import numpy as np
+
     from vision.glcm import GLCMMeter
     from vision.lacey import LaceyMeter
 
@@ -250,8 +254,22 @@ def _plot(path: Path, ts: list[float], mis: list[float], avgs: list[float], meth
     plt.close(fig)
 
 
-def _pick_frames(source: list[str], n_frames: int) -> list:
-    """Up to ``n_frames`` readable frames spread evenly over the source (sources.Frame list)."""
+def _pick_count(source: list[str], n_frames: int) -> int:
+    """How many frames :func:`_pick_frames` will try to give (images: exact; a video: at most)."""
+    from vision.sources import _image_paths, source_kind
+
+    spec = source if len(source) > 1 else source[0]
+    kind = source_kind(spec)
+    if kind == "image":
+        return 1
+    if kind in ("folder", "images"):
+        return max(1, min(n_frames, len(_image_paths(spec))))
+    return n_frames
+
+
+def _pick_frames(source: list[str], n_frames: int) -> Iterator[tuple[str, np.ndarray]]:
+    """Up to ``n_frames`` readable frames spread evenly over the source, as (name, image), read
+    one at a time (``classes suggest --frames 500`` holds no more than it must)."""
     from vision.sources import _image_paths, open_source, read_image, source_kind
 
     spec = source if len(source) > 1 else source[0]
@@ -264,15 +282,14 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
             raise FileNotFoundError(f"no such file: {paths[0]}")
         m = min(n_frames, len(paths))
         idx = sorted({round(i * (len(paths) - 1) / max(m - 1, 1)) for i in range(m)})
-        out = []
         for i in idx:
             img, err = read_image(paths[i])
             if err:
                 if kind == "image":
                     raise VisionError(err)
                 continue
-            out.append((paths[i].name, img))
-        return out
+            yield paths[i].name, img
+        return
     total = 0
     if kind == "video":
         import cv2
@@ -281,13 +298,16 @@ def _pick_frames(source: list[str], n_frames: int) -> list:
         total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         cap.release()
     step = max(1, total // n_frames) if total > 0 else 10
-    out = []
+    got = 0
     for fr in open_source(spec, reconnect=False):
         if fr.index % step == 0 and not fr.error:
-            out.append((fr.name or str(fr.index), fr.image))
-        if len(out) >= n_frames:
+            yield fr.name or str(fr.index), fr.image
+            got += 1
+        if got >= n_frames:
             break
-    return out
+
+
+_SIDE = ("bottom", "right", "top", "left")  # where gravity's down lies in the image per quarter turn
 
 
 @classes_app.command("suggest")
@@ -303,6 +323,10 @@ def suggest_cmd(
     drum_depth_mm: float | None = typer.Option(
         None, "--drum-depth-mm", help="With --drum-diameter-mm: the end plates' distance (mm); default a "
         "monolayer drum (one particle thick)."),
+    rotation: float | None = typer.Option(
+        None, "--camera-rotation-deg",
+        help="How far the camera is turned (deg, counter-clockwise as seen); default: from where the bed lies."),
+    mirror: bool = typer.Option(False, "--mirror", help="The drum is filmed through a mirror."),
 ) -> None:
     """Learn the particle colours from the bed over many frames and print a ready TOML config."""
     from vision.config import config_to_toml
@@ -317,33 +341,55 @@ def suggest_cmd(
         if drum_diameter_mm is None:
             raise VisionError("--drum-depth-mm needs --drum-diameter-mm")
         _check_number("--drum-depth-mm", drum_depth_mm, 0.1, 1e4)
+    if rotation is not None:
+        _check_number("--camera-rotation-deg", rotation, -360, 360)
     if preview is not None and not preview.parent.exists():
         raise VisionError(f"--preview folder does not exist: {preview.parent}")
     if preview is not None and preview.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise VisionError(f"--preview must be a .png or .jpg file, got {preview.name}")
     manual = parse_roi(roi) if roi else None
-    picked = _pick_frames(source, n_frames)
-    if not picked:
-        raise VisionError("no readable frames in the source")
-    for name, img in picked:
-        if img.ndim != 3:
-            raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
-    rois = []
-    if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
-        kept = []
-        for name, img in picked:
-            try:
-                rois.append(detect_drum(img))
-                kept.append((name, img))
-            except VisionError as exc:
-                if len(picked) == 1:
-                    raise VisionError(f"{name}: {exc}") from None
-                _warn([f"{name} left out: {exc}"])
-        if not kept:
-            raise VisionError(f"none of the {len(picked)} frames shows a drum that can be found; pass --roi cx,cy,r")
-        picked = kept
-    frames = [img for _, img in picked]
-    cfg = suggest_classes(frames, manual, k=k, rois=rois or None)
+    seen: list[str] = []  # names of the frames used (the first frame is kept for the preview)
+    rois: list = []
+    first: list[np.ndarray] = []
+    skipped: list[str] = []
+    done: list[bool] = []  # the source read to its end
+    census_frames: list[np.ndarray] = []
+
+    def stream() -> Iterator[np.ndarray]:
+        """The picked frames, one at a time; frames without a drum are left out (and named)."""
+        for name, img in _pick_frames(source, n_frames):
+            if img.ndim != 3:
+                raise VisionError(f"{name} is a grayscale image; colour classes need colour frames")
+            if manual is None:  # find the drum in each frame; leave out (and name) the frames without one
+                try:
+                    rois.append(detect_drum(img))
+                except VisionError as exc:
+                    skipped.append(f"{name}: {exc}")
+                    continue
+            seen.append(name)
+            if not first:
+                first.append(img)
+            if drum_diameter_mm is not None and len(census_frames) < CENSUS_MAX_FRAMES:
+                census_frames.append(img)  # the mixer's census measures these again (bounded)
+            yield img
+        done.append(True)
+
+    try:  # (``rois`` grows as the stream goes: each frame's drum is found before it is handed over)
+        cfg = suggest_classes(stream(), manual, k=k, rois=None if manual else rois, camera_rotation_deg=rotation,
+                              mirror=mirror, n_frames=_pick_count(source, n_frames))
+    except VisionError as exc:
+        if seen or not done:  # an error of a frame or of the fit, not an empty source
+            raise
+        if not skipped:
+            raise VisionError("no readable frames in the source") from None
+        if len(skipped) == 1:
+            raise VisionError(skipped[0]) from None
+        _warn([f"{w.split(': ', 1)[0]} left out: {w.split(': ', 1)[1]}" for w in skipped])
+        raise VisionError(f"none of the {len(skipped)} frames shows a drum that can be found; "
+                          "pass --roi cx,cy,r") from exc
+    _warn([f"{w.split(': ', 1)[0]} left out: {w.split(': ', 1)[1]}" for w in skipped])
+    picked = [(seen[0], first[0])]
+    frames = seen  # (only their number is used below)
     r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
     comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
@@ -355,22 +401,29 @@ def suggest_cmd(
         comment += (f"\nopening = true ({why}): it drops the thin rims and gaps that colour blur gives a class,\n"
                     "and keeps whole particles.")
         console_err.print(f"class opening on ({why})", highlight=False)
+    if rotation is None and cfg.camera_rotation_deg:
+        why = (f"camera_rotation_deg = {cfg.camera_rotation_deg:g}: the bed lies towards the image's "
+               f"{_SIDE[int(cfg.camera_rotation_deg) // 90]}, so gravity points there (nearest quarter turn)")
+        comment += f"\n{why}"
+        console_err.print(why, highlight=False)
     comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
     _warn(cfg.warnings)
     if preview is not None:
         import cv2
 
-        if not cv2.imwrite(str(preview), class_preview(frames[0], cfg.classes, r0)):
+        if not cv2.imwrite(str(preview), class_preview(picked[0][1], cfg.classes, r0)):
             raise VisionError(f"cannot write {preview}")
         console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False)
     text = config_to_toml(cfg, comment)
     if drum_diameter_mm is not None:
-        text += "\n" + suggest_mixer_toml(cfg, frames, rois or [r0] * len(frames), float(drum_diameter_mm),
-                                          drum_depth_mm)
+        n = len(census_frames)
+        text += "\n" + suggest_mixer_toml(cfg, census_frames, rois[:n] if rois else [r0] * n,
+                                          float(drum_diameter_mm), drum_depth_mm)
     sys.stdout.write(text)
 
 
 SUGGEST_DENSITY_KG_M3 = 1190.0  # PMMA: a camera cannot see density
+CENSUS_MAX_FRAMES = 24  # frames `classes suggest --drum-diameter-mm` keeps for the mixer's census
 
 
 def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm: float | None) -> str:
@@ -483,6 +536,10 @@ def bench_vision(
     t.add_row("centroid 640x480, stride 2 (opt-in decimation)", f"{res['centroid_fps_stride2']:,.0f}", "")
     t.add_row("centroid 640x480, class opening", f"{res['centroid_fps_opening']:,.0f}", "")
     t.add_row("centroid 640x480, three glare spots filled", f"{res['centroid_fps_glare']:,.0f}", "")
+    t.add_row("centroid 640x480, photometric tracking on", f"{res['centroid_fps_tracked']:,.0f}",
+              f"{res['tracked_ratio']:.2f}x")
+    t.add_row("centroid 640x480, light moving every frame (re-bakes)", f"{res['centroid_fps_light_moved']:,.1f}",
+              f"one re-bake {1000 * res['rebake_s']:.0f} ms")
     t.add_row("GLCM 640x480", f"{res['glcm_fps']:,.1f}", f"{c / res['glcm_fps']:.1f}x slower")
     t.add_row("Lacey 640x480", f"{res['lacey_fps']:,.1f}", f"{c / res['lacey_fps']:.1f}x slower")
     t.add_row("centroid 1920x1080 (every pixel)", f"{res['centroid_fps_1080p']:,.0f}", "")

@@ -1,0 +1,427 @@
+"""Photometric tracking: each frame's exposure and white balance against the light at set-up.
+
+What does not change while the drum turns is *what* is in it: the same particles, the same
+drum, the same background, in nearly the same shares of the drum's area. The bed moves and
+mixes, but the distribution of each colour channel over the drum ROI stays put; an exposure
+or white-balance change moves every value of a channel the same (monotone) way, and a
+monotone change keeps ranks: the q-quantile of a channel now is the image of the q-quantile
+at set-up. So the reference is a set of per-channel quantiles of the ROI's pixels
+(:data:`LEVELS`) from the frames ``classes suggest`` learned on, kept in the config
+(``[meter] light_reference``), and each frame's quantiles, from a few thousand ROI pixels
+on a fixed grid, give one gain per channel in linear light (sensor gamma :data:`GAMMA`):
+the median ratio over the quantile levels both frames see unclipped and above the black
+level. This uses the drum's empty region and rim, the achromatic particles and the bed's
+own colours at once, needs no segmentation (which the light change would itself upset),
+and costs a gather and three 256-bin histograms per tracked frame.
+
+The classification is then done in the reference's terms: the class table is re-baked
+through per-channel maps (frame value -> value at set-up, :func:`channel_maps`,
+``vision.moments.remapped_tables``) when the gains move beyond a threshold -- a one-off
+cost, the per-pixel pass stays one lookup. A clipped channel (255 under a gain > 1) maps to
+the middle of the reference values that clip: a pale class whose brightest channels clip
+keeps those channels near its own values instead of dropping to the darkest guess, which
+would turn it into a grey.
+
+When the light cannot be mapped back -- too few unclipped levels in a channel (saturated or
+black), a gain outside :data:`GAIN_RANGE`, or ratios that disagree along a channel (a colour
+cast or tone curve that no gain explains) -- :func:`estimate_light` names the cause and the
+meter gives no MI for the frame and a ``lighting_changed:<cause>`` flag.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vision.errors import VisionError
+from vision.roi import DrumROI, _mask_in_box, roi_bbox
+
+__all__ = [
+    "CLASS_LEVELS",
+    "GAIN_RANGE",
+    "GAMMA",
+    "LEVELS",
+    "LightEstimate",
+    "channel_maps",
+    "check_class_reference",
+    "check_reference",
+    "class_quantiles",
+    "class_reference_from_frames",
+    "estimate_light",
+    "light_quantiles",
+    "reference_from_frames",
+    "refine_light",
+    "roi_sample_index",
+    "sample_labels",
+    "sample_means",
+    "track_light",
+]
+
+GAMMA = 2.2
+"""Sensor gamma: display value v (0..255) is linear light (v / 255) ** GAMMA."""
+LEVELS = np.linspace(0.30, 0.98, 35)
+"""Quantile levels of the ROI's pixels (per channel) in the light reference."""
+FLOOR = 20.0
+"""Display values at or below this carry no gain information (black level, noise)."""
+CEIL = 247.0
+"""Display values at or above this may be clipped."""
+GAIN_RANGE = (0.4, 2.5)
+"""Linear-light gains outside this range are too far to map back."""
+MIN_LEVELS = 5
+"""A channel needs at least this many usable quantile levels."""
+MAX_SPREAD = 0.2
+"""Largest median |log ratio - log gain| over a channel's levels that one gain explains (the
+real PMMA frames, unperturbed, reach 0.11 against a reference from another frame: the bed's
+share of the drum moves the levels near the bed/background step)."""
+MAX_CLASS_SPREAD = 0.16
+"""The same for the per-class quantiles (:func:`refine_light`), which one gain explains closely."""
+JUMP = 0.03
+"""Between two full estimates, a frame whose sampled mean moved by more than this share in a
+channel (or 3 display levels) since the last estimate is estimated at once (``Meter``)."""
+SAMPLES = 2000
+"""About this many ROI pixels per frame for the estimate."""
+CLASS_LEVELS = np.array([0.1, 0.25, 0.5, 0.75, 0.9])
+"""Quantile levels of each class's pixels (per channel) in the per-class light reference."""
+MIN_CLASS_SAMPLES = 40
+"""A class with fewer sampled pixels has no quantiles (written as -1)."""
+_NAMES = ("blue", "green", "red")
+
+
+@dataclass(frozen=True, slots=True)
+class LightEstimate:
+    """Gains (linear light, B, G, R) of a frame against the reference, the largest disagreement
+    along a channel (median |log ratio - log gain|), and the cause when it cannot be mapped back
+    (``None`` when it can)."""
+
+    gains_bgr: tuple[float, float, float]
+    spread: float
+    cause: str | None = None
+
+
+def check_reference(ref, where: str = "light_reference") -> np.ndarray:
+    """A light reference as a float (3, len(LEVELS)) array of non-decreasing display values 0..255."""
+    try:
+        a = np.asarray(ref, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise VisionError(f"{where} must be 3 rows of {len(LEVELS)} numbers") from None
+    if a.shape != (3, len(LEVELS)):
+        raise VisionError(f"{where} must be 3 rows (B, G, R) of {len(LEVELS)} numbers, got shape {a.shape}")
+    if not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 255:
+        raise VisionError(f"{where} must hold finite numbers within 0..255")
+    if np.any(np.diff(a, axis=1) < -1e-9):
+        raise VisionError(f"{where}: each row must be non-decreasing (quantiles)")
+    return a
+
+
+def check_class_reference(ref, n_labels: int, where: str = "light_reference_classes") -> np.ndarray:
+    """A per-class light reference as a float (n_labels, 3, len(CLASS_LEVELS)) array (rows of
+    3 x L numbers, B then G then R; -1 = a class not seen); ``n_labels`` = counted classes + 1."""
+    try:
+        a = np.asarray(ref, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise VisionError(f"{where} must be rows of {3 * len(CLASS_LEVELS)} numbers") from None
+    if a.ndim == 2:
+        a = a.reshape(a.shape[0], 3, -1) if a.shape[1] == 3 * len(CLASS_LEVELS) else a[:, None, :]
+    if a.shape != (n_labels, 3, len(CLASS_LEVELS)):
+        raise VisionError(f"{where} must be {n_labels} rows (no class, then each counted class) of "
+                          f"{3 * len(CLASS_LEVELS)} numbers (B, G, R quantiles)")
+    if not np.all(np.isfinite(a)) or a.min() < -1 or a.max() > 255:
+        raise VisionError(f"{where} must hold finite numbers within 0..255 (-1: class not seen)")
+    return a
+
+
+def class_quantiles(pixels_bgr: np.ndarray, labels: np.ndarray, n_labels: int) -> np.ndarray:
+    """Per label (0 = no class, k = k-th counted class) and channel, the quantiles at
+    :data:`CLASS_LEVELS` of (N, 3) pixels; -1 for a label with under ``MIN_CLASS_SAMPLES``."""
+    px = np.ascontiguousarray(pixels_bgr, np.uint8).reshape(-1, 3)
+    out = np.empty((n_labels, 3, len(CLASS_LEVELS)))
+    _kernels()[0](px, np.ascontiguousarray(labels, np.int64), n_labels, CLASS_LEVELS, MIN_CLASS_SAMPLES, out)
+    return out
+
+
+def roi_sample_index(roi: DrumROI, shape_hw: tuple[int, int], n: int = SAMPLES) -> np.ndarray:
+    """Flat pixel indices (into an H x W image) of about ``n`` ROI pixels on a regular grid."""
+    box = roi_bbox(roi, shape_hw)
+    x0, y0 = box[:2]
+    inside = _mask_in_box(roi, box)
+    step = max(1, int(math.sqrt(max(float(inside.sum()), 1.0) / n)))
+    # the grid through the pixel nearest the drum centre: a camera turned by quarter turns or
+    # mirrored samples the same pixels of the drum, so it estimates the same light
+    ox, oy = (round(roi.cx_px) - x0) % step, (round(roi.cy_px) - y0) % step
+    ys, xs = np.nonzero(inside[oy::step, ox::step])
+    return ((ys * step + oy + y0) * shape_hw[1] + xs * step + ox + x0).astype(np.intp)
+
+
+def light_quantiles(pixels_bgr: np.ndarray) -> np.ndarray:
+    """Per-channel quantiles at :data:`LEVELS` of (N, 3) uint8 pixels, display values (3, L)."""
+    px = np.ascontiguousarray(pixels_bgr, np.uint8).reshape(-1, 3)
+    out = np.empty((1, 3, len(LEVELS)))
+    _kernels()[0](px, np.zeros(px.shape[0], np.int64), 1, LEVELS, 1, out)
+    return out[0]
+
+
+def _samples(frames: list[np.ndarray], rois: list[DrumROI]) -> np.ndarray:
+    parts = []
+    for img, roi in zip(frames, rois, strict=True):
+        idx = roi_sample_index(roi, (img.shape[0], img.shape[1]))
+        parts.append(np.ascontiguousarray(img).reshape(-1, 3)[idx])
+    return np.concatenate(parts)
+
+
+def reference_from_frames(frames: list[np.ndarray], rois: list[DrumROI]) -> np.ndarray:
+    """The light reference (3, L) of set-up frames: the quantiles of their ROI pixels together."""
+    return light_quantiles(_samples(frames, rois))
+
+
+def class_reference_from_frames(frames: list[np.ndarray], rois: list[DrumROI], lut: np.ndarray,
+                                n_labels: int) -> np.ndarray:
+    """The per-class light reference (n_labels, 3, L) of set-up frames: ``lut`` (a
+    ``vision.colours.class_lut``) labels their ROI pixels, :func:`class_quantiles` of each."""
+    px = _samples(frames, rois)
+    return class_quantiles(px, sample_labels(lut, px, n_labels), n_labels)
+
+
+def sample_labels(lut: np.ndarray, pixels_bgr: np.ndarray, n_labels: int,
+                  maps: np.ndarray | None = None) -> np.ndarray:
+    """Labels of (N, 3) pixels through a class table, read through per-channel ``maps``
+    (:func:`channel_maps`) when given; labels >= ``n_labels`` (glare) become 0."""
+    px = np.asarray(pixels_bgr)
+    b, g, r = (px[:, c] if maps is None else maps[c][px[:, c]] for c in range(3))
+    lab = lut[(b.astype(np.int32) << 16) | (g.astype(np.int32) << 8) | r]
+    return np.where(lab < n_labels, lab, 0)
+
+
+def _fit_gains(ref3: np.ndarray, cur3: np.ndarray, start: tuple[float, float, float] | None,
+               max_spread: float) -> LightEstimate:
+    """One linear gain per channel from matched values (3, M) of the reference and the frame
+    (:func:`_fit_py`); a channel with too few usable entries keeps its ``start`` gain, or (no
+    start) ends the estimate as saturated or too dark."""
+    res = np.empty(5)
+    st = np.ones(3) if start is None else np.asarray(start, np.float64)
+    _kernels()[1](np.ascontiguousarray(ref3, np.float64), np.ascontiguousarray(cur3, np.float64), st,
+                  start is not None, res)
+    return _verdict(res, max_spread)
+
+
+def _verdict(res: np.ndarray, max_spread: float) -> LightEstimate:
+    """A :class:`LightEstimate` from a fit's result row (gains, spread, status)."""
+    status = int(res[4])
+    if status:
+        cause = "saturated" if status <= 3 else "too_dark"
+        return LightEstimate((math.nan,) * 3, math.nan, f"{cause}:{_NAMES[(status - 1) % 3]}")
+    g = (float(res[0]), float(res[1]), float(res[2]))
+    spread = float(res[3])
+    if not all(GAIN_RANGE[0] <= v <= GAIN_RANGE[1] for v in g):
+        return LightEstimate(g, spread, "gain:" + "/".join(f"{v:.2f}" for v in g))
+    if spread > max_spread:
+        return LightEstimate(g, spread, f"unexplained_cast:{spread:.2f}")
+    return LightEstimate(g, spread, None)
+
+
+def track_light(flat_bgr: np.ndarray, sample: np.ndarray, ref: np.ndarray, ref_cls: np.ndarray | None,
+                lut: np.ndarray) -> LightEstimate:
+    """The whole estimate of one frame in one compiled call: the drum's quantiles of the pixels
+    ``sample`` (flat indices into ``flat_bgr``, (H*W, 3) uint8) against ``ref`` (:func:`estimate_light`),
+    then, with a per-class reference, twice the per-class refinement (:func:`refine_light`) with
+    the pixels classified through ``lut`` (the base class table) in the reference's terms."""
+    res = np.empty(5)
+    n = 0 if ref_cls is None else ref_cls.shape[0]
+    rc = np.zeros((1, 3, len(CLASS_LEVELS))) if ref_cls is None else ref_cls
+    _kernels()[2](flat_bgr, sample, ref, rc, n, lut, LEVELS, CLASS_LEVELS, MIN_CLASS_SAMPLES, MAX_SPREAD, res)
+    return _verdict(res, MAX_CLASS_SPREAD if n else MAX_SPREAD)
+
+
+def _quantiles_py(px, labels, n_labels, levels, min_count, out):  # pragma: no cover - compiled
+    """out[k, c, :] = quantiles at ``levels`` of channel c of the pixels labelled k (-1 when
+    fewer than ``min_count``): 256-bin histograms, linear within a bin."""
+    hist = np.zeros((n_labels, 3, 256), np.int64)
+    cnt = np.zeros(n_labels, np.int64)
+    for i in range(px.shape[0]):
+        k = labels[i]
+        if k < 0 or k >= n_labels:
+            continue
+        cnt[k] += 1
+        for c in range(3):
+            hist[k, c, px[i, c]] += 1
+    for k in range(n_labels):
+        for c in range(3):
+            if cnt[k] < min_count or cnt[k] == 0:
+                for j in range(levels.shape[0]):
+                    out[k, c, j] = -1.0
+                continue
+            acc = 0.0
+            v = 0
+            for j in range(levels.shape[0]):
+                target = levels[j] * cnt[k]
+                while v < 255 and acc + hist[k, c, v] < target:
+                    acc += hist[k, c, v]
+                    v += 1
+                h = hist[k, c, v]
+                frac = (target - acc) / h if h > 0 else 0.0
+                q = v - 0.5 + min(max(frac, 0.0), 1.0)
+                out[k, c, j] = min(max(q, 0.0), 255.0)
+
+
+def _fit_py(ref3, cur3, start, has_start, res):  # pragma: no cover - compiled
+    """res = (gain b, g, r, spread, status): per channel the median over usable entries of
+    GAMMA x log(cur / ref); spread = the largest median |deviation|; status 0, or 1 + c
+    (saturated channel c) / 4 + c (too dark) when a channel has too few entries and no start."""
+    spread = 0.0
+    res[4] = 0.0
+    m = ref3.shape[1]
+    lr = np.empty(m)
+    for c in range(3):
+        n = 0
+        n_hi = 0
+        for j in range(m):
+            r = ref3[c, j]
+            q = cur3[c, j]
+            if q >= CEIL and r < CEIL:
+                n_hi += 1
+            if r > FLOOR and r < CEIL and q > FLOOR and q < CEIL:
+                lr[n] = GAMMA * (math.log(q) - math.log(r))
+                n += 1
+        if n < MIN_LEVELS:
+            if has_start:
+                res[c] = start[c]
+                continue
+            res[4] = (1 + c) if n_hi > 0 else (4 + c)
+            return
+        lg = np.median(lr[:n])
+        dev = np.abs(lr[:n] - lg)
+        spread = max(spread, np.median(dev))
+        res[c] = math.exp(lg)
+    res[3] = spread
+
+
+def _track_py(flat, sample, ref, ref_cls, n_cls, lut, levels, cls_levels, min_cls, max_spread,
+              res):  # pragma: no cover - compiled
+    """:func:`track_light` in one pass: gather, quantiles, fit, then (n_cls > 0) two refinements."""
+    ns = sample.shape[0]
+    px = np.empty((ns, 3), np.uint8)
+    for i in range(ns):
+        for c in range(3):
+            px[i, c] = flat[sample[i], c]
+    zeros = np.zeros(ns, np.int64)
+    cur = np.empty((1, 3, levels.shape[0]))
+    _quantiles(px, zeros, 1, levels, 1, cur)
+    _fit(ref, cur[0], np.ones(3), False, res)
+    if res[4] != 0 or n_cls == 0:
+        return
+    g0 = res[0]
+    g1 = res[1]
+    g2 = res[2]
+    if not (GAIN_RANGE[0] <= min(g0, g1, g2) and max(g0, g1, g2) <= GAIN_RANGE[1]):
+        return  # out of range on the whole drum's quantiles: too far to map back
+    maps = np.empty((3, 256), np.uint8)
+    lab = np.empty(ns, np.int64)
+    ccur = np.empty((n_cls, 3, cls_levels.shape[0]))
+    start = np.empty(3)
+    m = n_cls * cls_levels.shape[0]
+    r3 = np.empty((3, m))
+    q3 = np.empty((3, m))
+    for c in range(3):
+        for k in range(n_cls):
+            for j in range(cls_levels.shape[0]):
+                r3[c, k * cls_levels.shape[0] + j] = ref_cls[k, c, j]
+    for _ in range(2):
+        for c in range(3):
+            start[c] = res[c]
+        _maps(start, _LIN, _BOUNDS, maps)
+        for i in range(ns):
+            k = lut[(np.int64(maps[0, px[i, 0]]) << 16) | (np.int64(maps[1, px[i, 1]]) << 8) | maps[2, px[i, 2]]]
+            lab[i] = k if k < n_cls else 0
+        _quantiles(px, lab, n_cls, cls_levels, min_cls, ccur)
+        for c in range(3):
+            for k in range(n_cls):
+                for j in range(cls_levels.shape[0]):
+                    q3[c, k * cls_levels.shape[0] + j] = ccur[k, c, j]
+        _fit(r3, q3, start, True, res)
+
+
+def _maps_py(gains, lin, bounds, out):  # pragma: no cover - compiled
+    """out[c, v] = round(255 (lin[v] / gains[c]) ** (1 / GAMMA)), clipped: the number of
+    rounding bounds ((k + 0.5) / 255) ** GAMMA at or below lin[v] / gain (one merge walk, no powers);
+    under a gain > 1 the clipped value 255 maps to the middle of the values it can have come from."""
+    for c in range(3):
+        p = 0
+        for v in range(256):
+            t = lin[v] / gains[c]
+            while p < 255 and bounds[p] <= t:
+                p += 1
+            out[c, v] = p
+        if gains[c] > 1.0:  # a clipped value came from anywhere between its map and 255: the middle
+            out[c, 255] = (out[c, 255] + 256) // 2
+
+
+def _means_py(flat, sample, step, out):  # pragma: no cover - compiled
+    """out = mean B, G, R of every ``step``-th sampled pixel."""
+    s0 = 0
+    s1 = 0
+    s2 = 0
+    n = 0
+    for i in range(0, sample.shape[0], step):
+        k = sample[i]
+        s0 += flat[k, 0]
+        s1 += flat[k, 1]
+        s2 += flat[k, 2]
+        n += 1
+    out[0] = s0 / max(n, 1)
+    out[1] = s1 / max(n, 1)
+    out[2] = s2 / max(n, 1)
+
+
+def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Mean B, G, R (display values) of every 8th sampled pixel: the meter's per-frame check
+    for a sudden light change (an auto-exposure jump) between two full estimates (~1 us)."""
+    if out is None:
+        out = np.empty(3)
+    _kernels()[4](flat_bgr, sample, 8, out)
+    return out
+
+
+_LIN = (np.arange(256) / 255.0) ** GAMMA
+_BOUNDS = ((np.arange(255) + 0.5) / 255.0) ** GAMMA
+_compiled: tuple | None = None
+_quantiles = _quantiles_py  # replaced by their compiled forms before _track_py is compiled
+_fit = _fit_py
+_maps = _maps_py
+
+
+def _kernels() -> tuple:
+    global _compiled, _quantiles, _fit, _maps
+    if _compiled is None:
+        import numba  # imported here: the CLI starts fast when no frame is measured
+
+        _quantiles = numba.njit(nogil=True, cache=True)(_quantiles_py)
+        _fit = numba.njit(nogil=True, cache=True)(_fit_py)
+        _maps = numba.njit(nogil=True, cache=True)(_maps_py)
+        _compiled = (_quantiles, _fit, numba.njit(nogil=True, cache=True)(_track_py), _maps,
+                     numba.njit(nogil=True, cache=True)(_means_py))
+    return _compiled
+
+
+def estimate_light(ref: np.ndarray, cur: np.ndarray) -> LightEstimate:
+    """Per-channel linear gains of quantiles ``cur`` against ``ref`` (both (3, L) display values)."""
+    return _fit_gains(ref, cur, None, MAX_SPREAD)
+
+
+def refine_light(ref_cls: np.ndarray, cur_cls: np.ndarray, first: LightEstimate) -> LightEstimate:
+    """Gains from per-class quantiles (:func:`class_quantiles` of the frame's pixels, grouped by
+    their class in the reference's terms) against the per-class reference: unlike the whole
+    drum's quantiles, they do not move when the bed's mix of colours in view does. Pools every
+    (class, level) both see unclipped per channel; keeps ``first``'s gain for a channel with
+    fewer than ``MIN_LEVELS`` such entries."""
+    return _fit_gains(ref_cls.transpose(1, 0, 2).reshape(3, -1), cur_cls.transpose(1, 0, 2).reshape(3, -1),
+                      first.gains_bgr, MAX_CLASS_SPREAD)
+
+
+def channel_maps(gains_bgr: tuple[float, float, float]) -> np.ndarray:
+    """uint8 (3, 256): each frame value of a channel -> its value in the reference light
+    (linear gain undone, rounded, clipped to 0..255; a clipped 255 under a gain > 1 -> the
+    middle of the reference values that clip)."""
+    out = np.empty((3, 256), np.uint8)
+    _kernels()[3](np.asarray(gains_bgr, np.float64), _LIN, _BOUNDS, out)
+    return out
