@@ -63,7 +63,10 @@ def test_mill_commands_on_a_modbus_url(delta: DriveEmulator) -> None:
     assert json.loads(r.out)["running"] is True
     r = cli("mill", url, "stop", "--json")
     assert r.code == 0 and json.loads(r.out)["running"] is False
-    assert_one_line_error(cli("mill", url, "set-rpm", "70"), "RANGE")  # above 60 Hz
+    assert_one_line_error(cli("mill", url, "set-rpm", "70"), "outside the limits 5-45 rpm")  # the run's limits
+    r = cli("mill", url, "set-rpm", "70", "--commission")  # past them (warned): the drive's own 60 Hz refuses
+    err = [ln for ln in r.err.splitlines() if ln.strip()]
+    assert r.code == 2 and len(err) == 2 and "commissioning override" in err[0] and "RANGE" in err[1], r.err
     assert_one_line_error(cli("mill", "modbus:/dev/x?profile=nope", "status"), "unknown drive profile")
 
 

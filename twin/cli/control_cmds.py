@@ -6,6 +6,7 @@ import math
 import signal
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -348,7 +349,9 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
     if len(frames) < 3:
         raise ControlError(f"the real trend bench needs at least 3 frames in {images}, found {len(frames)}")
     cfg = load_config(config) if config is not None else suggest_classes(list(frames.values()))
-    meter = cfg.make_meter()
+    # the frames are as shot and their blends are no change of light (but mixed colours no gain maps back):
+    # the trend bench measures them in the set-up's light, without tracking it
+    meter = replace(cfg, light_reference=None, light_reference_classes=None).make_meter()
 
     def mi(img: np.ndarray, what: str) -> float:
         r = meter.measure(img)
