@@ -137,7 +137,8 @@ class ContactStats:
 
 @dataclass(frozen=True)
 class Particles:
-    """Positions (m, drum frame, y up), radii (m) and class index of every disk."""
+    """Positions (m, drum frame, y up), radii (m) and class index of every disk (for a shaped particle:
+    its centroid and circumscribed radius; its outline in ``class_outline_m``, turned by ``angle_rad``)."""
 
     x_m: np.ndarray
     y_m: np.ndarray
@@ -146,6 +147,8 @@ class Particles:
     angle_rad: np.ndarray | None = None
     class_names: tuple[str, ...] = ()
     class_bgr: tuple[tuple[int, int, int], ...] = ()
+    class_outline_m: tuple[np.ndarray | None, ...] = ()  # per class: outline (k, 2) about the centroid, None: disc
+    baffles_m: tuple[np.ndarray, ...] = ()  # the drum's baffles now, polygons (k, 2) in the drum frame
 
     def __len__(self) -> int:
         return int(self.x_m.shape[0])
