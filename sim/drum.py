@@ -46,6 +46,7 @@ import numpy as np
 
 from sim import dem
 from sim.errors import SimError
+from sim.mixer import Mixer, disk_classes
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 CASES = ("A", "B", "C")
@@ -159,14 +160,14 @@ class SimState:
     """Everything needed to rebuild a running twin (picklable; sent to what-if workers)."""
 
     drum: DrumSpec
-    recipe: Recipe
+    recipe: Recipe | None  # the 3D recipe sliced into ``classes``; None when built from a ``mixer``
     classes: tuple[DiskClass, ...]
     case: str
     seed: int
     params: SimParams
     t_s: float
-    rpm_target: float
-    rpm_actual: float
+    rpm_target: float  # the DEM's own sign (counter-clockwise positive; ``DrumSim.rpm_target`` is the mixer's)
+    rpm_actual: float  # the same sign as ``rpm_target``
     drum_angle_rad: float
     cls: np.ndarray
     pos_m: np.ndarray  # (n, 2)
@@ -175,6 +176,12 @@ class SimState:
     omega_rad_s: np.ndarray
     n_steps: int = 0
     extra: dict = field(default_factory=dict)
+    mixer: Mixer | None = None  # the user's mixer the twin was built from (None: ``drum`` + ``recipe``)
+
+    @property
+    def direction(self) -> int:
+        """+1: the drum turns counter-clockwise as the camera sees it at positive rpm, -1 clockwise."""
+        return 1 if self.mixer is None else int(self.mixer.direction)
 
 
 def rpm_to_rad_s(rpm: float) -> float:
@@ -274,7 +281,10 @@ class DrumSim:
         stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
         end_friction: float | None = DEFAULT_END_FRICTION,
         settle_s: float = 1.0,
+        mixer: Mixer | None = None,
     ) -> None:
+        """``mixer``: the user's mixer (all classes round; its drum, discs and rotation direction
+        replace ``drum`` and ``recipe``); positive ``rpm`` then turns the drum the mixer's way."""
         case = str(case).upper()
         if case not in CASES:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
@@ -283,15 +293,19 @@ class DrumSim:
                            float(accel_rpm_s), None if dt_s is None else float(dt_s), float(stiffness_n_m),
                            None if end_friction is None else float(end_friction))
         _check_params(params)
+        if mixer is not None:
+            drum, recipe_used, classes = mixer.drum, None, disk_classes(mixer)
+        else:
+            recipe_used, classes = recipe, tuple(slice_2d(recipe, drum))
         rpm = check_rpm(rpm, drum)
-        classes = tuple(slice_2d(recipe, drum))
         rng = np.random.default_rng(seed)
         pos, cls = _place(list(classes), case, drum.radius_m, rng)
         n = cls.size
         state = SimState(
-            drum=drum, recipe=recipe, classes=classes, case=case, seed=int(seed), params=params,
+            drum=drum, recipe=recipe_used, classes=classes, case=case, seed=int(seed), params=params,
             t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
             vel_m_s=np.zeros((n, 2)), angle_rad=rng.uniform(0, 2 * math.pi, n), omega_rad_s=np.zeros(n),
+            mixer=mixer,
         )
         self._start(state, rpm, 0.0 if case == "B" else settle_s)
 
@@ -311,13 +325,15 @@ class DrumSim:
         self._acc_s = 0.0
         self._sort()
         self.reset_stats()
-        self._ds[dem.DS_TARGET] = rpm
-        self._ds[dem.DS_RPM] = rpm  # the drum starts at full speed
+        self._ds[dem.DS_TARGET] = self.direction * rpm
+        self._ds[dem.DS_RPM] = self.direction * rpm  # the drum starts at full speed
 
     # ----------------------------------------------------------------- build
     def _build(self, st: SimState, radius_scale: float = 1.0) -> None:
         self.drum = st.drum
         self.recipe = st.recipe
+        self.mixer = st.mixer
+        self.direction = st.direction
         self.classes = st.classes
         self.case = st.case
         self.seed = st.seed
@@ -490,13 +506,14 @@ class DrumSim:
     # ------------------------------------------------------------- controls
     @property
     def rpm_actual(self) -> float:
-        """Drum speed now (rpm), following the setpoint at the acceleration limit."""
-        return float(self._ds[dem.DS_RPM])
+        """Drum speed now (rpm, positive: the mixer's direction), following the setpoint at the
+        acceleration limit."""
+        return self.direction * float(self._ds[dem.DS_RPM])
 
     @property
     def rpm_target(self) -> float:
-        """The rpm setpoint."""
-        return float(self._ds[dem.DS_TARGET])
+        """The rpm setpoint (positive: the mixer's direction)."""
+        return self.direction * float(self._ds[dem.DS_TARGET])
 
     @property
     def critical_rpm(self) -> float:
@@ -505,7 +522,7 @@ class DrumSim:
 
     def set_rpm(self, rpm: float) -> None:
         """New rpm setpoint; the drum ramps to it at ``accel_rpm_s``. Above critical speed: SimError."""
-        self._ds[dem.DS_TARGET] = check_rpm(rpm, self.drum)
+        self._ds[dem.DS_TARGET] = self.direction * check_rpm(rpm, self.drum)
 
     def set_friction(self, mu: float, rolling: float | None = None) -> None:
         """Change sliding friction (and rolling friction) at run time."""
@@ -591,11 +608,13 @@ class DrumSim:
         q = self._inv_perm
         return SimState(
             drum=self.drum, recipe=self.recipe, classes=self.classes, case=self.case, seed=self.seed,
-            params=self.params, t_s=self.t_s, rpm_target=self.rpm_target, rpm_actual=self.rpm_actual,
+            params=self.params, t_s=self.t_s, rpm_target=float(self._ds[dem.DS_TARGET]),
+            rpm_actual=float(self._ds[dem.DS_RPM]),
             drum_angle_rad=float(self._ds[dem.DS_ANGLE]), cls=self._cls[q], pos_m=self._pos[q],
             vel_m_s=self._vel[q], angle_rad=self._ang[q], omega_rad_s=self._omg[q], n_steps=self.n_steps,
             extra={"acc_s": self._acc_s, "springs": (self._perm[pairs], xis, self._wall_xi[q]),
                    "order": self._perm.copy()},
+            mixer=self.mixer,
         )
 
     def restore(self, state: SimState) -> None:

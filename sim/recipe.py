@@ -78,9 +78,11 @@ class DiskClass:
     count: int
     density_kg_m3: float
     colour_bgr: tuple[int, int, int]
+    slab_m: float | None = None  # the disc's own thickness (m); None: the bed's slab ``mass_kg`` is given
 
     def mass_kg(self, slab_m: float) -> float:
-        """Mass of the disk as a slab of thickness ``slab_m``: ``rho * pi r^2 * slab_m``.
+        """Mass of the disk as a slab of thickness ``slab_m`` (its own ``self.slab_m`` if set):
+        ``rho * pi r^2 * slab_m``.
 
         Every disk of a given density has the same mass per unit area, so the 2D slice
         has no hidden density contrast between sizes (3D ball masses would make the
@@ -88,7 +90,7 @@ class DiskClass:
         size segregation around). The twin uses ``slab_m = 4/3 r_max`` so the largest
         disk weighs what its ball weighs.
         """
-        return self.density_kg_m3 * math.pi * self.radius_m**2 * slab_m
+        return self.density_kg_m3 * math.pi * self.radius_m**2 * (slab_m if self.slab_m is None else self.slab_m)
 
 
 RED_BGR = (0, 0, 220)
