@@ -16,9 +16,10 @@ Model:
 * **Particles**: one DYNAMIC body each; discs are ``Circle``; convex outlines (regular polygon,
   pellet) one ``Poly`` with a corner radius ``CORNER_R`` of the particle's radius (the vertices
   pulled in by it, so the outer size stays); non-convex outlines one body of several convex
-  ``Poly`` pieces (a cut disc: two or three sectors of less than 144 deg; vertices: ``pymunk.autogeometry
-  .convex_decomposition``). Mass ``density * area * thickness`` and the flat particle's own
-  moment of inertia (2D is the real physics of a monolayer).
+  ``Poly`` pieces (a cut disc: two or three sectors of less than 144 deg; vertices:
+  ``pymunk.autogeometry.convex_decomposition``). Counts and masses from ``sim.mixer.resolve``
+  (``density * area * slab``) and the flat particle's own moment of inertia (2D is the real
+  physics of a monolayer).
 * **Contacts**: Chipmunk's impulse solver (``iterations`` per step, ``collision_slop`` 1 % of the
   smallest radius, overlaps pushed out at 10 % per 4 ms: pymunk's default, 10 % per 1/60 s, left
   the deep bed sunk 0.13 small radii into itself at the 99th percentile, this 0.05),
@@ -31,7 +32,7 @@ Model:
 * **End plates** (monolayer and thin drums; Taberlet et al. 2003, as ``sim.dem``): after each step
   every particle's velocity relative to the plates (turning with the drum) loses
   ``mu_end r sum(F_n) / depth * dt / m``, capped so it cannot reverse. ``depth`` is the drum's
-  depth, or for a monolayer drum the thickest particle's thickness.
+  depth (``sim.mixer.parse_mixer`` makes a monolayer drum's its thickest particle's thickness).
 * **Time step**: one fixed internal step ``dt_s`` (``DEFAULT_DT_S``; the study in
   docs/validation.md section 9), independent of how the caller slices time: ``advance`` runs
   every whole step that fits and carries the remainder.
@@ -66,8 +67,8 @@ from sim.drum import (
     rpm_to_rad_s,
 )
 from sim.errors import SimError
-from sim.mixer import Mixer, ParticleKind, Shape, shape_area_m2, shape_outline_m
-from sim.recipe import G_M_S2, PACKING_2D, DiskClass, DrumSpec
+from sim.mixer import Mixer, Shape, resolve, shape_outline_m
+from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
 DEFAULT_DT_S = 0.002  # the fixed step (docs/validation.md section 9)
 DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
@@ -149,29 +150,6 @@ def _check_params(p: PymunkParams) -> None:
         raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
 
 
-def kind_counts(mixer: Mixer) -> tuple[int, ...]:
-    """Particles of each class: its ``count``, else its ``share`` of the bed's solid area
-    (``fill * PACKING_2D * pi R^2``) over the particle's area."""
-    solid = mixer.fill * PACKING_2D * math.pi * mixer.drum.radius_m ** 2
-    out = []
-    for p in mixer.particles:
-        n = p.count if p.count is not None else round(float(p.share or 0.0) * solid / shape_area_m2(p.shape))
-        out.append(int(n))
-    return tuple(out)
-
-
-def thickness_m(kind: ParticleKind) -> float:
-    """The particle's thickness (m): ``thickness_m``, else its diameter."""
-    return float(kind.thickness_m) if kind.thickness_m is not None else kind.shape.diameter_m
-
-
-def plate_gap_m(mixer: Mixer) -> float:
-    """Distance between the end plates (m): the thickest particle in a monolayer drum, else the depth."""
-    if mixer.monolayer:
-        return max(thickness_m(k) for k in mixer.particles)
-    return mixer.drum.depth_m
-
-
 def _is_convex(v: np.ndarray) -> bool:
     d = np.roll(v, -1, axis=0) - v
     cross = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
@@ -249,9 +227,7 @@ class PymunkDrumSim:
             raise SimError("the mixer has no particle classes")
         rpm = check_rpm(rpm, mixer.drum)
         self.mixer, self.case, self.seed, self.params = mixer, case, int(seed), params
-        counts = kind_counts(mixer)
-        disks = [DiskClass(k.name, k.shape.radius_m, n, k.density_kg_m3, k.colour_bgr)
-                 for k, n in zip(mixer.particles, counts, strict=True)]
+        disks = [DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer)]
         rng = np.random.default_rng(seed)
         pos, cls = _place(disks, case, mixer.drum.radius_m, rng)
         angles = rng.uniform(0, 2 * math.pi, cls.size)
@@ -273,10 +249,10 @@ class PymunkDrumSim:
     def _set_tables(self) -> None:
         """Per-class and per-particle constants (pure functions of the mixer)."""
         kinds = self.mixer.particles
-        self._r_cls = np.array([k.shape.radius_m for k in kinds])
-        self._area_cls = np.array([shape_area_m2(k.shape) for k in kinds])
-        self._mass_cls = np.array([k.density_kg_m3 * a * thickness_m(k) for k, a in zip(kinds, self._area_cls,
-                                                                                        strict=True)])
+        res = resolve(self.mixer)
+        self._r_cls = np.array([k.radius_m for k in res])
+        self._area_cls = np.array([k.area_m2 for k in res])
+        self._mass_cls = np.array([k.mass_kg for k in res])
         self._moment_cls = np.array([_moment_kg_m2(k.shape, m) for k, m in zip(kinds, self._mass_cls, strict=True)])
         self._round_cls = np.array([k.shape.is_round for k in kinds])
         self._r = self._r_cls[self._cls]
@@ -289,7 +265,7 @@ class PymunkDrumSim:
         self._r_x = np.append(self._r_cls[self._cls], 0.0)
         self._r_over_m = self._r_cls[self._cls] / self._m
         self._r_min = float(self._r_cls.min())
-        self._depth = plate_gap_m(self.mixer)
+        self._depth = self.mixer.drum.depth_m  # the end plates' distance (a monolayer's: its thickest particle)
         self._outlines = tuple(shape_outline_m(k.shape) for k in kinds)
 
     def _new_space(self, pos: np.ndarray, angles: np.ndarray) -> None:
@@ -642,8 +618,5 @@ __all__ = [
     "PymunkParams",
     "PymunkState",
     "convex_pieces",
-    "kind_counts",
-    "plate_gap_m",
     "radial_spread_m",
-    "thickness_m",
 ]

@@ -10,7 +10,7 @@ import pytest
 from sim.drum import ContactStats
 from sim.errors import SimError
 from sim.mixer import Baffles, Mixer, ParticleKind, Shape, polygon_area_m2, shape_area_m2
-from sim.pymunk_twin import PymunkDrumSim, convex_pieces, kind_counts, plate_gap_m, radial_spread_m
+from sim.pymunk_twin import PymunkDrumSim, convex_pieces, radial_spread_m
 from sim.recipe import DrumSpec
 
 
@@ -47,17 +47,6 @@ def test_vertices_shape_is_decomposed() -> None:
     pieces = convex_pieces(shape)
     assert len(pieces) >= 2
     assert sum(polygon_area_m2(p) for p in pieces) == pytest.approx(shape_area_m2(shape), rel=1e-6)
-
-
-def test_counts_from_count_and_share() -> None:
-    m = _small_rig(n=17)
-    assert kind_counts(m) == (17, 17)
-    share = Mixer(m.drum, tuple(ParticleKind(k.name, k.shape, k.density_kg_m3, share=0.5) for k in m.particles),
-                  fill=0.4)
-    n_disc, n_cut = kind_counts(share)
-    assert n_cut > n_disc  # equal area shares: the cut disc (3/4 of the area) needs more particles
-    assert n_cut / n_disc == pytest.approx(4 / 3, rel=0.05)
-    assert plate_gap_m(m) == pytest.approx(0.005)
 
 
 def test_interface_and_particles(running: PymunkDrumSim) -> None:
