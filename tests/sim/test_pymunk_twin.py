@@ -187,3 +187,28 @@ def test_radial_spread() -> None:
 
     p = Particles(x_m=np.array([1.0, -1.0, 2.0, -2.0]), y_m=np.zeros(4), r_m=np.ones(4), cls=np.array([0, 0, 1, 1]))
     assert radial_spread_m(p) == pytest.approx((1.0, 2.0))
+
+
+def test_render_draws_the_shapes_and_the_baffles() -> None:
+    from sim.drum import Particles
+    from sim.mixer import shape_outline_m
+    from sim.render import RIM_BGR, Renderer
+
+    drum = DrumSpec(0.1, 0.005)
+    cut = Shape("cut_disc", 0.02, wedge_deg=90.0)
+    base = dict(x_m=np.array([-0.02, 0.02]), y_m=np.zeros(2), r_m=np.full(2, 0.01), cls=np.array([0, 1]),
+                angle_rad=np.zeros(2), class_bgr=((0, 0, 220), (220, 60, 0)))
+    r = Renderer(drum, 400)
+    discs = r.render(Particles(**base))
+    shaped = r.render(Particles(**base, class_outline_m=(None, shape_outline_m(cut))))
+    assert discs is not None and shaped is not None
+
+    def count(img: np.ndarray, bgr: tuple[int, int, int]) -> int:
+        return int(np.all(img == np.array(bgr, np.uint8), axis=2).sum())
+
+    assert count(shaped, (0, 0, 220)) == count(discs, (0, 0, 220))  # the disc class unchanged
+    assert count(shaped, (220, 60, 0)) / count(discs, (220, 60, 0)) == pytest.approx(0.75, abs=0.04)  # wedge cut
+    box = np.array([[0.03, -0.002], [0.05, -0.002], [0.05, 0.002], [0.03, 0.002]])
+    baffled = r.render(Particles(**base, baffles_m=(box,)))
+    assert baffled is not None and count(baffled, RIM_BGR) > count(discs, RIM_BGR) + 50
+
