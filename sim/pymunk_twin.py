@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 import pickle
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pymunk
@@ -56,12 +56,18 @@ import pymunk.autogeometry
 import pymunk.batch as pbatch
 
 from sim.drum import (
+    _OVERLAP_BINS,
+    _SHRINK,
     CASES,
+    DEFAULT_ACCEL_RPM_S,
     DEFAULT_FRICTION,
     DEFAULT_RESTITUTION,
     DEFAULT_ROLLING,
     ContactStats,
+    FixedStepTwin,
     Particles,
+    SimParams,
+    _check_params,
     _place,
     check_rpm,
     rpm_to_rad_s,
@@ -72,43 +78,18 @@ from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
 DEFAULT_DT_S = 0.001  # the fixed step: the converged one (docs/validation.md section 9; 2 ms reads 1.6 deg low)
 DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
-DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit (as the DEM)
 WALL_SEGMENTS = 180
 CORNER_R = 0.02  # corner radius of polygon shapes, in the particle's radius
 PIECE_SEGMENTS = 16  # round parts of a polygon piece: vertices per full turn (cost of Chipmunk's poly contacts)
 OVERLAP_LEFT_PER_S = 0.9 ** (1 / 0.004)  # Chipmunk collision_bias: 10 % of an overlap corrected per 4 ms
 SLOP_R = 0.01  # collision slop, in the smallest radius
-_SHRINK = 0.8  # placement size before inflation (as the DEM)
 _INFLATE_S = 0.1
 _SETTLE_DAMPING = 0.1  # velocity kept after one second while settling (pymunk Space.damping)
-_OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
 
 _ARB = (pbatch.ArbiterFields.BODY_A_ID | pbatch.ArbiterFields.BODY_B_ID | pbatch.ArbiterFields.TOTAL_IMPULSE
         | pbatch.ArbiterFields.NORMAL | pbatch.ArbiterFields.CONTACT_COUNT | pbatch.ArbiterFields.DISTANCE_1)
 _BOD = (pbatch.BodyFields.POSITION | pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY)
 _VEL = pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY
-
-
-@dataclass(frozen=True)
-class PymunkParams:
-    """Contact and integration parameters of the pymunk twin (friction, rolling: the calibration knobs)."""
-
-    friction: float = DEFAULT_FRICTION
-    rolling: float = DEFAULT_ROLLING
-    restitution: float = DEFAULT_RESTITUTION
-    wall_friction: float | None = None  # None: same as ``friction``
-    end_friction: float | None = None  # None: same as the wall; 0: no end plates
-    accel_rpm_s: float = DEFAULT_ACCEL_RPM_S
-    dt_s: float = DEFAULT_DT_S
-    iterations: int = DEFAULT_ITERATIONS
-
-    @property
-    def wall_mu(self) -> float:
-        return self.friction if self.wall_friction is None else self.wall_friction
-
-    @property
-    def end_mu(self) -> float:
-        return self.wall_mu if self.end_friction is None else self.end_friction
 
 
 @dataclass(frozen=True)
@@ -119,7 +100,8 @@ class PymunkState:
     mixer: Mixer
     case: str
     seed: int
-    params: PymunkParams
+    params: SimParams  # ``dt_s`` always set; ``stiffness_n_m`` is not used (Chipmunk's contacts are rigid)
+    iterations: int
     t_s: float
     rpm_target: float
     rpm_actual: float
@@ -133,21 +115,10 @@ class PymunkState:
         return self.mixer.drum
 
 
-def _check_params(p: PymunkParams) -> None:
-    for name, v in (("friction", p.friction), ("rolling resistance", p.rolling)):
-        if not (0.0 <= v <= 5.0) or not math.isfinite(v):
-            raise SimError(f"{name} must be in [0, 5] (got {v})")
-    if not (0.0 <= p.restitution <= 1.0):
-        raise SimError(f"restitution must be in [0, 1] (got {p.restitution})")
-    for name, w in (("wall friction", p.wall_friction), ("end-plate friction", p.end_friction)):
-        if w is not None and not (0.0 <= w <= 5.0):
-            raise SimError(f"{name} must be in [0, 5] (got {w})")
-    if not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s):
-        raise SimError(f"time step must be in [0.01, 20] ms (got {p.dt_s * 1e3:g} ms)")
-    if not (1 <= p.iterations <= 1000):
-        raise SimError(f"solver iterations must be in [1, 1000] (got {p.iterations})")
-    if p.accel_rpm_s <= 0:
-        raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
+def _check_iterations(iterations: int) -> int:
+    if not (1 <= int(iterations) <= 1000):
+        raise SimError(f"solver iterations must be in [1, 1000] (got {iterations})")
+    return int(iterations)
 
 
 def _is_convex(v: np.ndarray) -> bool:
@@ -188,7 +159,7 @@ def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:
     return float(mass_kg * j / area)
 
 
-class PymunkDrumSim:
+class PymunkDrumSim(FixedStepTwin):
     """The pymunk drum twin of a ``Mixer`` (see the module doc). Seeded and reproducible."""
 
     _hist: np.ndarray
@@ -218,11 +189,12 @@ class PymunkDrumSim:
         case = str(case).upper()
         if case not in CASES:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
-        params = PymunkParams(float(friction), float(rolling), float(restitution),
-                              None if wall_friction is None else float(wall_friction),
-                              None if end_friction is None else float(end_friction), float(accel_rpm_s),
-                              DEFAULT_DT_S if dt_s is None else float(dt_s), int(iterations))
+        params = SimParams(float(friction), float(rolling), float(restitution),
+                           None if wall_friction is None else float(wall_friction), float(accel_rpm_s),
+                           DEFAULT_DT_S if dt_s is None else float(dt_s),
+                           end_friction=None if end_friction is None else float(end_friction))
         _check_params(params)
+        self.iterations = _check_iterations(iterations)
         if not mixer.particles:
             raise SimError("the mixer has no particle classes")
         rpm = check_rpm(rpm, mixer.drum)
@@ -307,8 +279,7 @@ class PymunkDrumSim:
 
     def _install(self, space: pymunk.Space, drum: pymunk.Body, bodies: list[pymunk.Body]) -> None:
         """Use this space: solver settings, contact coefficients, the batch order of the bodies."""
-        p = self.params
-        space.iterations = p.iterations
+        space.iterations = self.iterations
         space.collision_slop = SLOP_R * self._r_min
         space.collision_bias = OVERLAP_LEFT_PER_S  # the same correction rate in time whatever the step
         space.collision_persistence = 1  # the contact cache holds this step's contacts only (statistics, F_n)
@@ -378,7 +349,7 @@ class PymunkDrumSim:
 
     def _settle(self, settle_s: float) -> None:
         """Inflate the particles to full size without gravity, then settle with the drum at rest."""
-        h = self.params.dt_s
+        h = self.substep_s()
         sp = self._space
         sp.gravity = (0.0, 0.0)
         sp.damping = _SETTLE_DAMPING ** 10
@@ -414,41 +385,12 @@ class PymunkDrumSim:
         """New rpm setpoint; the drum ramps to it at ``accel_rpm_s``. Above critical speed: SimError."""
         self._rpm_target = check_rpm(rpm, self.drum)
 
-    def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling friction) at run time."""
-        rolling = self.params.rolling if rolling is None else float(rolling)
-        params = replace(self.params, friction=float(mu), rolling=rolling)
-        _check_params(params)
-        self.params = params
+    def _params_changed(self) -> None:
         self._set_coefficients()
-
-    def substep_s(self) -> float:
-        """The fixed internal step (s)."""
-        return self.params.dt_s
-
-    # ----------------------------------------------------------------- time
-    def step(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` seconds (same as ``advance``)."""
-        if not (dt_s > 0) or not math.isfinite(dt_s):
-            raise SimError(f"step must be a positive number of seconds (got {dt_s})")
-        self.advance(dt_s)
-
-    def advance(self, duration_s: float) -> None:
-        """Advance the clock by ``duration_s`` s in whole fixed steps; the remainder is carried."""
-        if duration_s < 0 or not math.isfinite(duration_s):
-            raise SimError(f"duration must be >= 0 s (got {duration_s})")
-        h = self.params.dt_s
-        self._acc_s += duration_s
-        n = int(math.floor(self._acc_s / h + 1e-9))
-        self.t_s += duration_s
-        if n <= 0:
-            return
-        self._acc_s = max(0.0, self._acc_s - n * h)
-        self._run(n)
 
     def _run(self, n_steps: int, count: bool = True) -> None:
         p = self.params
-        h = p.dt_s
+        h = self.substep_s()
         dv_max = p.accel_rpm_s * h
         end_k = p.end_mu / self._depth * h  # end-plate velocity loss per (r sum F_n / m), s
         for _ in range(n_steps):
@@ -574,7 +516,7 @@ class PymunkDrumSim:
         """The whole state now. The live twin is re-based on it (module doc), so the live run and every
         ``restore``/``from_state`` of it continue bit-identically."""
         blob = pickle.dumps((self._space, self._drum, self._bodies), protocol=pickle.HIGHEST_PROTOCOL)
-        state = PymunkState(self.mixer, self.case, self.seed, self.params, self.t_s, self._rpm_target,
+        state = PymunkState(self.mixer, self.case, self.seed, self.params, self.iterations, self.t_s, self._rpm_target,
                             self._rpm_actual, self.n_steps, self._acc_s, self._cls.copy(), blob)
         self.restore(state)
         return state
@@ -582,6 +524,7 @@ class PymunkDrumSim:
     def restore(self, state: PymunkState) -> None:
         """Go back to ``state`` (bit-identical continuation)."""
         self.mixer, self.case, self.seed, self.params = state.mixer, state.case, state.seed, state.params
+        self.iterations = int(state.iterations)
         self._cls = np.asarray(state.cls, dtype=np.int64).copy()
         self._set_tables()
         space, drum, bodies = pickle.loads(state.space)
@@ -615,7 +558,6 @@ __all__ = [
     "DEFAULT_DT_S",
     "DEFAULT_ITERATIONS",
     "PymunkDrumSim",
-    "PymunkParams",
     "PymunkState",
     "convex_pieces",
     "radial_spread_m",
