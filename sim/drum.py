@@ -140,7 +140,8 @@ class ContactStats:
 
 @dataclass(frozen=True)
 class Particles:
-    """Positions (m, drum frame, y up), radii (m) and class index of every disk."""
+    """Positions (m, drum frame, y up), radii (m) and class index of every disk (for a shaped particle:
+    its centroid and circumscribed radius; its outline in ``class_outline_m``, turned by ``angle_rad``)."""
 
     x_m: np.ndarray
     y_m: np.ndarray
@@ -149,6 +150,8 @@ class Particles:
     angle_rad: np.ndarray | None = None
     class_names: tuple[str, ...] = ()
     class_bgr: tuple[tuple[int, int, int], ...] = ()
+    class_outline_m: tuple[np.ndarray | None, ...] = ()  # per class: outline (k, 2) about the centroid, None: disc
+    baffles_m: tuple[np.ndarray, ...] = ()  # the drum's baffles now, polygons (k, 2) in the drum frame
 
     def __len__(self) -> int:
         return int(self.x_m.shape[0])
@@ -260,7 +263,61 @@ def _place(
     return pos, cls
 
 
-class DrumSim:
+class FixedStepTwin:
+    """The clock and contact knobs every engine shares: one fixed internal step ``params.dt_s``
+    whatever the caller's slicing (the remainder carried), and run-time friction. An engine
+    provides ``_run(n_steps)`` and ``_params_changed()``."""
+
+    params: SimParams
+    t_s: float
+    _acc_s: float
+
+    def _run(self, n_steps: int, count: bool = True) -> None:
+        raise NotImplementedError
+
+    def _params_changed(self) -> None:
+        raise NotImplementedError
+
+    def set_friction(self, mu: float, rolling: float | None = None) -> None:
+        """Change sliding friction (and rolling friction) at run time."""
+        rolling = self.params.rolling if rolling is None else float(rolling)
+        params = replace(self.params, friction=float(mu), rolling=rolling)
+        _check_params(params)
+        self.params = params
+        self._params_changed()
+
+    def substep_s(self) -> float:
+        """The fixed internal step (s)."""
+        assert self.params.dt_s is not None
+        return self.params.dt_s
+
+    # ---------------------------------------------------------------- time
+    def step(self, dt_s: float) -> None:
+        """Advance by ``dt_s`` seconds (same as ``advance``; kept for callers of the old API)."""
+        if not (dt_s > 0) or not math.isfinite(dt_s):
+            raise SimError(f"step must be a positive number of seconds (got {dt_s})")
+        self.advance(dt_s)
+
+    def advance(self, duration_s: float) -> None:
+        """Advance the clock by ``duration_s`` s, running every whole fixed step that fits.
+
+        The physics runs in steps of exactly ``dt_s``; what is left over (less than a
+        step) is carried to the next call, so any way of slicing the same time runs
+        the same steps.
+        """
+        if duration_s < 0 or not math.isfinite(duration_s):
+            raise SimError(f"duration must be >= 0 s (got {duration_s})")
+        h = self.substep_s()
+        self._acc_s += duration_s
+        n = int(math.floor(self._acc_s / h + 1e-9))
+        self.t_s += duration_s
+        if n <= 0:
+            return
+        self._acc_s = max(0.0, self._acc_s - n * h)
+        self._run(n)
+
+
+class DrumSim(FixedStepTwin):
     """The 2D drum twin (see the module doc). Seeded and reproducible."""
 
     def __init__(
@@ -523,43 +580,8 @@ class DrumSim:
         """New rpm setpoint; the drum ramps to it at ``accel_rpm_s``. Above critical speed: SimError."""
         self._ds[dem.DS_TARGET] = self.direction * check_rpm(rpm, self.drum)
 
-    def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling friction) at run time."""
-        rolling = self.params.rolling if rolling is None else float(rolling)
-        params = replace(self.params, friction=float(mu), rolling=rolling)
-        _check_params(params)
-        self.params = params
+    def _params_changed(self) -> None:
         self._set_prm()
-
-    def substep_s(self) -> float:
-        """The fixed internal step (s)."""
-        assert self.params.dt_s is not None
-        return self.params.dt_s
-
-    # ---------------------------------------------------------------- time
-    def step(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` seconds (same as ``advance``; kept for callers of the old API)."""
-        if not (dt_s > 0) or not math.isfinite(dt_s):
-            raise SimError(f"step must be a positive number of seconds (got {dt_s})")
-        self.advance(dt_s)
-
-    def advance(self, duration_s: float) -> None:
-        """Advance the clock by ``duration_s`` s, running every whole fixed step that fits.
-
-        The physics runs in steps of exactly ``dt_s``; what is left over (less than a
-        step) is carried to the next call, so any way of slicing the same time runs
-        the same steps.
-        """
-        if duration_s < 0 or not math.isfinite(duration_s):
-            raise SimError(f"duration must be >= 0 s (got {duration_s})")
-        h = self.substep_s()
-        self._acc_s += duration_s
-        n = int(math.floor(self._acc_s / h + 1e-9))
-        self.t_s += duration_s
-        if n <= 0:
-            return
-        self._acc_s = max(0.0, self._acc_s - n * h)
-        self._run(n)
 
     # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:
@@ -636,6 +658,7 @@ __all__ = [
     "DEFAULT_STIFFNESS_N_M",
     "ContactStats",
     "DrumSim",
+    "FixedStepTwin",
     "Particles",
     "SimParams",
     "SimState",

@@ -1,7 +1,8 @@
 """The synthetic camera: the twin's front view as a BGR frame, optionally with camera realism.
 
-Clean frames: dark background, grey drum rim, every disk filled with its class
-colour (red about BGR (0, 0, 220), blue about BGR (220, 60, 0), which
+Clean frames: dark background, grey drum rim (and the baffles in the rim's grey), every disk
+filled with its class colour (a shaped particle: its outline turned by its angle, filled)
+(red about BGR (0, 0, 220), blue about BGR (220, 60, 0), which
 ``vision.colours.DEFAULT_CLASSES`` catch). ``Renderer.roi`` is the exact drum ROI
 in the image, so a ``vision.meter.Meter`` needs no drum detection.
 
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -21,6 +23,9 @@ import numpy as np
 from sim.drum import DrumSim, Particles
 from sim.errors import SimError
 from sim.recipe import DrumSpec
+
+if TYPE_CHECKING:
+    from sim.pymunk_twin import PymunkDrumSim
 
 BACKGROUND_BGR = (22, 20, 18)
 INSIDE_BGR = (34, 30, 28)
@@ -49,11 +54,12 @@ class Renderer:
     """Front view of a drum to ``size_px`` images (int = square, or (width, height))."""
 
     def __init__(
-        self, drum: DrumSpec | DrumSim, size_px: int | tuple[int, int] = 480, realism: Realism | None = None
+        self, drum: DrumSpec | DrumSim | PymunkDrumSim, size_px: int | tuple[int, int] = 480,
+        realism: Realism | None = None,
     ) -> None:
-        spec = drum.drum if isinstance(drum, DrumSim) else drum
+        spec = drum if isinstance(drum, DrumSpec) else getattr(drum, "drum", None)  # a DrumSpec, or any twin's
         if not isinstance(spec, DrumSpec):
-            raise SimError(f"Renderer needs a DrumSpec or DrumSim (got {type(drum).__name__})")
+            raise SimError(f"Renderer needs a DrumSpec or a twin (got {type(drum).__name__})")
         if isinstance(size_px, (int, np.integer)):
             w = h = int(size_px)
         else:
@@ -112,12 +118,44 @@ class Renderer:
         ys = np.rint((self.cy_px - particles.y_m * self.px_per_m) * (1 << _SHIFT)).astype(np.int64)
         rs = np.maximum(np.rint(particles.r_m * scale).astype(np.int64), 1 << _SHIFT)
         colours = [tuple(int(v) for v in c) for c in particles.class_bgr] or [(0, 0, 220), (220, 60, 0)]
-        for x, y, r, k in zip(xs.tolist(), ys.tolist(), rs.tolist(), particles.cls.tolist(), strict=False):
+        outlines = particles.class_outline_m
+        shaped = np.zeros(len(particles), dtype=bool)
+        for k, outline in enumerate(outlines):
+            if outline is None:
+                continue
+            m = particles.cls == k
+            shaped |= m
+            if np.any(m):
+                polys = self._outlines_px(particles, m, np.asarray(outline))
+                cv2.fillPoly(img, list(polys), colours[k % len(colours)], cv2.LINE_8, _SHIFT)
+        if shaped.any():
+            keep = ~shaped
+            xs, ys, rs, cls = xs[keep], ys[keep], rs[keep], particles.cls[keep]
+        else:
+            cls = particles.cls
+        for x, y, r, k in zip(xs.tolist(), ys.tolist(), rs.tolist(), cls.tolist(), strict=False):
             cv2.circle(img, (x, y), r, colours[k % len(colours)], -1, cv2.LINE_8, _SHIFT)
+        if particles.baffles_m:
+            cv2.fillPoly(img, [self._poly_px(b) for b in particles.baffles_m], RIM_BGR, cv2.LINE_8, _SHIFT)
         out = img.copy()
         if self.realism is None:
             return out
         return self._degrade(out, self._frame_no / 30.0 if t_s is None else float(t_s))
+
+    def _poly_px(self, poly_m: np.ndarray) -> np.ndarray:
+        """A drum-frame polygon (k, 2) in m as fixed-point image points (``_SHIFT`` bits), int32."""
+        x, y = self.to_px(poly_m[:, 0], poly_m[:, 1])
+        return np.rint(np.stack([x, y], axis=-1) * (1 << _SHIFT)).astype(np.int32)
+
+    def _outlines_px(self, particles: Particles, mask: np.ndarray, outline_m: np.ndarray) -> np.ndarray:
+        """The outline turned by each selected particle's angle about its centre: (n, k, 2) fixed-point px."""
+        ang = particles.angle_rad[mask] if particles.angle_rad is not None else np.zeros(int(mask.sum()))
+        c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
+        ox, oy = outline_m[None, :, 0], outline_m[None, :, 1]
+        x_m = particles.x_m[mask][:, None] + c * ox - s * oy
+        y_m = particles.y_m[mask][:, None] + s * ox + c * oy
+        x, y = self.to_px(x_m, y_m)
+        return np.rint(np.stack([x, y], axis=-1) * (1 << _SHIFT)).astype(np.int32)
 
     # ------------------------------------------------------------- realism
     def _prepare_realism(self, rz: Realism) -> None:

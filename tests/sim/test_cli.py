@@ -179,3 +179,7 @@ def test_bench_twin_prints_the_real_time_factors_and_the_step():
         assert out[k] > 0
     assert out["n_4x"] == 4 * out["n_paper_5rpm"]
     assert out["dt_ms"] == pytest.approx(DEFAULT_DT_S * 1e3) and out["cost_exponent_16x"] > 0
+    # the pymunk engine in the same run: the same paper bed, and the cut-disc rig's 250 particles
+    assert out["rtf_paper_5rpm_pymunk"] > 0 and out["n_paper_5rpm_pymunk"] == out["n_paper_5rpm"]
+    assert out["rtf_cutdisc_10rpm_pymunk"] > 0 and out["n_cutdisc_10rpm_pymunk"] == 250
+    assert out["dt_ms_pymunk"] > 0

@@ -408,12 +408,24 @@ def _plot_whatif(results, path: Path) -> None:
     plt.close(fig)
 
 
+def _cpu_rtf(sim, duration_s: float) -> float:
+    """Sim seconds per CPU second of a twin: warmed up past the start transient, the best of three equal chunks."""
+    sim.advance(min(1.0, duration_s))
+    best = math.inf
+    for _ in range(3):
+        t0 = time.process_time()
+        sim.advance(duration_s / 3)
+        best = min(best, time.process_time() - t0)
+    return duration_s / 3 / max(best, 1e-9)
+
+
 @bench_app.command("twin")
 def bench_twin(
     duration: float = typer.Option(10.0, "--duration", help="simulated seconds per measurement"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
-    """Real-time factor of the twin on one core: paper bed at 5 and 30 rpm, 4x and 16x particles at 5 rpm.
+    """Real-time factor of the twin on one core: paper bed at 5 and 30 rpm, 4x and 16x particles at 5 rpm
+    on the DEM; the paper bed and the cut-disc rig (configs/pmma-cutdisc.toml) on pymunk, each at its default step.
 
     The 4x/16x beds keep the particles and fill level and grow the drum (diameter and depth x2, x4:
     the paper's drum scaled, its end plates as far apart relative to its size), so the particle
@@ -437,19 +449,25 @@ def bench_twin(
         task = prog.add_task("bench", total=len(cases))
         for name, drum, rpm in cases:
             sim = DrumSim(drum, PAPER_RECIPE, case="C", seed=0, rpm=rpm, settle_s=0.3)
-            sim.advance(min(1.0, duration))  # warm up past the start transient
-            best = math.inf
-            for _ in range(3):
-                t0 = time.process_time()
-                sim.advance(duration / 3)
-                best = min(best, time.process_time() - t0)
-            out[name] = duration / 3 / max(best, 1e-9)
+            out[name] = _cpu_rtf(sim, duration)
             counts[name.replace("rtf_", "n_")] = len(sim.particles())
             prog.advance(task)
     out.update(counts)
     from sim.drum import DEFAULT_DT_S
 
     out["dt_ms"] = DEFAULT_DT_S * 1e3
+    # the pymunk engine beside it, in the same run: the paper bed and the cut-disc rig at its default step
+    from sim.engine import make_twin
+    from sim.mixer import paper_mixer
+    from sim.pymunk_twin import DEFAULT_DT_S as PYMUNK_DT_S
+    from sim.validation_pymunk import rig
+
+    for name, mixer, rpm in (("rtf_paper_5rpm_pymunk", paper_mixer(), 5.0),
+                             ("rtf_cutdisc_10rpm_pymunk", rig(True), 10.0)):
+        twin = make_twin(mixer, "pymunk", case="C", seed=0, rpm=rpm, settle_s=0.3)
+        out[name] = _cpu_rtf(twin, duration)
+        out[name.replace("rtf_", "n_")] = len(twin.particles())
+    out["dt_ms_pymunk"] = PYMUNK_DT_S * 1e3
     out["clock"] = "process cpu time, best of 3 chunks"
     # total cost per simulated second grows as N^k from the paper bed to the 16x bed
     out["cost_exponent_16x"] = math.log(out["rtf_paper_5rpm"] / out["rtf_16x"]) / math.log(
@@ -466,6 +484,10 @@ def bench_twin(
             n = counts[name.replace("rtf_", "n_")]
             rtf = out[name]
             bed = "paper" if name.startswith("rtf_paper") else name[4:] + " particles"
-            table.add_row(f"{bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}",
+            table.add_row(f"DEM: {bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}",
                           f"{1e6 / (rtf * n):.0f}")
+        for name, bed in (("rtf_paper_5rpm_pymunk", "pymunk: paper, 5 rpm"),
+                          ("rtf_cutdisc_10rpm_pymunk", "pymunk: cut-disc rig, 10 rpm")):
+            n, rtf = out[name.replace("rtf_", "n_")], out[name]
+            table.add_row(bed, str(n), f"{rtf:.1f}", f"{1e6 / (rtf * n):.0f}")
         console.print(table)

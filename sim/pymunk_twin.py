@@ -1,0 +1,564 @@
+"""The pymunk twin: the user's mixer (any particle shape, baffles) in Chipmunk2D through pymunk.
+
+Same interface and statistics as ``sim.drum.DrumSim`` (advance/step, particles, snapshot/restore/
+from_state, set_rpm, rpm_actual, t_s, set_friction, stats/reset_stats, critical_rpm), for the
+mixers the compiled DEM cannot hold (``sim.mixer.Mixer.all_round`` False).
+
+Frame and units as ``sim.drum``: origin at the drum axis, x right, y up, metres, seconds, kg.
+The drum turns at ``direction * rpm_actual`` (``Mixer.direction``: +1 counter-clockwise as the
+camera sees it); ``rpm_actual`` follows ``set_rpm`` at the acceleration limit.
+
+Model:
+
+* **Drum**: one KINEMATIC body turning about the axis; the wall is a ring of ``WALL_SEGMENTS``
+  segments whose inner surface is the circle of radius ``R`` (to ``R * (1 - cos(pi/N)) / cos``,
+  0.02 mm on a 250 mm drum); baffles are rounded boxes on the same body, from the wall inwards.
+* **Particles**: one DYNAMIC body each; discs are ``Circle``; convex outlines (regular polygon,
+  pellet) one ``Poly`` with a corner radius ``CORNER_R`` of the particle's radius (the vertices
+  pulled in by it, so the outer size stays); non-convex outlines one body of several convex
+  ``Poly`` pieces (a cut disc: two or three sectors of less than 144 deg; vertices:
+  ``pymunk.autogeometry.convex_decomposition``). Counts and masses from ``sim.mixer.resolve``
+  (``density * area * slab``) and the flat particle's own moment of inertia (2D is the real
+  physics of a monolayer).
+* **Contacts**: Chipmunk's impulse solver (``iterations`` per step, ``collision_slop`` 1 % of the
+  smallest radius, overlaps pushed out at 10 % per 4 ms: pymunk's default, 10 % per 1/60 s, left
+  the deep bed sunk 0.13 small radii into itself at the 99th percentile, this 0.05),
+  Coulomb friction: a shape's coefficient is ``sqrt(friction)`` so the
+  particle-particle product is ``friction``, the wall's ``wall_mu / sqrt(friction)``; restitution
+  the same way (``sqrt(e)`` on every shape).
+* **Rolling friction** (contacts between round shapes: disc-disc, disc-wall): after each step a
+  torque ``mu_r r_eff F_n`` against the contact's relative spin, capped per contact so it cannot
+  reverse it (the DEM's "constant directional torque"); ``F_n`` the contact's normal impulse / dt.
+* **End plates** (monolayer and thin drums; Taberlet et al. 2003, as ``sim.dem``): after each step
+  every particle's velocity relative to the plates (turning with the drum) loses
+  ``mu_end r sum(F_n) / depth * dt / m``, capped so it cannot reverse. ``depth`` is the drum's
+  depth (``sim.mixer.parse_mixer`` makes a monolayer drum's its thickest particle's thickness).
+* **Time step**: one fixed internal step ``dt_s`` (``DEFAULT_DT_S``; the study in
+  docs/validation.md section 10), independent of how the caller slices time: ``advance`` runs
+  every whole step that fits and carries the remainder.
+
+Snapshots: pymunk pickles a Space without its contact cache (the warm-start impulses), so a
+restored copy does not continue bit-identically to the space it was taken from, but two copies of
+the same pickle do. ``snapshot()`` therefore re-bases the live twin on its own snapshot: the live
+run and every branch restored from it continue bit-identically (the live run loses one step's warm
+start, a perturbation far below the step's own error).
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+from dataclasses import dataclass
+
+import numpy as np
+import pymunk
+import pymunk.autogeometry
+import pymunk.batch as pbatch
+
+from sim.drum import (
+    _OVERLAP_BINS,
+    _SHRINK,
+    CASES,
+    DEFAULT_ACCEL_RPM_S,
+    DEFAULT_FRICTION,
+    DEFAULT_RESTITUTION,
+    DEFAULT_ROLLING,
+    ContactStats,
+    FixedStepTwin,
+    Particles,
+    SimParams,
+    _check_params,
+    _place,
+    check_rpm,
+    rpm_to_rad_s,
+)
+from sim.errors import SimError
+from sim.mixer import Mixer, Shape, resolve, shape_outline_m
+from sim.recipe import G_M_S2, DiskClass, DrumSpec
+
+DEFAULT_DT_S = 0.001  # the fixed step: the converged one (docs/validation.md section 10; 2 ms reads 1.6 deg low)
+DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
+WALL_SEGMENTS = 180
+CORNER_R = 0.02  # corner radius of polygon shapes, in the particle's radius
+PIECE_SEGMENTS = 16  # round parts of a polygon piece: vertices per full turn (cost of Chipmunk's poly contacts)
+OVERLAP_LEFT_PER_S = 0.9 ** (1 / 0.004)  # Chipmunk collision_bias: 10 % of an overlap corrected per 4 ms
+SLOP_R = 0.01  # collision slop, in the smallest radius
+_INFLATE_S = 0.1
+_SETTLE_DAMPING = 0.1  # velocity kept after one second while settling (pymunk Space.damping)
+
+_ARB = (pbatch.ArbiterFields.BODY_A_ID | pbatch.ArbiterFields.BODY_B_ID | pbatch.ArbiterFields.TOTAL_IMPULSE
+        | pbatch.ArbiterFields.NORMAL | pbatch.ArbiterFields.CONTACT_COUNT | pbatch.ArbiterFields.DISTANCE_1)
+_BOD = (pbatch.BodyFields.POSITION | pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY)
+_VEL = pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY
+
+
+@dataclass(frozen=True)
+class PymunkState:
+    """A pymunk twin's whole state (picklable; sent to what-if workers). ``space`` is the pickled
+    (Space, drum body, particle bodies) of ``pymunk``."""
+
+    mixer: Mixer
+    case: str
+    seed: int
+    params: SimParams  # ``dt_s`` always set; ``stiffness_n_m`` is not used (Chipmunk's contacts are rigid)
+    iterations: int
+    t_s: float
+    rpm_target: float
+    rpm_actual: float
+    n_steps: int
+    acc_s: float
+    cls: np.ndarray
+    space: bytes
+
+    @property
+    def drum(self) -> DrumSpec:
+        return self.mixer.drum
+
+
+def _check_iterations(iterations: int) -> int:
+    if not (1 <= int(iterations) <= 1000):
+        raise SimError(f"solver iterations must be in [1, 1000] (got {iterations})")
+    return int(iterations)
+
+
+def _is_convex(v: np.ndarray) -> bool:
+    d = np.roll(v, -1, axis=0) - v
+    cross = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
+    return bool(np.all(cross >= -1e-15) or np.all(cross <= 1e-15))
+
+
+def convex_pieces(shape: Shape) -> list[np.ndarray]:
+    """The shape's outline (body frame, m, about its centroid) as convex polygons (k, 2); [] for a disc."""
+    if shape.kind == "disc":
+        return []
+    outline = shape_outline_m(shape, segments=PIECE_SEGMENTS)
+    if shape.kind == "cut_disc":
+        # sectors of the disc left after the wedge, each under 144 deg, sharing the apex (outline[0])
+        apex, arc = outline[0], outline[1:]
+        span = 2 * math.pi * (1 - float(shape.wedge_deg or 90.0) / 360.0)
+        k = max(1, math.ceil(span / (0.8 * math.pi) - 1e-9))  # pieces under 144 deg: convex, few pairs
+        idx = np.linspace(0, len(arc) - 1, k + 1).round().astype(int)
+        return [np.vstack([apex, arc[idx[j]: idx[j + 1] + 1]]) for j in range(k)]
+    if _is_convex(outline):
+        return [outline]
+    closed = [tuple(p) for p in outline] + [tuple(outline[0])]
+    hulls = pymunk.autogeometry.convex_decomposition(closed, 1e-3 * shape.radius_m)
+    return [np.asarray([(p.x, p.y) for p in h[:-1]]) for h in hulls]
+
+
+def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:
+    """Polar moment of inertia of the flat particle about its centroid (kg m^2)."""
+    if shape.kind == "disc":
+        return 0.5 * mass_kg * shape.radius_m ** 2
+    v = shape_outline_m(shape, segments=96)
+    x, y = v[:, 0], v[:, 1]
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    cross = x * y1 - x1 * y
+    area = 0.5 * cross.sum()
+    j = (cross * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)).sum() / 12.0
+    return float(mass_kg * j / area)
+
+
+class PymunkDrumSim(FixedStepTwin):
+    """The pymunk drum twin of a ``Mixer`` (see the module doc). Seeded and reproducible."""
+
+    _hist: np.ndarray
+    _ov_max: float
+    _wall_max: float
+    _contacts: int
+    _stat_steps: int
+    _airborne: float
+
+    def __init__(
+        self,
+        mixer: Mixer,
+        case: str = "C",
+        seed: int = 0,
+        rpm: float = 5.0,
+        friction: float = DEFAULT_FRICTION,
+        rolling: float = DEFAULT_ROLLING,
+        *,
+        restitution: float = DEFAULT_RESTITUTION,
+        wall_friction: float | None = None,
+        end_friction: float | None = None,
+        accel_rpm_s: float = DEFAULT_ACCEL_RPM_S,
+        dt_s: float | None = None,
+        iterations: int = DEFAULT_ITERATIONS,
+        settle_s: float = 1.0,
+    ) -> None:
+        case = str(case).upper()
+        if case not in CASES:
+            raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
+        params = SimParams(float(friction), float(rolling), float(restitution),
+                           None if wall_friction is None else float(wall_friction), float(accel_rpm_s),
+                           DEFAULT_DT_S if dt_s is None else float(dt_s),
+                           end_friction=None if end_friction is None else float(end_friction))
+        _check_params(params)
+        self.iterations = _check_iterations(iterations)
+        if not mixer.particles:
+            raise SimError("the mixer has no particle classes")
+        rpm = check_rpm(rpm, mixer.drum)
+        self.mixer, self.case, self.seed, self.params = mixer, case, int(seed), params
+        disks = [DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer)]
+        rng = np.random.default_rng(seed)
+        pos, cls = _place(disks, case, mixer.drum.radius_m, rng)
+        angles = rng.uniform(0, 2 * math.pi, cls.size)
+        self._cls = cls
+        self._set_tables()
+        self._new_space(pos, angles)
+        self.t_s, self.n_steps, self._acc_s = 0.0, 0, 0.0
+        self._rpm_target = self._rpm_actual = 0.0
+        self.reset_stats()
+        self._settle(0.0 if case == "B" else settle_s)
+        self.reset_stats()
+        self._rpm_target = self._rpm_actual = rpm  # the drum starts at full speed
+
+    # ------------------------------------------------------------------ build
+    @property
+    def drum(self) -> DrumSpec:
+        return self.mixer.drum
+
+    def _set_tables(self) -> None:
+        """Per-class and per-particle constants (pure functions of the mixer)."""
+        kinds = self.mixer.particles
+        res = resolve(self.mixer)
+        self._r_cls = np.array([k.radius_m for k in res])
+        self._area_cls = np.array([k.area_m2 for k in res])
+        self._mass_cls = np.array([k.mass_kg for k in res])
+        self._moment_cls = np.array([_moment_kg_m2(k.shape, m) for k, m in zip(kinds, self._mass_cls, strict=True)])
+        self._round_cls = np.array([k.shape.is_round for k in kinds])
+        self._r = self._r_cls[self._cls]
+        self._m = self._mass_cls[self._cls]
+        self._inertia = self._moment_cls[self._cls]
+        self._round = self._round_cls[self._cls]
+        # per particle and one more entry for the drum (index n): round, 1 / moment, radius
+        self._round_x = np.append(self._round, True)
+        self._inv_i_x = np.append(1.0 / self._inertia, 0.0)
+        self._r_x = np.append(self._r_cls[self._cls], 0.0)
+        self._r_over_m = self._r_cls[self._cls] / self._m
+        self._r_min = float(self._r_cls.min())
+        self._depth = self.mixer.drum.depth_m  # the end plates' distance (a monolayer's: its thickest particle)
+        self._outlines = tuple(shape_outline_m(k.shape) for k in kinds)
+
+    def _new_space(self, pos: np.ndarray, angles: np.ndarray) -> None:
+        space = pymunk.Space()
+        space.gravity = (0.0, -G_M_S2)
+        drum = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        space.add(drum)
+        R = self.drum.radius_m
+        seg_r = 0.5 * self._r_min
+        rv = (R + seg_r) / math.cos(math.pi / WALL_SEGMENTS)
+        a = 2 * math.pi * np.arange(WALL_SEGMENTS) / WALL_SEGMENTS
+        pts = [(rv * math.cos(t), rv * math.sin(t)) for t in a]
+        for i in range(WALL_SEGMENTS):
+            space.add(pymunk.Segment(drum, pts[i], pts[(i + 1) % WALL_SEGMENTS], seg_r))
+        for poly in self.baffle_polygons_m(0.0):
+            space.add(pymunk.Poly(drum, [tuple(p) for p in poly], radius=0.0))
+        bodies = []
+        self._shapes_of: list[list[pymunk.Shape]] = []  # each body's shapes in piece order (inflation)
+        for i in range(self._cls.size):
+            k = int(self._cls[i])
+            body = pymunk.Body(float(self._mass_cls[k]), float(self._moment_cls[k]))
+            body.position = (float(pos[i, 0]), float(pos[i, 1]))
+            body.angle = float(angles[i])
+            shape = self.mixer.particles[k].shape
+            pieces = convex_pieces(shape)
+            shapes: list[pymunk.Shape]
+            if not pieces:
+                shapes = [pymunk.Circle(body, shape.radius_m * _SHRINK)]
+            else:
+                c = CORNER_R * shape.radius_m
+                pull = (shape.radius_m - c) / shape.radius_m
+                shapes = [pymunk.Poly(body, [tuple(p) for p in piece * pull * _SHRINK], radius=c * _SHRINK)
+                          for piece in pieces]
+            space.add(body, *shapes)
+            self._shapes_of.append(shapes)
+            bodies.append(body)
+        self._install(space, drum, bodies)
+        self._scale_shapes(_SHRINK)
+
+    def _install(self, space: pymunk.Space, drum: pymunk.Body, bodies: list[pymunk.Body]) -> None:
+        """Use this space: solver settings, contact coefficients, the batch order of the bodies."""
+        space.iterations = self.iterations
+        space.collision_slop = SLOP_R * self._r_min
+        space.collision_bias = OVERLAP_LEFT_PER_S  # the same correction rate in time whatever the step
+        space.collision_persistence = 1  # the contact cache holds this step's contacts only (statistics, F_n)
+        self._space, self._drum, self._bodies = space, drum, bodies
+        buf = pbatch.Buffer()
+        pbatch.get_space_bodies(space, pbatch.BodyFields.BODY_ID, buf)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp).copy()
+        index = {int(v): j for j, v in enumerate(ids.tolist())}
+        n = len(bodies)
+        # batch order -> particle index (the drum: n)
+        self._batch_of = np.array([index[b.id] for b in bodies], dtype=np.int64)  # particle -> batch row
+        self._id_sorted = np.sort(ids)
+        part_of_id = {b.id: i for i, b in enumerate(bodies)}
+        part_of_id[drum.id] = n
+        self._part_of_sorted = np.array([part_of_id[int(v)] for v in self._id_sorted.tolist()], dtype=np.int64)
+        self._drum_row = index[drum.id]
+        self._abuf = pbatch.Buffer()
+        self._bbuf = pbatch.Buffer()
+        self._vel_rows = np.zeros((ids.size, 3))  # vx, vy, omega per batch row, written back after a step
+        self._sbuf = pbatch.Buffer()
+        self._sbuf.set_float_buf(self._vel_rows)
+        self._set_coefficients()
+
+    def _set_coefficients(self) -> None:
+        p = self.params
+        su = math.sqrt(p.friction)
+        wall_u = p.wall_mu / su if su > 0 else 0.0
+        se = math.sqrt(p.restitution)
+        for s in self._drum.shapes:
+            s.friction, s.elasticity = wall_u, se
+        for b in self._bodies:
+            for s in b.shapes:
+                s.friction, s.elasticity = su, se
+
+    def _scale_shapes(self, scale: float) -> None:
+        """Set every particle's shapes to ``scale`` times full size (inflation)."""
+        for i, shapes in enumerate(self._shapes_of):
+            shape = self.mixer.particles[int(self._cls[i])].shape
+            if self._round[i]:
+                for s in shapes:
+                    assert isinstance(s, pymunk.Circle)
+                    s.unsafe_set_radius(shape.radius_m * scale)
+                continue
+            c = CORNER_R * shape.radius_m
+            pull = (shape.radius_m - c) / shape.radius_m
+            for s, piece in zip(shapes, convex_pieces(shape), strict=True):
+                assert isinstance(s, pymunk.Poly)
+                s.unsafe_set_vertices([tuple(q) for q in piece * pull * scale])
+                s.unsafe_set_radius(c * scale)
+
+    def baffle_polygons_m(self, drum_angle_rad: float | None = None) -> list[np.ndarray]:
+        """The baffles as (4, 2) polygons (m, drum frame) at the drum's angle (now, if None)."""
+        bf = self.mixer.baffles
+        if bf is None or bf.count <= 0:
+            return []
+        ang = self._drum.angle if drum_angle_rad is None else drum_angle_rad
+        R = self.drum.radius_m
+        r_out = R + 0.5 * self._r_min
+        box = np.array([[R - bf.height_m, -0.5 * bf.thickness_m], [r_out, -0.5 * bf.thickness_m],
+                        [r_out, 0.5 * bf.thickness_m], [R - bf.height_m, 0.5 * bf.thickness_m]])
+        out = []
+        for j in range(bf.count):
+            t = ang - 0.5 * math.pi + 2 * math.pi * j / bf.count
+            c, s = math.cos(t), math.sin(t)
+            out.append(box @ np.array([[c, s], [-s, c]]))
+        return out
+
+    def _settle(self, settle_s: float) -> None:
+        """Inflate the particles to full size without gravity, then settle with the drum at rest."""
+        h = self.substep_s()
+        sp = self._space
+        sp.gravity = (0.0, 0.0)
+        sp.damping = _SETTLE_DAMPING ** 10
+        n_grow = 10
+        per = max(1, int(round(_INFLATE_S / n_grow / h)))
+        for j in range(n_grow):
+            self._scale_shapes(_SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow)
+            self._run(per, count=False)
+        sp.gravity = (0.0, -G_M_S2)
+        sp.damping = _SETTLE_DAMPING
+        self._run(int(round(settle_s / h)), count=False)
+        sp.damping = 1.0
+        for b in self._bodies:
+            b.velocity = (0.0, 0.0)
+            b.angular_velocity = 0.0
+
+    # ------------------------------------------------------------- controls
+    @property
+    def rpm_actual(self) -> float:
+        """Drum speed now (rpm), following the setpoint at the acceleration limit."""
+        return self._rpm_actual
+
+    @property
+    def rpm_target(self) -> float:
+        return self._rpm_target
+
+    @property
+    def critical_rpm(self) -> float:
+        """Critical speed of this drum (rpm), ``DrumSpec.critical_rpm``."""
+        return self.drum.critical_rpm
+
+    def set_rpm(self, rpm: float) -> None:
+        """New rpm setpoint; the drum ramps to it at ``accel_rpm_s``. Above critical speed: SimError."""
+        self._rpm_target = check_rpm(rpm, self.drum)
+
+    def _params_changed(self) -> None:
+        self._set_coefficients()
+
+    def _run(self, n_steps: int, count: bool = True) -> None:
+        p = self.params
+        h = self.substep_s()
+        dv_max = p.accel_rpm_s * h
+        end_k = p.end_mu / self._depth * h  # end-plate velocity loss per (r sum F_n / m), s
+        for _ in range(n_steps):
+            if count:
+                d = self._rpm_target - self._rpm_actual
+                self._rpm_actual += max(-dv_max, min(dv_max, d))
+            w = self.mixer.direction * rpm_to_rad_s(self._rpm_actual) if count else 0.0
+            self._drum.angular_velocity = w
+            self._space.step(h)
+            self._after_step(h, w, end_k if count else 0.0, p.rolling if count else 0.0)
+            if count:
+                self.n_steps += 1
+
+    def _after_step(self, h: float, w_drum: float, end_k: float, mu_r: float) -> None:
+        """Contact statistics, rolling friction and end-plate friction of the step just taken."""
+        n = self._cls.size
+        ab = self._abuf
+        ab.clear()
+        pbatch.get_space_arbiters(self._space, _ARB, ab)
+        ints = np.frombuffer(ab.int_buf(), dtype=np.uintp).reshape(-1, 3)
+        fl = np.frombuffer(ab.float_buf(), dtype=np.float64).reshape(-1, 5)
+        live = fl[:, 4] < 0.0  # touching
+        ints, fl = ints[live], fl[live]
+        ij = self._part_of_sorted[np.searchsorted(self._id_sorted, ints[:, :2])]
+        # the cache is a hash set keyed by memory addresses: put the contacts in a canonical order so that
+        # sums over them do not depend on where a restored copy lives in memory (bit-exact branches)
+        order = np.lexsort((fl[:, 3], fl[:, 2], ij[:, 1], ij[:, 0]))
+        ij, fl = ij[order], fl[order]
+        ia, ib = ij[:, 0], ij[:, 1]
+        fn = np.abs(fl[:, 0] * fl[:, 2] + fl[:, 1] * fl[:, 3]) * (1.0 / h)  # normal force, N
+        depth = -fl[:, 4]
+        self._stat_steps += 1
+        m = ia.size
+        if m:
+            wall = (ia == n) | (ib == n)
+            self._contacts += m
+            ov = depth[~wall] * (1.0 / self._r_min)
+            if ov.size:
+                self._ov_max = max(self._ov_max, float(ov.max()))
+                self._hist += np.bincount(np.minimum((ov * (_OVERLAP_BINS / 2.0)).astype(np.int64), _OVERLAP_BINS),
+                                          minlength=_OVERLAP_BINS + 1)
+            if wall.any():
+                self._wall_max = max(self._wall_max, float(depth[wall].max()))
+        touched = np.bincount(ij.ravel(), minlength=n + 1)[:n] > 0
+        self._airborne = 1.0 - float(touched.mean()) if n else float("nan")
+        if not m or (end_k <= 0.0 and mu_r <= 0.0):
+            return
+        bb = self._bbuf
+        bb.clear()
+        pbatch.get_space_bodies(self._space, _BOD, bb)
+        rows = np.frombuffer(bb.float_buf(), dtype=np.float64).reshape(-1, 5)
+        st = rows[self._batch_of]  # x, y, vx, vy, omega per particle (a copy)
+        if mu_r > 0.0:
+            rr = self._round_x[ia] & self._round_x[ib]
+            if rr.any():
+                a, b, f = ia[rr], ib[rr], fn[rr]
+                om = np.append(st[:, 4], w_drum)
+                r = self._r_x
+                r_eff = np.where(b == n, r[a], np.where(a == n, r[b], r[a] * r[b] / (r[a] + r[b] + 1e-300)))
+                w_rel = om[a] - om[b]
+                ia_i, ib_i = self._inv_i_x[a], self._inv_i_x[b]
+                k_inv = ia_i + ib_i
+                dw = np.minimum(mu_r * h * r_eff * f * k_inv, np.abs(w_rel))  # change of w_rel, rad/s
+                tq = np.sign(w_rel) * dw / k_inv  # angular impulse on b (on a: minus), N m s
+                dom = np.bincount(b, weights=tq * ib_i, minlength=n + 1) - np.bincount(a, weights=tq * ia_i,
+                                                                                       minlength=n + 1)
+                st[:, 4] += dom[:n]
+        if end_k > 0.0:
+            sfn = np.bincount(ij.ravel(), weights=np.repeat(fn, 2), minlength=n + 1)[:n]
+            ux = st[:, 2] + w_drum * st[:, 1]
+            uy = st[:, 3] - w_drum * st[:, 0]
+            u = np.hypot(ux, uy)
+            dv = end_k * self._r_over_m * sfn
+            s = np.divide(np.minimum(dv, u), u, out=np.zeros(n), where=u > 0)
+            st[:, 2] -= s * ux
+            st[:, 3] -= s * uy
+        vr = self._vel_rows
+        vr[:] = rows[:, 2:5]
+        vr[self._batch_of] = st[:, 2:5]
+        pbatch.set_space_bodies(self._space, _VEL, self._sbuf)
+
+    # ------------------------------------------------------------ statistics
+    def reset_stats(self) -> None:
+        """Start counting contact statistics (``stats()``) afresh."""
+        self._hist = np.zeros(_OVERLAP_BINS + 1, dtype=np.int64)
+        self._ov_max = 0.0
+        self._wall_max = 0.0
+        self._contacts = 0
+        self._stat_steps = 0
+        self._airborne = float("nan")
+
+    def stats(self) -> ContactStats:
+        """Overlap percentiles (small radii), wall penetration (mm) and airborne fraction since ``reset_stats``."""
+        total = int(self._hist.sum())
+        if total:
+            k = int(np.searchsorted(np.cumsum(self._hist), 0.99 * total))
+            p99 = min((k + 1) * 2.0 / _OVERLAP_BINS, self._ov_max)
+        else:
+            p99 = 0.0
+        return ContactStats(self._stat_steps, self._contacts, float(p99), self._ov_max, 1e3 * self._wall_max,
+                            self._airborne)
+
+    # ----------------------------------------------------------------- read
+    def particles(self) -> Particles:
+        """Centroids (m), circumscribed radii (m), classes, angles, outlines and the baffles now."""
+        bb = pbatch.Buffer()
+        pbatch.get_space_bodies(self._space, pbatch.BodyFields.POSITION | pbatch.BodyFields.ANGLE, bb)
+        rows = np.frombuffer(bb.float_buf(), dtype=np.float64).reshape(-1, 3)[self._batch_of]
+        kinds = self.mixer.particles
+        return Particles(
+            x_m=rows[:, 0].copy(), y_m=rows[:, 1].copy(), r_m=self._r.copy(), cls=self._cls.copy(),
+            angle_rad=rows[:, 2].copy(), class_names=tuple(k.name for k in kinds),
+            class_bgr=tuple(k.colour_bgr for k in kinds),
+            class_outline_m=tuple(None if k.shape.is_round else o for k, o in zip(kinds, self._outlines, strict=True)),
+            baffles_m=tuple(self.baffle_polygons_m()),
+        )
+
+    def kinetic_energy_j(self) -> float:
+        """Translational kinetic energy of the particles (J)."""
+        return float(sum(0.5 * b.mass * b.velocity.get_length_sqrd() for b in self._bodies))
+
+    def snapshot(self) -> PymunkState:
+        """The whole state now. The live twin is re-based on it (module doc), so the live run and every
+        ``restore``/``from_state`` of it continue bit-identically."""
+        blob = pickle.dumps((self._space, self._drum, self._bodies), protocol=pickle.HIGHEST_PROTOCOL)
+        state = PymunkState(self.mixer, self.case, self.seed, self.params, self.iterations, self.t_s, self._rpm_target,
+                            self._rpm_actual, self.n_steps, self._acc_s, self._cls.copy(), blob)
+        self.restore(state)
+        return state
+
+    def restore(self, state: PymunkState) -> None:
+        """Go back to ``state`` (bit-identical continuation)."""
+        self.mixer, self.case, self.seed, self.params = state.mixer, state.case, state.seed, state.params
+        self.iterations = int(state.iterations)
+        self._cls = np.asarray(state.cls, dtype=np.int64).copy()
+        self._set_tables()
+        space, drum, bodies = pickle.loads(state.space)
+        self._install(space, drum, list(bodies))
+        self.t_s, self.n_steps, self._acc_s = float(state.t_s), int(state.n_steps), float(state.acc_s)
+        self._rpm_target, self._rpm_actual = float(state.rpm_target), float(state.rpm_actual)
+        if not hasattr(self, "_hist"):
+            self.reset_stats()
+
+    @classmethod
+    def from_state(cls, state: PymunkState) -> PymunkDrumSim:
+        """A new twin that continues from ``state``."""
+        sim = cls.__new__(cls)
+        sim.restore(state)
+        return sim
+
+
+def radial_spread_m(particles: Particles, areas_m2: np.ndarray | None = None) -> tuple[float, ...]:
+    """Each class's spread about the whole bed's centroid (m): ``sqrt(mean |p_i - c_bed|^2)`` over
+    its particles, ``c_bed`` area-weighted (``areas_m2`` per class; None: ``pi r^2``)."""
+    a = np.pi * particles.r_m ** 2 if areas_m2 is None else np.asarray(areas_m2)[particles.cls]
+    cx = float(np.dot(a, particles.x_m) / a.sum())
+    cy = float(np.dot(a, particles.y_m) / a.sum())
+    d2 = (particles.x_m - cx) ** 2 + (particles.y_m - cy) ** 2
+    k_max = int(particles.cls.max()) + 1 if len(particles) else 0
+    return tuple(float(np.sqrt(d2[particles.cls == k].mean())) if np.any(particles.cls == k) else float("nan")
+                 for k in range(k_max))
+
+
+__all__ = [
+    "DEFAULT_DT_S",
+    "DEFAULT_ITERATIONS",
+    "PymunkDrumSim",
+    "PymunkState",
+    "convex_pieces",
+    "radial_spread_m",
+]
