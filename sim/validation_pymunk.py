@@ -1,4 +1,4 @@
-"""Regenerate the pymunk twin's numbers and plots of docs/validation.md (section 9).
+"""Regenerate the pymunk twin's numbers and plots of docs/validation.md (section 10).
 
 ``python -m sim.validation_pymunk SECTION [OUT_DIR]`` with SECTION one of ``convergence``,
 ``segregation``, ``baffles``, ``dem``, ``calibration``, ``all``. The rig is the worked example
