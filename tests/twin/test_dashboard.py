@@ -138,6 +138,10 @@ def test_pure_helpers() -> None:
         parse_rpm_list("500")
     md = numbers_markdown({"mi": 0.8123, "mode": "auto", "last_decision": "rpm 5 -> 20"})
     assert "0.812" in md and "auto" in md and "rpm 5 -> 20" in md
+    assert "not settled" not in md and "Re-learn" not in md
+    md = numbers_markdown({"trend_state": "unsettled", "light_state": "changed (saturated:0.31)"})
+    assert "| trend | unsettled | light | changed (saturated:0.31) |" in md
+    assert "Trend not settled yet" in md and "Re-learn the classes" in md
     rng = axis_range(np.array([np.nan, 31.2, 44.9]), np.array([np.nan, np.nan, 38.0]), step=5.0, pad=1.0)
     assert rng == (30.0, 50.0)
     assert axis_range(np.array([np.nan]), step=5.0) is None

@@ -105,3 +105,26 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     kinds = [e["kind"] for e in events if e["kind"].startswith("trend_")]
     assert kinds[:2] == ["trend_unsettled", "trend_settled"]
     assert emu.motor.setpoint_rpm == 5.0
+
+
+def test_process_worker_tells_the_dashboard_the_trend_and_light_states():
+    """The numbers panel's "trend" and "light" rows: unsettled at first, and a frame whose light
+    cannot be mapped back is shown as changed (with its cause), a normal frame as ok."""
+    from dataclasses import replace
+
+    numbers: dict[str, Any] = {}
+
+    class NumberSink(Sink):
+        def numbers(self, **values) -> None:
+            numbers.update(values)
+
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, NumberSink(), lambda row: None, LiveState())
+    pw.process(CameraReading(0.0, 0, _reading(0.9)))
+    assert numbers["trend_state"] == "unsettled" and numbers["light_state"] == "ok"
+    dark = replace(_reading(math.nan, valid=False), flags=("lighting_changed:too_dark:0.12",))
+    pw.process(CameraReading(0.1, 1, dark))
+    assert numbers["light_state"] == "changed (too_dark:0.12)"
+    pw.process(CameraReading(0.2, 2, _reading(0.9)))
+    assert numbers["light_state"] == "ok"

@@ -100,12 +100,18 @@ def numbers_markdown(numbers: dict[str, Any]) -> str:
         ("camera fps", _fmt(n.get("camera_fps"), ".1f"), "twin fps", _fmt(n.get("twin_fps"), ".1f")),
         ("mill", _fmt(n.get("mill_state")), "mode", _fmt(n.get("mode"))),
         ("run time s", _fmt(n.get("t_s"), ".1f"), "friction", _fmt(n.get("friction"))),
+        ("trend", _fmt(n.get("trend_state")), "light", _fmt(n.get("light_state"))),
     ]
     lines = ["| | | | |", "|---|---:|---|---:|"]
     lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     decision = n.get("last_decision")
     reason = n.get("last_reason")
     lines.append("")
+    if str(n.get("light_state", "")).startswith("changed"):
+        lines.append("**The light moved too far to map back to the set-up's: no MI.** Re-learn the classes "
+                     "from the live bed (`drumtwin classes suggest`, then restart with the new config).  ")
+    if n.get("trend_state") == "unsettled":
+        lines.append("*Trend not settled yet: no segregation decision until it is.*  ")
     lines.append(f"**Last decision:** {decision or '–'}  \n{reason or ''}")
     return "\n".join(lines)
 

@@ -236,9 +236,11 @@ class ProcessWorker:
         values = row.as_dict()
         self.write_row(values)
         self.state.publish_point({**values, "rpm_setpoint": mill.setpoint_rpm, "rpm_actual": mill.actual_rpm})
+        light = next((f for f in r.flags if f.startswith("lighting_changed:")), None)
         self.sink.numbers(
             t_s=item.t_s, mi=r.mi, d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration,
             slope_deg=r.slope_deg, trend_mi=est.level, camera_fps=self.camera_fps(),
+            light_state="ok" if light is None else "changed (" + light.split(":", 1)[1] + ")",
         )
         return row
 
