@@ -249,7 +249,7 @@ def _mismatch_rig(camera_slope: float, twin_slope: float):
                          b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(),
                          on_twin_mismatch=lambda: recal.append(b.view.now_s()))
 
-    def run(t0: float, t1: float, twin_slope_deg: float) -> None:
+    def run(t0: float, t1: float, twin_slope_deg: float, twin_steps: bool = True) -> None:
         from control.trend import TrendEstimate
         from twin.live.records import CameraInfo, FrameInfo, TwinInfo
 
@@ -259,7 +259,8 @@ def _mismatch_rig(camera_slope: float, twin_slope: float):
             est = TrendEstimate(t, 0.9, 0.0, 0.01, 0.001, 0.88, 0.92, True, False)
             b.camera.set(CameraInfo(t, b.wall.t, None, None, int(t * 2) + 1, False))
             b.frames.set(FrameInfo(t, int(t * 2) + 1, t, _reading(0.9, slope=camera_slope), est))
-            b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg))
+            if twin_steps:  # False: the twin lags (its newest state stays where it was)
+                b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg))
             w.tick(b.view.now_s())
             t += 0.5
 
@@ -531,3 +532,24 @@ def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_
         assert "whatif_cancelled" in kinds and "whatif_error" not in kinds
         assert loop.state.snapshot().whatif.status == "cancelled by the operator"
         loop.whatif.close()
+
+
+def test_a_lagging_or_spinning_up_twin_is_no_evidence_of_a_mismatch() -> None:
+    """The demo's OFF run alarmed at 9 s: its twin, lagging, still showed the 4 deg slope of its
+    first state (just seeded, not spun up) against the camera's 34 deg. A twin whose newest state
+    is older than ``fresh_s`` or younger than ``warmup_s`` is no evidence; a fresh wrong twin is."""
+    from twin.live.mismatch import MismatchTolerance, twin_is_evidence
+
+    tol = MismatchTolerance()
+    assert not twin_is_evidence(9.0, 1.0, 0.1, tol)  # 8 s old
+    assert not twin_is_evidence(4.0, 4.0, 0.1, tol)  # fresh, but 3.9 s into its run
+    assert twin_is_evidence(9.0, 8.5, 0.1, tol)
+    w, sink, recal, run = _mismatch_rig(camera_slope=34.0, twin_slope=4.0)
+    run(0.0, 4.5, 4.0)  # spinning up: a wrong slope, but no verdict
+    assert "twin_mismatch" not in sink.faults
+
+    run(5.0, 20.0, 4.0, twin_steps=False)  # the twin lags at 4.5 s while the camera goes on
+    assert "twin_mismatch" not in sink.faults and not recal
+    assert w.view.twin().updated_s == 4.0
+    run(20.0, 30.0, 4.0)  # fresh again and past its spin-up, still wrong: raised
+    assert "twin_mismatch" in sink.faults and recal

@@ -12,7 +12,9 @@ Three comparisons, each with its tolerance (:class:`MismatchTolerance`):
 :class:`MismatchMonitor` turns residuals into a state with hysteresis: *mismatch* after
 ``raise_after_s`` of continuous disagreement, *agree* again after ``clear_after_s`` of
 continuous agreement. Missing numbers (NaN: no valid camera reading, no twin yet) are no
-evidence either way: they neither raise nor clear.
+evidence either way: they neither raise nor clear; nor is a twin that lags behind the camera
+(its newest state older than ``fresh_s``: the ``twin_lag`` alarm's business) or has run less than
+``warmup_s`` (:func:`twin_is_evidence`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ class MismatchTolerance:
     direction_min_deg: float = 5.0
     raise_after_s: float = 3.0
     clear_after_s: float = 5.0
+    fresh_s: float = 2.0  # a twin whose newest state is older than this (run time, s) is no evidence
+    warmup_s: float = 5.0  # nor is a twin before it has run this long (s): its bed is still spinning up
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,17 @@ class MismatchMonitor:
         return None
 
 
+def twin_is_evidence(now_s: float, twin_updated_s: float | None, twin_started_s: float | None,
+                     tol: MismatchTolerance | None = None) -> bool:
+    """True when the twin's numbers may be compared with the camera's at run time ``now_s``:
+    it is fresh (stepped to within ``fresh_s`` of now) and past its spin-up (``warmup_s`` of run
+    time since it was first seen, ``twin_started_s``)."""
+    t = tol or MismatchTolerance()
+    if twin_updated_s is None or twin_started_s is None:
+        return False
+    return now_s - twin_updated_s <= t.fresh_s and twin_updated_s - twin_started_s >= t.warmup_s
+
+
 def _median(values: tuple[float, ...]) -> float:
     """Median of the finite values (NaN when none is)."""
     finite = sorted(float(v) for v in values if math.isfinite(float(v)))
@@ -131,4 +146,4 @@ def _median(values: tuple[float, ...]) -> float:
     return finite[n // 2] if n % 2 else 0.5 * (finite[n // 2 - 1] + finite[n // 2])
 
 
-__all__ = ["MismatchMonitor", "MismatchTolerance", "Residual", "residual"]
+__all__ = ["MismatchMonitor", "MismatchTolerance", "Residual", "residual", "twin_is_evidence"]

@@ -22,7 +22,7 @@ from typing import Any, Protocol
 from control.errors import ControlError
 from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
 from twin.live.camera import is_valid_mi
-from twin.live.mismatch import MismatchMonitor
+from twin.live.mismatch import MismatchMonitor, twin_is_evidence
 from twin.live.records import (
     EventSink,
     Latest,
@@ -99,6 +99,7 @@ class SupervisorWorker:
         self._epoch = 0  # the mill epoch of the inputs of the latest step
         self.safe = False  # mirrors supervisor.safe after each tick (read by tests and the CLI)
         self.mismatch = mismatch  # twin vs camera (None: not compared)
+        self._twin_seen_s: float | None = None  # run time of the twin's first state
         self.on_twin_mismatch = on_twin_mismatch  # e.g. request a recalibration
         self._doubts: dict[str, str] = {}  # why the twin is not trusted (key -> reason)
         self._doubts_lock = threading.Lock()
@@ -187,6 +188,10 @@ class SupervisorWorker:
         r, twin = self.view.frames().reading, self.view.twin()
         if twin.updated_s is None:
             return
+        if self._twin_seen_s is None:
+            self._twin_seen_s = twin.updated_s
+        if not twin_is_evidence(now, twin.updated_s, self._twin_seen_s, self.mismatch.tol):
+            return  # lagging (twin_lag says so) or still spinning up: no evidence either way
         valid = r is not None and is_valid_mi(r)
         change = self.mismatch.observe(
             now, r.slope_deg if r is not None else math.nan, twin.slope_deg,
