@@ -25,6 +25,7 @@ import pytest
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error, cli
+from tests.twin.live_script import run_scripted
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events, read_frames, read_metadata
@@ -311,41 +312,31 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
                     extra={"plant": {"watchdog_s": 2.5}}).resolved()  # the board's watchdog trips sooner
     report: dict = {}
 
-    def script(loop, plant, dash) -> None:
-        def run() -> None:
-            try:
-                mill = loop.mill_box.get
-                _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
-                plant.emulator.disconnect()
-                _wait(lambda: not mill().connected, 10, "the loop to see the link down")
-                _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
-                report["alarm_link"] = list(loop.state.alarms)
-                _wait(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
-                plant.emulator.reconnect()
-                _wait(lambda: mill().connected, 20, "the link to come back")
-                time.sleep(1.0)
-                report["motor_after_reconnect"] = plant.emulator.motor
-                loop.start_mill()  # the operator
-                _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
-                _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
-                t_pause = loop.now_s()
-                plant.camera_paused.set()
-                _wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
-                report["safe_with_alarm"] = loop.supervisor.safe
-                time.sleep(1.0)
-                report["pause"] = (t_pause, loop.now_s())
-                plant.camera_paused.clear()
-                _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
-            except BaseException as exc:
-                report["error"] = exc
-            finally:
-                loop.stop_event.set()
+    def body(loop, plant) -> None:
+        mill = loop.mill_box.get
+        _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
+        plant.emulator.disconnect()
+        _wait(lambda: not mill().connected, 10, "the loop to see the link down")
+        _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+        report["alarm_link"] = list(loop.state.alarms)
+        _wait(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
+        plant.emulator.reconnect()
+        _wait(lambda: mill().connected, 20, "the link to come back")
+        time.sleep(1.0)
+        report["motor_after_reconnect"] = plant.emulator.motor
+        loop.start_mill()  # the operator
+        _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
+        _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
+        t_pause = loop.now_s()
+        plant.camera_paused.set()
+        _wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
+        report["safe_with_alarm"] = loop.supervisor.safe
+        time.sleep(1.0)
+        report["pause"] = (t_pause, loop.now_s())
+        plant.camera_paused.clear()
+        _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
 
-        threading.Thread(target=run, daemon=True).start()
-
-    run_live(cfg, progress=False, on_started=script)
-    if "error" in report:
-        raise report["error"]
+    run_scripted(cfg, body)
     events = read_events(tmp_path / "run")
     faults = {e["fault"] for e in events if e["kind"] == "fault"}
     recovered = {e["fault"] for e in events if e["kind"] == "recovered"}
@@ -355,7 +346,8 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     assert not m.running and m.fault == "WDOG"  # reconnecting restarted nothing
     starts = [e for e in events if e["kind"] == "mill_command" and e["command"] == "start"]
     assert len(starts) == 2 and {e["source"] for e in starts} == {"operator"}  # the demo's, then after the trip
-    assert starts[0]["t_s"] < 2.0 < starts[1]["t_s"]
+    t_lost = min(e["t_s"] for e in events if e["kind"] == "fault" and e["fault"] == "mill_link")
+    assert starts[0]["t_s"] < t_lost < starts[1]["t_s"]  # (not a clock bound: a loaded machine starts later)
     safe = [e for e in events if e["kind"] == "decision" and e["safe"]]
     assert any("mill link lost" in e["reason"] for e in safe)
     assert any("no valid MI" in e["reason"] for e in safe) and report["safe_with_alarm"]

@@ -11,7 +11,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,6 +20,7 @@ import pytest
 from control.modbus.emulator import DriveEmulator, DriveFaults
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
+from tests.twin.live_script import run_scripted
 from tests.twin.test_live import QUICK_AUTO, SPEED, _video, _wait
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
@@ -49,32 +49,22 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
                     log_dir=tmp_path / "run", extra={**QUICK_AUTO, "plant": {"drive": "delta-ms300"}}).resolved()
     report: dict = {}
 
-    def script(loop, plant, dash) -> None:
-        def run() -> None:
-            try:
-                mill = loop.mill_box.get
-                emu = plant.emulator
-                assert isinstance(emu, DriveEmulator)
-                _wait(lambda: mill().connected and mill().setpoint_rpm >= 15.0, 150, "AUTO to set 15 rpm")
-                report["setpoint_counts"] = emu.registers(DELTA.setpoint_register)[0]
-                _wait(lambda: emu.output_hz > 10.0, 20, "the drive ramping towards 15 Hz")
-                for fault in (DriveFaults(corrupt_p=1.0), DriveFaults(mute=True)):
-                    emu.faults = fault
-                    _wait(lambda: not mill().connected, 10, "the loop to see the link down")
-                    _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
-                    report.setdefault("alarms", []).append(list(loop.state.alarms))
-                    emu.faults = DriveFaults()
-                    _wait(lambda: mill().connected, 10, "the link back")
-            except BaseException as exc:
-                report["error"] = exc
-            finally:
-                loop.stop_event.set()
+    def body(loop, plant) -> None:
+        mill = loop.mill_box.get
+        emu = plant.emulator
+        assert isinstance(emu, DriveEmulator)
+        _wait(lambda: mill().connected and mill().setpoint_rpm >= 15.0, 150, "AUTO to set 15 rpm")
+        report["setpoint_counts"] = emu.registers(DELTA.setpoint_register)[0]
+        _wait(lambda: emu.output_hz > 10.0, 20, "the drive ramping towards 15 Hz")
+        for fault in (DriveFaults(corrupt_p=1.0), DriveFaults(mute=True)):
+            emu.faults = fault
+            _wait(lambda: not mill().connected, 10, "the loop to see the link down")
+            _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+            report.setdefault("alarms", []).append(list(loop.state.alarms))
+            emu.faults = DriveFaults()
+            _wait(lambda: mill().connected, 10, "the link back")
 
-        threading.Thread(target=run, daemon=True).start()
-
-    run_live(cfg, progress=False, on_started=script)
-    if "error" in report:
-        raise report["error"]
+    run_scripted(cfg, body)
     assert report["setpoint_counts"] == 1500  # 15 rpm x 1 Hz/rpm x 100 counts/Hz: the manual's Hz x 100
     events = read_events(tmp_path / "run")
     sent = [e for e in events if e["kind"] == "mill_command" and e["command"] == "set_rpm"]

@@ -17,6 +17,7 @@ from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from control.motor import MotorConfig
 from tests.cli import assert_one_line_error, cli
+from tests.twin.live_script import run_scripted
 from twin.config import RunConfig
 from twin.loop import supervisor_config
 
@@ -436,16 +437,14 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
     10 s of run time and the supervisor is safe with the twin stale."""
     import dataclasses
     import math
-    import threading
     import time
 
-    from twin.cli.run_cmd import run_live
     from twin.runlog import read_events
 
     cfg = RunConfig(dashboard=False, duration_s=600, speed=4.0, mode="auto", log_dir=tmp_path / "run").resolved()
     report: dict = {}
 
-    def script(loop, plant, dash) -> None:
+    def before(loop, plant) -> None:  # wrap the twin's box before any worker publishes
         box = loop.twin_box
         inner_set = box.set
 
@@ -458,28 +457,19 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
 
         box.set = wrong_set
 
-        def run() -> None:
-            try:
-                end = time.monotonic() + 120
-                while time.monotonic() < end and not (box.get().updated_s and loop.now_s() > 15.0):
-                    time.sleep(0.1)
-                report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
-                report["t_wrong"] = loop.now_s()
-                end = time.monotonic() + 60
-                while time.monotonic() < end and not loop.supervisor.safe:
-                    time.sleep(0.05)
-                report["t_safe"] = loop.now_s()
-                report["safe_reason"] = loop.supervisor.supervisor.safe_reason
-            except BaseException as exc:
-                report["error"] = exc
-            finally:
-                loop.stop_event.set()
+    def body(loop, plant) -> None:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and not (loop.twin_box.get().updated_s and loop.now_s() > 15.0):
+            time.sleep(0.1)
+        report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
+        report["t_wrong"] = loop.now_s()
+        end = time.monotonic() + 60
+        while time.monotonic() < end and not loop.supervisor.safe:
+            time.sleep(0.05)
+        report["t_safe"] = loop.now_s()
+        report["safe_reason"] = loop.supervisor.supervisor.safe_reason
 
-        threading.Thread(target=run, daemon=True).start()
-
-    run_live(cfg, progress=False, on_started=script)
-    if "error" in report:
-        raise report["error"]
+    run_scripted(cfg, body, before)
     events = read_events(tmp_path / "run")
     raised = [e for e in events if e["kind"] == "fault" and e["fault"] == "twin_mismatch"]
     assert report["quiet_before"] and raised
