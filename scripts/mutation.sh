@@ -24,6 +24,7 @@ fi
 # The venv with mutmut: $DRUMTWIN_VENV, else ./.venv (made by scripts/bootstrap.sh when missing).
 venv=${DRUMTWIN_VENV:-$PWD/.venv}
 [ -x "$venv/bin/mutmut" ] || { [ -z "${DRUMTWIN_VENV:-}" ] && bash scripts/bootstrap.sh >/dev/null; }
+[ -x "$venv/bin/mutmut" ] || "$venv/bin/python" -m pip install -q -e '.[mutation]' >/dev/null
 [ -x "$venv/bin/mutmut" ] || { echo "mutation: no mutmut in $venv (set DRUMTWIN_VENV)" >&2; exit 2; }
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
