@@ -15,18 +15,14 @@ from control.modbus.drive import DriveModel
 from control.modbus.emulator import DriveEmulator, DriveFaults
 from control.modbus.link import ModbusMill, comm_loss_problem, parse_modbus_url
 from control.modbus.profile import SHIPPED, load_profile, read_blocks
+from tests.waiting import wait_until
 
 # (profile, register counts the manual gives for 10.0 Hz at the setpoint register)
 MANUAL_10HZ = {"delta-ms300": 1000, "abb-acs": 4000, "siemens-v20": 3277, "invertek-e3": 100, "generic": 1000}
 
 
 def _wait(pred, timeout_s: float, what: str) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+    wait_until(pred, timeout_s, what, poll_s=0.02)
 
 
 @pytest.fixture

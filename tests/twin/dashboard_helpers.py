@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from tests.waiting import wait_until as _wait_until
 from twin.dashboard.ratebench import IMG_SELECTOR as IMG  # camera and twin frames, in panel order
 
 
@@ -28,13 +29,8 @@ def plot_pixels(page) -> dict[str, str]:
 
 
 def wait_until(pred: Callable[[], bool], timeout_s: float, what: str, poll_s: float = 0.1) -> None:
-    """Poll ``pred`` until it is true; AssertionError naming ``what`` after ``timeout_s``."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(poll_s)
-    raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+    """``tests.waiting.wait_until`` at the dashboard tests' 0.1 s poll."""
+    _wait_until(pred, timeout_s, what, poll_s)
 
 
 def slider(page):

@@ -26,6 +26,7 @@ from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
+from tests.waiting import wait_until
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events, read_frames, read_metadata
@@ -72,13 +73,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _wait(pred, timeout_s: float, what: str) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+_wait = wait_until
 
 
 @pytest.fixture(scope="session")  # session: xdist may interleave other modules' tests in the group
