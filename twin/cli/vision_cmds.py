@@ -389,10 +389,9 @@ def suggest_cmd(
                           "pass --roi cx,cy,r") from exc
     _warn([f"{w.split(': ', 1)[0]} left out: {w.split(': ', 1)[1]}" for w in skipped])
     picked = [(seen[0], first[0])]
-    frames = seen  # (only their number is used below)
     r0 = manual or rois[0]
     names = ", ".join(c.name for c in cfg.counted)
-    comment = (f"suggested by `drumtwin classes suggest` from {len(frames)} frame(s) ({picked[0][0]} ...); "
+    comment = (f"suggested by `drumtwin classes suggest` from {len(seen)} frame(s) ({picked[0][0]} ...); "
                f"classes: {names}.\nLearned colour model (CIELAB Gaussians); the first two classes give the MI.\n"
                "The drum is detected per frame size; add roi = [cx, cy, r] under [meter] to fix it.")
     if cfg.opening:
