@@ -47,6 +47,7 @@ class DriveModel:
         self.fault_code = 0
         self.writes: list[DriveWrite] = []
         self.counters = {"reads": 0, "writes": 0, "comm_loss_trips": 0, "comm_loss_ignored": 0}
+        self.trip_times_s: list[float] = []  # when (drive clock, s) each comm-loss trip stopped the motor
         self._last_feed_s = now_s
         self._t_s = now_s
         self._lost = False  # the current silence was already acted upon
@@ -139,6 +140,7 @@ class DriveModel:
             self._lost = True
             if setting.safe:
                 self.counters["comm_loss_trips"] += 1
+                self.trip_times_s.append(now_s)
                 self.fault_code = self.profile.comm_loss_fault_code
                 self.motor.running = False  # ramps to 0 Hz
             else:

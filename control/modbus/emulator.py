@@ -131,6 +131,13 @@ class DriveEmulator:
         with self._lock:
             return {**self.model.counters, "replies": self.replies}
 
+    @property
+    def trip_times_s(self) -> list[float]:
+        """When each comm-loss trip stopped the motor, on this emulator's clock (:meth:`now_s`)."""
+        with self._lock:
+            self.model.tick(self.now_s())
+            return list(self.model.trip_times_s)
+
     def registers(self, address: int, count: int = 1) -> list[int]:
         """The drive's registers as a Modbus read would see them now."""
         with self._lock:

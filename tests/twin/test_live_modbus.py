@@ -7,10 +7,11 @@ disabled is refused (exit 2) and runs only with the logged override."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
-import textwrap
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,7 +22,7 @@ from control.modbus.emulator import DriveEmulator, DriveFaults
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
-from tests.twin.test_live import QUICK_AUTO, SPEED, _video, _wait
+from tests.twin.test_live import QUICK_AUTO, SPEED, _free_port, _video, _wait
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events
@@ -102,43 +103,49 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
     assert not any(e["kind"] == "mill_command" for e in events)
 
 
-CHILD = textwrap.dedent("""
-    import sys
-    import time
-    from twin.cli.run_cmd import run_live
-    from twin.config import RunConfig
-    video, url, log = sys.argv[1:4]
-    def operator(loop, plant, dash):
-        while not loop.mill_box.get().connected:  # the operator sees the drive first
-            time.sleep(0.05)
-        loop.set_manual_rpm(12.0)
-        loop.start_mill()
-    cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=120.0, mode="manual", log_dir=log).resolved()
-    run_live(cfg, progress=False, on_started=operator)
-""")
+@pytest.mark.timeout(300)
+def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
+    delta: DriveEmulator, page, tmp_path: Path
+) -> None:
+    """`drumtwin run` (the console script in its own process, as a user starts it: AUTO, its
+    dashboard) on the Delta emulator over a real pty; the operator presses "Start mill" in
+    chromium, the drive runs at the frequency its keypad holds (12 Hz) and the run's
+    keep-alive writes hold it; kill -9 of the CLI: nobody writes any more and the drive's own
+    comm-loss trip (2 s) stops it within 2 + 1 s of the kill, on the drive's own clock."""
+    from tests.twin.dashboard_helpers import button
 
+    set_s = 2.0
+    delta.commission(set_s)
+    delta.set_motor(setpoint_rpm=12.0)  # the keypad's frequency command; the drive is stopped
+    video = _video(tmp_path / "v.avi", n=1800)
+    exe = Path(sys.executable).with_name("drumtwin")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "COLUMNS": "400"}
+    cmd = [str(exe), "run", "--video", str(video), "--mill", delta.mill_url(), "--port", str(_free_port()),
+           "--duration", "170", "--log", str(tmp_path / "run")]  # the default mode: AUTO
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(proc.stderr or []), daemon=True).start()
 
-@pytest.mark.timeout(240)
-def test_kill_9_of_the_run_stops_the_drive_through_its_comm_loss_trip(delta: DriveEmulator, tmp_path: Path) -> None:
-    """The run (`drumtwin run`'s run_live in its own process; the operator's start and
-    12 rpm scripted) controls the drive; kill -9: nobody writes any more and the drive's
-    own trip stops it within the set time + 1 s."""
-    delta.commission(2.0)
-    video = _video(tmp_path / "v.avi", n=600)
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(video), delta.mill_url(), str(tmp_path / "run")],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    def dashboard_url() -> str | None:
+        return next((m.group(1) for ln in list(lines) if (m := re.search(r"dashboard on (http://\S+)", ln))), None)
+
     try:
-        _wait(lambda: delta.output_hz > 8.0 or proc.poll() is not None, 180, "the run to start the drive")
-        assert proc.poll() is None, proc.stderr.read().decode()[-2000:] if proc.stderr else ""
-        time.sleep(1.0)  # the loop's keep-alive writes hold it
-        assert delta.motor.running and delta.fault_code == 0
-        kill_s = time.monotonic()
+        _wait(lambda: dashboard_url() is not None or proc.poll() is not None, 120, "the run's dashboard")
+        _wait(lambda: delta.counters["reads"] > 10 or proc.poll() is not None, 120, "the run to poll the drive")
+        assert proc.poll() is None, "".join(lines)[-2000:]
+        assert delta.writes == [] and not delta.motor.running  # connected, read only: nothing moved
+        page.goto(dashboard_url())
+        button(page, "Start mill").click()  # the operator's start, in this run
+        _wait(lambda: delta.output_hz > 8.0 or proc.poll() is not None, 60, "the run to start the drive")
+        assert proc.poll() is None, "".join(lines)[-2000:]
+        time.sleep(set_s + 0.5)  # longer than the trip time: only the run's keep-alive writes hold it
+        assert delta.motor.running and delta.fault_code == 0 and delta.trip_times_s == []
+        kill_s = delta.now_s()
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
-        _wait(lambda: delta.fault_code != 0, 5.0, "the comm-loss trip")
-        trip_s = time.monotonic() - kill_s
-        assert trip_s <= 2.0 + 1.0, trip_s
+        _wait(lambda: delta.trip_times_s != [], set_s + 3.0, "the comm-loss trip")
+        stop_s = delta.trip_times_s[0] - kill_s
+        assert 0.0 < stop_s <= set_s + 1.0, stop_s
         assert delta.fault_code == DELTA.comm_loss_fault_code and not delta.motor.running
         _wait(lambda: delta.output_hz == 0.0, 5.0, "the ramp to stop")
     finally:
@@ -146,8 +153,13 @@ def test_kill_9_of_the_run_stops_the_drive_through_its_comm_loss_trip(delta: Dri
             proc.kill()
             proc.wait(10)
     writes = delta.writes
-    assert any(w.address == DELTA.control_register and w.value == 0x12 for w in writes)  # the operator's start
-    assert max(w.t_s for w in writes) < delta.now_s() - 2.0  # nothing written since the kill
+    starts = [w for w in writes if w.address == DELTA.control_register and w.value == 0x12]
+    assert len(starts) == 1  # the operator's one start
+    assert max(w.t_s for w in writes) < kill_s  # nothing written since the kill
+    keepalive = [w for w in writes if w.address == DELTA.setpoint_register and w.t_s > starts[0].t_s]
+    assert len(keepalive) > 10 and all(w.value == 1200 for w in keepalive)  # 12 Hz x 100, again and again
+    events = read_events(tmp_path / "run")  # what the run logged before it was killed
+    assert [e["action"] for e in events if e["kind"] == "operator"] == ["start"]
 
 
 @pytest.mark.timeout(240)
