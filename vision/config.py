@@ -50,7 +50,7 @@ _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "d
                "light_reference_classes",
                "mirror"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
-_TOP_KEYS = {"meter", "classes", "drum", "particles"}
+_TOP_KEYS = {"meter", "classes", "drum", "particles", "drive"}
 MIXER_KEYS = ("drum", "particles")  # the twin's tables (sim.mixer parses them; vision only hands them over)
 
 
@@ -88,6 +88,9 @@ class MeterConfig:
     mixer_tables: dict = field(default_factory=dict, compare=False)
     """The config's ``[drum]`` and ``[[particles]]`` tables as read (the twin's mixer, parsed by
     ``sim.mixer.parse_mixer``); empty when the config has none."""
+    drive_table: dict = field(default_factory=dict, compare=False)
+    """The config's ``[drive]`` table as read (the mill's drive: ``control.modbus.link.drive_hz_per_rpm``
+    parses it; vision only hands it over); empty when the config has none."""
 
     @property
     def is_default(self) -> bool:
@@ -283,7 +286,7 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
                        warnings, opening, light_ref, light_cls, rot, mirror,
-                       {k: data[k] for k in MIXER_KEYS if k in data})
+                       {k: data[k] for k in MIXER_KEYS if k in data}, drive_table=data.get("drive", {}))
 
 
 def _nums(values, digits: int = 6) -> str:

@@ -121,6 +121,48 @@ def parse_modbus_url(url: str) -> ModbusUrl:
     )
 
 
+DRIVE_KEYS = ("hz_per_rpm",)
+"""Keys of a mixer config's ``[drive]`` table (the drive behind a ``modbus:`` mill URL)."""
+
+
+def drive_hz_per_rpm(table: object, source: str) -> float | None:
+    """``hz_per_rpm`` (motor Hz per drum rpm) of a config's ``[drive]`` table, None when the
+    table or the key is absent (pure); one-line ``ControlError`` for an unknown key or a bad value."""
+    if table is None or table == {}:
+        return None
+    if not isinstance(table, dict):
+        raise ControlError(f"{source}: [drive] must be a table (hz_per_rpm = ...)")
+    unknown = sorted(set(table) - set(DRIVE_KEYS))
+    if unknown:
+        raise ControlError(f"{source}: unknown key(s) {unknown} in [drive] (allowed: {', '.join(DRIVE_KEYS)})")
+    if "hz_per_rpm" not in table:
+        return None
+    v = table["hz_per_rpm"]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ControlError(f"{source}: [drive] hz_per_rpm must be a number (got {v!r})")
+    return check_number(f"{source}: [drive] hz_per_rpm", float(v), above=0.0, at_most=1e4)
+
+
+def config_mill_url(url: str, drive_table: object, source: str) -> str:
+    """The mill URL a run (or ``drumtwin mill --config``) opens, given the config's ``[drive]``
+    table (pure): its ``hz_per_rpm`` is written into a ``modbus:`` URL, the one place the link
+    reads it (the run's ``start`` event shows that URL). A URL that already carries
+    ``hz_per_rpm`` must agree (within 1e-6), else one-line ``ControlError`` naming both; a
+    line-protocol board's URL refuses it (that board takes rpm, not Hz). No value: the URL unchanged."""
+    hz_per_rpm = drive_hz_per_rpm(drive_table, source)
+    if hz_per_rpm is None:
+        return url
+    if not is_modbus_url(url):
+        raise ControlError(f"{source}: [drive] hz_per_rpm is for a drive (a modbus: mill URL), not {url!r}")
+    given = parse_modbus_url(url).hz_per_rpm
+    if given is not None:
+        if abs(given - hz_per_rpm) > 1e-6 * max(given, hz_per_rpm):
+            raise ControlError(f"hz_per_rpm: the mill URL says {given:g}, {source} [drive] says {hz_per_rpm:g}:"
+                               " give it in one place (or make them agree)")
+        return url
+    return url + ("&" if "?" in url else "?") + f"hz_per_rpm={hz_per_rpm!r}"
+
+
 def comm_loss_problem(profile: DriveProfile, setting: CommLossSetting, limit_s: float) -> str | None:
     """Why the drive's comm-loss trip is not good enough (one line naming the parameter and
     what to set), or None when it trips safely within ``limit_s`` (pure)."""
@@ -385,4 +427,5 @@ class ModbusMill:
         return st
 
 
-__all__ = ["COMM_LOSS_LIMIT_S", "ModbusMill", "ModbusUrl", "comm_loss_problem", "is_modbus_url", "parse_modbus_url"]
+__all__ = ["COMM_LOSS_LIMIT_S", "DRIVE_KEYS", "ModbusMill", "ModbusUrl", "comm_loss_problem", "config_mill_url",
+           "drive_hz_per_rpm", "is_modbus_url", "parse_modbus_url"]

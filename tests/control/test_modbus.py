@@ -13,7 +13,7 @@ import pytest
 from control.errors import ControlError, MillRefused
 from control.modbus.drive import DriveModel
 from control.modbus.emulator import DriveEmulator, DriveFaults
-from control.modbus.link import ModbusMill, comm_loss_problem, parse_modbus_url
+from control.modbus.link import ModbusMill, comm_loss_problem, config_mill_url, parse_modbus_url
 from control.modbus.profile import SHIPPED, load_profile, read_blocks
 from tests.waiting import wait_until
 
@@ -80,6 +80,24 @@ def test_modbus_urls_parse_and_bad_ones_name_the_key() -> None:
     ]:
         with pytest.raises(ControlError, match=key):
             parse_modbus_url(url)
+
+
+def test_the_configs_drive_hz_per_rpm_goes_into_the_modbus_url_and_a_disagreeing_url_is_refused() -> None:
+    base = "modbus:/dev/x?profile=delta-ms300&unit=1"
+    assert config_mill_url(base, {}, "config c.toml") == base  # no [drive]: the URL (and the profile) decide
+    url = config_mill_url(base, {"hz_per_rpm": 1.04}, "config c.toml")
+    assert parse_modbus_url(url).hz_per_rpm == 1.04 and url.startswith(base + "&")
+    assert config_mill_url(base + "&hz_per_rpm=1.04", {"hz_per_rpm": 1.04}, "c") == base + "&hz_per_rpm=1.04"
+    with pytest.raises(ControlError, match=r"mill URL says 2, config c.toml \[drive\] says 1.04"):
+        config_mill_url(base + "&hz_per_rpm=2", {"hz_per_rpm": 1.04}, "config c.toml")
+    with pytest.raises(ControlError, match="is for a drive"):
+        config_mill_url("/dev/ttyUSB0", {"hz_per_rpm": 1.04}, "config c.toml")
+    assert config_mill_url("/dev/ttyUSB0", {}, "c") == "/dev/ttyUSB0"
+    for table, needle in [({"hz_per_rpm": 0}, "hz_per_rpm must be a finite number > 0"),
+                          ({"hz_per_rpm": "fast"}, "must be a number"), ({"hz_per_rpm": True}, "must be a number"),
+                          ({"gear": 30}, r"unknown key\(s\) \['gear'\] in \[drive\]"), (3, "must be a table")]:
+        with pytest.raises(ControlError, match=needle):
+            config_mill_url(base, table, "config c.toml")
 
 
 def test_comm_loss_problem_names_the_parameter_and_the_value_to_set() -> None:

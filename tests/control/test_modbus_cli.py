@@ -70,6 +70,22 @@ def test_mill_commands_on_a_modbus_url(delta: DriveEmulator) -> None:
     assert_one_line_error(cli("mill", "modbus:/dev/x?profile=nope", "status"), "unknown drive profile")
 
 
+def test_mill_config_gives_hz_per_rpm_and_a_url_that_disagrees_is_refused(delta: DriveEmulator, tmp_path: Path) -> None:
+    cfg = tmp_path / "mixer.toml"
+    cfg.write_text("[drive]\nhz_per_rpm = 2.5  # measured at commissioning\n")
+    bare = f"modbus:{delta.url}?profile=delta-ms300&unit=3&parity=N"  # no hz_per_rpm in the URL
+    r = cli("mill", "--config", cfg, bare, "set-rpm", "10", "--json")
+    assert r.code == 0, r.err
+    assert delta.registers(0x2001) == [2500]  # 10 drum rpm x 2.5 Hz/rpm x 100 counts/Hz
+    assert json.loads(r.out)["setpoint_rpm"] == 10.0
+    n = len(delta.writes)
+    assert_one_line_error(cli("mill", "--config", cfg, bare + "&hz_per_rpm=1", "set-rpm", "10"),
+                          "the mill URL says 1", "[drive] says 2.5")
+    assert len(delta.writes) == n  # refused before the port is opened
+    cfg.write_text("[drive]\nhz_per_rpm = -2\n")
+    assert_one_line_error(cli("mill", "--config", cfg, bare, "status"), "hz_per_rpm must be a finite number > 0")
+
+
 @pytest.mark.timeout(60)
 def test_mill_emulator_modbus_process_on_tcp() -> None:
     proc = subprocess.Popen(

@@ -181,6 +181,29 @@ def test_a_drive_without_a_comm_loss_trip_is_refused_and_runs_only_with_the_logg
     assert len(over) == 1 and "Pr.09-03" in over[0]["message"] and over[0]["t_s"] == 0.0
 
 
+@pytest.mark.timeout(240)
+def test_run_takes_hz_per_rpm_from_the_configs_drive_table(delta: DriveEmulator, tmp_path: Path) -> None:
+    """`drumtwin run --config` with `[drive] hz_per_rpm = 2.5`: the link converts with it (the
+    drive's keypad holds 10 Hz: the run reads 4 drum rpm) and the start event's URL says so;
+    a URL giving another value is refused before anything starts."""
+    cfg = tmp_path / "mixer.toml"
+    cfg.write_text("[drive]\nhz_per_rpm = 2.5\n")
+    delta.set_motor(setpoint_rpm=10.0)  # 10 Hz (the emulator's own hz_per_rpm is 1)
+    bare = f"modbus:{delta.url}?profile=delta-ms300&unit=1&parity=N"
+    video = _video(tmp_path / "v.avi", n=30)
+    args = ("run", "--video", video, "--config", cfg, "--no-dashboard", "--mode", "off", "--duration", "2")
+    r = cli(*args, "--mill", bare + "&hz_per_rpm=1", "--log", tmp_path / "refused")
+    assert_one_line_error(r, "the mill URL says 1", "[drive] says 2.5")
+    assert not (tmp_path / "refused").exists()
+    r = cli(*args, "--mill", bare, "--log", tmp_path / "run")
+    assert r.code == 0, r.err
+    events = read_events(tmp_path / "run")
+    assert events[0]["kind"] == "start" and events[0]["mill"] == bare + "&hz_per_rpm=2.5"
+    synced = [e for e in events if e["kind"] == "mill_synced"]
+    assert synced and synced[0]["setpoint_rpm"] == 4.0  # 10 Hz / 2.5 Hz per rpm
+    assert delta.writes == []
+
+
 def test_drive_option_is_for_the_demo_only() -> None:
     assert_one_line_error(cli("run", "--drive", "nope", "--no-dashboard"), "unknown drive profile")
     assert_one_line_error(cli("run", "--drive", "abb-acs", "--mill", "/dev/x", "--no-dashboard"), "--drive")

@@ -45,10 +45,18 @@ def _mill(
     ),
     timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
     retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
+    config: Path = typer.Option(None, "--config", help="Mixer config whose [drive] hz_per_rpm the drive uses "
+                                "(as `drumtwin run --config`)."),
 ) -> None:
     check_number("--timeout", timeout_s, above=0.0, at_most=60.0)
     if not 0 <= retries <= 100:
         raise ControlError(f"--retries must be an integer in 0..100 (got {retries})")
+    if config is not None:
+        from control.modbus.link import config_mill_url
+        from vision.config import load_config
+
+        mc = load_config(config)
+        url = config_mill_url(url, mc.drive_table, f"config {mc.source}")
     ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries}
 
 

@@ -115,6 +115,10 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
 
             mill_url = cfg.mill
             frames = None
+            if mc is not None:  # the config's [drive] hz_per_rpm goes into a modbus: URL (docs/drives.md)
+                from control.modbus.link import config_mill_url
+
+                mill_url = config_mill_url(mill_url, mc.drive_table, f"config {mc.source}")
         mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
         if frames is None:
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
