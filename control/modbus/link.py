@@ -311,6 +311,8 @@ class ModbusMill:
                 s.port, framer=FramerType.RTU, baudrate=s.baud, parity=s.parity, stopbits=s.stopbits,
                 timeout=self.timeout_s, retries=self.retries, reconnect_delay=0,
             )
+            if s.port.startswith("rfc2217://"):
+                self._open_rfc2217(client)
             if not client.connect():
                 self._connected = False
                 self.last_error = f"cannot open {s.port}"
@@ -326,6 +328,22 @@ class ModbusMill:
                 self._checked = False
                 self._drop()  # release the port (pyserial locks it): the next request opens and checks again
                 raise
+
+    def _open_rfc2217(self, client: Any) -> None:
+        """pymodbus opens its port with a ``write_timeout``, which pyserial's RFC 2217 client
+        refuses (NotImplementedError): open it here without one, with pymodbus's other
+        settings; ``client.connect()`` then finds it open. A server that does not answer
+        leaves ``client.socket`` None (ConnectionError, as for any port)."""
+        import serial
+
+        s = self.spec
+        try:
+            port = serial.serial_for_url(s.port, timeout=self.timeout_s, baudrate=s.baud, parity=s.parity,
+                                         stopbits=s.stopbits, bytesize=8)
+            port.inter_byte_timeout = client.inter_byte_timeout or None
+        except (OSError, ValueError, serial.SerialException):
+            return
+        client.socket = port
 
     def _check_safety(self) -> None:
         setting = self.read_comm_loss()

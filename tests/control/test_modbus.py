@@ -275,6 +275,32 @@ def test_emulator_on_tcp(tmp_path) -> None:
             assert mill.status().setpoint_rpm == 25.0
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("drive", ["abb-acs"], indirect=True)
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # inside pyserial's rfc2217 client
+def test_an_rfc2217_url_reaches_the_drive_through_a_real_rfc2217_server(drive: DriveEmulator) -> None:
+    """`modbus:rfc2217://...`: pymodbus's RTU client on pyserial's RFC 2217 client, a serial
+    server (pyserial's PortManager, as its examples/rfc2217_server.py) on the drive's pty."""
+    from tests.control.test_link import Rfc2217Server
+
+    srv = Rfc2217Server(drive.url)
+    try:
+        url = f"modbus:rfc2217://127.0.0.1:{srv.port}?profile=abb-acs&unit=7&parity=N"
+        with ModbusMill(url, timeout_s=0.5) as mill:
+            assert drive.writes == []  # the comm-loss check at connect only read
+            mill.set_rpm(25.0)
+            mill.start()
+            _wait(lambda: drive.output_hz > 5.0, 10, "the drive to ramp up")
+            st = mill.heartbeat()
+            assert st.setpoint_rpm == 25.0 and st.running and st.fault is None
+            assert drive.registers(1) == [10000]  # 25 Hz of the 50 Hz that 20000 means (40002)
+            assert [(w.address, w.value) for w in drive.writes] == [(1, 10000), (0, 0x047E), (0, 0x047F), (1, 10000)]
+            mill.stop()
+            assert not mill.status().running
+    finally:
+        srv.close()
+
+
 def test_an_unopenable_port_is_a_connection_error(tmp_path) -> None:
     with pytest.raises(ConnectionError, match="cannot open"):
         ModbusMill(f"modbus:{tmp_path / 'none'}?profile=generic")
