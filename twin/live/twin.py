@@ -32,6 +32,8 @@ CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibrati
 TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
 MAX_LAG_S = 5.0  # run seconds the twin may fall behind before it skips ahead
 SNAPSHOT_EVERY_S = 2.0  # run seconds between twin snapshots kept for what-if studies
+CALIBRATION_STEADY_S = 3.0  # run seconds the drum must turn steadily before a calibration
+CALIBRATION_RPM_SPREAD = 0.05  # steady: actual rpm within this share of its median (+ 0.1 rpm) all along
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,8 @@ class TwinWorker:
         self._cal_future: Future | None = None
         self._cal_started: tuple[float, float, float, float] | None = None  # t, target, rpm, wall
         self._cal_wanted = True  # calibrate once the camera slope window is full
+        self._rpm_seen: deque[tuple[float, float]] = deque(maxlen=4000)  # (run s, actual rpm) for _rpm_now
+        self._cal_waiting: str | None = None  # why a wanted calibration waits (logged once per reason)
 
     # -- any thread ------------------------------------------------------------------------
     def request(self, kind: str) -> None:
@@ -158,22 +162,55 @@ class TwinWorker:
         vals = [a for t, a in s if t >= now_s - CALIBRATION_WINDOW_S]
         return statistics.median(vals) if len(vals) >= 3 else None
 
-    def _rpm_now(self) -> float:
+    def _rpm_now(self, t: float) -> tuple[float | None, str]:
+        """The drum's measured rpm to calibrate at, from the mill's actual rpm seen at run time
+        ``t`` (called every step): the median over the last ``CALIBRATION_STEADY_S`` once the
+        drum has turned at >= ``control.limits.Limits().min_rpm`` and steadily (within
+        ``CALIBRATION_RPM_SPREAD`` of it) all that time; else ``(None, why)``."""
+        from control.limits import Limits
+
+        seen = self._rpm_seen
         rpm = self.view.mill().actual_rpm
-        return rpm if math.isfinite(rpm) and rpm > 0 else self.settings.start_rpm
+        if not math.isfinite(rpm):  # not read yet, or the link is lost: start over
+            seen.clear()
+            return None, "unknown: the mill's actual rpm is not known (no reading, or the link is lost)"
+        if not seen or t > seen[-1][0] or rpm != seen[-1][1]:
+            seen.append((t, rpm))
+        while len(seen) > 1 and seen[1][0] <= t - CALIBRATION_STEADY_S:
+            seen.popleft()  # keep one sample at or before the window's start
+        lo_rpm = Limits().min_rpm
+        if rpm < lo_rpm:
+            return None, f"not turning: the drum turns at {rpm:.2f} rpm, below {lo_rpm:g} rpm (control.limits)"
+        if t - seen[0][0] < CALIBRATION_STEADY_S:
+            return None, (f"not steady yet: the drum has turned steadily for {t - seen[0][0]:.1f} of "
+                          f"{CALIBRATION_STEADY_S:g} s")
+        vals = [r for _, r in seen]
+        mid = statistics.median(vals)
+        if min(vals) < lo_rpm or max(vals) - min(vals) > CALIBRATION_RPM_SPREAD * mid + 0.1:
+            return None, f"not steady: {min(vals):.2f}-{max(vals):.2f} rpm over the last {CALIBRATION_STEADY_S:g} s"
+        return mid, ""
 
     def _tend_calibration(self) -> None:
-        """Start a wanted calibration once there is a target; apply a finished one."""
+        """Start a wanted calibration once there is a target and a steadily turning drum
+        (else a ``calibration_waiting`` event says why, once per reason); apply a finished one."""
         t = self.view.frames().t_s
         fut = self._cal_future
         if fut is None:
             if not self._cal_wanted:
                 return
+            rpm, why = self._rpm_now(t)
             target = self.camera_slope(t)
             if target is None:
                 return
+            if rpm is None:
+                reason = why.split(":", 1)[0]
+                if reason != self._cal_waiting:  # an event, not a fault: the twin runs on as it is
+                    self._cal_waiting = reason
+                    self.sink.event("calibration_waiting", t, reason=why, rpm=self.view.mill().actual_rpm)
+                    self.sink.numbers(twin_state="running, waiting to calibrate")
+                return
+            self._cal_waiting = None
             self._cal_wanted = False
-            rpm = self._rpm_now()
             self._cal_started = (t, target, rpm, time.monotonic())
             self.sink.numbers(twin_state="running, calibrating")
             self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)

@@ -1,0 +1,103 @@
+"""The twin worker's calibration start (``TwinWorker._tend_calibration`` / ``_rpm_now``): it
+calibrates only a turning, steady drum, at the rpm the mill measured, and says why it waits.
+
+Defect (a run calibrated at 0.19 rpm): the worker calibrated at the board's actual rpm
+whatever it was, and at the run's start rpm when the drum stood still. The calibration
+process is replaced by a pool that records what it was given (the calibration itself is
+tested in tests/sim); everything else is the worker with the run's own records."""
+
+from __future__ import annotations
+
+import queue
+from concurrent.futures import Executor, Future
+from typing import Any
+
+import pytest
+
+from control.limits import Limits
+from control.protocol import MillStatus
+from tests.twin.test_mill_worker import Sink
+from twin.live.records import CameraInfo, FrameInfo, Latest, MillSnapshot, RunView, TwinInfo
+from twin.live.twin import CALIBRATION_STEADY_S, CALIBRATION_WINDOW_S, TwinSettings, TwinWorker
+from twin.state import LiveState
+
+
+class RecordingPool(Executor):
+    """Takes calibration jobs and keeps them pending (what the worker decided to run)."""
+
+    def __init__(self) -> None:
+        self.jobs: list[tuple[Any, ...]] = []
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:  # type: ignore[override]
+        self.jobs.append(args)
+        return Future()
+
+
+class Rig:
+    """A TwinWorker on the run's records, stepped at 0.1 s of run time."""
+
+    def __init__(self) -> None:
+        self.frames: Latest[FrameInfo] = Latest(FrameInfo())
+        self.mill: Latest[MillSnapshot] = Latest(MillSnapshot())
+        view = RunView(1.0, Latest(CameraInfo()), self.frames, self.mill, Latest(TwinInfo()), Latest("auto"),
+                       clock_now=lambda: 0.0)
+        self.sink = Sink()
+        self.slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
+        self.worker = TwinWorker(TwinSettings(start_rpm=5.0), view, self.sink, LiveState(), Latest(TwinInfo()),
+                                 self.slopes)
+        self.pool = RecordingPool()
+        self.worker._pool = self.pool
+        self.t = 0.0
+
+    def run(self, seconds: float, rpm: float | None, slope_deg: float = -30.0, running: bool = True) -> None:
+        """``seconds`` of run time with the mill at ``rpm`` (None: the link is lost) and the
+        camera seeing ``slope_deg``."""
+        for _ in range(round(seconds / 0.1)):
+            self.t = round(self.t + 0.1, 6)
+            status = None if rpm is None else MillStatus(rpm, rpm, running, None)
+            self.mill.set(MillSnapshot(status, connected=rpm is not None, polled=True))
+            self.frames.set(FrameInfo(t_s=self.t))
+            self.slopes.put((self.t, slope_deg))
+            self.worker._drain_slopes()
+            self.worker._tend_calibration()
+
+    def waiting(self) -> list[str]:
+        return [d["reason"].split(":", 1)[0] for d in self.sink.kinds("calibration_waiting")]
+
+
+def test_the_twin_calibrates_only_a_turning_steady_drum_at_its_measured_rpm() -> None:
+    r = Rig()
+    r.run(CALIBRATION_WINDOW_S + 1.0, 0.19)  # the camera's slope window is full; the drum creeps
+    assert r.pool.jobs == [] and r.sink.kinds("calibration_started") == []
+    assert r.waiting() == ["not turning"]
+    assert r.sink.faults == set()  # waiting is an event, not a fault
+    r.run(2.0, 0.0, running=False)  # stopped: not calibrated at the run's start rpm either
+    r.run(1.0, None)  # the link is lost: the rpm is unknown
+    assert r.pool.jobs == []
+    for k in range(10):  # the drum ramps up: turning, not steady
+        r.run(0.5, 2.5 + 1.5 * k)
+    assert r.pool.jobs == []
+    assert r.waiting() == ["not turning", "unknown", "not steady yet", "not steady"]
+    r.run(0.5, 12.0)  # reached 12 rpm: steady only once it has held for the whole window
+    assert r.pool.jobs == []
+    for k in range(round(CALIBRATION_STEADY_S / 0.1)):  # +-0.1 rpm of jitter is steady
+        r.run(0.1, 12.0 + 0.1 * ((k % 3) - 1))
+        if r.pool.jobs:
+            break
+    assert len(r.pool.jobs) == 1
+    target, rpm, _ = r.pool.jobs[0]
+    assert rpm == pytest.approx(12.0, abs=0.05)  # the measured rpm, not start_rpm (5) nor a ramp value
+    assert target == -30.0
+    started = r.sink.kinds("calibration_started")
+    assert len(started) == 1 and started[0]["rpm"] == rpm
+    r.run(5.0, 12.0)  # one calibration per request
+    assert len(r.pool.jobs) == 1
+
+
+def test_the_minimum_is_the_limits_lowest_rpm() -> None:
+    lo = Limits().min_rpm
+    below, above = Rig(), Rig()
+    below.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 0.9 * lo)
+    above.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 1.1 * lo)
+    assert below.pool.jobs == [] and below.waiting() == ["not turning"]
+    assert [job[1] for job in above.pool.jobs] == [pytest.approx(1.1 * lo)]
