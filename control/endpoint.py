@@ -21,17 +21,19 @@ mixed at by more than ``exit_band`` (or below ``target_mi - band``) for ``exit_d
 An unsettled or invalid trend sample (NaN, ``settled`` False) restarts the dwell: the
 trend must hold continuously. Times are the samples' own (run or video seconds).
 :class:`EndpointDetector` is the streaming form (live); :func:`detect_endpoint` replays a
-whole recording through it (offline): one definition for both.
+whole recording through it (offline), :func:`endpoint_of_series` with the Kalman trend in
+front (raw MI of a video): one definition for both.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from control.errors import ControlError
+from control.trend import MITrend, TrendConfig
 
 
 @dataclass(frozen=True)
@@ -203,3 +205,22 @@ def detect_endpoint(
             changes.append((st.t_s, st.changed, st.mixing_time_s, st.reason))
     return EndpointResult(det.mixing_time_s if det.mixed else None, det.plateau_mi if det.mixed else None,
                           tuple(changes))
+
+
+def endpoint_of_series(
+    t_s: Sequence[float],
+    mi: Sequence[float],
+    config: EndpointConfig | None = None,
+    trend: TrendConfig | None = None,
+    rpm: float = 0.0,
+) -> EndpointResult:
+    """Offline: raw MI at times ``t_s`` (NaN: invalid frames) through a fresh Kalman trend
+    (``trend``; ``rpm``: the drum speed for its ripple, 0 when unknown) and the detector."""
+    tr = MITrend(trend or TrendConfig())
+
+    def samples() -> Iterable[tuple[float, float, float, bool]]:
+        for t, m in zip(t_s, mi, strict=True):
+            e = tr.update(float(t), float(m), rpm)
+            yield float(t), float(m), e.level, bool(e.valid and e.settled)
+
+    return detect_endpoint(samples(), config)

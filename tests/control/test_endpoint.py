@@ -7,21 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from control.endpoint import EndpointConfig, EndpointDetector, block_sd, detect_endpoint
+from control.endpoint import EndpointConfig, EndpointDetector, block_sd, endpoint_of_series
 from control.errors import ControlError
-from control.trend import MITrend, TrendConfig
 
 FPS = 30.0  # the camera rate the trend is tuned for (its re-init needs >= 8 samples in 0.6 s)
 
 
-def replay(t, raw, cfg=None, settled=True):
-    """Raw MI through the real Kalman trend, then the detector."""
-    tr = MITrend(TrendConfig())
-    samples = []
-    for ti, m in zip(t, raw, strict=True):
-        e = tr.update(float(ti), float(m), 0.0)
-        samples.append((float(ti), float(m), e.level, e.settled and settled))
-    return detect_endpoint(samples, cfg)
+def replay(t, raw, cfg=None):
+    """Raw MI through the real Kalman trend, then the detector (as ``drumtwin mi --endpoint``)."""
+    return endpoint_of_series(t, raw, cfg)
 
 
 def mixing_curve(t, t_mix_tau=20.0, lo=0.4, hi=0.95, noise=0.01, seed=0):
