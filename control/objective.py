@@ -9,8 +9,10 @@
   time to target, from the twin's torque; see the what-if results).
 
 Only rpms inside the limits count, and only rows that reach the target within the study
-(finite time / energy) can win "time" or "energy"; when none does, the highest plateau
-wins and the reason says so. Ties (within ``tie_rel``) go to the other quantity, then to
+(finite time / energy) *and stay there* (plateau MI at least the target: a noisy MI that
+touches the target once is not a mixed batch) can win "time" or "energy"; when none does,
+the highest plateau wins and the reason says so. :func:`choose` serves "time" and
+"energy"; "plateau" is the supervisor's own scoring. Ties (within ``tie_rel``) go to the other quantity, then to
 the smaller move. A move is made when the best beats staying at the current rpm by at
 least ``min_rel_gain`` (relative), or when the current rpm does not reach the target.
 """
@@ -92,20 +94,24 @@ def choose(
 ) -> Choice:
     """The rpm ``objective`` picks among ``rows`` inside ``limits`` (see module doc)."""
     obj = check_objective(objective)
+    if obj == "plateau":
+        raise ControlError("objective plateau is the supervisor's own scoring (control.supervisor), not choose()")
     lo, hi = limits
     inside = [r for r in rows if lo - 1e-9 <= float(r.rpm) <= hi + 1e-9 and math.isfinite(r.plateau_mi)]
     if not inside:
         return Choice(obj, None, False, {}, f"objective {obj}: no prediction inside {lo:g}..{hi:g} rpm")
     values = {float(r.rpm): r.value(obj) for r in inside}
-    other = {"time": "energy", "energy": "time", "plateau": "time"}[obj]
+    other = "energy" if obj == "time" else "time"
     target = "" if target_mi is None else f" to MI {target_mi:g}"
-    reaching = [r for r in inside if math.isfinite(values[float(r.rpm)])]
+    reaching = [r for r in inside if math.isfinite(values[float(r.rpm)])
+                and (target_mi is None or r.plateau_mi >= target_mi)]
     if not reaching:  # nobody reaches the target: the best plateau, said so
         best_row = max(inside, key=lambda r: (r.plateau_mi, -abs(r.rpm - current_rpm)))
         best = float(best_row.rpm)
         return Choice(obj, best, abs(best - current_rpm) > 1e-6, values,
                       f"objective {obj}: no rpm reaches the target{target} within the study; highest plateau "
                       f"MI {best_row.plateau_mi:.3f} at {best:g} rpm")
+    values = {rpm: (v if any(float(r.rpm) == rpm for r in reaching) else math.inf) for rpm, v in values.items()}
     vmin = min(values[float(r.rpm)] for r in reaching)
     tied = [r for r in reaching if values[float(r.rpm)] <= vmin + tie_rel * abs(vmin)]
     best_row = min(tied, key=lambda r: (r.value(other), abs(r.rpm - current_rpm)))

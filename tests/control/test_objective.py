@@ -63,3 +63,17 @@ def test_unknown_objective_is_a_control_error():
     assert check_objective(" Energy ") == "energy"
     with pytest.raises(ControlError, match="objective"):
         check_objective("cost")
+
+
+def test_a_row_that_touches_the_target_but_plateaus_below_it_does_not_reach_it():
+    """Measured on the twin (Case C after 30 s at 5 rpm, target 0.9): the 2 s average of a
+    noisy MI crosses 0.9 within 2-6 s at every rpm, but only 35 and 45 rpm plateau above it."""
+    rows = [RpmPrediction(5.0, 0.859, 2.75, 1.009, 0.366), RpmPrediction(15.0, 0.861, 6.25, 7.393, 1.18),
+            RpmPrediction(25.0, 0.881, 1.75, 3.269, 2.117), RpmPrediction(35.0, 0.941, 1.75, 4.056, 3.129),
+            RpmPrediction(45.0, 0.955, 1.75, 4.323, 4.144)]
+    en, tm = choose(rows, "energy", 5.0, LIMITS, 0.9), choose(rows, "time", 5.0, LIMITS, 0.9)
+    assert en.rpm == 35.0 and en.move  # not 5 rpm's 1.0 J: its plateau 0.859 never holds the target
+    assert tm.rpm == 35.0  # 35 and 45 tie on time: the energy decides
+    assert "5 rpm never" in en.reason
+    with pytest.raises(ControlError, match="plateau"):
+        choose(rows, "plateau", 5.0, LIMITS, 0.9)

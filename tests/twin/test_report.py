@@ -179,3 +179,10 @@ def test_report_bad_input_is_one_line_exit_2(runs, tmp_path):
     assert_one_line_error(cli("report", runs["off"], "--out", tmp_path), "directory")
     assert_one_line_error(cli("report", runs["off"]), "--out")
     assert not ok.exists()
+
+
+def test_dashboard_numbers_show_the_endpoint_banner():
+    from twin.dashboard import numbers_markdown
+
+    assert "**MIXED** since 12.3 s" in numbers_markdown({"endpoint": "mixed", "mixing_time_s": 12.3})
+    assert "MIXED" not in numbers_markdown({"endpoint": "not mixed", "mixing_time_s": None})
