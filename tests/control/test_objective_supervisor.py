@@ -72,3 +72,21 @@ def test_objective_needs_a_target_and_a_known_name():
     with pytest.raises(ControlError, match="objective"):
         SupervisorConfig(objective="cheapest", target_mi=0.9)
     assert SupervisorConfig().objective == "plateau" and not SupervisorConfig().stop_at_endpoint
+
+
+def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
+    from tests.cli import assert_one_line_error, cli
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
+    assert_one_line_error(cli("run", "--no-dashboard", "--objective", "cheapest", "--log", tmp_path / "a"),
+                          "--objective")
+    for bad in ("1.5", "-0.1", "nan"):
+        assert_one_line_error(cli("run", "--no-dashboard", "--target-mi", bad, "--log", tmp_path / "b"),
+                              "--target-mi")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    # one target: the endpoint's, handed to the supervisor; the defaults leave AUTO as it was
+    sc = supervisor_config(RunConfig(objective="energy", target_mi=0.8, stop_at_endpoint=True).resolved())
+    assert (sc.objective, sc.target_mi, sc.stop_at_endpoint) == ("energy", 0.8, True)
+    d = supervisor_config(RunConfig().resolved())
+    assert (d.objective, d.stop_at_endpoint) == ("plateau", False)
