@@ -13,7 +13,8 @@ Only rpms inside the limits count, and only rows that reach the target within th
 touches the target once is not a mixed batch) can win "time" or "energy"; when none does,
 the highest plateau wins and the reason says so. :func:`choose` serves "time" and
 "energy"; "plateau" is the supervisor's own scoring. Ties (within ``tie_rel``) go to the other quantity, then to
-the smaller move. A move is made when the best beats staying at the current rpm by at
+the lower drive power (a bed already at the target costs 0 J at every rpm: holding it
+costs the power), then to the smaller move. A move is made when the best beats staying at the current rpm by at
 least ``min_rel_gain`` (relative), or when the current rpm does not reach the target.
 """
 
@@ -72,6 +73,11 @@ class Choice:
     reason: str
 
 
+def _power(r: RpmPrediction) -> float:
+    """The drive power of a row (W; inf when unknown): the last tie-break but the move."""
+    return float(r.power_w) if r.power_w is not None and math.isfinite(r.power_w) else math.inf
+
+
 def _fmt(objective: str, v: float) -> str:
     if not math.isfinite(v):
         return "never"
@@ -114,10 +120,12 @@ def choose(
     values = {rpm: (v if any(float(r.rpm) == rpm for r in reaching) else math.inf) for rpm, v in values.items()}
     vmin = min(values[float(r.rpm)] for r in reaching)
     tied = [r for r in reaching if values[float(r.rpm)] <= vmin + tie_rel * abs(vmin)]
-    best_row = min(tied, key=lambda r: (r.value(other), abs(r.rpm - current_rpm)))
+    best_row = min(tied, key=lambda r: (r.value(other), _power(r), abs(r.rpm - current_rpm)))
     best = float(best_row.rpm)
     vb = values[best]
-    listing = ", ".join(f"{rpm:g} rpm {_fmt(obj, v)}" for rpm, v in sorted(values.items()))
+    watts = {float(r.rpm): _power(r) for r in inside}
+    listing = ", ".join(f"{rpm:g} rpm {_fmt(obj, v)}" + (f" at {watts[rpm]:.2f} W" if math.isfinite(watts[rpm]) else "")
+                        for rpm, v in sorted(values.items()))
     near = [rpm for rpm in values if abs(rpm - current_rpm) <= 0.5]
     stay = values[min(near, key=lambda x: abs(x - current_rpm))] if near else math.inf
     if abs(best - current_rpm) < 1e-6 or (math.isfinite(stay) and stay - vb < min_rel_gain * abs(stay)):

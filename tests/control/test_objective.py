@@ -77,3 +77,14 @@ def test_a_row_that_touches_the_target_but_plateaus_below_it_does_not_reach_it()
     assert "5 rpm never" in en.reason
     with pytest.raises(ControlError, match="plateau"):
         choose(rows, "plateau", 5.0, LIMITS, 0.9)
+
+
+def test_already_at_the_target_energy_ties_go_to_the_lower_power():
+    """Measured on the demo (the twin's start already at MI 0.9: 0 s and 0 J at 25 and 45 rpm):
+    the power curve decides, 25 rpm at 2.1 W over 45 rpm at 4.1 W, whatever the current rpm."""
+    rows = [RpmPrediction(5.0, 0.861, None, None, 0.37), RpmPrediction(25.0, 0.921, 0.0, 0.0, 2.10),
+            RpmPrediction(45.0, 0.972, 0.0, 0.0, 4.14)]
+    for current in (5.0, 45.0):
+        ch = choose(rows, "energy", current, LIMITS, 0.9)
+        assert ch.rpm == 25.0, current
+    assert "25 rpm 0.0 J at 2.10 W" in choose(rows, "energy", 5.0, LIMITS, 0.9).reason
