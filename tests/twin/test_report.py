@@ -53,7 +53,8 @@ def write_run(d: Path, mode: str, *, seconds: float = 120.0, power: bool = False
             log.event("decision", 20.0, decision="move", action="set_rpm", rpm=25.0, target_rpm=25.0,
                       reason="segregation (MI 0.6 < 0.88); twin predicts MI 0.95 at 25 rpm")
             log.event("whatif", 19.0, reason="AUTO", predictions={"5.0": 0.8, "25.0": 0.95},
-                      energy_to_target_j={"5.0": 150.0, "25.0": 750.0}, time_to_target_s={"5.0": 300.0, "25.0": 60.0})
+                      energy_to_target_j={"5.0": 150.0, "25.0": 750.0}, time_to_target_s={"5.0": 300.0, "25.0": 60.0},
+                      power_w={"5.0": 0.5, "25.0": 12.5}, target_mi=0.9)
         if endpoint:
             log.event("mixed", 70.0, mixing_time_s=60.0, plateau_mi=0.95, reason="trend within +-0.02 for 10 s")
         log.event("fault", 50.0, fault="twin_mismatch", message="twin disagrees")
@@ -135,6 +136,7 @@ def test_report_of_auto_off_and_killed_runs_in_chromium(page, runs, tmp_path):
     assert "offline" in end1
     energy0 = page.locator('section[data-section="energy"][data-run="0"]').inner_text()
     assert "150.0" in energy0 and "750.0" in energy0 and "Drive energy used" in energy0
+    assert "12.50" in energy0 and "to MI 0.9" in energy0
     assert "No energy logged" in page.locator('section[data-section="energy"][data-run="1"]').inner_text()
     assert '"mode": "off"' in page.locator('section[data-section="config"][data-run="1"]').inner_text()
     assert "numpy" in page.locator('section[data-section="versions"][data-run="0"]').inner_text()

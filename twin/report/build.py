@@ -215,11 +215,16 @@ def _energy(run: RunData) -> tuple[str, str | None]:
         plot = _energy_plot(tt, used)
     preds = [e for e in run.events if e.get("kind") == "whatif" and isinstance(e.get("energy_to_target_j"), dict)]
     for e in preds[-3:]:
-        rows = [(html.escape(str(r)), _fmt(j, ".1f"),
-                 _fmt((e.get("time_to_target_s") or {}).get(r), ".0f") if isinstance(e.get("time_to_target_s"), dict)
-                 else "–") for r, j in e["energy_to_target_j"].items()]
-        parts.append(f"<p>Predicted at t = {_fmt(e.get('t_s'), '.0f')} s ({html.escape(str(e.get('reason', '')))}):"
-                     f"</p>" + _table(rows, ("rpm", "energy to target J", "time to target s")))
+        def col(key: str, rpm: str, spec: str, ev: dict = e) -> str:
+            d = ev.get(key)
+            return _fmt(d.get(rpm), spec) if isinstance(d, dict) else "–"
+
+        rows = [(html.escape(str(r)), _fmt(j, ".1f"), col("time_to_target_s", r, ".0f"), col("power_w", r, ".2f"),
+                 col("predictions", r, ".3f")) for r, j in e["energy_to_target_j"].items()]
+        target = f" to MI {_fmt(e.get('target_mi'), 'g')}" if e.get("target_mi") is not None else ""
+        parts.append(f"<p>Predicted{target} at t = {_fmt(e.get('t_s'), '.0f')} s "
+                     f"({html.escape(str(e.get('reason', '')))}):</p>"
+                     + _table(rows, ("rpm", "energy to target J", "time to target s", "power W", "plateau MI")))
     if not parts:
         parts.append('<p class="none">No energy logged in this run (no power_w column, no what-if energy).</p>')
     return "".join(parts), plot
