@@ -41,6 +41,18 @@ AUTO rpm choice
     Evaluations are at least ``min_change_interval_s`` apart (also the minimum dwell
     between rpm changes).
 
+Objective and endpoint (issue 24, ``control.objective``, ``control.endpoint``)
+    ``objective`` "plateau" (the default) is the scoring above. "time" / "energy": the
+    predictions carry per-rpm rows (``PredictionResult.rows``: time to ``target_mi`` and
+    drive energy to it) and ``control.objective.choose`` picks the rpm that reaches the
+    target soonest / with least energy (rows missing: the plateau scoring, said in the
+    reason); a decision is then also due while the trend is below ``target_mi`` and the
+    batch is not mixed. ``stop_at_endpoint``: in AUTO, once the application reports the
+    batch mixed (``inputs.mixed``, from ``control.endpoint``), one ``endpoint`` decision
+    stops the mill (its reason names the mixing time) and AUTO then holds hands off until
+    a mode is set again. OFF and MANUAL never act on the endpoint (the application
+    reports it).
+
 Limits
     Every commanded rpm is inside ``[min_rpm, min(max_rpm, max_critical_frac * n_c)]``
     with ``n_c`` = ``critical_rpm``, the drum's critical speed, handed in by the
@@ -80,6 +92,7 @@ from typing import NamedTuple
 
 from control.errors import ControlError
 from control.limits import Limits
+from control.objective import RpmPrediction, check_objective, choose
 from control.trend import TrendEstimate
 
 
@@ -131,6 +144,11 @@ class SupervisorConfig:
     prediction_max_age_s: float = 30.0
     prediction_wait_s: float = 20.0
     fallback_step_rpm: float = 5.0
+    # objective and endpoint (issue 24)
+    objective: str = "plateau"  # plateau | time | energy (control.objective)
+    target_mi: float | None = None  # the target of "time"/"energy" (None: the endpoint's, from the application)
+    objective_min_rel_gain: float = 0.1  # "time"/"energy": move when the best saves this share vs staying
+    stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed
     # safe state
     safe_action: SafeAction = SafeAction.HOLD
     safe_rpm: float = 5.0
@@ -145,6 +163,11 @@ class SupervisorConfig:
             raise ControlError(f"vision_timeout_s must be > 0, got {self.vision_timeout_s}")
         if self.clear_level < self.seg_level:
             raise ControlError("clear_level must be >= seg_level (hysteresis)")
+        check_objective(self.objective)
+        if self.target_mi is not None and not (math.isfinite(self.target_mi) and 0.0 <= self.target_mi <= 1.0):
+            raise ControlError(f"target_mi must be in [0, 1], got {self.target_mi}")
+        if self.objective != "plateau" and self.target_mi is None:
+            raise ControlError(f"objective {self.objective} needs a target_mi")
 
     @property
     def limits(self) -> Limits:
@@ -187,7 +210,8 @@ class SupervisorInputs:
     ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
     (None: no twin); ``twin_doubt``: why the application does not trust the twin now (it
     disagrees with the camera, its what-if study failed; "" = trusted): AUTO treats a
-    twin in doubt as stale (safe state) until it is trusted again.
+    twin in doubt as stale (safe state) until it is trusted again. ``mixed``: the batch is
+    at its endpoint (``control.endpoint``), mixed since ``mixing_time_s``.
     """
 
     trend: TrendEstimate | None = None
@@ -202,24 +226,30 @@ class SupervisorInputs:
     camera_ended: bool = False
     twin_updated_s: float | None = None
     twin_doubt: str = ""
+    mixed: bool = False
+    mixing_time_s: float | None = None
 
 
 @dataclass(frozen=True)
 class PredictionRequest:
-    """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``."""
+    """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``
+    (``target_mi``: also the time and energy to reach it, for the "time"/"energy" objectives)."""
 
     t_s: float
     rpms: tuple[float, ...]
     horizon_s: float
+    target_mi: float | None = None
 
 
 @dataclass(frozen=True)
 class PredictionResult:
-    """Predicted MI after ``horizon_s`` per rpm, for the request made at ``t_s``."""
+    """Predicted MI after ``horizon_s`` per rpm, for the request made at ``t_s``; ``rows``:
+    per rpm the time and energy to the target too (None: the study gave only MI)."""
 
     t_s: float
     horizon_s: float
     predictions: Mapping[float, float]
+    rows: Mapping[float, RpmPrediction] | None = None
 
 
 @dataclass(frozen=True)
@@ -277,6 +307,8 @@ class Decision:
                 "last_valid_mi_s": inp.last_valid_mi_s,
                 "twin_updated_s": inp.twin_updated_s,
                 "twin_doubt": inp.twin_doubt,
+                "mixed": inp.mixed,
+                "mixing_time_s": inp.mixing_time_s,
             },
         }
 
@@ -369,6 +401,7 @@ class Supervisor:
         self.safe = False
         self.safe_reason = ""
         self._latched_stop = False
+        self._endpoint_stopped = False  # AUTO stopped the mill at the endpoint: hands off until a mode is set
         self._t0: float | None = None
         self._epoch: int | None = None  # the board state last synced to
         self._refused = 0  # the mill's refusals seen so far
@@ -394,6 +427,7 @@ class Supervisor:
         old, self._mode = self._mode, new
         self.detector.reset()
         self.safe, self.safe_reason, self._latched_stop = False, "", False
+        self._endpoint_stopped = False
         self._clear_since = self._due_since = None
         self.target_rpm = self.commanded_rpm
         lo, hi = self.config.rpm_limits
@@ -443,6 +477,8 @@ class Supervisor:
         if self._mode is Mode.OFF:
             return None
         self.detector.update(now_s, inputs.trend, inputs.radial_factor)
+        if self._mode is Mode.AUTO and self.config.stop_at_endpoint and (inputs.mixed or self._endpoint_stopped):
+            return self._endpoint_stop(now_s, inputs)
 
         faults = self.faults(now_s, inputs)
         if refused:
@@ -596,9 +632,26 @@ class Supervisor:
             return self._start_move(now_s, m, "manual", f"operator rpm {m:g}")
         return self._ramp_step(now_s, "ramp")
 
+    def _endpoint_stop(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
+        """AUTO with ``stop_at_endpoint``: the batch is mixed: one stop decision, then hands off."""
+        if self._endpoint_stopped:
+            return None
+        self._endpoint_stopped = True
+        self._due_since = None
+        self.target_rpm = self.commanded_rpm
+        mt = "" if inputs.mixing_time_s is None else f" (mixing time {inputs.mixing_time_s:.1f} s)"
+        lvl = "" if inputs.trend is None or not inputs.trend.valid else f", trend MI {inputs.trend.level:.3f}"
+        return self._emit(now_s, Action.STOP, "endpoint", f"batch mixed{mt}{lvl}: stop at endpoint")
+
+    def _below_target(self, inputs: SupervisorInputs) -> bool:
+        """"time"/"energy": the batch is not mixed yet and the trend is below the target MI."""
+        c, tr = self.config, inputs.trend
+        return (c.objective != "plateau" and c.target_mi is not None and not inputs.mixed and tr is not None
+                and tr.valid and tr.level < c.target_mi)
+
     def _auto(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
         c = self.config
-        if not self.detector.segregated:
+        if not self.detector.segregated and not self._below_target(inputs):
             self._due_since = None
             return None
         if inputs.trend is None or not inputs.trend.settled:  # no what-if, no move on an unsettled trend
@@ -610,12 +663,14 @@ class Supervisor:
         if preds is None:
             if self._due_since is None:  # ask once per decision, then wait a bounded time
                 self._due_since = now_s
-                self._request = PredictionRequest(now_s, c.candidates(current), c.horizon_s)
+                self._request = PredictionRequest(now_s, c.candidates(current), c.horizon_s, c.target_mi)
                 return None
             if now_s - self._due_since < c.prediction_wait_s:
                 return None
         self._due_since = None
-        why = self.detector.why or "segregation"
+        why = self.detector.why or ("segregation" if self.detector.segregated else f"below target MI {c.target_mi}")
+        if preds is not None and c.objective != "plateau" and preds.rows:
+            return self._choose_objective(now_s, current, preds, why)
         if preds is not None:
             return self._choose(now_s, current, preds, why, inputs)
         target = c.clamp(current + c.fallback_step_rpm)
@@ -625,10 +680,26 @@ class Supervisor:
             now_s, target, "move", f"segregation ({why}); no predictions -> fallback rule {current:g} -> {target:g} rpm"
         )
 
+    def _choose_objective(self, now_s: float, current: float, preds: PredictionResult, why: str) -> Decision:
+        """"time"/"energy" (``control.objective.choose``) on the per-rpm rows."""
+        c = self.config
+        assert preds.rows is not None
+        ch = choose(preds.rows.values(), c.objective, current, c.rpm_limits, c.target_mi,
+                    min_rel_gain=c.objective_min_rel_gain)
+        self._last_eval_s = now_s
+        scores = {r: -v for r, v in ch.values.items()}  # higher is better, as the plateau scores
+        if ch.rpm is None or not ch.move:
+            return self._emit(now_s, Action.NONE, "hold", f"{why}; {ch.reason}", predictions=preds.predictions,
+                              scores=scores)
+        return self._start_move(now_s, ch.rpm, "move", f"{why}; {ch.reason}", predictions=preds.predictions,
+                                scores=scores)
+
     def _choose(
         self, now_s: float, current: float, preds: PredictionResult, why: str, inputs: SupervisorInputs
     ) -> Decision:
         c = self.config
+        plateau_note = "" if c.objective == "plateau" else f"objective {c.objective}: no time/energy rows -> plateau; "
+        why = plateau_note + why
         lo, hi = c.rpm_limits
         scores: dict[float, float] = {}
         for r, mi in preds.predictions.items():

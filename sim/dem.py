@@ -28,6 +28,12 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
   quasi-2D flow): a force ``mu_end r_i sum(F_n) / W`` (``sum(F_n)``: the normal forces on
   disk i this step, N) against its velocity relative to the plates, which turn with the drum;
   capped so that it cannot reverse that velocity within a step.
+* **Drum torque**: the moment about the axis of every force the bed puts on the drum, summed per
+  step into ``acc[ACC_TORQUE]`` (N m; counter-clockwise positive, ``ACC_TORQUE_STEPS`` steps): the
+  wall's tangential forces at its radius ``R`` (the normal forces are radial: no moment), the
+  angular impulses of rolling friction at the wall over the step, and the reaction of the end
+  plates' friction at each disk's centre. (What the drive must supply to keep the drum turning at
+  a steady speed is minus this.)
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
   by ``j``, in compressed rows) rebuilt whenever a disk has moved more than half the skin since
@@ -50,7 +56,8 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_OVERLAP_MAX", "ACC_WALL_MAX", "DS_ANGLE", "DS_RPM", "DS_TARGET",
+    "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_N", "ACC_OVERLAP_MAX", "ACC_TORQUE", "ACC_TORQUE_STEPS", "ACC_WALL_MAX",
+    "DS_ANGLE", "DS_RPM", "DS_TARGET",
     "P_ACCEL", "P_DAMP", "P_DT", "P_END", "P_G", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
     "P_SKIN", "SKIN_MAX_R", "SKIN_STEPS", "contact_tables", "contact_time_s", "damping_ratio", "list_skin",
     "neighbour_slots", "run",
@@ -80,6 +87,9 @@ ACC_OVERLAP_MAX = 0  # largest disk-disk overlap, small radii
 ACC_WALL_MAX = 1  # deepest wall penetration, m
 ACC_CONTACTS = 2  # disk-disk contacts counted (summed over steps)
 ACC_AIRBORNE = 3  # fraction of disks without any contact in the last step
+ACC_TORQUE = 4  # torque of the bed on the drum about its axis, N m (counter-clockwise +), summed over steps
+ACC_TORQUE_STEPS = 5  # steps summed into ACC_TORQUE
+ACC_N = 6
 
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
@@ -336,7 +346,7 @@ def run(
     ref,  # (n, 2) centres at the last list build, updated
     rebuild,  # bool: build the list before the first step
     hist,  # overlap histogram (bins of 2 / (hist.size - 1) small radii, last = overflow), updated
-    acc,  # (4,) statistics (ACC_* slots), updated
+    acc,  # (ACC_N,) statistics (ACC_* slots), updated
     ncont,  # (n,) contacts of each disk in the last step, updated
 ):
     """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed)."""
@@ -370,8 +380,12 @@ def run(
     lanes = np.zeros((4, hist.size), dtype=hist.dtype)
     frc = np.zeros((n, 4))  # per disk: force x, y (N), torque (N m), sum of normal forces (N, end plates)
     weight = np.empty(n)
+    mass = np.empty(n)
     for i in range(n):
-        weight[i] = -g / inv_m[i]
+        mass[i] = 1.0 / inv_m[i]
+        weight[i] = -g * mass[i]
+    inv_dt = 1.0 / dt
+    tq_sum = 0.0  # torque of the bed on the drum (N m, counter-clockwise +), summed over this call's steps
     # this step's contacts in visiting order (i, then the wall, then i's partners j): for rolling friction
     roll_start = np.zeros(n + 1, dtype=np.int64)
     roll_j = np.empty(cap + n, dtype=np.int64)  # partner, -1 = the wall
@@ -415,7 +429,7 @@ def run(
         if far > half_skin2:
             skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
             if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
-                _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
+                _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, step)
                 _unpack(hot, pos, vel, omg)
                 return step
             half_skin2 = 0.25 * skin * skin
@@ -448,6 +462,7 @@ def run(
                 frc[i, 1] += -fn * ny + ft * nx
                 frc[i, 2] += ri * ft
                 frc[i, 3] += fn
+                tq_sum -= r_drum * ft  # the reaction at the wall, lever R (the normal force is radial)
                 if last:
                     ncont[i] += 1
                 if delta > wall_max:
@@ -528,7 +543,9 @@ def run(
                     jr = roll_imp[c]
                     if j < 0:
                         w_rel = wi - w_drum
-                        wi -= math.copysign(min(jr * ii, abs(w_rel)), w_rel)
+                        dw = math.copysign(min(jr * ii, abs(w_rel)), w_rel)
+                        wi -= dw
+                        tq_sum += dw / ii * inv_dt  # the drum takes the opposite angular impulse
                     else:
                         w_rel = wi - hot[j, 4]
                         sj = math.copysign(min(jr, abs(w_rel) * roll_cap[c]), w_rel)
@@ -555,6 +572,9 @@ def run(
                     s = min(dv, u) / u
                     vx -= s * ux
                     vy -= s * uy
+                    # the plates take the opposite impulse m s u at the disk's centre
+                    ms = mass[i] * s * inv_dt
+                    tq_sum += ms * (hot[i, 0] * uy - hot[i, 1] * ux)
             vx *= damp
             vy *= damp
             hot[i, 2] = vx
@@ -571,7 +591,7 @@ def run(
             frc[i, 2] = 0.0
             frc[i, 3] = 0.0
         ds[DS_ANGLE] += w_drum * dt
-    _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes)
+    _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, n_steps)
     _unpack(hot, pos, vel, omg)
     return n_steps
 
@@ -588,13 +608,16 @@ def _unpack(hot, pos, vel, omg):
 
 
 @njit(cache=True)
-def _store(acc, ov_max_r, wall_max, n_contacts, ncont, hist, lanes):
-    """Write a run's statistics into ``acc`` and its overlap histogram lanes into ``hist``."""
+def _store(acc, ov_max_r, wall_max, n_contacts, ncont, hist, lanes, tq_sum, steps):
+    """Write a run's statistics into ``acc`` (its drum torque summed over ``steps`` steps: ``tq_sum``,
+    N m) and its overlap histogram lanes into ``hist``."""
     for b in range(hist.size):
         hist[b] += lanes[0, b] + lanes[1, b] + lanes[2, b] + lanes[3, b]
     acc[ACC_OVERLAP_MAX] = ov_max_r
     acc[ACC_WALL_MAX] = wall_max
     acc[ACC_CONTACTS] += n_contacts
+    acc[ACC_TORQUE] += tq_sum
+    acc[ACC_TORQUE_STEPS] += steps
     n_free = 0
     for i in range(ncont.size):
         if ncont[i] == 0:

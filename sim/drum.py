@@ -587,7 +587,7 @@ class DrumSim(FixedStepTwin):
     def reset_stats(self) -> None:
         """Start counting contact statistics (``stats()``) afresh."""
         self._hist = np.zeros(_OVERLAP_BINS + 1, dtype=np.int64)
-        self._acc = np.zeros(4)
+        self._acc = np.zeros(dem.ACC_N)
         self._acc[dem.ACC_AIRBORNE] = np.nan
         self._stat_steps = 0
 
@@ -603,6 +603,18 @@ class DrumSim(FixedStepTwin):
         return ContactStats(self._stat_steps, int(acc[dem.ACC_CONTACTS]), float(p99),
                             float(acc[dem.ACC_OVERLAP_MAX]), 1e3 * float(acc[dem.ACC_WALL_MAX]),
                             float(acc[dem.ACC_AIRBORNE]))
+
+    def drum_torque_nm(self) -> float:
+        """Torque of the bed on the drum about its axis (N m, the 2D slice as simulated), the mean over
+        the steps since the last call (or ``reset_stats``); positive in the sense the drum turns at
+        positive rpm, so a bed that the drum lifts gives a negative mean. Wall contacts (tangential
+        force x R, rolling friction) and end-plate friction (``sim.dem``); NaN if no step ran."""
+        acc = self._acc
+        steps = float(acc[dem.ACC_TORQUE_STEPS])
+        mean = self.direction * float(acc[dem.ACC_TORQUE]) / steps if steps > 0 else float("nan")
+        acc[dem.ACC_TORQUE] = 0.0
+        acc[dem.ACC_TORQUE_STEPS] = 0.0
+        return mean
 
     def contact_counts(self) -> np.ndarray:
         """Number of contacts (with disks or the wall) of each disk in the last step."""

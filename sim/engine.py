@@ -96,6 +96,13 @@ class Twin(Protocol):
         """Translational kinetic energy of the particles (J)."""
         ...
 
+    def drum_torque_nm(self) -> float:
+        """Torque of the bed on the drum about its axis (N m, the 2D slice as simulated; positive in the
+        sense the drum turns at positive rpm, so negative while it lifts the bed): the DEM's mean over
+        the steps since the last call (wall, rolling friction at the wall, end plates); pymunk's the
+        last step's (wall and baffles). ``sim.power`` scales it to the drum and makes it a power."""
+        ...
+
 
 def check_engine(engine: str | None) -> str | None:
     """``engine`` if it is None or one of ``ENGINES``, else a one-line SimError."""

@@ -493,6 +493,28 @@ class PymunkDrumSim(FixedStepTwin):
         return ContactStats(self._stat_steps, self._contacts, float(p99), self._ov_max, 1e3 * self._wall_max,
                             self._airborne)
 
+    def drum_torque_nm(self) -> float:
+        """Torque of the bed on the drum about its axis (N m, the 2D slice), positive in the sense the drum
+        turns at positive rpm: the drum body's contact impulses of the last step (``Body.each_arbiter``,
+        ``Arbiter.total_impulse`` at the mean of its contact points) over the step -- one step's sample,
+        not a mean (the space keeps only this step's contacts). Wall and baffles; not the end plates'
+        friction (applied outside the solver). NaN before the first step."""
+        if self.n_steps == 0:
+            return float("nan")
+        tq = [0.0]
+
+        def one(arb: pymunk.Arbiter) -> None:
+            pts = arb.contact_point_set.points
+            if not pts:
+                return
+            x = sum(p.point_a.x + p.point_b.x for p in pts) / (2 * len(pts))
+            y = sum(p.point_a.y + p.point_b.y for p in pts) / (2 * len(pts))
+            j = arb.total_impulse  # each_arbiter turns the arbiter to the drum's side: the impulse on the drum
+            tq[0] += x * j.y - y * j.x
+
+        self._drum.each_arbiter(one)
+        return self.mixer.direction * tq[0] / self.substep_s()
+
     # ----------------------------------------------------------------- read
     def particles(self) -> Particles:
         """Centroids (m), circumscribed radii (m), classes, angles, outlines and the baffles now."""

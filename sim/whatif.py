@@ -6,6 +6,14 @@ curve, the plateau MI and the regime. ``run_study`` runs many: in this process
 (``workers=1``), on a local process pool (default: all cores), or on an existing Dask
 cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within seconds).
 
+Time to mix and drive power (issue 24): a job with a ``target_mi`` reports the time the twin
+takes to reach it from the start state (``time_to_target``: the first time a centred moving
+average of MI over ``TARGET_SMOOTH_S`` reaches it; 0 if the start is already there; NaN if the
+run never gets there), the drive power over the plateau part (``sim.power``: the bed's torque
+on the drum times its speed, scaled from the slice to the drum's depth) and the energy up to
+the target. ``target_mi`` None: no target (those fields NaN); the application passes its
+config's endpoint target (``control.endpoint``), which is the one definition of it.
+
 Regime from the flow (``flow_regime``): the fraction of disks without any contact
 (airborne) and the S-shape of the free surface decide rolling / cascading /
 cataracting; the Froude number ``Fr = omega^2 R / g`` is reported beside it (and
@@ -28,16 +36,19 @@ import numpy as np
 from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
 from sim.engine import from_state, make_twin
 from sim.errors import SimError
-from sim.measure import free_surface, particle_mi
 from sim.mixer import Mixer
+from sim.power import depth_scale, drive_power_w
+from sim.probe import probe
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
 
 __all__ = [
     "AIRBORNE_CATARACTING",
     "CURVATURE_CASCADING",
     "DEFAULT_CONNECT_TIMEOUT_S",
+    "TARGET_SMOOTH_S",
     "WhatIfJob",
     "WhatIfResult",
+    "energy_to",
     "flow_regime",
     "froude",
     "froude_regime",
@@ -47,9 +58,11 @@ __all__ = [
     "run_job",
     "run_study",
     "summarize",
+    "time_to_target",
 ]
 
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
+TARGET_SMOOTH_S = 2.0  # window of the centred moving average of MI that must reach the target (s)
 _REGIMES = ((1e-4, "slumping"), (1e-2, "rolling"), (1e-1, "cascading"), (1.0, "cataracting"))
 
 
@@ -108,6 +121,7 @@ class WhatIfJob:
     tag: str = ""
     mixer: Mixer | None = None  # the user's mixer (replaces ``drum`` and ``recipe``); ``fill`` overrides its fill
     engine: str | None = None  # "dem" | "pymunk"; None: the mixer's (``sim.engine.engine_for``)
+    target_mi: float | None = None  # MI to reach (time/energy to it); None: no target (module doc)
 
     @property
     def bed_drum(self) -> DrumSpec:
@@ -136,8 +150,23 @@ class WhatIfResult:
     airborne: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fraction of disks without contact
     curvature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # free-surface S-shape
     froude_regime: str = ""
+    torque_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))  # drive torque, N m, whole drum, per sample
+    power_w: np.ndarray = field(default_factory=lambda: np.zeros(0))  # drive power, W, whole drum, per sample
+    time_to_target_s: float = math.nan  # s from the start to ``job.target_mi`` (NaN: not reached / no target)
+    energy_to_target_j: float = math.nan  # drive energy up to the target, J, whole drum
+
+    @property
+    def plateau_power_w(self) -> float:
+        """Mean drive power over the plateau part (the last third) of the run, W, whole drum."""
+        return _tail_mean(self.power_w)
+
+    @property
+    def plateau_torque_nm(self) -> float:
+        """Mean drive torque over the plateau part of the run, N m, whole drum."""
+        return _tail_mean(self.torque_nm)
 
     def summary(self) -> dict:
+        """The run in numbers (MI, s, W, J, N m; power and torque for the whole drum)."""
         j = self.job
         return {
             "rpm": j.rpm, "case": j.case, "seed": j.seed, "fill": j.fill, "tag": j.tag,
@@ -145,6 +174,9 @@ class WhatIfResult:
             "regime": self.regime, "froude": self.froude, "froude_regime": self.froude_regime,
             "airborne": _tail_mean(self.airborne), "curvature": _tail_mean(self.curvature),
             "mi_start": float(self.mi[0]) if self.mi.size else math.nan, "wall_s": self.wall_s,
+            "target_mi": j.target_mi, "time_to_target_s": self.time_to_target_s,
+            "power_w": self.plateau_power_w, "energy_to_target_j": self.energy_to_target_j,
+            "torque_nm": self.plateau_torque_nm,
         }
 
 
@@ -179,6 +211,47 @@ def plateau(t_s: np.ndarray, mi: np.ndarray, tail: float = 1.0 / 3.0) -> tuple[f
     return p, sd, tp
 
 
+def time_to_target(t_s: np.ndarray, mi: np.ndarray, target: float | None,
+                   smooth_s: float = TARGET_SMOOTH_S) -> float:
+    """Time (s, from ``t_s[0]``) at which MI reaches ``target``: 0 if the first sample does, else the first
+    centre time of a moving average over ``smooth_s`` that does (NaN samples left out); NaN if none does
+    or ``target`` is None."""
+    t = np.asarray(t_s, float)
+    y = np.asarray(mi, float)
+    if target is None or t.size == 0:
+        return math.nan
+    if math.isfinite(y[0]) and y[0] >= target:
+        return 0.0
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    w = max(1, int(round(smooth_s / dt))) if dt > 0 else 1
+    w = min(w, t.size)
+    ok = np.isfinite(y)
+    num = np.convolve(np.where(ok, y, 0.0), np.ones(w), mode="valid")
+    den = np.convolve(ok.astype(float), np.ones(w), mode="valid")
+    sm = np.divide(num, den, out=np.full(num.size, np.nan), where=den > 0)
+    tc = np.convolve(t, np.ones(w) / w, mode="valid")
+    hit = np.nonzero(sm >= target)[0]
+    return float(tc[hit[0]] - t[0]) if hit.size else math.nan
+
+
+def energy_to(t_s: np.ndarray, power_w: np.ndarray, t_end_s: float) -> float:
+    """Energy (J) of a power series up to ``t_end_s`` (from ``t_s[0]``): each sample's power is the mean
+    over the slice that ended at it (``sim.probe``), so the energy is the sum of power x slice over the
+    slices up to ``t_end_s`` (the last one in part); NaN when ``t_end_s`` is NaN."""
+    if not math.isfinite(t_end_s):
+        return math.nan
+    t = np.asarray(t_s, float) - float(t_s[0])
+    p = np.asarray(power_w, float)
+    e = 0.0
+    for k in range(1, t.size):
+        lo, hi = t[k - 1], min(t[k], t_end_s)
+        if hi <= lo:
+            break
+        if math.isfinite(p[k]):
+            e += p[k] * (hi - lo)
+    return float(e)
+
+
 def run_job(job: WhatIfJob) -> WhatIfResult:
     """Run one what-if job in this process (pure: same job, same result)."""
     t0 = time.perf_counter()
@@ -197,35 +270,31 @@ def run_job(job: WhatIfJob) -> WhatIfResult:
         recipe = job.recipe if job.fill is None else with_fill(job.recipe, job.fill)
         sim = DrumSim(job.drum, recipe, case=job.case, seed=job.seed, rpm=job.rpm, **job.sim_kwargs)
         drum = job.drum
-    t_start = sim.t_s
-    n = max(1, int(round(job.duration_s / job.sample_s)))
-    ts, mis, sigs, slopes, rpms, air, curv = [], [], [], [], [], [], []
-
-    def sample() -> None:
-        p = sim.particles()
-        m = particle_mi(p, drum)
-        fs = free_surface(p, drum)
-        ts.append(sim.t_s - t_start)
-        mis.append(m.mi)
-        sigs.append(m.mi_sigmoid)
-        slopes.append(fs.slope_deg)
-        curv.append(fs.curvature)
-        air.append(sim.stats().airborne)
-        rpms.append(sim.rpm_actual)
-
-    sample()
-    for _ in range(n):
-        sim.advance(job.duration_s / n)
-        sample()
+    scale = depth_scale(sim)
+    ts, mis, sigs, slopes, rpms, air, curv, tq = [], [], [], [], [], [], [], []
+    for s in probe(sim, job.duration_s, job.sample_s):
+        ts.append(s.t_s)
+        mis.append(s.mi.mi)
+        sigs.append(s.mi.mi_sigmoid)
+        slopes.append(s.surface.slope_deg)
+        curv.append(s.surface.curvature)
+        air.append(s.airborne)
+        rpms.append(s.rpm_actual)
+        tq.append(s.bed_torque_nm)
     t_arr, mi_arr = np.array(ts), np.array(mis)
     p, sd, tp = plateau(t_arr, mi_arr)
     air_arr, curv_arr = np.array(air), np.array(curv)
+    rpm_arr = np.array(rpms)
+    bed_tq = np.array(tq) * scale  # the bed's torque on the whole drum, N m
+    power = drive_power_w(bed_tq, rpm_arr)
+    t_target = time_to_target(t_arr, mi_arr, job.target_mi)
     return WhatIfResult(
         job=job, t_s=t_arr, mi=mi_arr, mi_sigmoid=np.array(sigs), slope_deg=np.array(slopes),
         rpm_actual=np.array(rpms), plateau_mi=p, plateau_mi_sd=sd, t_plateau_s=tp,
         regime=flow_regime(_tail_mean(air_arr), _tail_mean(curv_arr)), froude=froude(job.rpm, drum),
         wall_s=time.perf_counter() - t0, airborne=air_arr, curvature=curv_arr,
-        froude_regime=froude_regime(job.rpm, drum),
+        froude_regime=froude_regime(job.rpm, drum), torque_nm=-bed_tq, power_w=power,
+        time_to_target_s=t_target, energy_to_target_j=energy_to(t_arr, power, t_target),
     )
 
 
@@ -239,6 +308,8 @@ def _check_jobs(jobs: Sequence[WhatIfJob]) -> list[WhatIfJob]:
         check_rpm(j.rpm, j.bed_drum)
         if not (j.duration_s > 0) or not math.isfinite(j.duration_s):
             raise SimError(f"what-if duration must be > 0 s (got {j.duration_s})")
+        if j.target_mi is not None and not (math.isfinite(j.target_mi) and 0.0 <= j.target_mi <= 1.0):
+            raise SimError(f"target MI must be in [0, 1] (got {j.target_mi})")
         if not (0 < j.sample_s <= j.duration_s):
             raise SimError(f"sample interval must be in (0, duration] (got {j.sample_s} s)")
         if j.start is None and j.fill is not None and j.mixer is not None and any(
@@ -420,8 +491,19 @@ def close_pool(pool: Executor | None) -> None:
         p.join(timeout=2.0)
 
 
+def _mean_sd(vals: Sequence[float]) -> tuple[float, float]:
+    """Mean and sample sd (ddof 1) of the finite values (NaN when none; sd NaN below two)."""
+    a = np.asarray(vals, float)
+    a = a[np.isfinite(a)]
+    if a.size == 0:
+        return math.nan, math.nan
+    return float(np.mean(a)), float(np.std(a, ddof=1)) if a.size > 1 else math.nan
+
+
 def summarize(results: Sequence[WhatIfResult]) -> list[dict]:
-    """One entry per rpm (seeds and cases pooled): plateau MI mean, sd across runs and within, regime."""
+    """One entry per rpm (seeds and cases pooled): plateau MI mean, sd across runs and within, regime; the
+    seed mean and sd of the time to target (s; ``time_to_target_reached``: runs that got there, the mean
+    over those), drive power (W), energy to target (J) and torque (N m)."""
     by_rpm: dict[float, list[WhatIfResult]] = {}
     for r in results:
         by_rpm.setdefault(float(r.job.rpm), []).append(r)
@@ -440,4 +522,13 @@ def summarize(results: Sequence[WhatIfResult]) -> list[dict]:
             "froude_regime": rs[0].froude_regime, "airborne": float(np.nanmean([_tail_mean(r.airborne) for r in rs])),
             "curvature": float(np.nanmean([_tail_mean(r.curvature) for r in rs])), "runs": len(rs),
         })
+        row = out[-1]
+        for key, sd_key, vals in (
+            ("time_to_target_s", "time_to_target_sd_s", [r.time_to_target_s for r in rs]),
+            ("power_w", "power_sd_w", [r.plateau_power_w for r in rs]),
+            ("energy_to_target_j", "energy_to_target_sd_j", [r.energy_to_target_j for r in rs]),
+            ("torque_nm", "torque_sd_nm", [r.plateau_torque_nm for r in rs]),
+        ):
+            row[key], row[sd_key] = _mean_sd(vals)
+        row["time_to_target_reached"] = int(np.sum(np.isfinite([r.time_to_target_s for r in rs])))
     return out

@@ -88,6 +88,9 @@ class RunConfig:
     whatif_workers: int = 1
     dashboard_hz: float = 12.0
     engine: str | None = None  # the twin's engine ("dem" | "pymunk"); None: the mixer's
+    objective: str = "plateau"  # AUTO's objective: plateau | time | energy (control.objective)
+    target_mi: float | None = None  # the endpoint's and the objective's target MI (None: twin.loop.LOOP_ENDPOINT)
+    stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed (control.endpoint)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -148,6 +151,15 @@ class RunConfig:
             raise FileNotFoundError(f"config not found: {self.meter_config}")
         if self.engine is not None and self.engine not in ("dem", "pymunk"):
             raise TwinError(f"--engine must be dem or pymunk, got {self.engine!r}")
+        from control.errors import ControlError
+        from control.objective import check_objective
+
+        try:
+            objective = check_objective(self.objective)
+        except ControlError as exc:
+            raise TwinError(f"--objective: {exc}") from None
+        if self.target_mi is not None and not (math.isfinite(self.target_mi) and 0.0 <= self.target_mi <= 1.0):
+            raise TwinError(f"--target-mi must be a number in [0, 1], got {self.target_mi}")
         if not self.demo and self.speed != 1.0:
             raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
         token = self.control_token or os.environ.get(TOKEN_ENV) or None
@@ -157,7 +169,7 @@ class RunConfig:
                 f"(--control-token or ${TOKEN_ENV})"
             )
         log_dir = self.log_dir or default_run_dir()
-        return replace(self, mode=mode, case=case, control_token=token, log_dir=Path(log_dir))
+        return replace(self, mode=mode, case=case, control_token=token, log_dir=Path(log_dir), objective=objective)
 
     def to_metadata(self) -> dict:
         """The config as JSON data for metadata.json (the token is never written)."""

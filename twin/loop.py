@@ -31,6 +31,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from control.endpoint import EndpointConfig, EndpointDetector
 from control.errors import ControlError
 from control.limits import Limits
 from control.supervisor import Mode, Supervisor, SupervisorConfig
@@ -168,6 +169,7 @@ class LiveLoop:
         self.process = ProcessWorker(
             readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, self.events.frame,
             self.state, slopes, camera_fps=self.camera.fps.rate,
+            endpoint=EndpointDetector(endpoint_config(config)),
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
         self.twin = TwinWorker(
@@ -424,6 +426,18 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
 LOOP_TREND: dict[str, Any] = {}
 
 
+# Endpoint settings of the live loop (control.endpoint; docs/endpoint.md): a mixed bed's camera MI is
+# ~0.93-0.95, a radially segregated one ~0.80-0.85. ``--target-mi`` and ``config.extra["endpoint"]`` override.
+LOOP_ENDPOINT: dict[str, Any] = dict(target_mi=0.9)
+
+
+def endpoint_config(config: RunConfig) -> EndpointConfig:
+    """The endpoint detector's settings for this run (``RunConfig.target_mi``, then
+    ``config.extra["endpoint"]`` override ``LOOP_ENDPOINT``)."""
+    target = {} if config.target_mi is None else {"target_mi": float(config.target_mi)}
+    return EndpointConfig(**{**LOOP_ENDPOINT, **target, **config.extra.get("endpoint", {})})
+
+
 def trend_config(config: RunConfig) -> TrendConfig:
     """The Kalman trend's settings for this run (``config.extra["trend"]`` overrides)."""
     return TrendConfig(**{**LOOP_TREND, **config.extra.get("trend", {})})
@@ -437,7 +451,9 @@ def supervisor_config(config: RunConfig, critical_rpm: float | None = None) -> S
 
     overrides = config.extra.get("supervisor", {})
     crit = PAPER_DRUM.critical_rpm if critical_rpm is None else float(critical_rpm)
-    return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **overrides})
+    batch = {"objective": config.objective, "stop_at_endpoint": config.stop_at_endpoint,
+             "target_mi": endpoint_config(config).target_mi}  # one target: the endpoint's
+    return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **batch, **overrides})
 
 
 def _overlay(image: Any, reading: Any) -> Any:
@@ -446,4 +462,5 @@ def _overlay(image: Any, reading: Any) -> Any:
     return draw_overlay(image, reading)
 
 
-__all__ = ["LOOP_SUPERVISOR", "LiveLoop", "Summary", "open_mill", "supervisor_config", "trend_config"]
+__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "LiveLoop", "Summary", "endpoint_config", "open_mill",
+           "supervisor_config", "trend_config"]

@@ -55,6 +55,8 @@ FRAME_COLUMNS: tuple[str, ...] = (
     "rpm_actual",
     "mode",
     "flags",  # ';'-separated
+    "mixed",  # 0/1: the batch is at its endpoint (control.endpoint)
+    "mixing_time_s",  # since when, s (empty: not mixed)
 )
 
 FRAMES_FILE = "frames.csv"

@@ -50,6 +50,8 @@ class FrameRow:
     rpm_actual: float | None
     mode: str
     flags: tuple[str, ...]
+    mixed: bool = False  # the batch is at its endpoint (control.endpoint)
+    mixing_time_s: float | None = None  # since when (None: not mixed)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

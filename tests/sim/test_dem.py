@@ -30,7 +30,7 @@ def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, m
     rad = np.full(n, r)
     kk = dem.neighbour_slots(r, r, max(skin, dem.SKIN_MAX_R * r))
     hist = np.zeros(1001, dtype=np.int64)
-    acc = np.zeros(4)
+    acc = np.zeros(dem.ACC_N)
     ncont = np.zeros(n, dtype=np.int64)
     pair, wall = dem.contact_tables(np.array([m]), np.array([r]), k, e)
     done = dem.run(n_steps, prm, np.zeros(3), pos, vel, np.zeros(n), omg, rad, np.zeros(n, dtype=np.int64),

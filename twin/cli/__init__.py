@@ -29,6 +29,7 @@ _COMMAND_MODULES = (
     "twin.cli.vision_cmds",
     "twin.cli.sim_cmds",
     "twin.cli.control_cmds",
+    "twin.cli.report_cmd",
 )
 
 for _name in _COMMAND_MODULES:

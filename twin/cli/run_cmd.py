@@ -268,6 +268,9 @@ def run(
     drive: str = typer.Option(
         None, "--drive", help="Demo only: the mill is this drive profile's emulator over Modbus RTU (e.g. delta-ms300)."
     ),
+    objective: str = typer.Option("plateau", "--objective", help="AUTO's objective: plateau, time or energy."),
+    target_mi: float = typer.Option(None, "--target-mi", help="Target MI of the endpoint and the objective."),
+    stop_at_endpoint: bool = typer.Option(False, "--stop-at-endpoint", help="AUTO stops the mill once mixed."),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
 
@@ -281,7 +284,8 @@ def run(
             camera=camera, video=video, mill=mill, meter_config=config, dashboard=not no_dashboard,
             duration_s=duration, log_dir=log, mode=mode, case=case, speed=speed, seed=seed, port=port,
             host=host, control_token=control_token, scheduler=scheduler, engine=engine,
-            estop_needs_token=estop_needs_token,
+            estop_needs_token=estop_needs_token, objective=objective, target_mi=target_mi,
+            stop_at_endpoint=stop_at_endpoint,
             extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
         ).resolved()
         if json_out:

@@ -88,6 +88,10 @@ def mi_cmd(
     fps: float = typer.Option(30.0, "--fps", help="Frame rate assumed for image sequences (timestamps)."),
     max_frames: int = typer.Option(0, "--max-frames", help="Stop after this many frames (0 = all)."),
     window: int = typer.Option(150, "--window", help="Moving-average window (samples)."),
+    endpoint: bool = typer.Option(False, "--endpoint", help="Batch endpoint: the mixing time (docs/endpoint.md)."),
+    target_mi: float = typer.Option(None, "--target-mi", help="--endpoint: plateau MI a mixed batch reaches "
+                                    "(default: the run's, control.endpoint)."),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout (the CSV only with --csv)."),
 ) -> None:
     """Mixing index per frame: CSV row per frame, optional plot and overlay video."""
     import cv2
@@ -102,6 +106,8 @@ def mi_cmd(
     _check_number("--window", window, 1, 1_000_000)
     _check_number("--fps", fps, 1e-3, 10_000)
     _check_number("--max-frames", max_frames, 0, 10**12)
+    if target_mi is not None:
+        _check_number("--target-mi", target_mi, 0.0, 1.0)
     cfg = load_config(config)
     _warn(cfg.warnings)
     manual_roi = parse_roi(roi) if roi else None
@@ -133,7 +139,9 @@ def mi_cmd(
 
     names = [c.name for c in meter.classes]
     cols = csv_columns(names)
-    fh = open(csv_out, "w", newline="") if csv_out else sys.stdout
+    import io
+
+    fh = open(csv_out, "w", newline="") if csv_out else io.StringIO() if json_out else sys.stdout
     writer = csv.writer(fh)
     header_written = False
     ma = MovingAverage(window)
@@ -233,6 +241,43 @@ def mi_cmd(
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
     console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
+    if endpoint or json_out:
+        summary = _mi_summary(ts, mis, method.value, endpoint, target_mi)
+        if json_out:
+            print_json(summary)
+        elif endpoint:
+            mt = summary["mixing_time_s"]
+            console_err.print("endpoint: " + ("never mixed" if mt is None else f"mixed at {mt:.2f} s "
+                              f"(plateau MI {summary['plateau_mi']:.3f})"), highlight=False)
+
+
+def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, target_mi: float | None) -> dict:
+    """The ``--json`` summary: frames, MI statistics and (``--endpoint``) the mixing time."""
+    import numpy as np
+
+    v = np.asarray(mis, float)
+    ok = v[np.isfinite(v)]
+    stats = {"mi_first": ok[0], "mi_last": ok[-1], "mi_mean": ok.mean(), "mi_median": np.median(ok),
+             "mi_min": ok.min(), "mi_max": ok.max()} if ok.size else {}
+    out: dict = {"frames": len(mis), "valid": int(ok.size), "method": method,
+                 "duration_s": (ts[-1] - ts[0]) if ts else 0.0,
+                 **{k: float(stats[k]) if k in stats else None
+                    for k in ("mi_first", "mi_last", "mi_mean", "mi_median", "mi_min", "mi_max")}}
+    if endpoint:
+        from dataclasses import asdict, replace
+
+        from control.endpoint import EndpointConfig, endpoint_of_series
+        from twin.config import RunConfig
+        from twin.loop import endpoint_config, trend_config
+
+        run_cfg = RunConfig()
+        cfg: EndpointConfig = endpoint_config(run_cfg)
+        cfg = cfg if target_mi is None else replace(cfg, target_mi=target_mi)
+        res = endpoint_of_series(ts, mis, cfg, trend_config(run_cfg))
+        out.update(mixing_time_s=res.mixing_time_s, plateau_mi=res.plateau_mi, endpoint=asdict(cfg),
+                   endpoint_changes=[{"t_s": t, "kind": k, "mixing_time_s": m, "reason": why}
+                                     for t, k, m, why in res.changes])
+    return out
 
 
 def _plot(path: Path, ts: list[float], mis: list[float], avgs: list[float], method: str, window: int) -> None:

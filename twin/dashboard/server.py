@@ -110,6 +110,8 @@ def numbers_markdown(numbers: dict[str, Any]) -> str:
     if str(n.get("light_state", "")).startswith("changed"):
         lines.append("**The light moved too far to map back to the set-up's: no MI.** Re-learn the classes "
                      "from the live bed (`drumtwin classes suggest`, then restart with the new config).  ")
+    if n.get("endpoint") == "mixed":  # issue 24: the batch endpoint (control.endpoint)
+        lines.append(f"**MIXED** since {_fmt(n.get('mixing_time_s'), '.1f')} s (endpoint)  ")
     if n.get("trend_state") == "unsettled":
         lines.append("*Trend not settled yet: no segregation decision until it is.*  ")
     lines.append(f"**Last decision:** {decision or '–'}  \n{reason or ''}")

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from control.endpoint import EndpointDetector
 from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
 from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
@@ -178,6 +179,7 @@ class ProcessWorker:
         slopes: queue.SimpleQueue[tuple[float, float]] | None = None,
         ma_window: int = 150,
         camera_fps: Callable[[], float] = lambda: 0.0,
+        endpoint: EndpointDetector | None = None,
     ) -> None:
         self.inbox = inbox
         self.trend = trend
@@ -189,6 +191,7 @@ class ProcessWorker:
         self.state = state
         self.slopes = slopes
         self.camera_fps = camera_fps
+        self.endpoint = endpoint or EndpointDetector()  # the batch endpoint: events mixed / unmixed
         self._settled: bool | None = None  # the trend's state last logged (None: no valid trend yet)
 
     def run(self, stop: threading.Event) -> None:
@@ -219,8 +222,13 @@ class ProcessWorker:
         est = self.trend.update(item.t_s, mi, rpm)
         self._log_settled(est)
         ma = self.ma.update(mi)
+        end = self.endpoint.update(item.t_s, mi, est.level, est.valid and est.settled)
+        if end.changed:  # issue 24: the endpoint, live (the dashboard shows the numbers)
+            self.sink.event(end.changed, item.t_s, mixing_time_s=end.mixing_time_s, plateau_mi=end.plateau_mi,
+                            block_sd=end.block_sd, reason=end.reason)
+            self.sink.numbers(endpoint="mixed" if end.mixed else "not mixed", mixing_time_s=end.mixing_time_s)
         last_valid = item.t_s if valid else prev.last_valid_t_s
-        self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est))
+        self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est, end.mixed, end.mixing_time_s))
         if valid and self.slopes is not None and math.isfinite(r.slope_deg):
             self.slopes.put((item.t_s, float(r.slope_deg)))
         tw = self.view.twin()
@@ -232,6 +240,7 @@ class ProcessWorker:
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
             rpm_setpoint=_known(mill.setpoint_rpm), rpm_actual=_known(mill.actual_rpm), mode=self.view.mode(),
             flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ()),
+            mixed=end.mixed, mixing_time_s=end.mixing_time_s,
         )
         values = row.as_dict()
         self.write_row(values)

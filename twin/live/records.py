@@ -120,13 +120,16 @@ class CameraInfo:
 @dataclass(frozen=True)
 class FrameInfo:
     """The process worker's newest result: run time of the newest processed frame, frames
-    processed, time of the last valid MI, the reading and the Kalman estimate."""
+    processed, time of the last valid MI, the reading and the Kalman estimate; whether the
+    batch is at its endpoint (``control.endpoint``) and since when."""
 
     t_s: float = 0.0
     n_frames: int = 0
     last_valid_t_s: float | None = None
     reading: Reading | None = None
     estimate: TrendEstimate | None = None
+    mixed: bool = False
+    mixing_time_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,8 @@ def inputs_of(view: RunView, now_s: float, twin_doubt: str = "") -> SupervisorIn
         camera_ended=cam.ended,
         twin_updated_s=twin.updated_s,
         twin_doubt=twin_doubt,
+        mixed=frames.mixed,
+        mixing_time_s=frames.mixing_time_s,
     )
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from control.objective import RpmPrediction
 from control.supervisor import PredictionRequest, PredictionResult
 from twin.live.records import EventSink, RunView
 from twin.state import LiveState, WhatIfView
@@ -149,12 +150,12 @@ class WhatIfWorker:
         try:
             if pred is not None:
                 try:
-                    preds = self._study(pred.rpms, pred.horizon_s, "AUTO")
+                    preds, rows = self._study(pred.rpms, pred.horizon_s, "AUTO", pred.target_mi)
                 except Exception as exc:
                     self._report_auto(f"{type(exc).__name__}: {exc}")
                     return True
                 with self._lock:
-                    self._result = PredictionResult(pred.t_s, pred.horizon_s, preds)
+                    self._result = PredictionResult(pred.t_s, pred.horizon_s, preds, rows)
                 self._report_auto(None)
             elif study is not None:
                 try:
@@ -194,7 +195,10 @@ class WhatIfWorker:
             return run_study(jobs, scheduler=self.scheduler)
         return run_study(jobs, workers=self.workers, pool=self._get_pool())
 
-    def _study(self, rpms: Sequence[float], duration_s: float, reason: str) -> dict[float, float]:
+    def _study(self, rpms: Sequence[float], duration_s: float, reason: str, target_mi: float | None = None
+               ) -> tuple[dict[float, float], dict[float, RpmPrediction] | None]:
+        """Run one study; plateau MI per rpm and (``target_mi`` given) the rows to the target
+        (time, drive power and energy: ``sim.whatif``) for AUTO's objective."""
         from sim.whatif import WhatIfJob
 
         state = self.view.twin().state
@@ -206,7 +210,7 @@ class WhatIfWorker:
         status = f"running {len(rpms)} rpm x {duration_s:g} s ({reason})"
         self.state.set_whatif(WhatIfView(status=status, seq=self._seq))
         t0 = time.monotonic()
-        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state) for r in rpms]
+        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state, target_mi=target_mi) for r in rpms]
         try:
             results = list(self._run_jobs(jobs))
         except Exception as exc:
@@ -219,6 +223,11 @@ class WhatIfWorker:
             self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
             raise
         preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results, strict=False)}
+        rows = None if target_mi is None else {  # issue 24: time and energy to the target (sim.whatif)
+            float(r): RpmPrediction(float(r), float(res.plateau_mi), float(getattr(res, "time_to_target_s", np.nan)),
+                                    float(getattr(res, "energy_to_target_j", np.nan)),
+                                    float(getattr(res, "plateau_power_w", np.nan)))
+            for r, res in zip(rpms, results, strict=False)}
         self._seq += 1
         t_done = self.view.now_s()
         self.state.set_whatif(
@@ -235,8 +244,13 @@ class WhatIfWorker:
         self.sink.event(
             "whatif", t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
             predictions={str(k): v for k, v in preds.items()}, took_s=time.monotonic() - t0,
+            **({} if rows is None else {
+                "target_mi": target_mi,
+                "time_to_target_s": {str(k): v.time_to_target_s for k, v in rows.items()},
+                "energy_to_target_j": {str(k): v.energy_j for k, v in rows.items()},
+                "power_w": {str(k): v.power_w for k, v in rows.items()}}),
         )
-        return preds
+        return preds, rows
 
     def close(self) -> None:
         """Shut the worker processes down (a running study is abandoned: it fails at once)."""

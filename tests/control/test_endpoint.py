@@ -1,0 +1,110 @@
+"""Endpoint detection (control.endpoint) on synthetic MI: dwell in band + moving-block sd."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from control.endpoint import EndpointConfig, EndpointDetector, block_sd, endpoint_of_series
+from control.errors import ControlError
+
+FPS = 30.0  # the camera rate the trend is tuned for (its re-init needs >= 8 samples in 0.6 s)
+
+
+def replay(t, raw, cfg=None):
+    """Raw MI through the real Kalman trend, then the detector (as ``drumtwin mi --endpoint``)."""
+    return endpoint_of_series(t, raw, cfg)
+
+
+def mixing_curve(t, t_mix_tau=20.0, lo=0.4, hi=0.95, noise=0.01, seed=0):
+    rng = np.random.default_rng(seed)
+    return hi - (hi - lo) * np.exp(-t / t_mix_tau) + rng.normal(0, noise, t.size)
+
+
+def test_exponential_mix_is_mixed_near_where_the_curve_enters_the_band():
+    t = np.arange(0, 200, 1 / FPS)
+    raw = mixing_curve(t)
+    c = EndpointConfig(target_mi=0.85, band=0.02, dwell_s=10.0)
+    res = replay(t, raw, c)
+    assert res.mixing_time_s is not None
+    # noise-free, the curve's net rise over one 10 s dwell is <= band = 0.02 from t = 20 ln(0.216/0.02) = 48 s,
+    # and it is within band of 0.95 from 66 s: the mixing time lies around there (a window's tenths and the
+    # trend's smoothing move it by a few s); a detector without the net-change rule fires at ~36 s
+    assert 40.0 <= res.mixing_time_s <= 75.0, res.mixing_time_s
+    assert [k for _, k, _, _ in res.changes] == ["mixed"]
+    assert res.plateau_mi == pytest.approx(0.95, abs=0.02)
+    # detection comes exactly one dwell after the mixing time
+    t_detect, _, mt, reason = res.changes[0]
+    assert t_detect - mt == pytest.approx(c.dwell_s, abs=1 / FPS + 1e-9)
+    assert "target" in reason and "block sd" in reason
+
+
+def test_flat_segregated_bed_is_a_plateau_but_never_mixed():
+    t = np.arange(0, 120, 1 / FPS)
+    raw = 0.40 + np.random.default_rng(1).normal(0, 0.005, t.size)
+    assert replay(t, raw, EndpointConfig(target_mi=0.85)).mixing_time_s is None
+    # the same flat bed above the target is mixed (the target is what tells them apart)
+    assert replay(t, raw + 0.5, EndpointConfig(target_mi=0.85)).mixing_time_s is not None
+
+
+def test_noisy_raw_mi_fails_the_moving_block_sd_and_passes_without_it():
+    t = np.arange(0, 120, 1 / FPS)
+    raw = np.clip(0.93 + np.random.default_rng(2).normal(0, 0.08, t.size), 0, 1)
+    strict = EndpointConfig(target_mi=0.85, band=0.03, block_sd_max=0.05)
+    assert replay(t, raw, strict).mixing_time_s is None
+    loose = EndpointConfig(target_mi=0.85, band=0.03, block_sd_max=None)
+    assert replay(t, raw, loose).mixing_time_s is not None
+
+
+def test_unmixed_after_the_trend_falls_off_its_plateau_then_mixed_again():
+    t = np.arange(0, 240, 1 / FPS)
+    raw = np.where(t < 100, 0.95, np.where(t < 160, 0.70, 0.95)) + np.random.default_rng(3).normal(0, 0.005, t.size)
+    res = replay(t, raw, EndpointConfig(target_mi=0.85, exit_dwell_s=5.0))
+    kinds = [k for _, k, _, _ in res.changes]
+    assert kinds == ["mixed", "unmixed", "mixed"]
+    t_unmixed = res.changes[1][0]
+    assert 100.0 + 5.0 <= t_unmixed < 100.0 + 5.0 + 2.0  # exit dwell + the trend's re-init lag
+    assert res.mixing_time_s is not None and res.mixing_time_s > 160.0  # the last mix counts
+
+
+def test_a_short_dip_and_a_slow_rise_do_not_unmix():
+    t = np.arange(0, 200, 1 / FPS)
+    raw = 0.90 + 0.0004 * t  # creeping up 0.08 over the run
+    raw = np.where((t > 120) & (t < 122), 0.75, raw)  # a 2 s dip: shorter than the exit dwell
+    res = replay(t, raw, EndpointConfig(target_mi=0.85, band=0.02, exit_dwell_s=5.0, block_sd_max=None))
+    assert [k for _, k, _, _ in res.changes] == ["mixed"]
+
+
+def test_unsettled_trend_restarts_the_dwell():
+    det = EndpointDetector(EndpointConfig(target_mi=0.5, dwell_s=10.0, block_sd_max=None))
+    for i in range(200):
+        t = i * 0.1
+        st = det.update(t, 0.9, 0.9, settled=(i % 50 != 49))  # unsettled every 5 s
+        assert not st.mixed, t
+    for i in range(200, 400):
+        st = det.update(i * 0.1, 0.9, 0.9, True)
+    assert st.mixed and st.mixing_time_s == pytest.approx(19.9, abs=0.11)
+
+
+def test_frames_from_the_past_are_ignored_and_nan_frames_do_not_count():
+    det = EndpointDetector(EndpointConfig(target_mi=0.5, dwell_s=1.0, block_s=1.0))
+    for i in range(30):
+        det.update(i * 0.1, math.nan if i % 3 else 0.9, 0.9)
+    before = det.update(3.0, 0.9, 0.9)
+    assert before.mixed
+    back = det.update(1.0, 0.1, 0.1)  # a frame from the past: no news
+    assert back.mixed and back.changed == ""
+
+
+def test_block_sd_is_the_sample_sd_of_the_finite_values():
+    assert block_sd([1.0, 2.0, 3.0, math.nan]) == pytest.approx(1.0)
+    assert math.isnan(block_sd([1.0]))
+
+
+@pytest.mark.parametrize("bad", [dict(target_mi=1.5), dict(band=0.0), dict(dwell_s=-1), dict(block_sd_max=0.0),
+                                 dict(dwell_s=math.nan), dict(exit_band=0)])
+def test_bad_settings_are_one_line_control_errors(bad):
+    with pytest.raises(ControlError):
+        EndpointConfig(**bad)

@@ -1,0 +1,92 @@
+"""The supervisor with objective "time" / "energy" (issue 24): it asks for rows to the
+target, picks with control.objective, and its logged reason names the objective and the
+numbers; "plateau" (the default) is unchanged."""
+
+from __future__ import annotations
+
+import pytest
+
+from control.errors import ControlError
+from control.objective import RpmPrediction
+from control.supervisor import Action, Mode, PredictionResult, Supervisor, SupervisorConfig, SupervisorInputs
+from control.trend import TrendEstimate
+
+ROWS = {  # faster is sooner, but the power grows as rpm^2: energy favours the slow drum
+    5.0: RpmPrediction(5.0, 0.95, 300.0, 0.5 * 300.0, 0.5),
+    25.0: RpmPrediction(25.0, 0.95, 60.0, 12.5 * 60.0, 12.5),
+    45.0: RpmPrediction(45.0, 0.95, 70.0, 40.5 * 70.0, 40.5),
+}
+
+
+def est(t: float, level: float) -> TrendEstimate:
+    return TrendEstimate(t, level, 0.0, 0.01, 0.001, level - 0.02, level + 0.02, True, False, settled=True)
+
+
+def decide(objective: str, level: float = 0.80, rows=ROWS, current: float = 15.0):
+    """Step until the first move/hold; the request is answered at once with ``rows``."""
+    sup = Supervisor(SupervisorConfig(objective=objective, target_mi=0.9, min_rpm=5.0, max_rpm=45.0,
+                                      critical_rpm=None, max_critical_frac=1.0, max_rate_rpm_per_s=100.0,
+                                      detect_dwell_s=5.0), mode=Mode.AUTO)
+    requests = []
+    for i in range(40):
+        t = i * 0.5
+        inp = SupervisorInputs(trend=est(t, level), actual_rpm=current, setpoint_rpm=current, mill_running=True,
+                               last_valid_mi_s=t, twin_updated_s=t)
+        d, req = sup.step(t, inp)
+        if req is not None:
+            requests.append(req)
+            res = PredictionResult(req.t_s, req.horizon_s, {r: v.plateau_mi for r, v in rows.items()},
+                                   rows=rows)
+            d, _ = sup.step(t, inp, res)
+        if d is not None and d.kind in ("move", "hold"):
+            return d, requests
+    raise AssertionError("no decision")
+
+
+def test_energy_and_time_pick_different_rpms_and_say_why():
+    dt, reqs = decide("time")
+    de, _ = decide("energy")
+    assert reqs[0].target_mi == 0.9
+    assert dt.action is Action.SET_RPM and dt.target_rpm == 25.0
+    assert de.action is Action.SET_RPM and de.target_rpm == 5.0
+    assert "objective time to MI 0.9" in dt.reason and "60 s" in dt.reason and "300 s" in dt.reason
+    assert "objective energy to MI 0.9" in de.reason and "150.0 J" in de.reason and "750.0 J" in de.reason
+    assert de.scores is not None and de.scores[5.0] == -150.0
+
+
+def test_a_decision_is_due_below_the_target_even_when_not_segregated():
+    # 0.89: above seg_level 0.5 (not segregated) but below the target 0.9
+    d, _ = decide("time", level=0.89)
+    assert d.target_rpm == 25.0
+
+
+def test_without_rows_the_plateau_scoring_decides_and_says_so():
+    sup_rows = {r: RpmPrediction(r, mi) for r, mi in ((5.0, 0.80), (25.0, 0.95), (45.0, 0.90))}
+    d, _ = decide("energy", rows=sup_rows)  # rows without time/energy: nobody reaches the target
+    assert d.target_rpm == 25.0 and "no rpm reaches the target" in d.reason
+
+
+def test_objective_needs_a_target_and_a_known_name():
+    with pytest.raises(ControlError, match="target_mi"):
+        SupervisorConfig(objective="time")
+    with pytest.raises(ControlError, match="objective"):
+        SupervisorConfig(objective="cheapest", target_mi=0.9)
+    assert SupervisorConfig().objective == "plateau" and not SupervisorConfig().stop_at_endpoint
+
+
+def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
+    from tests.cli import assert_one_line_error, cli
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
+    assert_one_line_error(cli("run", "--no-dashboard", "--objective", "cheapest", "--log", tmp_path / "a"),
+                          "--objective")
+    for bad in ("1.5", "-0.1", "nan"):
+        assert_one_line_error(cli("run", "--no-dashboard", "--target-mi", bad, "--log", tmp_path / "b"),
+                              "--target-mi")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    # one target: the endpoint's, handed to the supervisor; the defaults leave AUTO as it was
+    sc = supervisor_config(RunConfig(objective="energy", target_mi=0.8, stop_at_endpoint=True).resolved())
+    assert (sc.objective, sc.target_mi, sc.stop_at_endpoint) == ("energy", 0.8, True)
+    d = supervisor_config(RunConfig().resolved())
+    assert (d.objective, d.stop_at_endpoint) == ("plateau", False)

@@ -1,0 +1,127 @@
+"""The endpoint on the embedded demo and ``drumtwin report`` of real demo runs (issue 24).
+
+Two demo runs (Case C, ``--speed 4``, the drive started at 45 rpm, where the plant's bed
+stays mixed): AUTO with ``stop_at_endpoint`` (the endpoint is detected live, an ``endpoint``
+decision stops the mill through the supervisor, the board stops), and OFF in a separate
+process killed with SIGKILL once its ``mixed`` event is logged (the endpoint is only
+reported: no decision, the board keeps its 45 rpm). The report of both opens in chromium
+with every section and plots that are not blank.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.cli import cli
+from tests.twin.test_report import data_pixels, open_report
+from twin.cli.run_cmd import run_live
+from twin.config import RunConfig
+from twin.report.build import SECTIONS
+from twin.runlog import read_events, read_frames
+
+pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]
+
+SPEED = 4.0
+MIXED_RPM = 45.0  # the demo plant's bed stays mixed at 45 rpm (MI ~0.95); at 5 rpm it segregates
+
+OFF_SCRIPT = """
+import sys
+from twin.cli.run_cmd import run_live
+from twin.config import RunConfig
+cfg = RunConfig(dashboard=False, duration_s=600.0, speed={speed}, case="C", seed=0, mode="off",
+                start_rpm={rpm}, log_dir=sys.argv[1]).resolved()
+run_live(cfg, progress=False)
+"""
+
+
+@pytest.fixture(scope="module")
+def auto_run(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("endpoint") / "auto"
+    cfg = RunConfig(dashboard=False, duration_s=40.0, speed=SPEED, case="C", seed=0, mode="auto",
+                    start_rpm=MIXED_RPM, stop_at_endpoint=True, log_dir=d).resolved()
+    run_live(cfg, progress=False)
+    return d
+
+
+@pytest.fixture(scope="module")
+def killed_off_run(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("endpoint") / "off"
+    code = OFF_SCRIPT.format(speed=SPEED, rpm=MIXED_RPM)
+    proc = subprocess.Popen([sys.executable, "-c", code, str(d)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        end = time.monotonic() + 240.0
+        while time.monotonic() < end and proc.poll() is None:
+            ev = d / "events.jsonl"
+            if ev.exists() and any(e["kind"] == "mixed" for e in read_events(ev)):
+                break
+            time.sleep(0.5)
+        time.sleep(2.0)  # a few more rows after the event
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    return d
+
+
+@pytest.mark.timeout(400)
+def test_auto_stops_the_demo_mill_at_the_endpoint(auto_run):
+    ev = read_events(auto_run)
+    mixed = [e for e in ev if e["kind"] == "mixed"]
+    assert mixed, [e["kind"] for e in ev]
+    m = mixed[0]
+    assert m["mixing_time_s"] is not None and m["mixing_time_s"] < m["t_s"] and m["plateau_mi"] >= 0.9
+    stops = [e for e in ev if e["kind"] == "decision" and e["decision"] == "endpoint"]
+    assert len(stops) == 1 and stops[0]["action"] == "stop" and stops[0]["mode"] == "auto"
+    assert stops[0]["t_s"] >= m["t_s"] and "stop at endpoint" in stops[0]["reason"]
+    assert "mixing time" in stops[0]["reason"]
+    sent = [e for e in ev if e["kind"] == "mill_command" and e["command"] == "stop"]
+    assert sent and sent[0]["source"] == "supervisor"
+    assert not [e for e in ev if e["kind"] == "mill_command" and e["command"] == "set_rpm"]
+    rows = read_frames(auto_run)
+    late = [r["rpm_actual"] for r in rows if r["t_s"] > stops[0]["t_s"] + 10.0 and r["rpm_actual"] is not None]
+    assert late and max(late) < 1.0  # the board really stopped
+    assert any(r["mixed"] == 1.0 and r["mixing_time_s"] == pytest.approx(m["mixing_time_s"]) for r in rows)
+
+
+@pytest.mark.timeout(400)
+def test_off_only_reports_the_endpoint(killed_off_run):
+    ev = read_events(killed_off_run)
+    assert any(e["kind"] == "mixed" for e in ev)
+    assert not any(e["kind"] == "decision" for e in ev)
+    assert [e["command"] for e in ev if e["kind"] == "mill_command"] == ["start"]  # the demo operator's
+    assert not any(e["kind"] == "stop" for e in ev)  # killed: no stop event
+    rpm = np.array([r["rpm_actual"] for r in read_frames(killed_off_run)[-20:]], dtype=float)
+    assert np.all(rpm > MIXED_RPM - 2.0)
+
+
+@pytest.mark.browser
+@pytest.mark.timeout(400)
+def test_report_of_real_auto_and_killed_off_runs(page, auto_run, killed_off_run, tmp_path):
+    out = tmp_path / "report.html"
+    r = cli("report", f"AUTO={auto_run}", f"OFF={killed_off_run}", "--out", out)
+    assert r.code == 0, r.err
+    outside = open_report(page, out)
+    assert outside == []
+    for sid, _ in SECTIONS:
+        for i in range(2):
+            assert page.locator(f'section[data-section="{sid}"][data-run="{i}"]').is_visible(), (sid, i)
+    for i in range(2):
+        for sid in ("mi", "rpm", "slope", "events"):
+            n = data_pixels(page.locator(f"img#plot-{sid}-{i}").screenshot())
+            assert n > (100 if sid == "events" else 300), (sid, i, n)
+        end = page.locator(f'section[data-section="endpoint"][data-run="{i}"]').inner_text()
+        assert "MIXED" in end and "source: live" in end
+    assert "did not end cleanly" in page.locator('section[data-section="summary"][data-run="1"]').inner_text()
+    assert "did not end cleanly" not in page.locator('section[data-section="summary"][data-run="0"]').inner_text()
+    assert "stop at endpoint" in page.content()
