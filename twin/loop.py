@@ -58,6 +58,7 @@ from twin.live.records import (
 from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import WhatIfWorker
+from twin.records import MillState, ModeSet
 from twin.state import LiveState
 from vision.errors import VisionError
 from vision.meter import Meter
@@ -166,8 +167,8 @@ class LiveLoop:
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,
         )
         self.process = ProcessWorker(
-            readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, self.events.frame,
-            self.state, slopes, camera_fps=self.camera.fps.rate,
+            readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, slopes,
+            camera_fps=self.camera.fps.rate,
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
         self.twin = TwinWorker(
@@ -194,7 +195,8 @@ class LiveLoop:
         )
         self.whatif.on_auto_result = self._auto_study_result
         self._threads: list[threading.Thread] = []
-        self.state.update_numbers(mode=config.mode, mill_state="connecting")
+        self.events.publish(ModeSet(t_s=0.0, mode=config.mode))
+        self.events.publish(MillState(t_s=0.0, state="connecting", setpoint_rpm=None, actual_rpm=None))
 
     # -- lifecycle (the only place threads start and stop) ---------------------------------
     def warm_up(self) -> None:

@@ -43,7 +43,8 @@ from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
 from twin.loop import supervisor_config
-from twin.state import LiveState, forward_fill
+from twin.records import FrameReading, MillState, ModeSet
+from twin.state import LiveState, Panel, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
 # mid-handshake is never delivered (whichever test of the shared dashboard sees it)
@@ -113,11 +114,12 @@ class Feeder:
                               class_bgr=((0, 0, 220), (220, 60, 0)))
             self.state.publish_twin(img[:, ::-1].copy(), disks, 0.15)
             t = i * 0.05
-            self.state.publish_point(
-                {"t_s": t, "mi": 0.8 + 0.1 * np.sin(t), "trend_mi": 0.8, "trend_lo95": 0.7, "trend_hi95": 0.9,
-                 "rpm_setpoint": 5.0, "rpm_actual": 5.0, "slope_deg": 30.0, "twin_slope_deg": 31.0}
-            )
-            self.state.update_numbers(t_s=t, mi=0.8)
+            self.state.record(FrameReading(
+                t_s=t, frame=i, mi=0.8 + 0.1 * np.sin(t), mi_sigmoid=0.8, mi_linear=0.8, d_px=3.0, dsigma_px=1.0,
+                concentration=0.5, slope_deg=30.0, valid=True, trend_mi=0.8, trend_lo95=0.7, trend_hi95=0.9,
+                trend_rate=0.0, ma_mi=0.8, twin_mi=None, twin_slope_deg=31.0, rpm_setpoint=5.0, rpm_actual=5.0,
+                mode="auto", flags=(),
+            ))
             i += 1
             self.stop.wait(0.05)
 
@@ -136,10 +138,10 @@ def test_pure_helpers() -> None:
         parse_rpm_list("5, fast")
     with pytest.raises(ValueError):
         parse_rpm_list("500")
-    md = numbers_markdown({"mi": 0.8123, "mode": "auto", "last_decision": "rpm 5 -> 20"})
+    md = numbers_markdown(Panel(mi=0.8123, mode="auto", last_decision="rpm 5 -> 20"))
     assert "0.812" in md and "auto" in md and "rpm 5 -> 20" in md
     assert "not settled" not in md and "Re-learn" not in md
-    md = numbers_markdown({"trend_state": "unsettled", "light_state": "changed (saturated:0.31)"})
+    md = numbers_markdown(Panel(trend_state="unsettled", light_state="changed (saturated:0.31)"))
     assert "| trend | unsettled | light | changed (saturated:0.31) |" in md
     assert "Trend not settled yet" in md and "Re-learn the classes" in md
     rng = axis_range(np.array([np.nan, 31.2, 44.9]), np.array([np.nan, np.nan, 38.0]), step=5.0, pad=1.0)
@@ -163,7 +165,8 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     """One chromium for the whole browser check: the local dashboard (updates and
     controls), then a remote one (read-only until the token, rate-limited unlocks)."""
     state = LiveState()
-    state.update_numbers(mode="auto", rpm_setpoint=5.0)
+    state.record(ModeSet(t_s=0.0, mode="auto"))
+    state.record(MillState(t_s=0.0, state="running", setpoint_rpm=5.0, actual_rpm=5.0))
     controls = RecordingControls()
     limits = supervisor_config(RunConfig()).limits  # what the run's supervisor enforces
     dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
@@ -230,7 +233,7 @@ def remote_viewer_without_token_is_read_only(page) -> None:
     EMERGENCY STOP and nothing else; six wrong attempts lock that viewer only: a new
     viewer with the right token operates the mill at once."""
     state = LiveState()
-    state.update_numbers(mode="auto")
+    state.record(ModeSet(t_s=0.0, mode="auto"))
     controls = RecordingControls()
     with pytest.raises(ValueError, match="token"):
         Dashboard(state, controls, host="127.0.0.2", port=0)
@@ -338,7 +341,7 @@ def test_unlock_limiter_is_per_viewer_and_per_address_never_global() -> None:
 @pytest.fixture(scope="module")
 def local_dash() -> Iterator[tuple[Dashboard, RecordingControls, list]]:
     state = LiveState()
-    state.update_numbers(mode="off")
+    state.record(ModeSet(t_s=0.0, mode="off"))
     controls = RecordingControls()
     events: list = []
     dash = Dashboard(state, controls, port=0, update_hz=4,

@@ -322,15 +322,14 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
     from tests.twin.test_workers import Boxes, _reading
     from twin.live.camera import CameraReading, ProcessWorker
     from twin.live.supervise import inputs_of
-    from twin.state import LiveState
 
     w, link, _sink, box = make(RUNNING)
     w.cycle()
     b = Boxes("auto")
     b.mill = box
     b.view.mill = box.get  # type: ignore[method-assign]
-    rows: list = []
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), None)
+    sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, None)
     pw.process(CameraReading(0.0, 0, _reading(0.8)))
     link.up = False  # the outage: the board's last report (5 rpm) is history now
     w.cycle()
@@ -340,6 +339,7 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
     link.up = True
     w.cycle()
     pw.process(CameraReading(0.2, 2, _reading(0.8)))
+    rows = sink.rows()
     assert [(r["rpm_actual"], r["rpm_setpoint"]) for r in rows] == [(5.0, 5.0), (None, None), (5.0, 5.0)]
     assert [r["flags"] for r in rows] == [(), ("link_lost:mill",), ()]
 

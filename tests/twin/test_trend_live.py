@@ -31,7 +31,7 @@ def test_process_worker_logs_the_trend_unsettled_and_settled():
     b = Boxes("auto")
     b.mill_at(5.0)
     sink = Sink()
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, lambda row: None, LiveState())
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink)
     rng = np.random.default_rng(0)
     for i in range(240):  # 4 s mixed, then 4 s segregated
         mi = (0.97 if i < 120 else 0.38) + rng.normal(0, 0.008)
@@ -112,19 +112,14 @@ def test_process_worker_tells_the_dashboard_the_trend_and_light_states():
     cannot be mapped back is shown as changed (with its cause), a normal frame as ok."""
     from dataclasses import replace
 
-    numbers: dict[str, Any] = {}
-
-    class NumberSink(Sink):
-        def numbers(self, **values) -> None:
-            numbers.update(values)
-
+    state = LiveState()
     b = Boxes("auto")
     b.mill_at(5.0)
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, NumberSink(), lambda row: None, LiveState())
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(state))
     pw.process(CameraReading(0.0, 0, _reading(0.9)))
-    assert numbers["trend_state"] == "unsettled" and numbers["light_state"] == "ok"
+    assert state.panel.trend_state == "unsettled" and state.panel.light_state == "ok"
     dark = replace(_reading(math.nan, valid=False), flags=("lighting_changed:too_dark:0.12",))
     pw.process(CameraReading(0.1, 1, dark))
-    assert numbers["light_state"] == "changed (too_dark:0.12)"
+    assert state.panel.light_state == "changed (too_dark:0.12)"
     pw.process(CameraReading(0.2, 2, _reading(0.9)))
-    assert numbers["light_state"] == "ok"
+    assert state.panel.light_state == "ok"

@@ -71,7 +71,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
     from twin.demo import DemoPlant, PlantConfig
     from twin.loop import LiveLoop, open_mill
     from twin.runlog import RunLog
-    from twin.state import FRAME_ROW_COLUMNS, LiveState
+    from twin.state import LiveState
 
     if cfg.scheduler is not None:
         check_scheduler_answers(cfg.scheduler)  # before anything starts: one line, exit 2
@@ -118,7 +118,7 @@ def run_live(cfg, *, progress: bool = True, on_started=None):
         mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
         if frames is None:
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
-        runlog = RunLog(cfg.log_dir, columns=FRAME_ROW_COLUMNS)  # the frame row defines the CSV
+        runlog = RunLog(cfg.log_dir)  # columns: twin.records.FRAME_COLUMNS (the frame record's fields)
         started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
         if plant is not None:

@@ -44,7 +44,8 @@ from twin.dashboard.guard import (
     tokens_match,
 )
 from twin.dashboard.scene import TwinScene
-from twin.state import Controls, LiveState, Snapshot, forward_fill
+from twin.records import ModeSet
+from twin.state import Controls, LiveState, Panel, Snapshot, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
@@ -67,7 +68,7 @@ def _rgb(image_bgr: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(image_bgr[..., ::-1])
 
 
-def _fmt(value: Any, spec: str = ".3f") -> str:
+def _fmt(value: float | str | None, spec: str = ".3f") -> str:
     if value is None:
         return "–"
     if isinstance(value, float):
@@ -88,29 +89,28 @@ def parse_rpm_list(text: str, limits: Limits | None = None) -> list[float]:
         raise ValueError(str(exc)) from None
 
 
-def numbers_markdown(numbers: dict[str, Any]) -> str:
-    """The numbers panel as a markdown table."""
-    n = numbers
+def numbers_markdown(n: Panel) -> str:
+    """The numbers panel (``twin.state.Panel``) as a markdown table."""
     rows = [
-        ("MI (eq. 4)", _fmt(n.get("mi")), "trend", _fmt(n.get("trend_mi"))),
-        ("d px", _fmt(n.get("d_px"), ".1f"), "dσ px", _fmt(n.get("dsigma_px"), ".1f")),
-        ("concentration", _fmt(n.get("concentration")), "twin MI", _fmt(n.get("twin_mi"))),
-        ("slope °", _fmt(n.get("slope_deg"), ".1f"), "twin slope °", _fmt(n.get("twin_slope_deg"), ".1f")),
-        ("rpm set", _fmt(n.get("rpm_setpoint"), ".1f"), "rpm actual", _fmt(n.get("rpm_actual"), ".1f")),
-        ("camera fps", _fmt(n.get("camera_fps"), ".1f"), "twin fps", _fmt(n.get("twin_fps"), ".1f")),
-        ("mill", _fmt(n.get("mill_state")), "mode", _fmt(n.get("mode"))),
-        ("run time s", _fmt(n.get("t_s"), ".1f"), "friction", _fmt(n.get("friction"))),
-        ("trend", _fmt(n.get("trend_state")), "light", _fmt(n.get("light_state"))),
+        ("MI (eq. 4)", _fmt(n.mi), "trend", _fmt(n.trend_mi)),
+        ("d px", _fmt(n.d_px, ".1f"), "dσ px", _fmt(n.dsigma_px, ".1f")),
+        ("concentration", _fmt(n.concentration), "twin MI", _fmt(n.twin_mi)),
+        ("slope °", _fmt(n.slope_deg, ".1f"), "twin slope °", _fmt(n.twin_slope_deg, ".1f")),
+        ("rpm set", _fmt(n.rpm_setpoint, ".1f"), "rpm actual", _fmt(n.rpm_actual, ".1f")),
+        ("camera fps", _fmt(n.camera_fps, ".1f"), "twin fps", _fmt(n.twin_fps, ".1f")),
+        ("mill", _fmt(n.mill_state), "mode", _fmt(n.mode)),
+        ("run time s", _fmt(n.t_s, ".1f"), "friction", _fmt(n.friction)),
+        ("trend", _fmt(n.trend_state), "light", _fmt(n.light_state)),
     ]
     lines = ["| | | | |", "|---|---:|---|---:|"]
     lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
-    decision = n.get("last_decision")
-    reason = n.get("last_reason")
+    decision = n.last_decision
+    reason = n.last_reason
     lines.append("")
-    if str(n.get("light_state", "")).startswith("changed"):
+    if str(n.light_state or "").startswith("changed"):
         lines.append("**The light moved too far to map back to the set-up's: no MI.** Re-learn the classes "
                      "from the live bed (`drumtwin classes suggest`, then restart with the new config).  ")
-    if n.get("trend_state") == "unsettled":
+    if n.trend_state == "unsettled":
         lines.append("*Trend not settled yet: no segregation decision until it is.*  ")
     lines.append(f"**Last decision:** {decision or '–'}  \n{reason or ''}")
     return "\n".join(lines)
@@ -327,7 +327,7 @@ class Dashboard:
 
         self._plots_panel = gui.add_panel()
         with self._plots_panel.add_tab("Plots"):
-            self._numbers = gui.add_markdown(numbers_markdown({}))
+            self._numbers = gui.add_markdown(numbers_markdown(Panel()))
             z = np.zeros(1)
             self._mi_plot = gui.add_uplot(
                 (z,) * 7,
@@ -415,8 +415,7 @@ class Dashboard:
         with self._clients_lock:
             self._clients[client.client_id] = cc
         gui = client.gui
-        numbers = self.state.numbers
-        mode_now = str(numbers.get("mode", "off")).upper()
+        mode_now = (self.state.panel.mode or "off").upper()
         with self._controls_folder:
             if self._token_required:
                 token = gui.add_text("Control token", "", hint="controls stay read-only without it")
@@ -433,7 +432,7 @@ class Dashboard:
                         h.disabled = not ok
                     if cc.estop is not None:
                         cc.estop.disabled = not self._estop_allowed(cc)
-                    self._sync_rpm_enabled(cc, str(self.state.numbers.get("mode", "off")))
+                    self._sync_rpm_enabled(cc, self.state.panel.mode or "off")
                     cc.status.content = message
 
             cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
@@ -447,7 +446,7 @@ class Dashboard:
                 min=lo,
                 max=hi,
                 step=0.5,
-                initial_value=self.limits.clamp(float(numbers.get("rpm_setpoint") or lo)),
+                initial_value=self.limits.clamp(float(self.state.panel.rpm_setpoint or lo)),
                 disabled=not cc.authorised or mode_now != "MANUAL",
                 hint=f"limits {self.limits.describe()}",
             )
@@ -485,7 +484,7 @@ class Dashboard:
         def _(event: viser.GuiEvent) -> None:
             mode = str(cc.mode.value).lower()
             self.controls.set_mode(mode)
-            self.state.update_numbers(mode=mode)
+            self.state.record(ModeSet(t_s=self.state.panel.t_s or 0.0, mode=mode))
             with self._clients_lock:
                 clients = list(self._clients.values())
             for other in clients:
@@ -606,7 +605,7 @@ class Dashboard:
                 self.scene.update(snap.twin_particles, snap.twin_drum_r_m)
             seen["twin"] = snap.twin_seq
         self._alarm.content = alarms_html(snap.alarms)
-        self._numbers.content = numbers_markdown(snap.numbers)
+        self._numbers.content = numbers_markdown(snap.panel)
         if plots and snap.history_seq != seen["hist"] and len(snap.history["t_s"]) >= 2:
             h = {k: forward_fill(v) for k, v in snap.history.items()}
             t = h["t_s"]
@@ -624,7 +623,7 @@ class Dashboard:
                 plot.data = (t, *ys)
             seen["hist"] = snap.history_seq
             pushed = True
-        mode = str(snap.numbers.get("mode", "off"))
+        mode = snap.panel.mode or "off"
         if mode != seen["mode"]:
             seen["mode"] = mode
             with self._clients_lock:

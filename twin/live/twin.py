@@ -26,6 +26,7 @@ from typing import Any
 from twin.clock import Cadence
 from twin.live.camera import Rate
 from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
+from twin.records import Calibrated, TwinReading, TwinStatus
 from twin.state import LiveState
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
@@ -175,7 +176,7 @@ class TwinWorker:
             self._cal_wanted = False
             rpm = self._rpm_now()
             self._cal_started = (t, target, rpm, time.monotonic())
-            self.sink.numbers(twin_state="running, calibrating")
+            self.sink.publish(TwinStatus(t_s=t, state="running, calibrating"))
             self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)
             try:
                 self._cal_future = self._get_pool().submit(
@@ -195,19 +196,19 @@ class TwinWorker:
         assert self._cal_started is not None  # set together with the future
         _, target, rpm, wall0 = self._cal_started
         self.calibration = cal
-        self.sink.event(
-            "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
+        self.sink.publish(Calibrated(
+            t_s=t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
             twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - wall0,
-        )
+        ))
         self.sink.metadata(calibration=cal)
-        self.sink.numbers(friction=cal.friction, twin_state="running")
+        self.sink.publish(TwinStatus(t_s=t, state="running"))
         self.sink.clear_fault("calibration", "calibrated", t)
         if self.sim is not None:
             self.sim.set_friction(cal.friction, cal.rolling)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
         self.sink.fault("calibration", f"calibration failed: {exc}", t)
-        self.sink.numbers(twin_state="running (uncalibrated)")
+        self.sink.publish(TwinStatus(t_s=t, state="running (uncalibrated)"))
 
     def _get_pool(self) -> Executor:
         if self._closed:
@@ -270,5 +271,5 @@ class TwinWorker:
         self.fps.tick()
         self._mi, self._slope = float(r.mi), float(r.slope_deg)
         self.state.publish_twin(image, parts, self.sim.drum.radius_m)
-        self.sink.numbers(twin_mi=r.mi, twin_slope_deg=r.slope_deg, twin_fps=self.fps.rate())
+        self.sink.publish(TwinReading(t_s=self.now_s, mi=r.mi, slope_deg=r.slope_deg, fps=self.fps.rate()))
 
