@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from twin.errors import TwinError
@@ -88,7 +88,7 @@ class RunConfig:
     whatif_workers: int = 1
     dashboard_hz: float = 12.0
     engine: str | None = None  # the twin's engine ("dem" | "pymunk"); None: the mixer's
-    extra: dict = field(default_factory=dict)
+    drive: str | None = None  # demo only: the mill is this drive profile's emulator over Modbus RTU
 
     @property
     def demo(self) -> bool:

@@ -454,6 +454,7 @@ class MillState(_Status):
     kind: ClassVar[str] = "mill_state"
     doc: ClassVar[str] = "the mill as last polled"
     state: str = unit("", "connecting | link lost | fault X | running | stopped")
+    connected: bool = unit("", "the link is up and the board was read")
     setpoint_rpm: float | None = unit("rpm", "board setpoint (None: unknown)")
     actual_rpm: float | None = unit("rpm", "board actual speed (None: unknown)")
 

@@ -36,7 +36,6 @@ from tests.twin.dashboard_helpers import (
     wait_for_label,
     wait_until,
 )
-from twin.config import RunConfig
 from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
 from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origin_allowed, tokens_match
 from twin.dashboard.ratebench import check_bench_args
@@ -166,9 +165,9 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     controls), then a remote one (read-only until the token, rate-limited unlocks)."""
     state = LiveState()
     state.record(ModeSet(t_s=0.0, mode="auto"))
-    state.record(MillState(t_s=0.0, state="running", setpoint_rpm=5.0, actual_rpm=5.0))
+    state.record(MillState(t_s=0.0, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
     controls = RecordingControls()
-    limits = supervisor_config(RunConfig()).limits  # what the run's supervisor enforces
+    limits = supervisor_config().limits  # what the run's supervisor enforces
     dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
     try:
         with Feeder(state):
@@ -185,7 +184,7 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             lo, hi = limits.rpm_range  # the slider shows what is allowed: the supervisor's limits
             assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=0.5)
             assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo)
-            assert hi == Supervisor(supervisor_config(RunConfig())).config.rpm_limits[1]
+            assert hi == Supervisor(supervisor_config()).config.rpm_limits[1]
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")

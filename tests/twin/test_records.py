@@ -198,3 +198,49 @@ def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: P
     assert snap.history["rpm_actual"][-1] == 7.5 and snap.history["trend_mi"][-1] == pytest.approx(rec.trend_mi)
     p = snap.panel
     assert (p.t_s, p.mi, p.slope_deg, p.trend_state, p.light_state) == (4.25, rec.mi, 31.5, "unsettled", "ok")
+
+
+def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and_the_mill() -> None:
+    """The demo's start (``twin.loop.DemoStart``): nothing is started before the mill worker's
+    first connected ``MillState`` record; then the front panel, then the operator's Start."""
+    import threading
+
+    from twin.loop import DemoStart
+    from twin.records import Bus, MillState
+
+    calls: list[str] = []
+
+    class Plant:
+        def start_drive(self) -> None:
+            calls.append("drive")
+
+    class Loop:
+        stop_event = threading.Event()
+
+        def start_mill(self) -> None:
+            calls.append("start")
+
+    bus = Bus()
+    plan = DemoStart(Plant(), connect_timeout_s=30.0)  # type: ignore[arg-type]
+    bus.subscribe(plan.record)
+    bus.publish(MillState(t_s=0.0, state="connecting", connected=False, setpoint_rpm=None, actual_rpm=None))
+    done = threading.Thread(target=plan.execute, args=(Loop(),))
+    done.start()
+    done.join(0.3)
+    assert done.is_alive() and calls == []  # still waiting: the board was not read yet
+    bus.publish(MillState(t_s=0.5, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
+    done.join(5.0)
+    assert not done.is_alive() and calls == ["drive", "start"]
+
+
+def test_run_config_has_no_untyped_bag() -> None:
+    """Test seams are the typed ``twin.loop.Seams``, not a ``RunConfig.extra`` dict."""
+    from twin.config import RunConfig
+    from twin.loop import Seams
+
+    assert "extra" not in {f.name for f in fields(RunConfig)}
+    assert {f.name for f in fields(Seams)} >= {"supervisor", "calibrate", "whatif_study", "mismatch", "on_started"}
+    with pytest.raises(TypeError):  # a misspelt supervisor setting is refused, not ignored
+        from twin.loop import supervisor_config
+
+        supervisor_config(Seams(supervisor={"seg_levle": 0.9}))

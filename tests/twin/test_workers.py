@@ -138,12 +138,11 @@ def test_a_twin_that_never_runs_is_stale_for_the_loops_auto() -> None:
     """The twin worker died (or hung) before its first step: the supervisor saw no twin time
     at all and never called it stale, so AUTO went on without it. With the loop's settings a
     twin that has not run within the twin timeout is stale: safe state."""
-    from twin.config import RunConfig
     from twin.loop import supervisor_config
 
     b = Boxes()
     b.mill_at(5.0)
-    cfg = supervisor_config(RunConfig(mode="auto", dashboard=False).resolved())
+    cfg = supervisor_config()
     assert cfg.twin_timeout_s is not None
     w = SupervisorWorker(Supervisor(cfg, mode=Mode.AUTO), b.view, Sink(), [].append, None, b.mode)
     advance(b, w, 0, cfg.twin_timeout_s - 1.0)

@@ -221,7 +221,7 @@ class MillWorker:
     def _publish(self, snap: MillSnapshot) -> None:
         sp, act = snap.setpoint_rpm, snap.actual_rpm
         self.sink.publish(MillState(
-            t_s=self.now_s(), state=snap.state,
+            t_s=self.now_s(), state=snap.state, connected=snap.connected,
             setpoint_rpm=sp if math.isfinite(sp) else None,
             actual_rpm=act if math.isfinite(act) else None,
         ))
