@@ -567,3 +567,27 @@ def test_the_viser_internals_the_dashboard_relies_on(fresh_dash) -> None:
         assert wait_for_label(ws, "EMERGENCY STOP", 20)
         (cid,) = list(dash._server._websock_server._live_connections)
         assert dash._client_address(cid) == "127.0.0.1"  # the per-address unlock limit's key
+
+
+def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
+    """The policy split out of the viser server (``twin.dashboard.guard.Gatekeeper``): a
+    wrong token is refused and counted, the right one unlocks, EMERGENCY STOP follows
+    ``estop_needs_token``, a noisy event is written once per window with a count of the rest."""
+    from twin.dashboard.guard import EVENT_THROTTLE_S, Gatekeeper
+
+    now = [100.0]
+    events: list[tuple[str, dict]] = []
+    gate = Gatekeeper("s3cret", on_event=lambda k, f: events.append((k, f)), estop_needs_token=True,
+                      unlock_policy=UnlockPolicy(per_client_s=0.0, max_failures=5, window_s=60.0),
+                      monotonic=lambda: now[0])
+    assert gate.token_required and not gate.estop_allowed(False) and gate.estop_allowed(True)
+    assert gate.try_unlock(1, "wrong", "10.0.0.1") == (False, "**wrong token: read-only**")
+    assert gate.try_unlock(1, "s3cret", "10.0.0.1")[0] and gate.failed_unlocks == 1
+    assert [k for k, _ in events] == ["dashboard_unlock_failed", "dashboard_unlocked"]
+    for _ in range(3):
+        gate.refused("http://evil.example", "127.0.0.1:8080")
+    assert gate.refused_handshakes == 3 and [k for k, _ in events].count("dashboard_refused") == 1
+    now[0] += EVENT_THROTTLE_S
+    gate.flush_throttled()
+    assert events[-1] == ("dashboard_refused", {"suppressed": 2, "summary": True})
+    assert not Gatekeeper(None).token_required and Gatekeeper(None).estop_allowed(False)
