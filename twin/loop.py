@@ -34,7 +34,9 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from control.errors import ControlError
 from control.limits import Limits
@@ -64,15 +66,18 @@ from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import Study, WhatIfWorker
 from twin.records import MillState, ModeSet, Record
+from twin.runlog import RunLog
 from twin.state import LiveState
 from vision.errors import VisionError
-from vision.meter import Meter
+from vision.meter import Meter, Reading
 
 if TYPE_CHECKING:
     from sim.mixer import Mixer
     from twin.dashboard import Dashboard
     from twin.demo import DemoPlant
+    from vision.colours import ColourClass
     from vision.config import MeterConfig
+    from vision.roi import DrumROI
     from vision.sources import Frame
 
 log = logging.getLogger("drumtwin.loop")
@@ -134,15 +139,15 @@ class LiveLoop:
     def __init__(
         self,
         config: RunConfig,
-        frames: Iterable[Any],
+        frames: Iterable[Frame],
         mill: MillLink,
-        runlog: Any,
+        runlog: RunLog,
         state: LiveState | None = None,
         *,
         clock: RunClock | None = None,
-        roi: Any = None,
-        classes: Sequence[Any] | None = None,
-        overlay: Callable[..., Any] | None = None,
+        roi: DrumROI | None = None,
+        classes: Sequence[ColourClass] | None = None,
+        overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
         mixer: Mixer | None = None,
         meter_config: MeterConfig | None = None,
         seams: Seams | None = None,
@@ -455,7 +460,7 @@ def supervisor_config(seams: Seams | None = None, critical_rpm: float | None = N
     return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **overrides})  # type: ignore[arg-type]
 
 
-def _overlay(image: Any, reading: Any) -> Any:
+def _overlay(image: np.ndarray, reading: Reading) -> np.ndarray:
     from vision.overlay import draw_overlay
 
     return draw_overlay(image, reading)

@@ -40,11 +40,14 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from twin.config import LOCAL_HOSTS
 from twin.errors import TwinError
+
+if TYPE_CHECKING:
+    from viser import ViserServer
 
 CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {"viser": ("1.1.1",), "websockets": ("16.1.1",)}
 """Versions whose internals the dashboard relies on were checked against (the websocket
@@ -384,7 +387,7 @@ class Gatekeeper:
 
 
 # -- viser internals (pinned: CHECKED_VERSIONS) -------------------------------------------------
-def disable_share_tunnel(server: Any) -> None:
+def disable_share_tunnel(server: ViserServer) -> None:
     """No share URL: viser's tunnel would publish the dashboard on the internet. viser 1.1
     registers the share handlers on its websocket server; the public ``request_share_url``
     is replaced by a no-op too."""
@@ -398,14 +401,14 @@ def disable_share_tunnel(server: Any) -> None:
     def no_share(verbose: bool = True) -> None:
         return None
 
-    server.request_share_url = no_share
+    server.request_share_url = no_share  # type: ignore[method-assign]
 
 
-def _connection(server: Any, client_id: int) -> Any:
+def _connection(server: ViserServer, client_id: int) -> Any:
     return server._websock_server._live_connections.get(client_id)
 
 
-def client_headers(server: Any, client_id: int) -> tuple[str | None, str | None] | None:
+def client_headers(server: ViserServer, client_id: int) -> tuple[str | None, str | None] | None:
     """(Origin, Host) of a viewer's websocket handshake; None when the viewer has already
     disconnected; (None, None) when its request is unknown."""
     conn = _connection(server, client_id)
@@ -418,7 +421,7 @@ def client_headers(server: Any, client_id: int) -> tuple[str | None, str | None]
     return (h.get("Origin"), h.get("Host"))
 
 
-def client_address(server: Any, client_id: int) -> str:
+def client_address(server: ViserServer, client_id: int) -> str:
     """The viewer's client address (IP), "" when unknown."""
     conn = _connection(server, client_id)
     try:
@@ -428,7 +431,7 @@ def client_address(server: Any, client_id: int) -> str:
     return str(addr[0]) if isinstance(addr, tuple) and addr else ""
 
 
-def close_client(server: Any, client_id: int) -> None:
+def close_client(server: ViserServer, client_id: int) -> None:
     """Drop one viewer's websocket (viser reconnects it; the handshake guard refuses it then)."""
     ws = server._websock_server
     conn = ws._live_connections.get(client_id)

@@ -190,7 +190,7 @@ class Layout:
             self._whatif_table = gui.add_markdown("")
         self._whatif_seq = -1
 
-    def push(self, snap: Snapshot, seen: dict[str, Any], plots: bool) -> bool:
+    def push(self, snap: Snapshot, seen: dict[str, int | str | None], plots: bool) -> bool:
         """Push what changed since ``seen`` (sequence numbers, updated here); the plots only
         when ``plots``. True when an image or the plots were pushed."""
         pushed = False

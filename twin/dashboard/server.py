@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any
 
 import viser
 
@@ -161,7 +160,7 @@ class Dashboard:
 
     def _run(self) -> None:
         period = 0.5 / self.update_hz
-        seen: dict[str, Any] = {"camera": -1, "twin": -1, "hist": -1, "mode": None}
+        seen: dict[str, int | str | None] = {"camera": -1, "twin": -1, "hist": -1, "mode": None}
         next_t = time.monotonic()
         tick = 0
         while not self._stop.is_set():
@@ -180,7 +179,7 @@ class Dashboard:
                 delay = 0
             self._stop.wait(delay)
 
-    def _push(self, seen: dict[str, Any], plots: bool) -> None:
+    def _push(self, seen: dict[str, int | str | None], plots: bool) -> None:
         snap = self.state.snapshot()
         if self.layout.push(snap, seen, plots):
             self.pushes += 1

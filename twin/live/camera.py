@@ -10,7 +10,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 
@@ -20,7 +20,10 @@ from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
 from twin.records import CameraRate, FrameReading, TrendSettled, TrendUnsettled
 from twin.state import LiveState
 from vision.errors import VisionError
-from vision.meter import Reading
+from vision.meter import Meter, Reading
+from vision.sources import Frame
+
+T = TypeVar("T")
 
 NO_DRUM_GRACE_S = 5.0
 """Camera seconds from the first frame during which frames without a findable drum (a webcam
@@ -70,7 +73,7 @@ def is_valid_mi(r: Reading) -> bool:
     return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
 
 
-def put_dropping_oldest(q: queue.Queue, item: Any) -> None:
+def put_dropping_oldest(q: queue.Queue[T], item: T) -> None:
     """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
     while True:
         try:
@@ -90,8 +93,8 @@ class CameraWorker:
 
     def __init__(
         self,
-        frames: Iterable[Any],
-        meter: Any,
+        frames: Iterable[Frame],
+        meter: Meter,
         out: queue.Queue[CameraReading],
         box: Latest[CameraInfo],
         state: LiveState,

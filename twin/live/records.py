@@ -25,6 +25,7 @@ from twin.records import Bus, DecisionMade, Record, record_of
 from twin.runlog import write_record
 from twin.state import LiveState
 from vision.meter import Reading
+from vision.roi import DrumROI
 
 T = TypeVar("T")
 
@@ -114,7 +115,7 @@ class CameraInfo:
     t_s: float | None = None
     wall_s: float = 0.0
     image: np.ndarray | None = None
-    roi: Any = None
+    roi: DrumROI | None = None
     n_frames: int = 0
     ended: bool = False
 

@@ -21,13 +21,17 @@ from collections import deque
 from collections.abc import Mapping
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.clock import Cadence
 from twin.live.camera import Rate
 from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
 from twin.records import Calibrated, TwinReading, TwinStatus
 from twin.state import LiveState
+
+if TYPE_CHECKING:
+    from sim.mixer import Mixer
+    from vision.colours import ColourClass
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
 TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
@@ -43,8 +47,8 @@ class TwinSettings:
     seed: int = 0
     start_rpm: float = 5.0
     size_px: int = 240
-    classes: tuple[Any, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
-    mixer: Any = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
+    classes: tuple[ColourClass, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
+    mixer: Mixer | None = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
     engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
