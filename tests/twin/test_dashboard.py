@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import viser
 import websockets
 
 from control.supervisor import Supervisor
@@ -591,3 +592,29 @@ def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
     gate.flush_throttled()
     assert events[-1] == ("dashboard_refused", {"suppressed": 2, "summary": True})
     assert not Gatekeeper(None).token_required and Gatekeeper(None).estop_allowed(False)
+
+
+@pytest.mark.timeout(60)
+def test_a_locked_viewers_callbacks_are_refused_by_the_server() -> None:
+    """viser runs a control's callbacks on the server for whatever a viewer's websocket
+    sends: a disabled button in the browser is no defence. Every callback of a viewer without
+    the token (``twin.dashboard.controls``: each re-checks its viewer) moves nothing; its
+    EMERGENCY STOP still works. The callbacks are run as viser runs them (its handle's
+    callbacks, with a ``GuiEvent`` from that viewer)."""
+    controls = RecordingControls()
+    dash = Dashboard(LiveState(), controls, port=0, update_hz=4, control_token="s3cret").start()
+    try:
+        with open_viewer(dash.url, timeout_s=20) as ws:
+            assert wait_for_label(ws, "EMERGENCY STOP", 30)
+            wait_until(lambda: dash.viewers_with_estop() == 1, 10, "the viewer's controls")
+            (cid, client), = dash._server.get_clients().items()
+            cc = dash.viewers._clients[cid]
+            for handle in cc.handles:
+                for cb in handle._impl.update_cb:
+                    cb(viser.GuiEvent(client, cid, handle))
+            assert controls.names() == [] and "refused" in cc.status.content
+            for cb in cc.estop._impl.update_cb:
+                cb(viser.GuiEvent(client, cid, cc.estop))
+            assert controls.names() == ["emergency_stop"]
+    finally:
+        dash.stop()
