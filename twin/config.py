@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from twin.errors import TwinError
@@ -91,7 +91,7 @@ class RunConfig:
     objective: str = "plateau"  # AUTO's objective: plateau | time | energy (control.objective)
     target_mi: float | None = None  # the endpoint's and the objective's target MI (None: twin.loop.LOOP_ENDPOINT)
     stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed (control.endpoint)
-    extra: dict = field(default_factory=dict)
+    drive: str | None = None  # demo only: the mill is this drive profile's emulator over Modbus RTU
 
     @property
     def demo(self) -> bool:

@@ -1,5 +1,9 @@
-"""The live loop's composition root: builds the workers, wires them, starts and joins
-their threads. Nothing else in the application starts a thread of the loop.
+"""The live loop's composition root, for the demo and for hardware alike: :func:`run_live`
+builds the plant (demo) or opens the camera, the mill link, the run log, the dashboard's
+state, the :class:`LiveLoop` and the dashboard, starts them in order (the demo's start is a
+small plan, :class:`DemoStart`), waits and shuts them down; the CLI only parses and calls it.
+:class:`LiveLoop` builds the workers, wires them, starts and joins their threads. Nothing
+else in the application starts a thread of the loop. Test seams are typed (:class:`Seams`).
 
 Workers (``twin/live/``), one thread each, none of which sees the loop:
 
@@ -24,12 +28,15 @@ from __future__ import annotations
 
 import logging
 import math
+import platform
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from control.endpoint import EndpointConfig, EndpointDetector
 from control.errors import ControlError
@@ -58,10 +65,21 @@ from twin.live.records import (
 )
 from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
-from twin.live.whatif import WhatIfWorker
+from twin.live.whatif import Study, WhatIfWorker
+from twin.records import MillState, ModeSet, Record
+from twin.runlog import RunLog
 from twin.state import LiveState
 from vision.errors import VisionError
-from vision.meter import Meter
+from vision.meter import Meter, Reading
+
+if TYPE_CHECKING:
+    from sim.mixer import Mixer
+    from twin.dashboard import Dashboard
+    from twin.demo import DemoPlant
+    from vision.colours import ColourClass
+    from vision.config import MeterConfig
+    from vision.roi import DrumROI
+    from vision.sources import Frame
 
 log = logging.getLogger("drumtwin.loop")
 
@@ -96,7 +114,6 @@ class Summary:
     wall_time_s: float = 0.0
     camera_fps: float = 0.0
     twin_fps: float = 0.0
-    extra: dict = field(default_factory=dict)
 
 
 def open_mill(url: str) -> MillLink:
@@ -123,18 +140,20 @@ class LiveLoop:
     def __init__(
         self,
         config: RunConfig,
-        frames: Iterable[Any],
+        frames: Iterable[Frame],
         mill: MillLink,
-        runlog: Any,
+        runlog: RunLog,
         state: LiveState | None = None,
         *,
         clock: RunClock | None = None,
-        roi: Any = None,
-        classes: Sequence[Any] | None = None,
-        overlay: Callable[..., Any] | None = None,
-        mixer: Any = None,
-        meter_config: Any = None,
+        roi: DrumROI | None = None,
+        classes: Sequence[ColourClass] | None = None,
+        overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
+        mixer: Mixer | None = None,
+        meter_config: MeterConfig | None = None,
+        seams: Seams | None = None,
     ) -> None:
+        seams = seams or Seams()
         self.config = config
         self.clock = clock or RunClock(1.0)
         self.stop_event = self.clock.stop
@@ -167,36 +186,37 @@ class LiveLoop:
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,
         )
         self.process = ProcessWorker(
-            readings, MITrend(trend_config(config)), self.frames_box, self.view, self.events, self.events.frame,
-            self.state, slopes, camera_fps=self.camera.fps.rate,
-            endpoint=EndpointDetector(endpoint_config(config)),
+            readings, MITrend(trend_config(seams)), self.frames_box, self.view, self.events, slopes,
+            camera_fps=self.camera.fps.rate,
+            endpoint=EndpointDetector(endpoint_config(config, seams)),
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
                 classes=self._classes, mixer=mixer, engine=config.engine,
-                calibrate_kwargs={"mixer": mixer, "engine": config.engine,
-                                  **config.extra.get("calibrate_kwargs", {})},
+                calibrate_kwargs={"mixer": mixer, "engine": config.engine, **seams.calibrate},
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
         )
         self.whatif = WhatIfWorker(
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
-            study=config.extra.get("whatif_study"),
+            study=seams.whatif_study,
         )
-        sup_config = supervisor_config(config, None if mixer is None else mixer.drum.critical_rpm)
+        sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
         self._limits = sup_config.limits
         self.supervisor = SupervisorWorker(
             Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
             alive=self.supervisor_alive,
-            mismatch=MismatchMonitor(MismatchTolerance(**config.extra.get("mismatch", {}))),
+            mismatch=MismatchMonitor(seams.mismatch),
             on_twin_mismatch=lambda: self.twin.request("calibrate"),
         )
         self.whatif.on_auto_result = self._auto_study_result
         self._threads: list[threading.Thread] = []
-        self.state.update_numbers(mode=config.mode, mill_state="connecting")
+        self.events.publish(ModeSet(t_s=0.0, mode=config.mode))
+        self.events.publish(MillState(t_s=0.0, state="connecting", connected=False, setpoint_rpm=None,
+                                      actual_rpm=None))
 
     # -- lifecycle (the only place threads start and stop) ---------------------------------
     def warm_up(self) -> None:
@@ -401,7 +421,7 @@ class LiveLoop:
 
 # Supervisor settings of the live loop. The camera MI of a well-mixed bed is ~0.93-0.95;
 # radial segregation at 5 rpm brings it to ~0.80-0.85 (vision MI of the demo plant).
-LOOP_SUPERVISOR: dict[str, Any] = dict(
+LOOP_SUPERVISOR: dict[str, float | int | bool] = dict(
     seg_level=0.88,
     clear_level=0.91,
     seg_rate_per_s=-0.004,
@@ -422,45 +442,277 @@ LOOP_SUPERVISOR: dict[str, Any] = dict(
 
 # Trend settings of the live loop: the defaults of ``control.trend.TrendConfig`` (the noise is
 # estimated on line and re-initialisation is decided on the share of rejections, so camera MI
-# needs no loop-specific tuning; issue 21). ``config.extra["trend"]`` overrides.
-LOOP_TREND: dict[str, Any] = {}
+# needs no loop-specific tuning; issue 21). ``Seams.trend`` overrides.
+LOOP_TREND: dict[str, float | int | bool] = {}
 
 
 # Endpoint settings of the live loop (control.endpoint; docs/endpoint.md): a mixed bed's camera MI is
-# ~0.93-0.95, a radially segregated one ~0.80-0.85. ``--target-mi`` and ``config.extra["endpoint"]`` override.
-LOOP_ENDPOINT: dict[str, Any] = dict(target_mi=0.9)
+# ~0.93-0.95, a radially segregated one ~0.80-0.85. ``--target-mi`` and ``Seams.endpoint`` override.
+LOOP_ENDPOINT: dict[str, float | int | bool] = dict(target_mi=0.9)
 
 
-def endpoint_config(config: RunConfig) -> EndpointConfig:
-    """The endpoint detector's settings for this run (``RunConfig.target_mi``, then
-    ``config.extra["endpoint"]`` override ``LOOP_ENDPOINT``)."""
-    target = {} if config.target_mi is None else {"target_mi": float(config.target_mi)}
-    return EndpointConfig(**{**LOOP_ENDPOINT, **target, **config.extra.get("endpoint", {})})
+def endpoint_config(config: RunConfig | None = None, seams: Seams | None = None) -> EndpointConfig:
+    """The endpoint detector's settings for a run (``RunConfig.target_mi``, then
+    ``seams.endpoint`` override ``LOOP_ENDPOINT``)."""
+    target = {} if config is None or config.target_mi is None else {"target_mi": float(config.target_mi)}
+    over = seams.endpoint if seams is not None else {}
+    return EndpointConfig(**{**LOOP_ENDPOINT, **target, **over})
 
 
-def trend_config(config: RunConfig) -> TrendConfig:
-    """The Kalman trend's settings for this run (``config.extra["trend"]`` overrides)."""
-    return TrendConfig(**{**LOOP_TREND, **config.extra.get("trend", {})})
+def trend_config(seams: Seams | None = None) -> TrendConfig:
+    """The Kalman trend's settings for a run (``seams.trend`` overrides)."""
+    return TrendConfig(**{**LOOP_TREND, **(seams.trend if seams is not None else {})})  # type: ignore[arg-type]
 
 
-def supervisor_config(config: RunConfig, critical_rpm: float | None = None) -> SupervisorConfig:
-    """The supervisor's settings for this run (``config.extra["supervisor"]`` overrides);
-    the critical speed comes from the twin's drum (``critical_rpm``, the mixer's drum's;
-    default the paper's: ``sim.recipe``, the one formula)."""
+def supervisor_config(
+    seams: Seams | None = None, critical_rpm: float | None = None, config: RunConfig | None = None
+) -> SupervisorConfig:
+    """The supervisor's settings for a run (``seams.supervisor`` overrides); the critical
+    speed comes from the twin's drum (``critical_rpm``, the mixer's drum's; default the
+    paper's: ``sim.recipe``, the one formula); AUTO's objective, target MI and stop at the
+    endpoint from ``config`` (``RunConfig``)."""
     from sim.recipe import PAPER_DRUM
 
-    overrides = config.extra.get("supervisor", {})
+    overrides = seams.supervisor if seams is not None else {}
     crit = PAPER_DRUM.critical_rpm if critical_rpm is None else float(critical_rpm)
-    batch = {"objective": config.objective, "stop_at_endpoint": config.stop_at_endpoint,
-             "target_mi": endpoint_config(config).target_mi}  # one target: the endpoint's
-    return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **batch, **overrides})
+    batch: dict[str, object] = {}
+    if config is not None:  # one target: the endpoint's
+        batch = {"objective": config.objective, "stop_at_endpoint": config.stop_at_endpoint,
+                 "target_mi": endpoint_config(config, seams).target_mi}
+    return SupervisorConfig(**{"critical_rpm": crit, **LOOP_SUPERVISOR, **batch, **overrides})  # type: ignore[arg-type]
 
 
-def _overlay(image: Any, reading: Any) -> Any:
+def _overlay(image: np.ndarray, reading: Reading) -> np.ndarray:
     from vision.overlay import draw_overlay
 
     return draw_overlay(image, reading)
 
 
-__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "LiveLoop", "Summary", "endpoint_config", "open_mill",
-           "supervisor_config", "trend_config"]
+# -- test seams and the demo's start ------------------------------------------------------------
+Overrides = Mapping[str, float | int | bool]
+"""Field overrides of a settings dataclass (names checked by the dataclass: a typo is a TypeError)."""
+
+
+@dataclass(frozen=True)
+class Seams:
+    """What a test (or a bench) may change about a run, typed; a production run uses the
+    defaults. ``supervisor``/``trend``: overrides of the loop's ``SupervisorConfig`` /
+    ``TrendConfig``; ``calibrate``: keyword arguments of the twin's calibration
+    (``sim.calibrate``); ``whatif_study``: runs what-if jobs instead of the process pool;
+    ``mismatch``: the twin-against-camera tolerance; ``plant_watchdog_s``: the demo board's
+    watchdog (wall s); ``on_started(loop, plant, dashboard)``: called once everything runs
+    (fault injection)."""
+
+    supervisor: Overrides = field(default_factory=dict)
+    trend: Overrides = field(default_factory=dict)
+    endpoint: Overrides = field(default_factory=dict)
+    calibrate: Overrides = field(default_factory=dict)
+    whatif_study: Study | None = None
+    mismatch: MismatchTolerance = field(default_factory=MismatchTolerance)
+    plant_watchdog_s: float | None = None
+    on_started: Callable[[LiveLoop, DemoPlant | None, Dashboard | None], None] | None = None
+
+
+class DemoStart:
+    """The demo's start plan: once the mill worker has read the board (its first connected
+    ``MillState`` record on the run's bus, at most ``connect_timeout_s`` wall), the plant's
+    front panel spins the drive at its start rpm and the demo's operator presses Start (the
+    loop then feeds the board's watchdog). A hardware run has no plan: its operator starts
+    the mill from the dashboard."""
+
+    def __init__(self, plant: DemoPlant, connect_timeout_s: float = 20.0) -> None:
+        self.plant = plant
+        self.connect_timeout_s = connect_timeout_s
+        self._connected = threading.Event()
+
+    def record(self, rec: Record) -> None:
+        """The bus subscriber: the mill is connected."""
+        if isinstance(rec, MillState) and rec.connected:
+            self._connected.set()
+
+    def execute(self, loop: LiveLoop) -> None:
+        end = time.monotonic() + self.connect_timeout_s
+        while not self._connected.wait(0.05) and time.monotonic() < end and not loop.stop_event.is_set():
+            pass
+        self.plant.start_drive()
+        loop.start_mill()
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "numba", "filterpy", "pyserial", "viser"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _paced(frames: Iterator[Frame], clock: RunClock) -> Iterator[Frame]:
+    """Replay a recording at its own speed (``frame.t_s`` on the run clock)."""
+    t0 = None
+    for f in frames:
+        t0 = f.t_s if t0 is None else t0
+        if not clock.sleep_until(f.t_s - t0):
+            return
+        yield f
+
+
+def check_scheduler_answers(address: str, timeout_s: float = 3.0) -> None:
+    """TwinError (one line) unless something accepts a TCP connection at the Dask
+    scheduler ``address`` within ``timeout_s`` (a dead or garbage address is refused at
+    the start of the run, not found by the first what-if study in AUTO)."""
+    import socket
+
+    from twin.config import check_scheduler
+
+    host, port = check_scheduler(address)
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise TwinError(f"--scheduler {address}: no Dask scheduler answers ({exc.strerror or exc})") from None
+
+
+def _wait_plain(loop: LiveLoop) -> None:
+    loop.wait(loop.config.duration_s)
+
+
+def run_live(
+    cfg: RunConfig,
+    seams: Seams | None = None,
+    *,
+    wait: Callable[[LiveLoop], None] = _wait_plain,
+    on_dashboard: Callable[[str], None] | None = None,
+) -> Summary:
+    """The one composition root of a run, demo and hardware alike: builds the plant (demo)
+    or opens the camera, the mill link, the run log, the dashboard's state, the loop and the
+    dashboard; starts them in order (the demo's :class:`DemoStart` plan once the loop runs);
+    ``wait(loop)`` blocks until the run is over (the CLI's progress bar; default: the
+    duration); then stops everything and returns the :class:`Summary`.
+
+    The mill link is opened first: a URL that cannot be opened raises ``ConnectionError``
+    before anything else starts (the CLI exits 2). A run that had to end (its log could not
+    be written, an essential worker crashed: ``LiveLoop.failure``) raises ``TwinError`` once
+    it is shut down. ``on_dashboard(url)``: told the dashboard's address once it serves.
+    """
+    from twin.demo import DemoPlant, PlantConfig
+    from twin.runlog import RunLog, default_run_dir
+
+    seams = seams or Seams()
+    if cfg.scheduler is not None:
+        check_scheduler_answers(cfg.scheduler)  # before anything starts: one line, exit 2
+    clock = RunClock(cfg.speed)
+    classes = None
+    roi = None
+    mixer = None
+    mc = None
+    if cfg.meter_config is not None:
+        from sim.mixer import mixer_from_config
+        from vision.config import load_config
+
+        mc = load_config(cfg.meter_config)
+        classes, roi = mc.classes, mc.roi
+        mixer = mixer_from_config(mc)  # checked in any case; the demo's plant and twin stay the paper's
+        mixer = None if cfg.demo else mixer
+    if cfg.engine is not None:
+        from sim.engine import engine_for
+        from sim.mixer import paper_mixer
+
+        engine_for(paper_mixer() if mixer is None else mixer, cfg.engine)
+    plant: DemoPlant | None = None
+    mill: MillLink | None = None
+    runlog: RunLog | None = None
+    loop: LiveLoop | None = None
+    dash: Dashboard | None = None
+    summary: Summary | None = None
+    t_wall = time.monotonic()
+    try:
+        frames: Iterable[Frame] | None
+        if cfg.demo:
+            plant_cfg = PlantConfig(case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps,
+                                    size_px=cfg.frame_px, drive=cfg.drive)
+            if seams.plant_watchdog_s is not None:
+                plant_cfg = replace(plant_cfg, watchdog_s=seams.plant_watchdog_s)
+            plant = DemoPlant(plant_cfg, clock)
+            frames, mill_url, roi = plant.frames(), plant.url, plant.roi
+        else:
+            mill_url = str(cfg.mill)
+            frames = None
+            if mc is not None:  # the config's [drive] hz_per_rpm goes into a modbus: URL (docs/drives.md)
+                from control.modbus.link import config_mill_url
+
+                mill_url = config_mill_url(mill_url, mc.drive_table, f"config {mc.source}")
+        mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
+        if frames is None:
+            from vision.sources import open_source
+
+            frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
+        runlog = RunLog(cfg.log_dir or default_run_dir())  # columns: twin.records.FRAME_COLUMNS
+        started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
+        if plant is not None:
+            runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
+        state = LiveState()
+        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, mixer=mixer,
+                        meter_config=mc, seams=seams)
+        if mixer is not None:
+            runlog.set_metadata(mixer=mixer_metadata(mixer))
+        if cfg.dashboard:
+            from twin.dashboard import Dashboard
+
+            events, now_s = loop.events, loop.now_s
+            dash = Dashboard(
+                state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
+                update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
+                limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
+            ).start()
+            if on_dashboard is not None:
+                on_dashboard(dash.url)
+            runlog.set_metadata(dashboard_url=dash.url)
+        plan = DemoStart(plant) if plant is not None else None
+        if plan is not None:
+            loop.events.bus.subscribe(plan.record)
+        loop.warm_up()  # compile before the clock runs, not while the camera does
+        clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
+        loop.start()
+        if plan is not None:
+            plan.execute(loop)
+        if seams.on_started is not None:
+            seams.on_started(loop, plant, dash)
+        wait(loop)
+    finally:
+        clock.stop.set()
+        if loop is not None:
+            loop.stop()  # joins the workers, closes the what-if pool and the mill link
+        elif mill is not None:
+            mill.close()
+        if dash is not None:
+            dash.stop()
+        if plant is not None:
+            plant.close()
+        if runlog is not None:
+            if loop is not None:
+                summary = loop.summary(time.monotonic() - t_wall)
+                loop.events.metadata(summary=asdict(summary))
+            runlog.close()
+    if loop is not None and loop.failure is not None:
+        raise TwinError(f"the run stopped: {loop.failure} (log in {cfg.log_dir})")
+    assert summary is not None  # the run log exists once the loop does
+    return summary
+
+
+def mixer_metadata(mixer: Mixer) -> dict[str, object]:
+    """The user's mixer for ``metadata.json``."""
+    from sim.mixer import resolve
+
+    return {"classes": [{"name": k.name, "count": k.count, "diameter_mm": 1e3 * k.shape.diameter_m,
+                         "shape": k.shape.kind} for k in resolve(mixer)],
+            "drum_diameter_mm": 1e3 * mixer.drum.diameter_m, "fill": mixer.fill,
+            "direction": mixer.direction, "monolayer": mixer.monolayer}
+
+
+__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "DemoStart", "LiveLoop", "Seams", "Summary", "endpoint_config",
+           "open_mill", "run_live", "supervisor_config", "trend_config"]

@@ -1,6 +1,11 @@
 """Crash-safe run log: ``frames.csv`` (one row per camera frame), ``events.jsonl``
 (decisions, faults, calibrations) and ``metadata.json`` (config, calibration, versions).
 
+The run log is a subscriber of the run's record bus (``twin.records``): :meth:`RunLog.record`
+writes a ``FrameReading`` as a CSV row (columns ``twin.records.FRAME_COLUMNS``) and every
+logged record as one JSONL line ``{"t_s", "wall_s", "kind", **fields}``. The formats are those
+of earlier runs: old run dirs read back the same.
+
 Every row and every event is written with one ``write`` and flushed to the OS at
 once, so ``kill -9`` of the process loses nothing that was logged; ``fsync`` (for a
 power cut) runs at most once per ``fsync_interval_s``, so a crash of the machine
@@ -28,36 +33,12 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from twin.errors import TwinError
+from twin.records import FRAME_COLUMNS, FrameReading, Record, event_fields, kind_of
 
-FRAME_COLUMNS: tuple[str, ...] = (
-    "t_s",  # run time (demo clock, scaled by --speed), s
-    "wall_s",  # unix time when the row was written, s
-    "frame",
-    "mi",
-    "mi_sigmoid",
-    "mi_linear",
-    "d_px",
-    "dsigma_px",
-    "concentration",
-    "slope_deg",
-    "valid",
-    "trend_mi",
-    "trend_lo95",
-    "trend_hi95",
-    "trend_rate",
-    "ma_mi",  # the paper's 150-sample moving average
-    "twin_mi",
-    "twin_slope_deg",
-    "rpm_setpoint",
-    "rpm_actual",
-    "mode",
-    "flags",  # ';'-separated
-    "mixed",  # 0/1: the batch is at its endpoint (control.endpoint)
-    "mixing_time_s",  # since when, s (empty: not mixed)
-)
+__all__ = ["FRAME_COLUMNS", "RunLog", "read_events", "read_frames", "read_metadata", "write_record"]
 
 FRAMES_FILE = "frames.csv"
 EVENTS_FILE = "events.jsonl"
@@ -221,6 +202,10 @@ class RunLog:
             self._sync()
         return record
 
+    def record(self, rec: Record) -> None:
+        """The bus subscriber (see :func:`write_record`)."""
+        write_record(self, rec)
+
     def set_metadata(self, **data: Any) -> None:
         """Merge ``data`` into ``metadata.json`` (atomic replace)."""
         with self._lock:
@@ -257,6 +242,22 @@ class RunLog:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class RecordWriter(Protocol):
+    """What :func:`write_record` writes to (a :class:`RunLog`, or a test's stand-in)."""
+
+    def frame(self, row: Mapping[str, Any]) -> None: ...
+    def event(self, kind: str, t_s: float, **data: Any) -> object: ...
+
+
+def write_record(log: RecordWriter, rec: Record) -> None:
+    """A frame reading -> one CSV row; a logged record -> one JSONL event; the dashboard-only
+    status records -> nothing."""
+    if isinstance(rec, FrameReading):
+        log.frame(rec.as_dict())
+    elif rec.logged:
+        log.event(kind_of(rec), rec.t_s, **event_fields(rec))
 
 
 # -- reading (tests, plots, summaries) ------------------------------------------------

@@ -1,78 +1,49 @@
-"""The live state the loop publishes and the dashboard reads: latest frames, plot
-histories, the numbers panel and what-if results, behind one lock; and the
-:class:`FrameRow`, one processed frame, whose fields are the run log's CSV columns and
-whose :data:`SERIES` are the dashboard's plots.
+"""The live state the dashboard reads: latest images, plot histories, the numbers panel
+(:class:`Panel`) and what-if results, behind one lock.
 
-Writers (loop threads) call ``publish_*``; readers take ``snapshot()``, a consistent
-copy they can use without holding the lock. Nothing here blocks for long: a slow
-dashboard can never stall the camera thread.
+It is a subscriber of the run's record bus (``twin.records``): :meth:`LiveState.record` folds
+each record into the plots and the panel (a frozen dataclass, never a dict of strings).
+Images and what-if curves come through ``publish_camera`` / ``publish_twin`` /
+``set_whatif``. The alarms are the messages of the run's one :class:`ActiveFaults`. Readers
+take ``snapshot()``, a consistent copy they can use without holding the lock. Nothing here
+blocks for long: a slow dashboard can never stall the camera thread.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import deque
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, fields
-from typing import TYPE_CHECKING, Any, Protocol
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+
+from twin.records import (
+    FRAME_COLUMNS,
+    SERIES,
+    ActiveFaults,
+    Calibrated,
+    CameraRate,
+    DecisionMade,
+    FrameReading,
+    MillState,
+    ModeSet,
+    Record,
+    TrendSettled,
+    TrendUnsettled,
+    TwinReading,
+    TwinStatus,
+)
 
 if TYPE_CHECKING:
     from sim.drum import Particles
 
-@dataclass(frozen=True)
-class FrameRow:
-    """One processed camera frame: the run log's CSV row and the plots' point.
+FrameRow = FrameReading
+"""The frame record (``twin.records.FrameReading``) under its old name."""
+FRAME_ROW_COLUMNS: tuple[str, ...] = FRAME_COLUMNS
 
-    Its fields, in order, are the CSV columns (``FRAME_ROW_COLUMNS``, with ``wall_s``
-    that the run log fills in); :data:`SERIES` are the plotted ones. Times in run seconds.
-    """
-
-    t_s: float
-    frame: int
-    mi: float
-    mi_sigmoid: float
-    mi_linear: float
-    d_px: float
-    dsigma_px: float
-    concentration: float
-    slope_deg: float
-    valid: bool
-    trend_mi: float
-    trend_lo95: float
-    trend_hi95: float
-    trend_rate: float
-    ma_mi: float  # the paper's 150-sample moving average
-    twin_mi: float | None
-    twin_slope_deg: float | None
-    rpm_setpoint: float | None  # None (an empty cell): unknown, the mill link is lost (flag link_lost:)
-    rpm_actual: float | None
-    mode: str
-    flags: tuple[str, ...]
-    mixed: bool = False  # the batch is at its endpoint (control.endpoint)
-    mixing_time_s: float | None = None  # since when (None: not mixed)
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-FRAME_ROW_COLUMNS: tuple[str, ...] = ("t_s", "wall_s", *tuple(f.name for f in fields(FrameRow))[1:])
-
-# Plot series (x is run time ``t_s``); each is a ring buffer of ``HISTORY_LEN`` points.
-SERIES: tuple[str, ...] = (
-    "t_s",
-    "mi",
-    "trend_mi",
-    "trend_lo95",
-    "trend_hi95",
-    "ma_mi",
-    "twin_mi",
-    "rpm_setpoint",
-    "rpm_actual",
-    "slope_deg",
-    "twin_slope_deg",
-)
 HISTORY_LEN = 900
 
 
@@ -90,6 +61,75 @@ class WhatIfView:
 
 
 @dataclass(frozen=True)
+class Panel:
+    """The dashboard's numbers panel: the newest value of each, folded from the run records
+    (None: not seen yet). Units as in ``twin.records``."""
+
+    t_s: float | None = None  # run time of the newest frame, s
+    mi: float | None = None
+    trend_mi: float | None = None
+    d_px: float | None = None
+    dsigma_px: float | None = None
+    concentration: float | None = None
+    slope_deg: float | None = None
+    light_state: str | None = None  # ok | changed (cause)
+    camera_fps: float | None = None
+    trend_state: str | None = None  # settled | unsettled
+    mixed: bool = False  # the batch is at its endpoint (control.endpoint)
+    mixing_time_s: float | None = None  # its mixing time, s
+    twin_mi: float | None = None
+    twin_slope_deg: float | None = None
+    twin_fps: float | None = None
+    twin_state: str | None = None
+    friction: float | None = None
+    rpm_setpoint: float | None = None
+    rpm_actual: float | None = None
+    mill_state: str | None = None
+    mode: str | None = None
+    last_decision: str | None = None
+    last_reason: str | None = None
+
+
+def fold(panel: Panel, rec: Record) -> Panel:
+    """The panel after ``rec`` (records that show nothing leave it as it is)."""
+    if isinstance(rec, FrameReading):
+        light = next((f for f in rec.flags if f.startswith("lighting_changed:")), None)
+        return replace(
+            panel, t_s=rec.t_s, mi=rec.mi, d_px=rec.d_px, dsigma_px=rec.dsigma_px, concentration=rec.concentration,
+            slope_deg=rec.slope_deg, trend_mi=rec.trend_mi, mixed=rec.mixed, mixing_time_s=rec.mixing_time_s,
+            light_state="ok" if light is None else "changed (" + light.split(":", 1)[1] + ")",
+        )
+    if isinstance(rec, CameraRate):
+        return replace(panel, camera_fps=rec.fps)
+    if isinstance(rec, (TrendSettled, TrendUnsettled)):
+        return replace(panel, trend_state="settled" if isinstance(rec, TrendSettled) else "unsettled")
+    if isinstance(rec, MillState):
+        return replace(panel, mill_state=rec.state, rpm_setpoint=rec.setpoint_rpm, rpm_actual=rec.actual_rpm)
+    if isinstance(rec, ModeSet):
+        return replace(panel, mode=rec.mode)
+    if isinstance(rec, DecisionMade):
+        rpm_txt = "" if rec.rpm is None else f" -> {rec.rpm:g} rpm"
+        return replace(panel, last_decision=f"{rec.decision}{rpm_txt}", last_reason=rec.reason)
+    if isinstance(rec, TwinStatus):
+        return replace(panel, twin_state=rec.state)
+    if isinstance(rec, Calibrated):
+        return replace(panel, friction=rec.friction)
+    if isinstance(rec, TwinReading):
+        return replace(panel, twin_mi=rec.mi, twin_slope_deg=rec.slope_deg, twin_fps=rec.fps)
+    return panel
+
+
+def plot_point(rec: FrameReading) -> dict[str, float | None]:
+    """The plot point of a frame: its :data:`SERIES` values; an unknown rpm (link lost) is a
+    gap (NaN), any other missing value (no twin yet) repeats the last one (None)."""
+    point: dict[str, float | None] = {k: getattr(rec, k) for k in SERIES}
+    for k in ("rpm_setpoint", "rpm_actual"):
+        if point[k] is None:
+            point[k] = math.nan
+    return point
+
+
+@dataclass(frozen=True)
 class Snapshot:
     """A consistent copy of the live state."""
 
@@ -101,7 +141,7 @@ class Snapshot:
     twin_drum_r_m: float | None
     history: dict[str, np.ndarray]
     history_seq: int
-    numbers: dict[str, Any]
+    panel: Panel
     alarms: tuple[str, ...]
     whatif: WhatIfView
 
@@ -122,7 +162,7 @@ class Controls(Protocol):
 class LiveState:
     """Thread-safe holder of the latest loop state (see module doc)."""
 
-    def __init__(self, history_len: int = HISTORY_LEN) -> None:
+    def __init__(self, history_len: int = HISTORY_LEN, faults: ActiveFaults | None = None) -> None:
         self._lock = threading.Lock()
         self._camera: np.ndarray | None = None
         self._camera_seq = 0
@@ -132,8 +172,8 @@ class LiveState:
         self._drum_r_m: float | None = None
         self._hist: dict[str, deque] = {k: deque(maxlen=history_len) for k in SERIES}
         self._hist_seq = 0
-        self._numbers: dict[str, Any] = {}
-        self._alarms: dict[str, str] = {}
+        self._panel = Panel()
+        self.faults = faults if faults is not None else ActiveFaults()  # the run's one set of active faults
         self._whatif = WhatIfView()
 
     def publish_camera(self, image_bgr: np.ndarray) -> None:
@@ -154,42 +194,32 @@ class LiveState:
                 self._particles = particles
                 self._drum_r_m = drum_r_m
 
-    def publish_point(self, values: Mapping[str, float]) -> None:
-        """Append one point to every plot series (missing ones repeat their last value)."""
+    def record(self, rec: Record) -> None:
+        """The bus subscriber: a frame reading is a plot point (missing values repeat their
+        last one, see :func:`plot_point`); every record is folded into the panel."""
+        point = plot_point(rec) if isinstance(rec, FrameReading) else None
         with self._lock:
-            for k, buf in self._hist.items():
-                v = values.get(k)
-                if v is None:
-                    v = buf[-1] if buf else float("nan")
-                buf.append(float(v))
-            self._hist_seq += 1
-
-    def update_numbers(self, **values: Any) -> None:
-        """Merge values into the numbers panel."""
-        with self._lock:
-            self._numbers.update(values)
-
-    def set_alarm(self, key: str, message: str | None) -> None:
-        """Raise (message) or clear (None) a named alarm."""
-        with self._lock:
-            if message is None:
-                self._alarms.pop(key, None)
-            else:
-                self._alarms[key] = message
+            if point is not None:
+                for k, buf in self._hist.items():
+                    v = point[k]
+                    if v is None:
+                        v = buf[-1] if buf else math.nan
+                    buf.append(float(v))
+                self._hist_seq += 1
+            self._panel = fold(self._panel, rec)
 
     def set_whatif(self, view: WhatIfView) -> None:
         with self._lock:
             self._whatif = view
 
     @property
-    def numbers(self) -> dict[str, Any]:
+    def panel(self) -> Panel:
         with self._lock:
-            return dict(self._numbers)
+            return self._panel
 
     @property
     def alarms(self) -> tuple[str, ...]:
-        with self._lock:
-            return tuple(self._alarms.values())
+        return self.faults.messages()
 
     def snapshot(self) -> Snapshot:
         """A consistent copy (arrays are fresh; images are shared, never mutated)."""
@@ -203,8 +233,8 @@ class LiveState:
                 twin_drum_r_m=self._drum_r_m,
                 history={k: np.fromiter(v, dtype=float, count=len(v)) for k, v in self._hist.items()},
                 history_seq=self._hist_seq,
-                numbers=dict(self._numbers),
-                alarms=tuple(self._alarms.values()),
+                panel=self._panel,
+                alarms=self.faults.messages(),
                 whatif=self._whatif,
             )
 

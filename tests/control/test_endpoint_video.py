@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from tests.cli import assert_one_line_error, cli
-from twin.config import RunConfig
 from twin.loop import trend_config
 
 REPO = Path(__file__).resolve().parents[2]
@@ -57,7 +56,7 @@ def test_real_video_mixing_time_at_the_segregated_to_mixed_transition(real_frame
     out = mi_json(video)
     assert out["frames"] == n_seg + n_mix and out["valid"] == out["frames"]
     assert out["mi_first"] < 0.5 < 0.9 < out["mi_median"]
-    tc = trend_config(RunConfig())
+    tc = trend_config()
     lag_s = tc.reinit_window_s + tc.settle_frames / FPS  # re-init on the new level, then settle
     mt = out["mixing_time_s"]
     assert mt is not None and SEG_S <= mt <= SEG_S + lag_s + 0.2, (mt, lag_s)

@@ -31,12 +31,21 @@ def feed(pw: ProcessWorker, b: Boxes, t0: float, t1: float, mi: float) -> None:
         i += 1
 
 
-def process_worker(b: Boxes) -> tuple[ProcessWorker, Sink, list[Mapping[str, Any]]]:
-    rows: list[Mapping[str, Any]] = []
-    sink = Sink()
+class Rows:
+    """The frame rows the worker published (``Sink.rows``), read at each use."""
+
+    def __init__(self, sink: Sink) -> None:
+        self.sink = sink
+
+    def __getitem__(self, i: int) -> Mapping[str, Any]:
+        return self.sink.rows()[i]
+
+
+def process_worker(b: Boxes) -> tuple[ProcessWorker, Sink, Rows]:
+    sink = Sink(LiveState())
     det = EndpointDetector(EndpointConfig(target_mi=0.9, dwell_s=5.0, exit_dwell_s=2.0))
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, rows.append, LiveState(), endpoint=det)
-    return pw, sink, rows
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, endpoint=det)
+    return pw, sink, Rows(sink)
 
 
 def test_process_worker_emits_mixed_and_unmixed_with_the_frame_columns():
@@ -50,6 +59,7 @@ def test_process_worker_emits_mixed_and_unmixed_with_the_frame_columns():
     assert mixed[0]["plateau_mi"] == pytest.approx(0.95, abs=0.01) and "target 0.9" in mixed[0]["reason"]
     f = b.frames.get()
     assert f.mixed and f.mixing_time_s == mixed[0]["mixing_time_s"]
+    assert sink.state is not None and sink.state.panel().mixed  # the dashboard's banner (twin.state.Panel)
     assert rows[-1]["mixed"] is True and rows[-1]["mixing_time_s"] == f.mixing_time_s
     assert rows[0]["mixed"] is False and rows[0]["mixing_time_s"] is None
     feed(pw, b, 15.0, 20.0, 0.6)  # falls off the plateau for longer than the exit dwell

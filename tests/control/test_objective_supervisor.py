@@ -86,7 +86,7 @@ def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
                               "--target-mi")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
     # one target: the endpoint's, handed to the supervisor; the defaults leave AUTO as it was
-    sc = supervisor_config(RunConfig(objective="energy", target_mi=0.8, stop_at_endpoint=True).resolved())
+    sc = supervisor_config(config=RunConfig(objective="energy", target_mi=0.8, stop_at_endpoint=True).resolved())
     assert (sc.objective, sc.target_mi, sc.stop_at_endpoint) == ("energy", 0.8, True)
-    d = supervisor_config(RunConfig().resolved())
+    d = supervisor_config(config=RunConfig().resolved())
     assert (d.objective, d.stop_at_endpoint) == ("plateau", False)

@@ -13,7 +13,6 @@ import pytest
 from control.trend import MITrend, TrendEstimate
 from control.trendbench import RealFrameMI, real_sequences, run_trend_bench
 from twin.cli.control_cmds import real_frame_mi
-from twin.config import RunConfig
 from twin.loop import trend_config
 
 FPS = 30.0
@@ -25,7 +24,7 @@ def frames_mi(real_drum_dir) -> RealFrameMI:
 
 
 def run_loop_trend(mi: np.ndarray, rpm: float = 5.0) -> list[TrendEstimate]:
-    tr = MITrend(trend_config(RunConfig()))  # what `drumtwin run` uses
+    tr = MITrend(trend_config())  # what `drumtwin run` uses
     return [tr.update(i / FPS, float(v), rpm) for i, v in enumerate(mi)]
 
 

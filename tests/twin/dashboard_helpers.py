@@ -147,3 +147,4 @@ def send_message(ws, message_type: str, **fields: object) -> None:
     import msgspec
 
     ws.send(msgspec.msgpack.encode({"type": message_type, **fields}))
+

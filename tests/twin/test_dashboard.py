@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import viser
 import websockets
 
 from control.supervisor import Supervisor
@@ -36,14 +37,14 @@ from tests.twin.dashboard_helpers import (
     wait_for_label,
     wait_until,
 )
-from twin.config import RunConfig
 from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
 from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origin_allowed, tokens_match
 from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
 from twin.loop import supervisor_config
-from twin.state import LiveState, forward_fill
+from twin.records import FrameReading, MillState, ModeSet
+from twin.state import LiveState, Panel, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
 # mid-handshake is never delivered (whichever test of the shared dashboard sees it)
@@ -113,11 +114,12 @@ class Feeder:
                               class_bgr=((0, 0, 220), (220, 60, 0)))
             self.state.publish_twin(img[:, ::-1].copy(), disks, 0.15)
             t = i * 0.05
-            self.state.publish_point(
-                {"t_s": t, "mi": 0.8 + 0.1 * np.sin(t), "trend_mi": 0.8, "trend_lo95": 0.7, "trend_hi95": 0.9,
-                 "rpm_setpoint": 5.0, "rpm_actual": 5.0, "slope_deg": 30.0, "twin_slope_deg": 31.0}
-            )
-            self.state.update_numbers(t_s=t, mi=0.8)
+            self.state.record(FrameReading(
+                t_s=t, frame=i, mi=0.8 + 0.1 * np.sin(t), mi_sigmoid=0.8, mi_linear=0.8, d_px=3.0, dsigma_px=1.0,
+                concentration=0.5, slope_deg=30.0, valid=True, trend_mi=0.8, trend_lo95=0.7, trend_hi95=0.9,
+                trend_rate=0.0, ma_mi=0.8, twin_mi=None, twin_slope_deg=31.0, rpm_setpoint=5.0, rpm_actual=5.0,
+                mode="auto", flags=(),
+            ))
             i += 1
             self.stop.wait(0.05)
 
@@ -136,10 +138,10 @@ def test_pure_helpers() -> None:
         parse_rpm_list("5, fast")
     with pytest.raises(ValueError):
         parse_rpm_list("500")
-    md = numbers_markdown({"mi": 0.8123, "mode": "auto", "last_decision": "rpm 5 -> 20"})
+    md = numbers_markdown(Panel(mi=0.8123, mode="auto", last_decision="rpm 5 -> 20"))
     assert "0.812" in md and "auto" in md and "rpm 5 -> 20" in md
     assert "not settled" not in md and "Re-learn" not in md
-    md = numbers_markdown({"trend_state": "unsettled", "light_state": "changed (saturated:0.31)"})
+    md = numbers_markdown(Panel(trend_state="unsettled", light_state="changed (saturated:0.31)"))
     assert "| trend | unsettled | light | changed (saturated:0.31) |" in md
     assert "Trend not settled yet" in md and "Re-learn the classes" in md
     rng = axis_range(np.array([np.nan, 31.2, 44.9]), np.array([np.nan, np.nan, 38.0]), step=5.0, pad=1.0)
@@ -163,9 +165,10 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     """One chromium for the whole browser check: the local dashboard (updates and
     controls), then a remote one (read-only until the token, rate-limited unlocks)."""
     state = LiveState()
-    state.update_numbers(mode="auto", rpm_setpoint=5.0)
+    state.record(ModeSet(t_s=0.0, mode="auto"))
+    state.record(MillState(t_s=0.0, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
     controls = RecordingControls()
-    limits = supervisor_config(RunConfig()).limits  # what the run's supervisor enforces
+    limits = supervisor_config().limits  # what the run's supervisor enforces
     dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
     try:
         with Feeder(state):
@@ -182,7 +185,7 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             lo, hi = limits.rpm_range  # the slider shows what is allowed: the supervisor's limits
             assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=0.5)
             assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo)
-            assert hi == Supervisor(supervisor_config(RunConfig())).config.rpm_limits[1]
+            assert hi == Supervisor(supervisor_config()).config.rpm_limits[1]
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")
@@ -230,7 +233,7 @@ def remote_viewer_without_token_is_read_only(page) -> None:
     EMERGENCY STOP and nothing else; six wrong attempts lock that viewer only: a new
     viewer with the right token operates the mill at once."""
     state = LiveState()
-    state.update_numbers(mode="auto")
+    state.record(ModeSet(t_s=0.0, mode="auto"))
     controls = RecordingControls()
     with pytest.raises(ValueError, match="token"):
         Dashboard(state, controls, host="127.0.0.2", port=0)
@@ -338,7 +341,7 @@ def test_unlock_limiter_is_per_viewer_and_per_address_never_global() -> None:
 @pytest.fixture(scope="module")
 def local_dash() -> Iterator[tuple[Dashboard, RecordingControls, list]]:
     state = LiveState()
-    state.update_numbers(mode="off")
+    state.record(ModeSet(t_s=0.0, mode="off"))
     controls = RecordingControls()
     events: list = []
     dash = Dashboard(state, controls, port=0, update_hz=4,
@@ -565,3 +568,53 @@ def test_the_viser_internals_the_dashboard_relies_on(fresh_dash) -> None:
         assert wait_for_label(ws, "EMERGENCY STOP", 20)
         (cid,) = list(dash._server._websock_server._live_connections)
         assert dash._client_address(cid) == "127.0.0.1"  # the per-address unlock limit's key
+
+
+def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
+    """The policy split out of the viser server (``twin.dashboard.guard.Gatekeeper``): a
+    wrong token is refused and counted, the right one unlocks, EMERGENCY STOP follows
+    ``estop_needs_token``, a noisy event is written once per window with a count of the rest."""
+    from twin.dashboard.guard import EVENT_THROTTLE_S, Gatekeeper
+
+    now = [100.0]
+    events: list[tuple[str, dict]] = []
+    gate = Gatekeeper("s3cret", on_event=lambda k, f: events.append((k, f)), estop_needs_token=True,
+                      unlock_policy=UnlockPolicy(per_client_s=0.0, max_failures=5, window_s=60.0),
+                      monotonic=lambda: now[0])
+    assert gate.token_required and not gate.estop_allowed(False) and gate.estop_allowed(True)
+    assert gate.try_unlock(1, "wrong", "10.0.0.1") == (False, "**wrong token: read-only**")
+    assert gate.try_unlock(1, "s3cret", "10.0.0.1")[0] and gate.failed_unlocks == 1
+    assert [k for k, _ in events] == ["dashboard_unlock_failed", "dashboard_unlocked"]
+    for _ in range(3):
+        gate.refused("http://evil.example", "127.0.0.1:8080")
+    assert gate.refused_handshakes == 3 and [k for k, _ in events].count("dashboard_refused") == 1
+    now[0] += EVENT_THROTTLE_S
+    gate.flush_throttled()
+    assert events[-1] == ("dashboard_refused", {"suppressed": 2, "summary": True})
+    assert not Gatekeeper(None).token_required and Gatekeeper(None).estop_allowed(False)
+
+
+@pytest.mark.timeout(60)
+def test_a_locked_viewers_callbacks_are_refused_by_the_server() -> None:
+    """viser runs a control's callbacks on the server for whatever a viewer's websocket
+    sends: a disabled button in the browser is no defence. Every callback of a viewer without
+    the token (``twin.dashboard.controls``: each re-checks its viewer) moves nothing; its
+    EMERGENCY STOP still works. The callbacks are run as viser runs them (its handle's
+    callbacks, with a ``GuiEvent`` from that viewer)."""
+    controls = RecordingControls()
+    dash = Dashboard(LiveState(), controls, port=0, update_hz=4, control_token="s3cret").start()
+    try:
+        with open_viewer(dash.url, timeout_s=20) as ws:
+            assert wait_for_label(ws, "EMERGENCY STOP", 30)
+            wait_until(lambda: dash.viewers_with_estop() == 1, 10, "the viewer's controls")
+            (cid, client), = dash._server.get_clients().items()
+            cc = dash.viewers._clients[cid]
+            for handle in cc.handles:
+                for cb in handle._impl.update_cb:
+                    cb(viser.GuiEvent(client, cid, handle))
+            assert controls.names() == [] and "refused" in cc.status.content
+            for cb in cc.estop._impl.update_cb:
+                cb(viser.GuiEvent(client, cid, cc.estop))
+            assert controls.names() == ["emergency_stop"]
+    finally:
+        dash.stop()

@@ -29,6 +29,7 @@ from tests.twin.live_script import run_scripted
 from tests.waiting import wait_until
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
+from twin.loop import Seams
 from twin.runlog import read_events, read_frames, read_metadata
 from vision.synthetic import drum_frame
 
@@ -55,12 +56,12 @@ def _predict(jobs):
 # AUTO acts within seconds in the smoke run: a bed at MI ~0.9 counts as segregated, the
 # what-if study is a stand-in (the real one is tested in tests/sim), a cheap calibration,
 # at most 15 rpm (the plant stays cheap to simulate).
-QUICK_AUTO = {
-    "supervisor": {"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 20.0,
-                   "min_change_interval_s": 60.0, "max_rpm": 15.0},
-    "calibrate_kwargs": {"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
-    "whatif_study": _predict,
-}
+QUICK_AUTO = Seams(
+    supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 20.0,
+                "min_change_interval_s": 60.0, "max_rpm": 15.0},
+    calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+    whatif_study=_predict,
+)
 
 
 def _col(rows: list[dict], name: str) -> np.ndarray:
@@ -91,14 +92,14 @@ def auto_and_off(tmp_path_factory) -> dict[str, Path]:
 
         threading.Thread(target=watch, daemon=True).start()
 
-    runs: tuple[tuple[str, dict, float, Any], ...] = (
+    runs: tuple[tuple[str, Seams, float, Any], ...] = (
         ("auto", QUICK_AUTO, 80.0, until_the_board_reads_15_rpm),
-        ("off", {}, 6.0, None),
+        ("off", Seams(), 6.0, None),
     )
-    for mode, extra, duration, hook in runs:
+    for mode, seams, duration, hook in runs:
         cfg = RunConfig(dashboard=False, duration_s=duration, speed=SPEED, case="C", seed=0, mode=mode,
-                        log_dir=base / mode, extra=extra).resolved()
-        run_live(cfg, progress=False, on_started=hook)
+                        log_dir=base / mode).resolved()
+        run_live(cfg, progress=False, on_started=hook, seams=seams)
     return {"auto": base / "auto", "off": base / "off"}
 
 
@@ -303,8 +304,8 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     """Unplug the mill: fault and safe state; the board's watchdog stops the drive and it
     stays stopped when the link returns (nothing restarts it); the operator starts it.
     Stop the camera: alarm and safe state together, no rpm moves; recovery."""
-    cfg = RunConfig(dashboard=False, duration_s=600, speed=SPEED, mode="auto", log_dir=tmp_path / "run",
-                    extra={"plant": {"watchdog_s": 2.5}}).resolved()  # the board's watchdog trips sooner
+    cfg = RunConfig(dashboard=False, duration_s=600, speed=SPEED, mode="auto", log_dir=tmp_path / "run").resolved()
+    seams = Seams(plant_watchdog_s=2.5)  # the board's watchdog trips sooner
     report: dict = {}
 
     def body(loop, plant) -> None:
@@ -331,7 +332,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
         plant.camera_paused.clear()
         _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
 
-    run_scripted(cfg, body)
+    run_scripted(cfg, body, seams=seams)
     events = read_events(tmp_path / "run")
     faults = {e["fault"] for e in events if e["kind"] == "fault"}
     recovered = {e["fault"] for e in events if e["kind"] == "recovered"}

@@ -47,7 +47,7 @@ def delta() -> Iterator[DriveEmulator]:
 def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_safe_state(tmp_path: Path) -> None:
     """The embedded demo on a Delta drive emulator (`drumtwin run --drive delta-ms300`)."""
     cfg = RunConfig(dashboard=False, duration_s=600, speed=SPEED, mode="auto", case="C", seed=0,
-                    log_dir=tmp_path / "run", extra={**QUICK_AUTO, "plant": {"drive": "delta-ms300"}}).resolved()
+                    log_dir=tmp_path / "run", drive="delta-ms300").resolved()
     report: dict = {}
 
     def body(loop, plant) -> None:
@@ -65,7 +65,7 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
             emu.faults = DriveFaults()
             _wait(lambda: mill().connected, 10, "the link back")
 
-    run_scripted(cfg, body)
+    run_scripted(cfg, body, seams=QUICK_AUTO)
     assert report["setpoint_counts"] == 1500  # 15 rpm x 1 Hz/rpm x 100 counts/Hz: the manual's Hz x 100
     events = read_events(tmp_path / "run")
     sent = [e for e in events if e["kind"] == "mill_command" and e["command"] == "set_rpm"]

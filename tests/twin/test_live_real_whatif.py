@@ -14,15 +14,16 @@ import pytest
 
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
+from twin.loop import Seams
 from twin.runlog import read_events
 
 pytestmark = pytest.mark.xdist_group("live")
 
-REAL_AUTO = {
-    "supervisor": {"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
-                   "min_change_interval_s": 60.0, "max_rpm": 15.0, "horizon_s": 6.0, "n_candidates": 2},
-    "calibrate_kwargs": {"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
-}
+REAL_AUTO = Seams(
+    supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
+                "min_change_interval_s": 60.0, "max_rpm": 15.0, "horizon_s": 6.0, "n_candidates": 2},
+    calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+)
 
 
 @pytest.mark.slow
@@ -43,8 +44,8 @@ def test_auto_decides_on_the_dem_twins_predictions(tmp_path: Path) -> None:
         threading.Thread(target=watch, daemon=True).start()
 
     cfg = RunConfig(dashboard=False, duration_s=600.0, speed=4.0, case="C", seed=0, mode="auto", log_dir=log,
-                    extra=REAL_AUTO).resolved()
-    run_live(cfg, progress=False, on_started=until_a_decision_quotes_the_twin)
+                    ).resolved()
+    run_live(cfg, progress=False, on_started=until_a_decision_quotes_the_twin, seams=REAL_AUTO)
     events = read_events(log)
     studies = [e for e in events if e["kind"] == "whatif" and e["reason"] == "AUTO"]
     assert studies, sorted({e["kind"] for e in events})

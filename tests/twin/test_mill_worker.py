@@ -8,6 +8,8 @@ from control.errors import MillRefused
 from control.protocol import MillStatus
 from twin.live.mill import MillWorker
 from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
+from twin.records import FrameReading, Record, UntypedEvent, event_fields, kind_of, record_of
+from twin.state import LiveState
 
 
 class FakeLink:
@@ -59,12 +61,27 @@ class FakeLink:
 
 
 class Sink:
-    def __init__(self) -> None:
+    """A test's event sink: every record published (``records``), the logged ones as
+    (kind, fields) (``events``); events by kind are built as the run's sink builds them
+    (``twin.records.record_of``: a kind or field not declared there fails the test).
+    ``state``: a ``LiveState`` subscribed to the records, as in a run."""
+
+    def __init__(self, state: LiveState | None = None) -> None:
         self.events: list[tuple[str, dict]] = []
+        self.records: list[Record] = []
         self.faults: set[str] = set()
+        self.state = state
+
+    def publish(self, rec: Record) -> None:
+        assert not isinstance(rec, UntypedEvent), f"unregistered record: {rec}"
+        self.records.append(rec)
+        if self.state is not None:
+            self.state.record(rec)
+        if rec.logged and not isinstance(rec, FrameReading):
+            self.events.append((kind_of(rec), event_fields(rec)))
 
     def event(self, kind: str, t_s: float, **data) -> None:
-        self.events.append((kind, data))
+        self.publish(record_of(kind, t_s, **data))
 
     def fault(self, key: str, message: str, t_s: float, **data) -> None:
         self.faults.add(key)
@@ -75,11 +92,12 @@ class Sink:
             self.faults.discard(key)
             self.events.append(("recovered", {"fault": key}))
 
-    def numbers(self, **values) -> None:
-        pass
-
     def metadata(self, **data) -> None:
         pass
+
+    def rows(self) -> list[dict]:
+        """The frame readings published, as CSV rows."""
+        return [r.as_dict() for r in self.records if isinstance(r, FrameReading)]
 
     def kinds(self, kind: str) -> list[dict]:
         return [d for k, d in self.events if k == kind]

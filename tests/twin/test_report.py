@@ -185,6 +185,7 @@ def test_report_bad_input_is_one_line_exit_2(runs, tmp_path):
 
 def test_dashboard_numbers_show_the_endpoint_banner():
     from twin.dashboard import numbers_markdown
+    from twin.state import Panel
 
-    assert "**MIXED** since 12.3 s" in numbers_markdown({"endpoint": "mixed", "mixing_time_s": 12.3})
-    assert "MIXED" not in numbers_markdown({"endpoint": "not mixed", "mixing_time_s": None})
+    assert "**MIXED** since 12.3 s" in numbers_markdown(Panel(mixed=True, mixing_time_s=12.3))
+    assert "MIXED" not in numbers_markdown(Panel(mixed=False, mixing_time_s=None))

@@ -19,7 +19,7 @@ from control.motor import MotorConfig
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from twin.config import RunConfig
-from twin.loop import supervisor_config
+from twin.loop import Seams, supervisor_config
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 REAL = Path(__file__).resolve().parents[1] / "data" / "real-drum-pmma" / "images"
@@ -106,7 +106,7 @@ def test_run_refuses_a_dead_scheduler_at_the_start(tmp_path) -> None:
 def test_mill_set_rpm_refuses_past_the_limits_unless_commissioning() -> None:
     """A board whose own maximum is 200 rpm: the CLI's limit is the run's (5-45 rpm on
     the demo drum, 0.6 x its 77.2 rpm critical speed), not the board's."""
-    limits = supervisor_config(RunConfig()).limits
+    limits = supervisor_config().limits
     with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=200.0))) as emu:
         emu.open_tcp(0)
         r = cli("mill", emu.url, "set-rpm", "100")
@@ -322,15 +322,14 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
     from tests.twin.test_workers import Boxes, _reading
     from twin.live.camera import CameraReading, ProcessWorker
     from twin.live.supervise import inputs_of
-    from twin.state import LiveState
 
     w, link, _sink, box = make(RUNNING)
     w.cycle()
     b = Boxes("auto")
     b.mill = box
     b.view.mill = box.get  # type: ignore[method-assign]
-    rows: list = []
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), None)
+    sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, None)
     pw.process(CameraReading(0.0, 0, _reading(0.8)))
     link.up = False  # the outage: the board's last report (5 rpm) is history now
     w.cycle()
@@ -340,6 +339,7 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
     link.up = True
     w.cycle()
     pw.process(CameraReading(0.2, 2, _reading(0.8)))
+    rows = sink.rows()
     assert [(r["rpm_actual"], r["rpm_setpoint"]) for r in rows] == [(5.0, 5.0), (None, None), (5.0, 5.0)]
     assert [r["flags"] for r in rows] == [(), ("link_lost:mill",), ()]
 
@@ -499,10 +499,10 @@ def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_
         release.wait(30)
         raise RuntimeError("pool terminated")
 
-    cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run",
-                    extra={"whatif_study": slow_study}).resolved()
+    cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run").resolved()
     with RunLog(tmp_path / "run") as log:
-        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log)
+        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log,
+                        seams=Seams(whatif_study=slow_study))
         loop.run_whatif([5.0], 1e9)
         loop.run_whatif([5.0 + i * 0.001 for i in range(WHATIF_MAX_RUNS + 1)], 60.0)
         loop.run_whatif([10000.0], 60.0)

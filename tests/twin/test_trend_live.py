@@ -21,6 +21,7 @@ from tests.twin.test_workers import Boxes, _reading
 from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.live.camera import CameraReading, ProcessWorker
+from twin.loop import Seams
 from twin.runlog import read_events, read_frames
 from twin.state import LiveState
 
@@ -31,7 +32,7 @@ def test_process_worker_logs_the_trend_unsettled_and_settled():
     b = Boxes("auto")
     b.mill_at(5.0)
     sink = Sink()
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, lambda row: None, LiveState())
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink)
     rng = np.random.default_rng(0)
     for i in range(240):  # 4 s mixed, then 4 s segregated
         mi = (0.97 if i < 120 else 0.38) + rng.normal(0, 0.008)
@@ -83,10 +84,9 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     emu.set_motor(setpoint_rpm=5.0, actual_rpm=5.0, running=True)  # the operator runs it at 5 rpm
     try:
         cfg = RunConfig(video=video, mill=f"socket://127.0.0.1:{port}", meter_config=classes, dashboard=False,
-                        duration_s=12.0, mode="auto", log_dir=tmp_path / "run",
-                        extra={"calibrate_kwargs": {"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
-                               "whatif_study": study}).resolved()
-        run_live(cfg, progress=False)
+                        duration_s=12.0, mode="auto", log_dir=tmp_path / "run").resolved()
+        run_live(cfg, progress=False, seams=Seams(calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+                                                  whatif_study=study))
     finally:
         emu.close()
     rows = read_frames(tmp_path / "run")
@@ -112,19 +112,14 @@ def test_process_worker_tells_the_dashboard_the_trend_and_light_states():
     cannot be mapped back is shown as changed (with its cause), a normal frame as ok."""
     from dataclasses import replace
 
-    numbers: dict[str, Any] = {}
-
-    class NumberSink(Sink):
-        def numbers(self, **values) -> None:
-            numbers.update(values)
-
+    state = LiveState()
     b = Boxes("auto")
     b.mill_at(5.0)
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, NumberSink(), lambda row: None, LiveState())
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(state))
     pw.process(CameraReading(0.0, 0, _reading(0.9)))
-    assert numbers["trend_state"] == "unsettled" and numbers["light_state"] == "ok"
+    assert state.panel.trend_state == "unsettled" and state.panel.light_state == "ok"
     dark = replace(_reading(math.nan, valid=False), flags=("lighting_changed:too_dark:0.12",))
     pw.process(CameraReading(0.1, 1, dark))
-    assert numbers["light_state"] == "changed (too_dark:0.12)"
+    assert state.panel.light_state == "changed (too_dark:0.12)"
     pw.process(CameraReading(0.2, 2, _reading(0.9)))
-    assert numbers["light_state"] == "ok"
+    assert state.panel.light_state == "ok"

@@ -6,9 +6,7 @@ from __future__ import annotations
 import math
 import queue
 import threading
-from collections.abc import Mapping
 from dataclasses import fields, replace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -140,12 +138,11 @@ def test_a_twin_that_never_runs_is_stale_for_the_loops_auto() -> None:
     """The twin worker died (or hung) before its first step: the supervisor saw no twin time
     at all and never called it stale, so AUTO went on without it. With the loop's settings a
     twin that has not run within the twin timeout is stale: safe state."""
-    from twin.config import RunConfig
     from twin.loop import supervisor_config
 
     b = Boxes()
     b.mill_at(5.0)
-    cfg = supervisor_config(RunConfig(mode="auto", dashboard=False).resolved())
+    cfg = supervisor_config()
     assert cfg.twin_timeout_s is not None
     w = SupervisorWorker(Supervisor(cfg, mode=Mode.AUTO), b.view, Sink(), [].append, None, b.mode)
     advance(b, w, 0, cfg.twin_timeout_s - 1.0)
@@ -227,10 +224,12 @@ def test_run_view_time_passes_without_frames_and_never_goes_back() -> None:
 
 
 def test_frame_row_defines_the_csv_columns_and_plot_series() -> None:
-    from twin.runlog import FRAME_COLUMNS
+    from twin.records import FRAME_COLUMNS, FrameReading
+    from twin.runlog import FRAME_COLUMNS as RUNLOG_COLUMNS
 
     names = [f.name for f in fields(FrameRow)]
-    assert FRAME_ROW_COLUMNS == FRAME_COLUMNS and set(SERIES) <= set(names)
+    assert FrameRow is FrameReading and FRAME_ROW_COLUMNS is FRAME_COLUMNS is RUNLOG_COLUMNS
+    assert list(FRAME_COLUMNS) == [names[0], "wall_s", *names[1:]] and set(SERIES) <= set(names)
 
 
 def _reading(mi: float, valid: bool = True, slope: float = 30.0):
@@ -243,14 +242,15 @@ def _reading(mi: float, valid: bool = True, slope: float = 30.0):
 def test_process_worker_rows_trend_moving_average_and_slopes() -> None:
     b = Boxes("auto")
     b.mill_at(5.0)
-    rows: list[Mapping[str, Any]] = []
     slopes: queue.SimpleQueue = queue.SimpleQueue()
     state = LiveState()
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, state, slopes, ma_window=2)
+    sink = Sink(state)
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, slopes, ma_window=2)
     pw.process(CameraReading(0.0, 0, _reading(0.8)))
     pw.process(CameraReading(0.1, 1, _reading(0.6)))
     pw.process(CameraReading(0.2, 2, _reading(math.nan, valid=False)))
     f = b.frames.get()
+    rows = sink.rows()
     assert f.n_frames == 3 and f.last_valid_t_s == 0.1 and f.t_s == 0.2
     assert [r["ma_mi"] for r in rows] == pytest.approx([0.8, 0.7, 0.7])  # the NaN frame is skipped
     assert rows[0]["rpm_actual"] == 5.0 and rows[0]["mode"] == "auto" and rows[0]["twin_mi"] is None
@@ -266,9 +266,9 @@ def test_a_reading_flagged_valid_with_an_impossible_mi_is_not_vision(bad_mi: flo
     reached the trend. Now both count as no valid MI: AUTO goes safe with the vision alarm."""
     b = Boxes("auto")
     b.mill_at(5.0)
-    rows: list[Mapping[str, Any]] = []
     slopes: queue.SimpleQueue = queue.SimpleQueue()
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(), slopes)
+    frames_sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, frames_sink, slopes)
     w, sink, _sent = sup_worker(b, Mode.AUTO)
     t = 0.0
     for i in range(40):  # 4 s of good frames, then 10 s of impossible ones
@@ -284,6 +284,7 @@ def test_a_reading_flagged_valid_with_an_impossible_mi_is_not_vision(bad_mi: flo
         t, b.wall.t = t + 0.1, b.wall.t + 0.1
     f = b.frames.get()
     assert f.last_valid_t_s == pytest.approx(3.9) and f.estimate.level == pytest.approx(0.9, abs=0.02)
+    rows = frames_sink.rows()
     assert slopes.qsize() == 40 and rows[-1]["valid"] is False and rows[-2]["valid"] is False
     assert "vision_lost" in sink.faults and w.safe
 
@@ -294,18 +295,17 @@ def test_a_frame_time_that_goes_back_or_is_not_a_number_is_dropped_with_a_fault(
     ``camera_clock`` fault, cleared when frames come in order again."""
     b = Boxes("manual")
     b.mill_at(5.0)
-    rows: list[Mapping[str, Any]] = []
     sink = Sink()
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, rows.append, LiveState())
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink)
     for i, t in enumerate((1.0, 1.1, 1.2)):
         pw.process(CameraReading(t, i, _reading(0.9)))
     assert pw.process(CameraReading(0.5, 3, _reading(0.9))) is None  # back in time
     assert pw.process(CameraReading(math.nan, 4, _reading(0.9))) is None
-    assert len(rows) == 3 and b.frames.get().t_s == 1.2 and b.frames.get().n_frames == 3
+    assert len(sink.rows()) == 3 and b.frames.get().t_s == 1.2 and b.frames.get().n_frames == 3
     assert "camera_clock" in sink.faults
     pw.process(CameraReading(1.2, 5, _reading(0.8)))  # in order again (the same time is fine)
     pw.process(CameraReading(1.3, 6, _reading(0.8)))
-    assert len(rows) == 5 and b.frames.get().t_s == 1.3 and "camera_clock" not in sink.faults
+    assert len(sink.rows()) == 5 and b.frames.get().t_s == 1.3 and "camera_clock" not in sink.faults
 
 
 def test_a_camera_clock_that_jumps_back_is_lost_vision_for_auto() -> None:
@@ -323,7 +323,7 @@ def test_a_camera_clock_that_jumps_back_is_lost_vision_for_auto() -> None:
     b.mill_at(5.0)
     q: queue.Queue = queue.Queue()
     sink = Sink()
-    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink, lambda row: None, LiveState())
+    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink)
     w, _sink, sent = sup_worker(b, Mode.AUTO)
     w.sink = sink
     img = np.zeros((4, 4, 3), np.uint8)

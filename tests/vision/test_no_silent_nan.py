@@ -23,7 +23,6 @@ from tests.twin.test_mill_worker import Sink
 from tests.twin.test_workers import Boxes
 from tests.vision import helpers as H
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.state import LiveState
 from vision.config import config_to_toml
 from vision.sources import read_image
 from vision.suggest import suggest_classes
@@ -116,15 +115,15 @@ def test_every_nan_in_the_live_loops_frame_rows_is_flagged(frames):
     imgs, cfg = frames
     b = Boxes("watch")
     b.mill_at(5.0)
-    rows: list[dict] = []
-    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(), rows.append, LiveState(),
-                       queue.SimpleQueue())
+    sink = Sink()
+    pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, queue.SimpleQueue())
     meter = dataclasses.replace(cfg).make_meter()
     # the live order: bad frames first (trend and average have nothing yet), then good and bad mixed
     first = ("empty", "few", "half")
     order = [x for x in imgs if x[0] in first] + [x for x in imgs if x[0] not in first]
     for i, (_, img) in enumerate(order):
         pw.process(CameraReading(0.1 * i, i, meter.measure(img)))
+    rows = sink.rows()
     assert len(rows) == len(order)
     bad = [unflagged({k: v for k, v in r.items() if k != "flags"}, list(r["flags"]), []) for r in rows]
     assert not any(bad), [b_ for b_ in bad if b_]

@@ -123,11 +123,10 @@ def mill_set_rpm(
 ) -> None:
     """Set the speed setpoint (rpm), inside the run's limits (the demo drum's: the same
     limits the supervisor enforces) unless --commission is given."""
-    from twin.config import RunConfig
     from twin.loop import supervisor_config
 
     check_number("rpm", rpm, at_least=0.0)
-    limits = supervisor_config(RunConfig()).limits  # the one set of limits (control.limits)
+    limits = supervisor_config().limits  # the one set of limits (control.limits)
     if not commission:
         limits.refuse_rpm(rpm, "set-rpm")  # ControlError: one line naming the limit, exit 2
     elif limits.check_rpm(rpm).clamped and rpm != 0:

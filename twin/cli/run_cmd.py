@@ -4,183 +4,49 @@ from __future__ import annotations
 
 import contextlib
 import os
-import platform
 import signal
 import sys
 import threading
-import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
 from twin.cli.app import app, bench_app, console_err, print_json
 from twin.errors import TwinError
 
+if TYPE_CHECKING:
+    from twin.config import RunConfig
+    from twin.dashboard import Dashboard
+    from twin.demo import DemoPlant
+    from twin.loop import LiveLoop, Seams, Summary
 
-def _versions() -> dict[str, str]:
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"python": platform.python_version()}
-    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "numba", "filterpy", "pyserial", "viser"):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            pass
-    return out
+StartHook = Callable[["LiveLoop", Optional["DemoPlant"], Optional["Dashboard"]], None]
 
 
-def _paced(frames: Iterator[Any], clock) -> Iterator[Any]:
-    """Replay a recording at its own speed (``frame.t_s`` on the run clock)."""
-    t0 = None
-    for f in frames:
-        t0 = f.t_s if t0 is None else t0
-        if not clock.sleep_until(f.t_s - t0):
-            return
-        yield f
+def run_live(
+    cfg: RunConfig, *, progress: bool = True, on_started: StartHook | None = None, seams: Seams | None = None
+) -> Summary:
+    """``drumtwin run`` for ``cfg`` (a resolved ``RunConfig``): the one composition root
+    (``twin.loop.run_live``) with the CLI's progress bar, Ctrl-C and SIGTERM; returns the
+    run's ``Summary``. ``on_started(loop, plant, dashboard)`` is the ``Seams.on_started``
+    seam (tests inject faults there)."""
+    from dataclasses import replace
+
+    from twin.loop import Seams
+    from twin.loop import run_live as run
+
+    seams = seams or Seams()
+    if on_started is not None:
+        seams = replace(seams, on_started=on_started)
+    return run(cfg, seams, wait=lambda loop: _wait(loop, cfg, progress),
+               on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
+                                                          highlight=False))
 
 
-def check_scheduler_answers(address: str, timeout_s: float = 3.0) -> None:
-    """TwinError (one line) unless something accepts a TCP connection at the Dask
-    scheduler ``address`` within ``timeout_s`` (a dead or garbage address is refused at
-    the start of the run, not found by the first what-if study in AUTO)."""
-    import socket
-
-    from twin.config import check_scheduler
-
-    host, port = check_scheduler(address)
-    try:
-        with socket.create_connection((host, port), timeout=timeout_s):
-            pass
-    except OSError as exc:
-        raise TwinError(f"--scheduler {address}: no Dask scheduler answers ({exc.strerror or exc})") from None
-
-
-def run_live(cfg, *, progress: bool = True, on_started=None):
-    """Run the loop for ``cfg`` (a resolved ``RunConfig``) and return its ``Summary``.
-
-    The mill link is opened first: a URL that cannot be opened raises ``ConnectionError``
-    before anything else starts (the CLI exits 2). ``on_started(loop, plant, dashboard)``
-    is called once everything runs (tests use it to inject faults). Ctrl-C / SIGTERM end
-    the run cleanly. A run that had to end (its log could not be written, an essential
-    worker crashed: ``LiveLoop.failure``) raises ``TwinError`` once it is shut down.
-    """
-    from twin.clock import RunClock
-    from twin.demo import DemoPlant, PlantConfig
-    from twin.loop import LiveLoop, open_mill
-    from twin.runlog import RunLog
-    from twin.state import FRAME_ROW_COLUMNS, LiveState
-
-    if cfg.scheduler is not None:
-        check_scheduler_answers(cfg.scheduler)  # before anything starts: one line, exit 2
-    clock = RunClock(cfg.speed)
-    classes = None
-    roi = None
-    mixer = None
-    mc = None
-    if cfg.meter_config is not None:
-        from sim.mixer import mixer_from_config
-        from vision.config import load_config
-
-        mc = load_config(cfg.meter_config)
-        classes, roi = mc.classes, mc.roi
-        mixer = mixer_from_config(mc)  # checked in any case; the demo's plant and twin stay the paper's
-        mixer = None if cfg.demo else mixer
-    if cfg.engine is not None:
-        from sim.engine import engine_for
-        from sim.mixer import paper_mixer
-
-        engine_for(paper_mixer() if mixer is None else mixer, cfg.engine)
-    plant = None
-    mill = None
-    runlog = None
-    loop = None
-    dash = None
-    summary = None
-    t_wall = time.monotonic()
-    try:
-        if cfg.demo:
-            plant = DemoPlant(
-                PlantConfig(
-                    case=cfg.case, seed=cfg.seed, start_rpm=cfg.start_rpm, fps=cfg.camera_fps, size_px=cfg.frame_px,
-                    **cfg.extra.get("plant", {}),  # tests: e.g. a shorter board watchdog
-                ),
-                clock,
-            )
-            frames, mill_url, roi = plant.frames(), plant.url, plant.roi
-        else:
-            from vision.sources import open_source
-
-            mill_url = cfg.mill
-            frames = None
-            if mc is not None:  # the config's [drive] hz_per_rpm goes into a modbus: URL (docs/drives.md)
-                from control.modbus.link import config_mill_url
-
-                mill_url = config_mill_url(mill_url, mc.drive_table, f"config {mc.source}")
-        mill = open_mill(mill_url)  # ConnectionError now, before any log or thread exists
-        if frames is None:
-            frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
-        runlog = RunLog(cfg.log_dir, columns=FRAME_ROW_COLUMNS)  # the frame row defines the CSV
-        started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
-        if plant is not None:
-            runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
-        state = LiveState()
-        loop = LiveLoop(cfg, frames, mill, runlog, state, clock=clock, roi=roi, classes=classes, mixer=mixer,
-                        meter_config=mc)
-        if mixer is not None:
-            from sim.mixer import resolve
-
-            runlog.set_metadata(mixer={"classes": [{"name": k.name, "count": k.count, "diameter_mm": 1e3 *
-                                                    k.shape.diameter_m, "shape": k.shape.kind} for k in resolve(mixer)],
-                                       "drum_diameter_mm": 1e3 * mixer.drum.diameter_m, "fill": mixer.fill,
-                                       "direction": mixer.direction, "monolayer": mixer.monolayer})
-        if cfg.dashboard:
-            from twin.dashboard import Dashboard
-
-            events, now_s = loop.events, loop.now_s
-            dash = Dashboard(
-                state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
-                update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
-                limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
-            ).start()
-            console_err.print(f"dashboard on [bold]{dash.url}[/]  (Ctrl-C stops)", highlight=False)
-            runlog.set_metadata(dashboard_url=dash.url)
-        loop.warm_up()  # compile before the clock runs, not while the camera does
-        clock.restart()  # run time 0 = the workers start (the plant's first frame is due now)
-        loop.start()
-        if plant is not None:  # the demo's drive spins at its start rpm, and its operator takes
-            end = time.monotonic() + 20.0  # control in this run: Start (the loop then feeds its watchdog)
-            while not loop.mill_box.get().connected and time.monotonic() < end and not clock.stop.is_set():
-                time.sleep(0.01)
-            plant.start_drive()
-            loop.start_mill()
-        if on_started is not None:
-            on_started(loop, plant, dash)
-        _wait(loop, cfg, progress)
-    finally:
-        clock.stop.set()
-        if loop is not None:
-            loop.stop()  # joins the workers, closes the what-if pool and the mill link
-        elif mill is not None:
-            mill.close()
-        if dash is not None:
-            dash.stop()
-        if plant is not None:
-            plant.close()
-        if runlog is not None:
-            if loop is not None:
-                summary = loop.summary(time.monotonic() - t_wall)
-                loop.events.metadata(summary=asdict(summary))
-            runlog.close()
-    if loop is not None and loop.failure is not None:
-        raise TwinError(f"the run stopped: {loop.failure} (log in {cfg.log_dir})")
-    return summary
-
-
-def _wait(loop, cfg, progress: bool) -> None:
+def _wait(loop: LiveLoop, cfg: RunConfig, progress: bool) -> None:
     """Block until the duration is over, Ctrl-C or SIGTERM."""
     stop = loop.stop_event
     if threading.current_thread() is threading.main_thread():
@@ -286,7 +152,7 @@ def run(
             host=host, control_token=control_token, scheduler=scheduler, engine=engine,
             estop_needs_token=estop_needs_token, objective=objective, target_mi=target_mi,
             stop_at_endpoint=stop_at_endpoint,
-            extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
+            drive=None if drive is None else _drive_profile(drive, camera, video, mill),
         ).resolved()
         if json_out:
             with stdout_to_stderr():

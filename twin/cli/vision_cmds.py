@@ -273,7 +273,7 @@ def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, 
         run_cfg = RunConfig()
         cfg: EndpointConfig = endpoint_config(run_cfg)
         cfg = cfg if target_mi is None else replace(cfg, target_mi=target_mi)
-        res = endpoint_of_series(ts, mis, cfg, trend_config(run_cfg))
+        res = endpoint_of_series(ts, mis, cfg, trend_config())
         out.update(mixing_time_s=res.mixing_time_s, plateau_mi=res.plateau_mi, endpoint=asdict(cfg),
                    endpoint_changes=[{"t_s": t, "kind": k, "mixing_time_s": m, "reason": why}
                                      for t, k, m, why in res.changes])

@@ -34,13 +34,20 @@ import hashlib
 import hmac
 import http
 import logging
+import math
+import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
+from twin.config import LOCAL_HOSTS
 from twin.errors import TwinError
+
+if TYPE_CHECKING:
+    from viser import ViserServer
 
 CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {"viser": ("1.1.1",), "websockets": ("16.1.1",)}
 """Versions whose internals the dashboard relies on were checked against (the websocket
@@ -49,7 +56,7 @@ server found by :func:`install_handshake_guard`, ``_live_connections`` and a con
 of a failed handler for :class:`OneLineConnectionErrors`); ``tests/twin/test_dashboard.py``
 tests each assumption and fails on a version not listed here."""
 
-LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+LOOPBACK_HOSTS = frozenset(LOCAL_HOSTS)  # the one list: twin.config.LOCAL_HOSTS
 FRAME_HEADERS: tuple[tuple[str, str], ...] = (
     ("X-Frame-Options", "DENY"),
     ("Content-Security-Policy", "frame-ancestors 'none'"),
@@ -270,3 +277,166 @@ def install_connection_error_filter(
     logger = logging.getLogger("websockets.server")
     logger.addFilter(flt)
     return lambda: logger.removeFilter(flt)
+
+
+# -- the policy: token, unlock limits, security events ----------------------------------------
+EVENT_THROTTLE_S = 5.0  # noisy security events (refused handshakes, limited unlocks): at most one per 5 s
+EventSink = Callable[[str, dict[str, Any]], None]
+"""``on_event(kind, fields)``: where the dashboard reports security events (e.g. the run log)."""
+_log = logging.getLogger("drumtwin.dashboard")
+
+
+class Gatekeeper:
+    """The dashboard's security policy, without viser: whether a token is needed, token
+    attempts under :class:`UnlockLimiter`, who may press EMERGENCY STOP, and the security
+    events (to ``on_event``, noisy ones throttled to one per ``EVENT_THROTTLE_S`` per kind
+    with a count of the ones suppressed). Thread-safe."""
+
+    def __init__(
+        self,
+        control_token: str | None,
+        *,
+        on_event: EventSink | None = None,
+        unlock_policy: UnlockPolicy | None = None,
+        estop_needs_token: bool = False,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._token = control_token
+        self.token_required = bool(control_token)  # on any host, loopback too
+        self.estop_needs_token = bool(estop_needs_token)
+        self._on_event = on_event
+        self._limiter = UnlockLimiter(unlock_policy)
+        self._lock = threading.Lock()
+        self._throttle: dict[str, tuple[float, int]] = {}  # kind -> (last reported, suppressed since)
+        self._monotonic = monotonic
+        self.refused_handshakes = 0
+        self.failed_unlocks = 0
+        self.bad_messages = 0
+
+    def event(self, kind: str, **fields: Any) -> None:
+        """Report a security event to ``on_event`` (default: the ``drumtwin.dashboard`` log)."""
+        if self._on_event is not None:
+            try:
+                self._on_event(kind, fields)
+                return
+            except Exception:
+                _log.exception("dashboard event sink failed")
+        _log.warning("%s %s", kind, fields)
+
+    def event_throttled(self, kind: str, **fields: Any) -> None:
+        """Like :meth:`event`, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
+        can retry a refused handshake in a loop); ``suppressed`` counts the ones not sent."""
+        now = self._monotonic()
+        with self._lock:
+            last, suppressed = self._throttle.get(kind, (-math.inf, 0))
+            if now - last < EVENT_THROTTLE_S:
+                self._throttle[kind] = (last, suppressed + 1)
+                return
+            self._throttle[kind] = (now, 0)
+        self.event(kind, suppressed=suppressed, **fields)
+
+    def flush_throttled(self, force: bool = False) -> None:
+        """Write the counts of throttled events suppressed since their last report once
+        their window has passed (``force``: now, e.g. when the dashboard stops), so the
+        log says how many refused handshakes or limited unlocks there were."""
+        now = self._monotonic()
+        due: list[tuple[str, int]] = []
+        with self._lock:
+            for kind, (last, suppressed) in self._throttle.items():
+                if suppressed and (force or now - last >= EVENT_THROTTLE_S):
+                    due.append((kind, suppressed))
+                    self._throttle[kind] = (now, 0)
+        for kind, suppressed in due:
+            self.event(kind, suppressed=suppressed, summary=True)
+
+    def bad_message(self, kind: str, detail: str) -> None:
+        self.bad_messages += 1
+        self.event_throttled(kind, error=detail)
+
+    def refused(self, origin: str | None, host: str | None) -> None:
+        self.refused_handshakes += 1
+        self.event_throttled("dashboard_refused", origin=origin, host=host)
+
+    def try_unlock(self, client_id: int, given: object, address: str = "") -> tuple[bool, str]:
+        """Check a token attempt under the per-viewer and per-address rate limits;
+        returns (authorised, message)."""
+        now = self._monotonic()
+        with self._lock:
+            wait = self._limiter.wait_s(client_id, now, address)
+            ok = wait <= 0 and tokens_match(given, self._token)
+            if wait <= 0:
+                self._limiter.attempt(client_id, now, ok, address)
+        if wait > 0:
+            self.event_throttled("dashboard_unlock_limited", client=client_id, address=address,
+                                 wait_s=round(wait, 1))
+            return False, f"**too many attempts: wait {math.ceil(wait)} s**"
+        if not ok:
+            self.failed_unlocks += 1
+            self.event("dashboard_unlock_failed", client=client_id, address=address)
+            return False, "**wrong token: read-only**"
+        self.event("dashboard_unlocked", client=client_id)
+        return True, "controls unlocked"
+
+    def estop_allowed(self, authorised: bool) -> bool:
+        """EMERGENCY STOP for every viewer (a stop is always safe) unless ``estop_needs_token``."""
+        return authorised or not self.estop_needs_token
+
+    def forget(self, client_id: int) -> None:
+        with self._lock:
+            self._limiter.forget(client_id)
+
+
+# -- viser internals (pinned: CHECKED_VERSIONS) -------------------------------------------------
+def disable_share_tunnel(server: ViserServer) -> None:
+    """No share URL: viser's tunnel would publish the dashboard on the internet. viser 1.1
+    registers the share handlers on its websocket server; the public ``request_share_url``
+    is replaced by a no-op too."""
+    from viser import _messages
+
+    ws = server._websock_server
+    for msg in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
+        if msg in ws._incoming_handlers:
+            ws.unregister_handler(msg)
+
+    def no_share(verbose: bool = True) -> None:
+        return None
+
+    server.request_share_url = no_share  # type: ignore[method-assign]
+
+
+def _connection(server: ViserServer, client_id: int) -> Any:
+    return server._websock_server._live_connections.get(client_id)
+
+
+def client_headers(server: ViserServer, client_id: int) -> tuple[str | None, str | None] | None:
+    """(Origin, Host) of a viewer's websocket handshake; None when the viewer has already
+    disconnected; (None, None) when its request is unknown."""
+    conn = _connection(server, client_id)
+    if conn is None:
+        return None
+    request = getattr(conn, "request", None)
+    if request is None:
+        return (None, None)
+    h = request.headers
+    return (h.get("Origin"), h.get("Host"))
+
+
+def client_address(server: ViserServer, client_id: int) -> str:
+    """The viewer's client address (IP), "" when unknown."""
+    conn = _connection(server, client_id)
+    try:
+        addr = conn.remote_address if conn is not None else None
+    except Exception:
+        addr = None
+    return str(addr[0]) if isinstance(addr, tuple) and addr else ""
+
+
+def close_client(server: ViserServer, client_id: int) -> None:
+    """Drop one viewer's websocket (viser reconnects it; the handshake guard refuses it then)."""
+    ws = server._websock_server
+    conn = ws._live_connections.get(client_id)
+    loop = ws._background_event_loop
+    if conn is not None and loop is not None:
+        import asyncio
+
+        asyncio.run_coroutine_threadsafe(conn.close(), loop)

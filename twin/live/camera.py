@@ -1,5 +1,6 @@
 """The camera worker (frames -> meter -> readings) and the process worker (readings ->
-Kalman trend + the paper's moving average -> CSV row, plot point, :class:`FrameInfo`)."""
+Kalman trend + the paper's moving average -> one ``FrameReading`` record on the run's bus,
+and the newest :class:`FrameInfo` for the other workers)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 
@@ -17,9 +18,13 @@ from control.endpoint import EndpointDetector
 from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
 from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
-from twin.state import FrameRow, LiveState
+from twin.records import CameraRate, FrameReading, TrendSettled, TrendUnsettled
+from twin.state import LiveState
 from vision.errors import VisionError
-from vision.meter import Reading
+from vision.meter import Meter, Reading
+from vision.sources import Frame
+
+T = TypeVar("T")
 
 NO_DRUM_GRACE_S = 5.0
 """Camera seconds from the first frame during which frames without a findable drum (a webcam
@@ -69,7 +74,7 @@ def is_valid_mi(r: Reading) -> bool:
     return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
 
 
-def put_dropping_oldest(q: queue.Queue, item: Any) -> None:
+def put_dropping_oldest(q: queue.Queue[T], item: T) -> None:
     """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
     while True:
         try:
@@ -89,8 +94,8 @@ class CameraWorker:
 
     def __init__(
         self,
-        frames: Iterable[Any],
-        meter: Any,
+        frames: Iterable[Frame],
+        meter: Meter,
         out: queue.Queue[CameraReading],
         box: Latest[CameraInfo],
         state: LiveState,
@@ -161,11 +166,12 @@ def _known(value: float) -> float | None:
 
 
 class ProcessWorker:
-    """Readings -> trend, moving average, one :class:`FrameRow` (run log + plots) and the
-    newest :class:`FrameInfo`; camera slope angles go on to the twin (``slopes``). Each
+    """Readings -> trend, moving average, one ``FrameReading`` record (published: the run log's
+    row, the plots, the numbers panel) and the newest :class:`FrameInfo`; camera slope angles
+    go on to the twin (``slopes``). Each
     change of the trend between unsettled and settled (``TrendEstimate.settled``: the
     supervisor decides nothing on an unsettled trend) is a ``trend_unsettled`` /
-    ``trend_settled`` event (a logged state, not a fault) and the ``trend_state`` number."""
+    ``trend_settled`` record (a logged state, not a fault; the panel's ``trend_state``)."""
 
     def __init__(
         self,
@@ -174,8 +180,6 @@ class ProcessWorker:
         box: Latest[FrameInfo],
         view: RunView,
         sink: EventSink,
-        write_row: Callable[[Mapping[str, Any]], None],
-        state: LiveState,
         slopes: queue.SimpleQueue[tuple[float, float]] | None = None,
         ma_window: int = 150,
         camera_fps: Callable[[], float] = lambda: 0.0,
@@ -187,8 +191,6 @@ class ProcessWorker:
         self.box = box
         self.view = view
         self.sink = sink
-        self.write_row = write_row
-        self.state = state
         self.slopes = slopes
         self.camera_fps = camera_fps
         self.endpoint = endpoint or EndpointDetector()  # the batch endpoint: events mixed / unmixed
@@ -202,7 +204,7 @@ class ProcessWorker:
                 continue
             self.process(item)
 
-    def process(self, item: CameraReading) -> FrameRow | None:
+    def process(self, item: CameraReading) -> FrameReading | None:
         """One reading -> trend, row, :class:`FrameInfo`. A frame whose time is not a number
         or goes back before the newest processed one is dropped (None) with a
         ``camera_clock`` fault: the trend's time only runs forward."""
@@ -223,16 +225,15 @@ class ProcessWorker:
         self._log_settled(est)
         ma = self.ma.update(mi)
         end = self.endpoint.update(item.t_s, mi, est.level, est.valid and est.settled)
-        if end.changed:  # issue 24: the endpoint, live (the dashboard shows the numbers)
+        if end.changed:  # issue 24: the endpoint, live (the frame record carries it to the panel)
             self.sink.event(end.changed, item.t_s, mixing_time_s=end.mixing_time_s, plateau_mi=end.plateau_mi,
                             block_sd=end.block_sd, reason=end.reason)
-            self.sink.numbers(endpoint="mixed" if end.mixed else "not mixed", mixing_time_s=end.mixing_time_s)
         last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est, end.mixed, end.mixing_time_s))
         if valid and self.slopes is not None and math.isfinite(r.slope_deg):
             self.slopes.put((item.t_s, float(r.slope_deg)))
         tw = self.view.twin()
-        row = FrameRow(
+        row = FrameReading(
             t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
             d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration, slope_deg=r.slope_deg,
             valid=valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
@@ -242,15 +243,8 @@ class ProcessWorker:
             flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ()),
             mixed=end.mixed, mixing_time_s=end.mixing_time_s,
         )
-        values = row.as_dict()
-        self.write_row(values)
-        self.state.publish_point({**values, "rpm_setpoint": mill.setpoint_rpm, "rpm_actual": mill.actual_rpm})
-        light = next((f for f in r.flags if f.startswith("lighting_changed:")), None)
-        self.sink.numbers(
-            t_s=item.t_s, mi=r.mi, d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration,
-            slope_deg=r.slope_deg, trend_mi=est.level, camera_fps=self.camera_fps(),
-            light_state="ok" if light is None else "changed (" + light.split(":", 1)[1] + ")",
-        )
+        self.sink.publish(row)  # the one way a frame leaves: the CSV row, the plots, the numbers panel
+        self.sink.publish(CameraRate(t_s=item.t_s, fps=self.camera_fps()))
         return row
 
     def _log_settled(self, est: TrendEstimate) -> None:
@@ -267,6 +261,6 @@ class ProcessWorker:
                   f" < {c.settle_frames}"
         else:
             why = f"band {band:.3f} > {c.settle_band:g}"
-        self.sink.event("trend_settled" if est.settled else "trend_unsettled", est.t_s, level=est.level,
-                        lo95=est.lo95, hi95=est.hi95, n_since_init=est.n_since_init, reason=why)
-        self.sink.numbers(trend_state="settled" if est.settled else "unsettled")
+        change = TrendSettled if est.settled else TrendUnsettled
+        self.sink.publish(change(t_s=est.t_s, level=est.level, lo95=est.lo95, hi95=est.hi95,
+                                 n_since_init=est.n_since_init, reason=why))

@@ -38,6 +38,7 @@ from typing import Protocol
 from control.errors import ControlError, MillRefused
 from control.protocol import MillStatus
 from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill, drain
+from twin.records import MillState
 
 MILL_POLL_S = 0.1  # wall seconds between polls
 
@@ -219,8 +220,8 @@ class MillWorker:
 
     def _publish(self, snap: MillSnapshot) -> None:
         sp, act = snap.setpoint_rpm, snap.actual_rpm
-        self.sink.numbers(
-            mill_state=snap.state,
-            rpm_setpoint=sp if math.isfinite(sp) else None,
-            rpm_actual=act if math.isfinite(act) else None,
-        )
+        self.sink.publish(MillState(
+            t_s=self.now_s(), state=snap.state, connected=snap.connected,
+            setpoint_rpm=sp if math.isfinite(sp) else None,
+            actual_rpm=act if math.isfinite(act) else None,
+        ))

@@ -1,5 +1,5 @@
 """What the live workers exchange: immutable snapshots, typed commands, a read-only view
-of the run, and the event sink (run log + dashboard alarms).
+of the run, and the event sink (typed run records onto the run's bus: ``twin.records``).
 
 Threads never share mutable fields. Each snapshot has exactly one writer (the worker
 that owns it) and is replaced whole in a :class:`Latest` box; readers get the current
@@ -13,7 +13,7 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -21,8 +21,11 @@ import numpy as np
 
 from control.protocol import MillStatus
 from control.trend import TrendEstimate
+from twin.records import Bus, DecisionMade, Record, record_of
+from twin.runlog import write_record
 from twin.state import LiveState
 from vision.meter import Reading
+from vision.roi import DrumROI
 
 T = TypeVar("T")
 
@@ -112,7 +115,7 @@ class CameraInfo:
     t_s: float | None = None
     wall_s: float = 0.0
     image: np.ndarray | None = None
-    roi: Any = None
+    roi: DrumROI | None = None
     n_frames: int = 0
     ended: bool = False
 
@@ -239,36 +242,56 @@ class RunView:
         return self._mode.get()
 
 
-# -- events -----------------------------------------------------------------------------------
+# -- events ---------------------------------------------------------------------------------
 class EventSink(Protocol):
-    """Where workers report: run-log events, named faults (alarms) and dashboard numbers."""
+    """Where workers report: typed run records (``publish``, see ``twin.records``), events by
+    kind (``event``: builds the kind's record), named faults raised once until cleared, and
+    metadata for the run log's ``metadata.json``."""
 
-    def event(self, kind: str, t_s: float, **data: Any) -> None: ...
-    def fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
-    def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None: ...
-    def numbers(self, **values: Any) -> None: ...
-    def metadata(self, **data: Any) -> None: ...
+    def publish(self, rec: Record) -> None: ...
+    def event(self, kind: str, t_s: float, **data: object) -> None: ...
+    def fault(self, key: str, message: str, t_s: float, **data: object) -> None: ...
+    def clear_fault(self, key: str, message: str, t_s: float, **data: object) -> None: ...
+    def metadata(self, **data: object) -> None: ...
+
+
+class RunLogLike(Protocol):
+    """The run log as the sink uses it (``twin.runlog.RunLog``)."""
+
+    def frame(self, row: Mapping[str, Any]) -> None: ...
+    def event(self, kind: str, t_s: float, **data: Any) -> object: ...
+    def set_metadata(self, **data: Any) -> None: ...
 
 
 class RunEvents:
-    """The run's :class:`EventSink`: events to the run log (``event(kind, t_s, **data)``),
-    faults raised once until cleared (an event plus a dashboard alarm), numbers to the
-    dashboard, metadata to the run log's ``metadata.json``, frame rows (``frame``).
-    Thread-safe; counts faults and decisions. A run-log write that fails (disk full,
-    read-only) never raises into a worker: the first one is a ``run_log`` alarm and goes to
-    ``on_failure`` (the loop ends the run)."""
+    """The run's :class:`EventSink`: records go on the run's :class:`Bus` (``bus``), to which the
+    run log (``twin.runlog.write_record``: CSV rows, JSONL events) and the dashboard's state
+    (``LiveState.record``) subscribe. Faults go through the run's one ``ActiveFaults``
+    (``state.faults``): a fault is published once until it is cleared. Thread-safe; counts
+    faults and decisions. A run-log write that fails (disk full, read-only) never raises into
+    a worker: the first one is a ``run_log`` alarm and goes to ``on_failure`` (the loop ends the
+    run)."""
 
-    def __init__(self, runlog: Any, state: LiveState, on_failure: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self, runlog: RunLogLike, state: LiveState, on_failure: Callable[[str], None] | None = None,
+        bus: Bus | None = None,
+    ) -> None:
         self.runlog = runlog
         self.state = state
+        self.faults = state.faults
         self.on_failure = on_failure
+        self.bus = bus if bus is not None else Bus()
         self._lock = threading.Lock()
-        self._active: set[str] = set()
         self.n_faults = 0
         self.n_decisions = 0
         self.log_error: str | None = None
+        self.bus.subscribe(self._log)
+        self.bus.subscribe(state.record)
 
-    def _write(self, write: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    def _log(self, rec: Record) -> None:
+        self._write(write_record, self.runlog, rec)
+
+    def _write(self, write: Callable[..., object], *args: object, **kwargs: object) -> None:
         try:
             write(*args, **kwargs)
         except OSError as exc:
@@ -276,43 +299,33 @@ class RunEvents:
                 if self.log_error is not None:
                     return
                 self.log_error = reason = f"cannot write the run log: {exc}"
-            self.state.set_alarm("run_log", reason)
+            self.faults.raise_fault("run_log", reason)
             if self.on_failure is not None:
                 self.on_failure(reason)
 
-    def frame(self, row: Any) -> None:
-        """One ``frames.csv`` row."""
-        self._write(self.runlog.frame, row)
-
-    def event(self, kind: str, t_s: float, **data: Any) -> None:
-        if kind == "decision":
+    def publish(self, rec: Record) -> None:
+        if isinstance(rec, DecisionMade):
             with self._lock:
                 self.n_decisions += 1
-        self._write(self.runlog.event, kind, t_s, **data)
+        self.bus.publish(rec)
 
-    def fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
+    def event(self, kind: str, t_s: float, **data: object) -> None:
+        self.publish(record_of(kind, t_s, **data))
+
+    def fault(self, key: str, message: str, t_s: float, **data: object) -> None:
+        if not self.faults.raise_fault(key, message, shown=False):
+            return
         with self._lock:
-            if key in self._active:
-                return
-            self._active.add(key)
             self.n_faults += 1
-        self._write(self.runlog.event, "fault", t_s, fault=key, message=message, **data)
-        self.state.set_alarm(key, message)
+        self.event("fault", t_s, fault=key, message=message, **data)
+        self.faults.show(key)  # the alarm once its event is logged
 
-    def clear_fault(self, key: str, message: str, t_s: float, **data: Any) -> None:
-        with self._lock:
-            if key not in self._active:
-                return
-            self._active.discard(key)
-        self._write(self.runlog.event, "recovered", t_s, fault=key, message=message, **data)
-        self.state.set_alarm(key, None)
+    def clear_fault(self, key: str, message: str, t_s: float, **data: object) -> None:
+        if self.faults.clear(key):
+            self.event("recovered", t_s, fault=key, message=message, **data)
 
-    def numbers(self, **values: Any) -> None:
-        self.state.update_numbers(**values)
-
-    def metadata(self, **data: Any) -> None:
+    def metadata(self, **data: object) -> None:
         self._write(self.runlog.set_metadata, **data)
 
     def active(self) -> frozenset[str]:
-        with self._lock:
-            return frozenset(self._active)
+        return self.faults.keys()

@@ -17,7 +17,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Protocol
 
 from control.errors import ControlError
 from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
@@ -34,6 +34,7 @@ from twin.live.records import (
     StopMill,
     SupervisorCommand,
 )
+from twin.records import DecisionMade, ModeSet
 
 RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
 
@@ -151,7 +152,7 @@ class SupervisorWorker:
                 self.sink.event("operator_rejected", now, action="mode", mode=cmd.mode, error=str(exc))
                 return
             self.mode_box.set(sup.mode.value)
-            self.sink.numbers(mode=sup.mode.value)
+            self.sink.publish(ModeSet(t_s=now, mode=sup.mode.value))
             if "whatif" in self._doubts:  # the operator chose again: a failed study is acknowledged
                 self.trust_twin("whatif")
                 self.sink.clear_fault("whatif_failed", "mode set by the operator", now)
@@ -242,12 +243,7 @@ class SupervisorWorker:
                 self.sink.clear_fault("vision_lost", "valid MI again", now)
 
     def _apply(self, d: Decision) -> None:
-        data: dict[str, Any] = d.as_dict()
-        data.pop("t_s", None)
-        data["decision"] = data.pop("kind")  # "kind" is the event's kind
-        self.sink.event("decision", d.t_s, **data)
-        rpm_txt = "" if d.rpm is None else f" -> {d.rpm:g} rpm"
-        self.sink.numbers(last_decision=f"{d.kind}{rpm_txt}", last_reason=d.reason)
+        self.sink.publish(DecisionMade.of(d))
         if d.action is Action.STOP:
             self.send(StopMill(source="supervisor"))
         elif d.action is Action.SET_RPM and d.rpm is not None:

@@ -21,12 +21,17 @@ from collections import deque
 from collections.abc import Mapping
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.clock import Cadence
 from twin.live.camera import Rate
 from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
+from twin.records import Calibrated, TwinReading, TwinStatus
 from twin.state import LiveState
+
+if TYPE_CHECKING:
+    from sim.mixer import Mixer
+    from vision.colours import ColourClass
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
 TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
@@ -44,8 +49,8 @@ class TwinSettings:
     seed: int = 0
     start_rpm: float = 5.0
     size_px: int = 240
-    classes: tuple[Any, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
-    mixer: Any = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
+    classes: tuple[ColourClass, ...] = ()  # the camera meter's colour classes (the twin's meters use the same)
+    mixer: Mixer | None = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
     engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
@@ -207,12 +212,12 @@ class TwinWorker:
                 if reason != self._cal_waiting:  # an event, not a fault: the twin runs on as it is
                     self._cal_waiting = reason
                     self.sink.event("calibration_waiting", t, reason=why, rpm=self.view.mill().actual_rpm)
-                    self.sink.numbers(twin_state="running, waiting to calibrate")
+                    self.sink.publish(TwinStatus(t_s=t, state="running, waiting to calibrate"))
                 return
             self._cal_waiting = None
             self._cal_wanted = False
             self._cal_started = (t, target, rpm, time.monotonic())
-            self.sink.numbers(twin_state="running, calibrating")
+            self.sink.publish(TwinStatus(t_s=t, state="running, calibrating"))
             self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)
             try:
                 self._cal_future = self._get_pool().submit(
@@ -232,19 +237,19 @@ class TwinWorker:
         assert self._cal_started is not None  # set together with the future
         _, target, rpm, wall0 = self._cal_started
         self.calibration = cal
-        self.sink.event(
-            "calibration", t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
+        self.sink.publish(Calibrated(
+            t_s=t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
             twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - wall0,
-        )
+        ))
         self.sink.metadata(calibration=cal)
-        self.sink.numbers(friction=cal.friction, twin_state="running")
+        self.sink.publish(TwinStatus(t_s=t, state="running"))
         self.sink.clear_fault("calibration", "calibrated", t)
         if self.sim is not None:
             self.sim.set_friction(cal.friction, cal.rolling)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
         self.sink.fault("calibration", f"calibration failed: {exc}", t)
-        self.sink.numbers(twin_state="running (uncalibrated)")
+        self.sink.publish(TwinStatus(t_s=t, state="running (uncalibrated)"))
 
     def _get_pool(self) -> Executor:
         if self._closed:
@@ -307,5 +312,5 @@ class TwinWorker:
         self.fps.tick()
         self._mi, self._slope = float(r.mi), float(r.slope_deg)
         self.state.publish_twin(image, parts, self.sim.drum.radius_m)
-        self.sink.numbers(twin_mi=r.mi, twin_slope_deg=r.slope_deg, twin_fps=self.fps.rate())
+        self.sink.publish(TwinReading(t_s=self.now_s, mi=r.mi, slope_deg=r.slope_deg, fps=self.fps.rate()))
 

@@ -195,7 +195,7 @@ def endpoint_of(run: RunData) -> dict[str, Any]:
     cfg = RunConfig()
     t, mi = run.series("t_s"), run.series("mi")
     ok = np.isfinite(t)
-    res = endpoint_of_series(t[ok], mi[ok], endpoint_config(cfg), trend_config(cfg))
+    res = endpoint_of_series(t[ok], mi[ok], endpoint_config(cfg), trend_config())
     return {"source": "offline (no endpoint events in the log: the run's raw MI replayed through the detector)",
             "mixing_time_s": res.mixing_time_s, "plateau_mi": res.plateau_mi, "changes": list(res.changes)}
 

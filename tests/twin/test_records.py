@@ -1,0 +1,246 @@
+"""The run's typed records (twin/records.py): one definition of the CSV schema, of every event
+kind and of the active faults; one frame traced from the process worker to the CSV row, the
+JSONL and the dashboard's state; the docs table generated from the code."""
+
+from __future__ import annotations
+
+import ast
+import logging
+import math
+import queue
+from dataclasses import fields
+from pathlib import Path
+
+import pytest
+
+from control.trend import MITrend
+from tests.twin.test_workers import Boxes, _reading
+from twin.live.camera import CameraReading, ProcessWorker
+from twin.live.records import RunEvents
+from twin.records import (
+    FRAME_COLUMNS,
+    KINDS,
+    SERIES,
+    ActiveFaults,
+    FrameReading,
+    TrendUnsettled,
+    UntypedEvent,
+    record_of,
+    records_table,
+)
+from twin.runlog import RunLog, read_events, read_frames
+from twin.state import LiveState
+
+ROOT = Path(__file__).resolve().parents[2]
+TWIN = ROOT / "twin"
+
+
+def _modules() -> list[tuple[Path, ast.Module]]:
+    return [(p, ast.parse(p.read_text(encoding="utf-8"))) for p in sorted(TWIN.rglob("*.py"))]
+
+
+def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
+    """docs/architecture.md carries the table ``twin.records.records_table()`` makes from the
+    classes (regenerate it with ``python -m twin.records``): a kind or field added, renamed or
+    given another unit without the docs fails here."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    begin, end = "<!-- records:begin -->\n", "<!-- records:end -->"
+    assert begin in text and end in text
+    assert text.split(begin, 1)[1].split(end, 1)[0] == records_table()
+    for kind, cls in KINDS.items():
+        assert f"| `{kind}` |" in records_table()
+        assert all(f.metadata.get("unit") is not None for f in fields(cls)), kind
+
+
+def _literal_kinds() -> list[tuple[str, str, int]]:
+    """(kind, file, line) of every event kind a twin/ module names as a string literal: the
+    first argument of ``.event(...)`` / ``._event(...)`` / ``._event_throttled(...)`` /
+    ``.on_error(...)``."""
+    out = []
+    for path, tree in _modules():
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
+                continue
+            if node.func.attr not in ("event", "_event", "_event_throttled", "on_error") or not node.args:
+                continue
+            arg = node.args[0]
+            values = [arg] if not isinstance(arg, ast.IfExp) else [arg.body, arg.orelse]
+            for v in values:
+                if isinstance(v, ast.Constant) and isinstance(v.value, str):
+                    out.append((v.value, str(path.relative_to(ROOT)), node.lineno))
+    return out
+
+
+def test_every_event_kind_named_in_twin_is_a_registered_record_kind() -> None:
+    """An event kind written as a string in a worker, the loop or the dashboard must be a
+    record class in twin/records.py (the one place: its fields and units). A new kind added
+    elsewhere only (e.g. ``sink.event("mixed", ...)``) fails here until its class exists."""
+    named = _literal_kinds()
+    assert len(named) >= 20  # the scan sees the call sites (a broken scan would pass vacuously)
+    missing = [(k, f, n) for k, f, n in named if k not in KINDS]
+    assert missing == []
+
+
+def test_an_unregistered_kind_is_still_logged_whole_and_warned(tmp_path: Path, caplog) -> None:
+    with caplog.at_level(logging.WARNING, logger="drumtwin.records"):
+        rec = record_of("no_such_kind", 2.0, a=1, b="x")
+        bad = record_of("operator", 2.0, action="stop", colour="red")  # a field the kind does not declare
+    assert isinstance(rec, UntypedEvent) and isinstance(bad, UntypedEvent)
+    assert "no_such_kind" in caplog.text and "operator" in caplog.text
+    with RunLog(tmp_path / "run") as log:
+        events = RunEvents(log, LiveState())
+        events.event("no_such_kind", 2.0, a=1, b="x")
+        events.event("operator", 3.0, action="stop")
+    got = read_events(tmp_path / "run")
+    assert [(e["kind"], e["t_s"]) for e in got] == [("no_such_kind", 2.0), ("operator", 3.0)]
+    assert got[0]["a"] == 1 and got[0]["b"] == "x"
+    assert set(got[1]) == {"t_s", "wall_s", "kind", "action"}  # unset optional fields are left out, as before
+
+
+OTHER_CSVS = ("vision_cmds.py", "sim_cmds.py")
+"""The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv."""
+
+
+def test_the_csv_schema_is_defined_once() -> None:
+    """Only ``FrameReading`` declares the frame columns: no other class in twin/ declares
+    frame fields and no tuple/list literal lists column names (the old code had both, in
+    twin/runlog.py and twin/state.py, kept equal only by a test). ``Panel`` is the dashboard's
+    numbers panel (values folded from several record kinds), not a row."""
+    columns = set(FRAME_COLUMNS) - {"t_s", "frame", "mode", "flags", "valid", "mi"}  # names too common to tell
+    second = []
+    for path, tree in _modules():
+        if path.name in OTHER_CSVS:
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef) and node.name not in ("FrameReading", "Panel"):
+                declared = {s.target.id for s in node.body if isinstance(s, ast.AnnAssign)
+                            and isinstance(s.target, ast.Name)}
+                if len(declared & columns) >= 4:
+                    second.append((str(path.relative_to(ROOT)), node.name))
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+                listed = {e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+                if len(listed & columns) >= 4:
+                    second.append((str(path.relative_to(ROOT)), node.lineno))
+    assert second == []
+    assert FRAME_COLUMNS == ("t_s", "wall_s", *(f.name for f in fields(FrameReading)[1:]))
+    assert set(SERIES) <= set(FRAME_COLUMNS) and "rpm_actual" in SERIES
+
+
+def test_the_active_fault_set_is_defined_once() -> None:
+    """Only ``ActiveFaults`` keeps active faults: no other class in twin/ holds a set or dict
+    attribute named for alarms, faults or active keys (the old code kept them twice:
+    ``RunEvents._active`` and ``LiveState._alarms``)."""
+    holders = []
+    for path, tree in _modules():
+        for cls in (n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)):
+            for node in ast.walk(cls):
+                targets = node.targets if isinstance(node, ast.Assign) else (
+                    [node.target] if isinstance(node, ast.AnnAssign) else [])
+                value = getattr(node, "value", None)
+                for t in targets:
+                    if not (isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) and t.value.id == "self"):
+                        continue
+                    if not any(w in t.attr.lower() for w in ("alarm", "fault", "active")):
+                        continue
+                    is_container = isinstance(value, (ast.Set, ast.Dict)) or (
+                        isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
+                        and value.func.id in ("set", "dict"))
+                    if is_container and cls.name != "ActiveFaults":
+                        holders.append((str(path.relative_to(ROOT)), cls.name, t.attr))
+    assert holders == []
+
+
+def test_a_fault_is_raised_once_and_the_dashboard_shows_the_same_set(tmp_path: Path) -> None:
+    state = LiveState()
+    with RunLog(tmp_path / "run") as log:
+        events = RunEvents(log, state)
+        assert events.faults is state.faults and isinstance(events.faults, ActiveFaults)
+        events.fault("mill_link", "mill link lost", 1.0, url="loop://")
+        events.fault("mill_link", "mill link lost again", 1.5, url="loop://")
+        assert state.alarms == ("mill link lost",) and events.active() == {"mill_link"}
+        events.clear_fault("mill_link", "restored", 2.0)
+        events.clear_fault("mill_link", "restored", 2.5)
+    got = [(e["kind"], e["t_s"], e.get("url")) for e in read_events(tmp_path / "run")]
+    assert got == [("fault", 1.0, "loop://"), ("recovered", 2.0, None)]
+    assert state.alarms == () and events.n_faults == 1
+
+
+def _same(a: object, b: object) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a):
+        return math.isnan(b)
+    return a == b or (isinstance(a, float) and b == pytest.approx(a, rel=1e-12))
+
+
+def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: Path) -> None:
+    """One camera reading through the process worker: the one record it publishes is the
+    CSV row cell for cell, the trend event it causes is in the JSONL at its time, and the
+    dashboard's state (plot point and numbers panel) shows the same values."""
+    state = LiveState()
+    b = Boxes("manual")
+    b.mill_at(7.5)
+    with RunLog(tmp_path / "run") as log:
+        events = RunEvents(log, state)
+        pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, events)
+        rec = pw.process(CameraReading(4.25, 17, _reading(0.83, slope=31.5)))
+    assert isinstance(rec, FrameReading)
+    [row] = read_frames(tmp_path / "run")
+    csv_value = {bool: lambda v: 1.0 if v else 0.0, tuple: lambda v: ";".join(v) or None}
+    for f in fields(FrameReading):
+        v = getattr(rec, f.name)
+        want = csv_value.get(type(v), lambda v: v)(v)
+        assert _same(float(want) if isinstance(want, int) and not isinstance(want, bool) else want, row[f.name]), f.name
+    assert row["mi"] == pytest.approx(0.83) and row["rpm_actual"] == 7.5 and row["frame"] == 17.0
+    assert row["mode"] == "manual" and row["wall_s"] > 0
+    [ev] = [e for e in read_events(tmp_path / "run") if e["kind"] == TrendUnsettled.kind]
+    assert ev["t_s"] == rec.t_s and ev["level"] == pytest.approx(rec.trend_mi)
+    snap = state.snapshot()
+    assert snap.history["t_s"][-1] == rec.t_s and snap.history["mi"][-1] == pytest.approx(rec.mi)
+    assert snap.history["rpm_actual"][-1] == 7.5 and snap.history["trend_mi"][-1] == pytest.approx(rec.trend_mi)
+    p = snap.panel
+    assert (p.t_s, p.mi, p.slope_deg, p.trend_state, p.light_state) == (4.25, rec.mi, 31.5, "unsettled", "ok")
+
+
+def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and_the_mill() -> None:
+    """The demo's start (``twin.loop.DemoStart``): nothing is started before the mill worker's
+    first connected ``MillState`` record; then the front panel, then the operator's Start."""
+    import threading
+
+    from twin.loop import DemoStart
+    from twin.records import Bus, MillState
+
+    calls: list[str] = []
+
+    class Plant:
+        def start_drive(self) -> None:
+            calls.append("drive")
+
+    class Loop:
+        stop_event = threading.Event()
+
+        def start_mill(self) -> None:
+            calls.append("start")
+
+    bus = Bus()
+    plan = DemoStart(Plant(), connect_timeout_s=30.0)  # type: ignore[arg-type]
+    bus.subscribe(plan.record)
+    bus.publish(MillState(t_s=0.0, state="connecting", connected=False, setpoint_rpm=None, actual_rpm=None))
+    done = threading.Thread(target=plan.execute, args=(Loop(),))
+    done.start()
+    done.join(0.3)
+    assert done.is_alive() and calls == []  # still waiting: the board was not read yet
+    bus.publish(MillState(t_s=0.5, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
+    done.join(5.0)
+    assert not done.is_alive() and calls == ["drive", "start"]
+
+
+def test_run_config_has_no_untyped_bag() -> None:
+    """Test seams are the typed ``twin.loop.Seams``, not a ``RunConfig.extra`` dict."""
+    from twin.config import RunConfig
+    from twin.loop import Seams
+
+    assert "extra" not in {f.name for f in fields(RunConfig)}
+    assert {f.name for f in fields(Seams)} >= {"supervisor", "calibrate", "whatif_study", "mismatch", "on_started"}
+    with pytest.raises(TypeError):  # a misspelt supervisor setting is refused, not ignored
+        from twin.loop import supervisor_config
+
+        supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
