@@ -59,7 +59,7 @@ def test_process_worker_emits_mixed_and_unmixed_with_the_frame_columns():
     assert mixed[0]["plateau_mi"] == pytest.approx(0.95, abs=0.01) and "target 0.9" in mixed[0]["reason"]
     f = b.frames.get()
     assert f.mixed and f.mixing_time_s == mixed[0]["mixing_time_s"]
-    assert sink.state is not None and sink.state.panel().mixed  # the dashboard's banner (twin.state.Panel)
+    assert sink.state is not None and sink.state.panel.mixed  # the dashboard's banner (twin.state.Panel)
     assert rows[-1]["mixed"] is True and rows[-1]["mixing_time_s"] == f.mixing_time_s
     assert rows[0]["mixed"] is False and rows[0]["mixing_time_s"] is None
     feed(pw, b, 15.0, 20.0, 0.6)  # falls off the plateau for longer than the exit dwell
