@@ -55,6 +55,21 @@ def check_scheduler(address: str) -> tuple[str, int]:
     return parts.hostname, port
 
 
+def check_port_free(host: str, port: int) -> None:
+    """A one-line TwinError when ``host:port`` is taken: the dashboard would otherwise come
+    up on another port, and an operator opening the asked one reaches whatever holds it
+    (another run's dashboard, another mill)."""
+    import socket
+
+    try:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((host, port))
+    except OSError as exc:
+        raise TwinError(f"--port {port} on {host} is not free ({exc.strerror or exc}): choose another") from None
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """Everything ``drumtwin run`` needs. Times are run time (the demo clock, which
@@ -150,6 +165,8 @@ class RunConfig:
             raise TwinError(f"--engine must be dem or pymunk, got {self.engine!r}")
         if not self.demo and self.speed != 1.0:
             raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
+        if self.control_token is not None and not self.control_token.strip():
+            raise TwinError("--control-token must not be empty (an empty token would unlock every viewer)")
         token = self.control_token or os.environ.get(TOKEN_ENV) or None
         if self.dashboard and self.host not in LOCAL_HOSTS and not token:
             raise TwinError(

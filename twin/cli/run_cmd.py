@@ -270,7 +270,7 @@ def run(
     With no arguments: the embedded demo (hidden plant, emulated mill on a pty, AUTO) and
     the dashboard on http://127.0.0.1:8080.
     """
-    from twin.config import RunConfig
+    from twin.config import RunConfig, check_port_free
 
     try:
         cfg = RunConfig(
@@ -280,6 +280,8 @@ def run(
             estop_needs_token=estop_needs_token,
             extra={} if drive is None else {"plant": {"drive": _drive_profile(drive, camera, video, mill)}},
         ).resolved()
+        if cfg.dashboard:  # issue 26: a port in use is refused, not swapped for another
+            check_port_free(cfg.host, cfg.port)
         if json_out:
             with stdout_to_stderr():
                 summary = run_live(cfg, progress=False)
