@@ -54,7 +54,9 @@ def _mill(
     check_number("--timeout", timeout_s, above=0.0, at_most=60.0)
     if not 0 <= retries <= 100:
         raise ControlError(f"--retries must be an integer in 0..100 (got {retries})")
-    ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries, "config": config}
+    # a given config is read (and refused when bad) whatever the subcommand
+    ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries,
+               "limits": None if config is None else mill_limits(config)}
 
 
 def mill_limits(config: Path | None) -> Limits:
@@ -135,7 +137,7 @@ def mill_set_rpm(
     """Set the speed setpoint (rpm), inside the run's limits (the drum of `mill --config`,
     else the demo's: the limits the supervisor enforces) unless --commission is given."""
     check_number("rpm", rpm, at_least=0.0)
-    limits = mill_limits(ctx.obj["config"])  # the one set of limits (control.limits)
+    limits = ctx.obj["limits"] or mill_limits(None)  # the one set of limits (control.limits)
     if not commission:
         limits.refuse_rpm(rpm, "set-rpm")  # ControlError: one line naming the limit, exit 2
     elif limits.check_rpm(rpm).clamped and rpm != 0:
