@@ -450,6 +450,9 @@ def test_bench_memory_measures_the_run_and_its_process_tree() -> None:
     d = json.loads(r.out)
     assert d["processes"] >= 2 and 50 < d["main_hwm_mb"] < 2000
     assert d["tree_rss_mb"] >= d["tree_pss_mb"] > 0 and d["tree_rss_mb"] >= d["main_hwm_mb"] * 0.8
+    per = d["per_process"]  # each process's own peak: their sum bounds the peak of the sum
+    assert "run" in per and len(per) >= 2 and sum(per.values()) >= d["tree_pss_mb"] - 0.5
+    assert not any(k == "forkserver" for k in per) or any(k.startswith("worker") for k in per)
     assert_one_line_error(cli("bench", "memory", "--seconds", "1e9"), "--seconds")
 
 
