@@ -22,13 +22,19 @@ import typing
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import pytest
 import typer
 
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
+from control.modbus.emulator import DriveEmulator
+from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
 from twin.cli import app
+from twin.membench import write_video
+from twin.runlog import RunLog
+from vision.synthetic import drum_frame
 
 DATA = Path(__file__).resolve().parent / "data" / "real-drum-pmma" / "images"
 IMG = str(DATA / "0002.jpg")
@@ -99,6 +105,8 @@ def env(tmp_path_factory):
     (d / "garbage.jpg").write_bytes(b"\xff\xd8\xff" + os.urandom(2000))
     (d / "garbage.avi").write_bytes(b"RIFF" + os.urandom(4000))
     (d / "file").write_text("a regular file\n")
+    write_video(d / "ok.avi", 2.0, size_px=320, fps=10.0)  # a real video: run --mill's cases fail on the mill
+    cv2.imwrite(str(d / "synth.png"), drum_frame((320, 320), mix=0.5, seed=1))  # the default red/blue classes
     example = (Path(__file__).resolve().parents[1] / "configs" / "example.toml").read_text()
     tomls = {
         "syntax": "[meter\nroi = \n",
@@ -121,6 +129,13 @@ def env(tmp_path_factory):
     bad_run.mkdir()
     (bad_run / "frames.csv").write_bytes(b"\x00garbage,\n1,2,3,4\n\xff\xfe")
     (bad_run / "events.jsonl").write_text('{"kind": "start", "t_s": 0}\n{"kind": "fa')
+    with RunLog(d / "okrun") as log:  # a real, small run log for compare's base
+        for i in range(20):
+            log.frame({"t_s": i * 0.5, "wall_s": 1e9 + i, "frame": i, "mi": 0.5 + i / 50, "trend_mi": 0.5 + i / 60,
+                       "rpm_setpoint": 20.0, "rpm_actual": 19.5, "mode": "auto", "flags": ""})
+        log.event("start", 0.0, mode="auto")
+    drive = DriveEmulator(load_profile("delta-ms300"))
+    drive.open_tcp(0)
     busy = socket.socket()
     busy.bind(("127.0.0.1", 0))
     busy.listen(1)
@@ -130,12 +145,15 @@ def env(tmp_path_factory):
     names.update(
         missing=str(d / "no-such-file"), dir=str(d / "dir"), empty=str(d / "empty.bin"),
         garbage=str(d / "garbage.bin"), truncated_jpg=str(d / "truncated.jpg"), garbage_jpg=str(d / "garbage.jpg"),
-        garbage_avi=str(d / "garbage.avi"), under_file=str(d / "file" / "out"), file=str(d / "file"),
-        badrun=str(bad_run), out=str(d / "out"), img=IMG, frames=str(DATA), mill=emu.url,
+        garbage_avi=str(d / "garbage.avi"), video=str(d / "ok.avi"), synth=str(d / "synth.png"),
+        under_file=str(d / "file" / "out"), file=str(d / "file"),
+        badrun=str(bad_run), okrun=str(d / "okrun"), drive=drive.mill_url(), out=str(d / "out"), img=IMG,
+        frames=str(DATA), mill=emu.url,
         busy=str(busy.getsockname()[1]), closed=str(_free_port()), tmp=str(d),
     )
     yield names
     emu.close()
+    drive.close()
     busy.close()
 
 
@@ -144,10 +162,10 @@ def env(tmp_path_factory):
 # the swept value. ``{...}`` names come from ``env``.
 BASE: dict[tuple[str, ...], list[str]] = {
     ("run",): ["--no-dashboard", "--duration", "1", "--speed", "10", "--log", "{out}/run-{case}"],
-    ("compare",): ["{frames}", "--plot", "{out}/cmp-{case}.png"],
-    ("mi",): ["{img}"],
+    ("compare",): ["{okrun}", "--plot", "{out}/cmp-{case}.png"],
+    ("mi",): ["{synth}"],
     ("sim",): ["--duration", "0.2", "--size", "64", "--fps", "5"],
-    ("calibrate",): ["{img}", "--rpm", "5", "--max-evals", "1", "--max-frames", "1", "--spin-up-s", "0.5",
+    ("calibrate",): ["{synth}", "--rpm", "10", "--max-evals", "1", "--max-frames", "1", "--spin-up-s", "0.5",
                      "--window-s", "0.5"],
     ("whatif",): ["--rpm", "5", "--duration", "0.5", "--workers", "1"],
     ("mill-emulator",): ["--tcp", "0", "--duration", "0.2"],
@@ -157,23 +175,27 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("bench", "twin"): ["--duration", "0.2"],
     ("bench", "trend"): ["--sequences", "1", "--real-seeds", "0"],
     ("bench", "link"): ["--requests", "5"],
-    ("classes", "suggest"): ["{img}", "--frames", "1"],
+    ("classes", "suggest"): ["{synth}", "--frames", "1"],
     ("mill", "status"): [],
     ("mill", "set-rpm"): ["10"],
     ("mill", "start"): [],
     ("mill", "stop"): [],
     ("mill", "check"): [],
 }
-GROUP_BASE: dict[tuple[str, ...], list[str]] = {("mill",): ["{mill}"]}
+GROUP_BASE: dict[tuple[str, ...], list[str]] = {("mill",): ["{mill}"], ("mill", "check"): ["{drive}"]}
 # A value of one option only means something next to another (run --video needs --mill).
 CONTEXT: dict[tuple[tuple[str, ...], str], list[str]] = {
     (("run",), "camera"): ["--mill", "{mill}"],
-    (("run",), "video"): ["--mill", "{mill}"],
-    (("run",), "mill"): ["--video", "{garbage_avi}"],
+    (("run",), "video"): ["--mill", "{mill}", "--video", "{video}"],  # the case's --video comes last: it wins
+    (("run",), "mill"): ["--video", "{video}", "--mill", "{mill}"],
     (("run",), "control_token"): ["--host", "0.0.0.0"],
 }
 # ... or needs other base arguments (a pty's --link is no option of a TCP emulator).
+REAL_RUN = ["--no-dashboard", "--duration", "1", "--log", "{out}/run-{case}"]  # a video and a mill: no --speed
 BASE_FOR: dict[tuple[tuple[str, ...], str], list[str]] = {
+    (("run",), "camera"): REAL_RUN,
+    (("run",), "video"): REAL_RUN,
+    (("run",), "mill"): REAL_RUN,
     (("mill-emulator",), "link"): ["--pty", "--duration", "0.2"],
     (("bench", "trend"), "frames"): ["--sequences", "1", "--real-seeds", "1"],
     (("bench", "trend"), "config"): ["--sequences", "1", "--real-seeds", "1"],
@@ -269,7 +291,7 @@ def _values(p: Param) -> list[str]:
 def sweep_cases() -> list[Case]:
     cases: list[Case] = []
     for path, params in command_tree():
-        group = GROUP_BASE.get(path[:1], [])
+        group = GROUP_BASE.get(path, GROUP_BASE.get(path[:1], []))
         for p in params:
             base = BASE_FOR.get((path, p.name), BASE[path])
             for value in _values(p):
@@ -306,6 +328,38 @@ def test_every_command_and_option_is_swept() -> None:
                 assert (" ".join(path), p.opt or p.name) in swept, p
     assert len(CASES) >= 182, len(CASES)
     assert set(DOCUMENTED_SUCCESS) <= {c.key for c in CASES}, "a documented success that is no case"
+
+
+def base_runs() -> dict[str, tuple[str, ...]]:
+    """Every distinct base a case is built on (command, base arguments, context)."""
+    out: dict[str, tuple[str, ...]] = {}
+    for path, params in command_tree():
+        group = GROUP_BASE.get(path, GROUP_BASE.get(path[:1], []))
+        for p in params:
+            if (" ".join(path), p.opt or p.name) in BASE_SKIP:
+                continue
+            argv = (*path[:1], *group, *path[1:], *BASE_FOR.get((path, p.name), BASE[path]),
+                    *CONTEXT.get((path, p.name), []))
+            out.setdefault(" ".join(argv)[:90], argv)
+    return out
+
+
+# Bases that cannot succeed here or are too slow for every run of the suite.
+NO_CAMERA = "no camera on this machine: the camera cases fail on the camera, by construction"
+BASE_SKIP = {("run", "--camera"): NO_CAMERA}
+SLOW_BASES = ("bench dashboard", "bench memory", "run")
+BASES = base_runs()
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("key", [
+    pytest.param(k, marks=pytest.mark.slow) if k.startswith(SLOW_BASES) else k
+    for k in BASES])
+def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env) -> None:
+    """The negative control: a command with its base arguments (and a case's context) is
+    exit 0, so a case's exit 2 is its swept value's, not the base's (a masked sweep)."""
+    r = cli(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))
+    assert r.code == 0 and "Traceback" not in r.err, (r.code, r.err[-2000:])
 
 
 @pytest.mark.timeout(120)

@@ -159,6 +159,11 @@ class RunConfig:
             raise TwinError("--mill needs --camera or --video (the demo emulates both)")
         if self.video is not None and not Path(self.video).is_file():
             raise FileNotFoundError(f"video not found: {self.video}")
+        if self.video is not None:
+            from vision.sources import source_kind
+
+            if source_kind(str(self.video)) != "video":  # an image replays as one frame of no video
+                raise TwinError(f"--video {self.video} is not a video file (for images: drumtwin mi)")
         if self.meter_config is not None and not Path(self.meter_config).is_file():
             raise FileNotFoundError(f"config not found: {self.meter_config}")
         if self.engine is not None and self.engine not in ("dem", "pymunk"):

@@ -16,7 +16,7 @@ from typing import Any
 
 import typer
 
-from twin.cli.app import app, bench_app, console_err, print_json
+from twin.cli.app import app, bench_app, check_outputs, console_err, print_json
 from twin.errors import TwinError
 
 
@@ -329,6 +329,7 @@ def compare(
     from twin.plots import plot_runs
     from twin.runlog import FRAMES_FILE, read_events, read_frames
 
+    check_outputs(plot)  # a directory as --plot would become DIR.png
     labelled: dict[str, Path] = {}
     for spec in runs:
         label, sep, d = spec.partition("=")
