@@ -55,6 +55,21 @@ def check_scheduler(address: str) -> tuple[str, int]:
     return parts.hostname, port
 
 
+def check_port_free(host: str, port: int) -> None:
+    """A one-line TwinError when ``host:port`` is taken: the dashboard would otherwise come
+    up on another port, and an operator opening the asked one reaches whatever holds it
+    (another run's dashboard, another mill)."""
+    import socket
+
+    try:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((host, port))
+    except OSError as exc:
+        raise TwinError(f"--port {port} on {host} is not free ({exc.strerror or exc}): choose another") from None
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """Everything ``drumtwin run`` needs. Times are run time (the demo clock, which
@@ -147,6 +162,11 @@ class RunConfig:
             raise TwinError("--mill needs --camera or --video (the demo emulates both)")
         if self.video is not None and not Path(self.video).is_file():
             raise FileNotFoundError(f"video not found: {self.video}")
+        if self.video is not None:
+            from vision.sources import source_kind
+
+            if source_kind(str(self.video)) != "video":  # an image replays as one frame of no video
+                raise TwinError(f"--video {self.video} is not a video file (for images: drumtwin mi)")
         if self.meter_config is not None and not Path(self.meter_config).is_file():
             raise FileNotFoundError(f"config not found: {self.meter_config}")
         if self.engine is not None and self.engine not in ("dem", "pymunk"):
@@ -162,6 +182,8 @@ class RunConfig:
             raise TwinError(f"--target-mi must be a number in [0, 1], got {self.target_mi}")
         if not self.demo and self.speed != 1.0:
             raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
+        if self.control_token is not None and not self.control_token.strip():
+            raise TwinError("--control-token must not be empty (an empty token would unlock every viewer)")
         token = self.control_token or os.environ.get(TOKEN_ENV) or None
         if self.dashboard and self.host not in LOCAL_HOSTS and not token:
             raise TwinError(

@@ -9,7 +9,9 @@ workers of the what-if studies and of the twin's calibration) every ``sample_s``
 - ``tree_rss_mb``: the highest sum of ``VmRSS`` over the tree (pages shared between the
   fork server and its workers counted once per process: an upper bound);
 - ``tree_pss_mb``: the highest sum of ``Pss`` (shared pages split between the sharers:
-  what the run really costs the machine).
+  what the run really costs the machine);
+- ``per_process``: each process's own peak ``Pss`` (MB) by role (``run``, ``forkserver``,
+  ``resource_tracker``, ``worker N``): where the memory goes.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from twin.errors import TwinError
@@ -34,6 +36,7 @@ class MemoryResult:
     tree_pss_mb: float
     processes: int
     seconds: float
+    per_process: dict[str, float] = field(default_factory=dict)
 
 
 def _kb(path: str, key: str) -> int:
@@ -65,6 +68,24 @@ def _tree(pid: int) -> list[int]:
         out.append(p)
         todo.extend(children.get(p, ()))
     return out
+
+
+def _role(pid: int, main_pid: int, workers: dict[int, str]) -> str:
+    """What process ``pid`` of the run's tree is, from its command line."""
+    if pid == main_pid:
+        return "run"
+    try:
+        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        cmd = ""
+    try:
+        ppid = int(Path(f"/proc/{pid}/stat").read_text(encoding="ascii", errors="replace").rsplit(")", 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        ppid = -1
+    for role in ("forkserver", "resource_tracker"):
+        if f"multiprocessing.{role}" in cmd and ppid == main_pid:  # a forked worker has the same command line
+            return role
+    return workers.setdefault(pid, f"worker {len(workers) + 1}")
 
 
 def write_video(path: Path, seconds: float, size_px: int = 640, fps: float = 30.0) -> Path:
@@ -101,12 +122,18 @@ def measure_run_memory(seconds: float = 30.0, sample_s: float = 0.25) -> MemoryR
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         hwm = rss = pss = 0
         n = 0
+        workers: dict[int, str] = {}
+        peaks: dict[str, int] = {}
         try:
             while proc.poll() is None and time.monotonic() - t0 < seconds + 120:
                 pids = _tree(proc.pid)
                 hwm = max(hwm, _kb(f"/proc/{proc.pid}/status", "VmHWM"))
                 rss = max(rss, sum(_kb(f"/proc/{p}/status", "VmRSS") for p in pids))
-                pss = max(pss, sum(_kb(f"/proc/{p}/smaps_rollup", "Pss:") for p in pids))
+                each = {p: _kb(f"/proc/{p}/smaps_rollup", "Pss:") for p in pids}
+                pss = max(pss, sum(each.values()))
+                for p, kb in each.items():
+                    role = _role(p, proc.pid, workers)
+                    peaks[role] = max(peaks.get(role, 0), kb)
                 n = max(n, len(pids))
                 time.sleep(sample_s)
         finally:
@@ -116,4 +143,5 @@ def measure_run_memory(seconds: float = 30.0, sample_s: float = 0.25) -> MemoryR
         if proc.returncode != 0:
             last = (err or "").strip().splitlines()[-1:] or ["no output"]
             raise TwinError(f"bench memory: the run failed ({last[0][:200]})")
-        return MemoryResult(hwm / 1024, rss / 1024, pss / 1024, n, time.monotonic() - t0)
+        return MemoryResult(hwm / 1024, rss / 1024, pss / 1024, n, time.monotonic() - t0,
+                            {k: round(v / 1024, 1) for k, v in peaks.items()})

@@ -119,6 +119,52 @@ def test_mill_set_rpm_refuses_past_the_limits_unless_commissioning() -> None:
         assert cli("mill", emu.url, "set-rpm", "0").code == 0  # stopping is always allowed
 
 
+def _drum_config(path: Path, diameter_mm: float) -> Path:
+    """A mixer config with a ``diameter_mm`` drum (two classes of 20 mm discs)."""
+    classes = "".join(f'[[classes]]\nname = "{n}"\nhsv = [[[{h}, 90, 50], [{h + 10}, 255, 255]]]\n\n'
+                      for n, h in (("red", 0), ("blue", 100)))
+    parts = "".join(f'[[particles]]\nname = "{n}"\nshape = "disc"\ndiameter_mm = 20\n'
+                    f"density_kg_m3 = 931\nshare = 0.5\n\n" for n in ("red", "blue"))
+    path.write_text(f"{classes}[drum]\ndiameter_mm = {diameter_mm}\ndepth_mm = 100\nfill = 0.3\n\n{parts}")
+    return path
+
+
+@pytest.mark.timeout(60)
+def test_mill_set_rpm_takes_its_limits_from_the_configs_drum(tmp_path) -> None:
+    """``drumtwin mill --config C URL set-rpm R``: the limit is the user's drum's, as the run
+    with that config enforces it (0.6 x its critical speed, capped by the supervisor's
+    ``max_rpm``), not the demo drum's. A 1 m drum (critical speed 42.3 rpm) refuses the
+    30 rpm the demo allows; a 100 mm drum (133.8 rpm) allows what the 400 mm drum (66.9 rpm)
+    refuses. Each refusal names the limit and leaves the board untouched."""
+    import math
+
+    from twin.cli.sim_cmds import load_mixer
+
+    def crit(d_mm: float) -> float:  # n_c = (30 / pi) sqrt(g / R), independently of sim/
+        return 30.0 / math.pi * math.sqrt(9.81 / (d_mm / 2000.0))
+
+    big, mid, small = (_drum_config(tmp_path / f"d{d}.toml", d) for d in (1000, 400, 100))
+    for cfg, d in ((big, 1000), (mid, 400), (small, 100)):
+        assert load_mixer(cfg)[0].drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
+        want = RunConfig(meter_config=cfg)
+        assert supervisor_config(want, crit(d)).limits.rpm_range[1] == pytest.approx(min(45.0, 0.6 * crit(d)),
+                                                                                      rel=1e-3)
+    with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=200.0))) as emu:
+        emu.open_tcp(0)
+        assert cli("mill", emu.url, "set-rpm", "30").code == 0 and emu.motor.setpoint_rpm == 30.0  # the demo's
+        r = cli("mill", "--config", big, emu.url, "set-rpm", "31")
+        assert_one_line_error(r, "31", f"5-{0.6 * crit(1000):.4g} rpm", f"critical speed {crit(1000):.1f} rpm")
+        assert emu.motor.setpoint_rpm == 30.0  # refused before the port was opened
+        r = cli("mill", "--config", mid, emu.url, "set-rpm", "42")
+        assert_one_line_error(r, "42", f"5-{0.6 * crit(400):.4g} rpm", f"critical speed {crit(400):.1f} rpm")
+        assert cli("mill", "--config", small, emu.url, "set-rpm", "42").code == 0 and emu.motor.setpoint_rpm == 42.0
+        assert_one_line_error(cli("mill", "--config", small, emu.url, "set-rpm", "50"), "outside the limits 5-45 rpm")
+        assert_one_line_error(cli("mill", "set-rpm", "45", "--config", big), "")  # usage: the group's option
+        assert_one_line_error(cli("mill", "--config", tmp_path / "missing.toml", emu.url, "set-rpm", "10"),
+                              "missing.toml")
+        assert emu.motor.setpoint_rpm == 42.0
+
+
 def _frames(d: Path) -> Path:
     from vision.synthetic import drum_frame
 
@@ -404,6 +450,9 @@ def test_bench_memory_measures_the_run_and_its_process_tree() -> None:
     d = json.loads(r.out)
     assert d["processes"] >= 2 and 50 < d["main_hwm_mb"] < 2000
     assert d["tree_rss_mb"] >= d["tree_pss_mb"] > 0 and d["tree_rss_mb"] >= d["main_hwm_mb"] * 0.8
+    per = d["per_process"]  # each process's own peak: their sum bounds the peak of the sum
+    assert "run" in per and len(per) >= 2 and sum(per.values()) >= d["tree_pss_mb"] - 0.5
+    assert not any(k == "forkserver" for k in per) or any(k.startswith("worker") for k in per)
     assert_one_line_error(cli("bench", "memory", "--seconds", "1e9"), "--seconds")
 
 

@@ -73,6 +73,8 @@ def main(argv: list[str] | None = None) -> None:
     except USER_ERRORS as exc:
         if os.environ.get("DRUMTWIN_DEBUG"):
             raise
+        if isinstance(exc, UnicodeDecodeError):
+            _one_line_error(f"a file is not text ({exc.reason} at byte {exc.start}): a binary or corrupt file")
         if isinstance(exc, RecursionError):
             _one_line_error("input nested too deeply to read (e.g. a TOML nested thousands of levels deep)")
         _one_line_error(str(exc) if str(exc).strip() else type(exc).__name__)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 from rich.console import Console
 
@@ -47,4 +49,18 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     OSError,  # a read-only or full directory, a device that went away: the environment, in one line
     RecursionError,  # a TOML nested thousands deep
     OverflowError,  # a number too large for its use (roi = [1e308, ...])
+    UnicodeDecodeError,  # a binary file where text (CSV, JSON lines, TOML) was expected
 )
+
+
+def check_outputs(*paths: Path | None) -> None:
+    """Refuse, before any work, an output file that cannot be written: an existing
+    directory, or a parent that is a regular file (one-line TwinError)."""
+    for p in paths:
+        if p is None:
+            continue
+        if p.is_dir():
+            raise TwinError(f"{p} is a directory: give a file name to write")
+        parent = next((q for q in p.parents if q.exists()), None)
+        if parent is not None and not parent.is_dir():
+            raise TwinError(f"cannot write {p}: {parent} is not a directory")

@@ -25,6 +25,7 @@ from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json
 
 if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
+    from control.limits import Limits
     from control.trendbench import RealFrameMI, SequenceSource, TrendBenchResult
 
 mill_app = typer.Typer(
@@ -45,19 +46,37 @@ def _mill(
     ),
     timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
     retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
-    config: Path = typer.Option(None, "--config", help="Mixer config whose [drive] hz_per_rpm the drive uses "
-                                "(as `drumtwin run --config`)."),
+    config: Path | None = typer.Option(
+        None, "--config", help="The mixer's TOML: set-rpm's limits come from its [drum]'s critical speed and a "
+        "drive's hz_per_rpm from its [drive], as in `drumtwin run --config` (default: the demo's drum)."
+    ),
 ) -> None:
     check_number("--timeout", timeout_s, above=0.0, at_most=60.0)
     if not 0 <= retries <= 100:
         raise ControlError(f"--retries must be an integer in 0..100 (got {retries})")
-    if config is not None:
+    limits = None
+    if config is not None:  # a given config is read (and refused when bad) whatever the subcommand
         from control.modbus.link import config_mill_url
         from vision.config import load_config
 
         mc = load_config(config)
         url = config_mill_url(url, mc.drive_table, f"config {mc.source}")
-    ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries}
+        limits = mill_limits(config)
+    ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries, "limits": limits}
+
+
+def mill_limits(config: Path | None) -> Limits:
+    """The limits ``drumtwin run --config CONFIG`` enforces: the supervisor's rpm range
+    with the critical speed of the config's drum (the demo's drum without a config or
+    without a ``[drum]``). A bad config is a one-line error."""
+    from twin.cli.sim_cmds import load_mixer
+    from twin.config import RunConfig
+    from twin.loop import supervisor_config
+
+    if config is None:
+        return supervisor_config(config=RunConfig()).limits
+    mixer, _ = load_mixer(config)
+    return supervisor_config(None, mixer.drum.critical_rpm, RunConfig(meter_config=config)).limits
 
 
 def _client(ctx: typer.Context) -> MillClient | ModbusMill:
@@ -121,12 +140,10 @@ def mill_set_rpm(
         False, "--commission", help="Commissioning override: allow an rpm outside the run's limits (logged)."
     ),
 ) -> None:
-    """Set the speed setpoint (rpm), inside the run's limits (the demo drum's: the same
-    limits the supervisor enforces) unless --commission is given."""
-    from twin.loop import supervisor_config
-
+    """Set the speed setpoint (rpm), inside the run's limits (the drum of `mill --config`,
+    else the demo's: the limits the supervisor enforces) unless --commission is given."""
     check_number("rpm", rpm, at_least=0.0)
-    limits = supervisor_config().limits  # the one set of limits (control.limits)
+    limits = ctx.obj["limits"] or mill_limits(None)  # the one set of limits (control.limits)
     if not commission:
         limits.refuse_rpm(rpm, "set-rpm")  # ControlError: one line naming the limit, exit 2
     elif limits.check_rpm(rpm).clamped and rpm != 0:
@@ -223,6 +240,7 @@ def mill_emulator(
 ) -> None:
     """Run the motor-board emulator on a pty (prints its path) or a TCP port; with
     --modbus PROFILE a frequency inverter's emulator (prints its modbus: URL)."""
+    _check_emulator_options(tcp, host, link, unit, comm_loss_s, seed)
     if modbus is not None:
         _drive_emulator(modbus, unit, comm_loss_s, tcp, link, faults, duration_s, seed)
         return
@@ -265,6 +283,24 @@ def mill_emulator(
             pass
     finally:
         emu.close()
+
+
+def _check_emulator_options(tcp: int | None, host: str, link: str | None, unit: int, comm_loss_s: float,
+                            seed: int | None) -> None:
+    """``mill-emulator``'s options that both emulators share, checked before anything opens
+    (one-line ControlError/TwinError): an option that does not apply is refused, not ignored."""
+    from twin.config import check_host
+
+    if tcp is not None and not 0 <= tcp <= 65535:
+        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
+    check_host(host)
+    if link is not None and tcp is not None:
+        raise ControlError("--link names the pty's symlink: not with --tcp")
+    if not 1 <= unit <= 247:
+        raise ControlError(f"--unit must be in 1..247 (got {unit})")
+    check_number("--comm-loss", comm_loss_s, at_least=0.0, at_most=600.0)
+    if seed is not None and not 0 <= seed < 2**32:
+        raise ControlError(f"--seed must be in 0..{2**32 - 1} (got {seed})")
 
 
 def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None, link: str | None,
@@ -406,8 +442,8 @@ def bench_trend(
     sequences of the real frames' MI: RMSE, lags, overshoot, lock-out, band coverage."""
     from control.trendbench import real_sequences, run_trend_bench, synthetic_sequence
 
-    if sequences < 1 or window < 1:
-        raise ControlError("--sequences and --window must be >= 1")
+    if not (1 <= sequences <= 10_000 and 1 <= window <= 100_000):
+        raise ControlError(f"--sequences must be in 1..10000 and --window in 1..100000 (got {sequences}, {window})")
     if not 0 <= real_seeds <= 100:
         raise ControlError(f"--real-seeds must be in 0..100 (got {real_seeds})")
     check_number("--fps", fps, above=0.0, at_most=10000.0)

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from twin.cli.app import app, bench_app, console_err, print_json
+from twin.cli.app import app, bench_app, check_outputs, console_err, print_json
 from twin.errors import TwinError
 
 if TYPE_CHECKING:
@@ -143,7 +143,7 @@ def run(
     With no arguments: the embedded demo (hidden plant, emulated mill on a pty, AUTO) and
     the dashboard on http://127.0.0.1:8080.
     """
-    from twin.config import RunConfig
+    from twin.config import RunConfig, check_port_free
 
     try:
         cfg = RunConfig(
@@ -154,6 +154,8 @@ def run(
             stop_at_endpoint=stop_at_endpoint,
             drive=None if drive is None else _drive_profile(drive, camera, video, mill),
         ).resolved()
+        if cfg.dashboard:  # issue 26: a port in use is refused, not swapped for another
+            check_port_free(cfg.host, cfg.port)
         if json_out:
             with stdout_to_stderr():
                 summary = run_live(cfg, progress=False)
@@ -201,6 +203,7 @@ def compare(
     from twin.plots import plot_runs
     from twin.runlog import FRAMES_FILE, read_events, read_frames
 
+    check_outputs(plot)  # a directory as --plot would become DIR.png
     labelled: dict[str, Path] = {}
     for spec in runs:
         label, sep, d = spec.partition("=")

@@ -14,7 +14,7 @@ import typer
 from control.limits import WHATIF_MAX_RUNS as MAX_WHATIF_RUNS  # the one set of limits: study size
 from control.limits import WHATIF_MAX_S as MAX_SIM_S  # and the longest simulated run of one command, s
 from sim.errors import SimError
-from twin.cli.app import app, bench_app, console, console_err, print_json
+from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json
 
 SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_linear", "mi_particles", "mi_sigmoid_particles", "slope_deg",
                "slope_deg_particles", "valid")
@@ -29,7 +29,7 @@ def _progress(label: str):
 
 def _parse_list(text: str, what: str) -> list[float]:
     try:
-        vals = [float(v) for v in str(text).replace(" ", "").split(",") if v]
+        vals = [float(v) for v in str(text).replace(" ", "").split(",")] if str(text).strip() else []
     except ValueError:
         raise SimError(f"{what} must be a comma-separated list of numbers (got {text!r})") from None
     if not vals:
@@ -334,6 +334,7 @@ def whatif_cmd(
     from sim.errors import check_number
     from sim.whatif import WhatIfJob, run_study, summarize
 
+    check_outputs(csv_out, plot)  # before the study: a directory as --plot is no PNG
     mixer, _ = load_mixer(config, engine)
     rpms = _parse_list(rpm, "--rpm")
     for r in rpms:

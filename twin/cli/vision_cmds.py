@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from twin.cli.app import app, bench_app, console, console_err, print_json
+from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json
 from vision.errors import VisionError
 
 if TYPE_CHECKING:
@@ -124,6 +124,7 @@ def mi_cmd(
     for out in (csv_out, plot, overlay_video):
         if out is not None and not out.parent.exists():
             raise VisionError(f"output folder does not exist: {out.parent}")
+    check_outputs(csv_out, plot, overlay_video)  # a directory as --plot would become DIR.png
     spec = source if len(source) > 1 else source[0]
     kind = source_kind(spec)
     frames = open_source(spec, fps=fps)

@@ -1,0 +1,128 @@
+"""Issue 26 item 11 with real runs: ten ``drumtwin run`` processes (the embedded demo),
+each killed with SIGKILL at a different moment, from the middle of its imports to well
+into the run. Each killed run's log parses up to the kill; the pty directories the kills
+leave behind are gone after the next run starts, and that run leaves nothing behind in
+the temp directory either (no ``drumtwin-*``, no ``pymp-*``, nothing) and no process."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from control.emulator import PTY_DIR_PREFIX
+from twin.runlog import EVENTS_FILE, FRAMES_FILE, read_events, read_frames
+
+DRUMTWIN = Path(sys.executable).with_name("drumtwin")
+
+# When each run is killed: (milestone, then this much more), the milestone one of
+# "spawn" (the process exists: it is importing), "pty" (its mill emulator's pty directory
+# exists), "frames N" (its frames.csv has N rows), "event KIND" (events.jsonl has KIND).
+MOMENTS: list[tuple[str, float]] = [
+    ("spawn", 0.3), ("spawn", 1.5), ("pty", 0.0), ("pty", 0.3), ("frames 1", 0.0),
+    ("frames 3", 0.1), ("frames 8", 0.0), ("event calibration_started", 0.2), ("frames 20", 0.37), ("frames 40", 0.0),
+]
+
+
+def _reached(milestone: str, tmp: Path, log: Path) -> bool:
+    if milestone == "spawn":
+        return True
+    if milestone == "pty":
+        return any(tmp.glob(PTY_DIR_PREFIX + "*"))
+    what, arg = milestone.split()
+    if what == "frames":
+        return (log / FRAMES_FILE).exists() and len(read_frames(log)) >= int(arg)
+    return (log / EVENTS_FILE).exists() and any(e["kind"] == arg for e in read_events(log))
+
+
+def _ours(marker: str) -> list[int]:
+    """Processes whose environment carries ``marker`` (the runs' and their children)."""
+    pids = []
+    for d in os.listdir("/proc"):
+        if d.isdigit() and int(d) != os.getpid():
+            try:
+                if marker.encode() in Path(f"/proc/{d}/environ").read_bytes():
+                    pids.append(int(d))
+            except OSError:
+                pass
+    return pids
+
+
+def _env(tmp: Path, marker: str) -> dict[str, str]:
+    env = {**os.environ, "TMPDIR": str(tmp), "DRUMTWIN_KILL9_TEST": marker, "PYTHONUNBUFFERED": "1",
+           "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd())}
+    env.pop("DRUMTWIN_DEBUG", None)
+    return env
+
+
+def _wait_gone(marker: str, timeout_s: float) -> list[int]:
+    end = time.monotonic() + timeout_s
+    while (left := _ours(marker)) and time.monotonic() < end:
+        time.sleep(0.2)
+    return left
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next_start(tmp_path) -> None:
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    marker = f"kill9-{os.getpid()}-{time.time_ns()}"
+    env = _env(tmp, marker)
+    argv = [str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--mode", "auto", "--duration", "3600"]
+    killed: list[tuple[Path, float, str]] = []  # (log dir, wall time of the kill, moment)
+
+    def start(i: int) -> tuple[subprocess.Popen, Path]:
+        log = tmp_path / f"run{i}"
+        proc = subprocess.Popen([*argv, "--log", str(log)], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        return proc, log
+
+    # two at a time (a two-core machine): the pair's two moments are checked independently
+    for pair in range(0, len(MOMENTS), 2):
+        runs = [(i, *start(i)) for i in range(pair, pair + 2)]
+        for i, proc, log in runs:
+            milestone, extra = MOMENTS[i]
+            end = time.monotonic() + 150
+            while time.monotonic() < end and proc.poll() is None and not _reached(milestone, tmp, log):
+                time.sleep(0.05)
+            assert proc.poll() is None, f"run {i} ended by itself (code {proc.returncode}) before {milestone}"
+            assert _reached(milestone, tmp, log), f"run {i} never reached {milestone}"
+            time.sleep(extra)
+            proc.send_signal(signal.SIGKILL)
+            killed.append((log, time.time(), f"{milestone} + {extra:g} s"))
+            proc.wait(10)
+    assert not _wait_gone(marker, 20.0), "a killed run's child process outlived it"
+
+    # each start already removed the leftovers of the runs killed before it; the last pair's
+    # (killed well after their pty existed) are still there: the kills do leave them
+    left = sorted(p.name for p in tmp.iterdir())
+    assert sum(n.startswith(PTY_DIR_PREFIX) for n in left) >= 2, left
+
+    for log, t_kill, moment in killed:
+        if not log.exists():
+            assert moment.startswith(("spawn", "pty")), (moment, "no log dir")
+            continue
+        rows = read_frames(log) if (log / FRAMES_FILE).exists() else []
+        events = read_events(log) if (log / EVENTS_FILE).exists() else []
+        if moment.startswith(("frames", "event")):
+            want = int(moment.split()[1]) if moment.startswith("frames") else 1
+            assert len(rows) >= want, (moment, len(rows))
+            assert events, moment
+        frames = [int(r["frame"]) for r in rows]
+        assert frames == sorted(frames), moment  # every row parses, in order, up to the kill
+        assert all(r["wall_s"] <= t_kill + 0.5 for r in rows), moment
+        assert all(isinstance(e, dict) and "kind" in e and "t_s" in e for e in events), moment
+
+    # the next start: a normal short run in the same temp directory
+    p = subprocess.run([*argv[:-1], "20", "--log", str(tmp_path / "next")], env=env, capture_output=True,
+                       text=True, timeout=240)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "Traceback" not in p.stderr
+    assert not _wait_gone(marker, 20.0)
+    assert sorted(p.name for p in tmp.iterdir()) == [], "left in the temp directory after the next run"
