@@ -556,6 +556,8 @@ def run(
         else:
             for i in range(n):
                 ang[i] += hot[i, 4] * dt
+        if end_w > 0.0:
+            tq_sum += _end_plate_torque(hot, frc, inv_m, mass, w_drum, end_w, dt)
         # velocities and positions; the largest move since the list was built; forces reset
         far = 0.0
         for i in range(n):
@@ -572,9 +574,7 @@ def run(
                     s = min(dv, u) / u
                     vx -= s * ux
                     vy -= s * uy
-                    # the plates take the opposite impulse m s u at the disk's centre
-                    ms = mass[i] * s * inv_dt
-                    tq_sum += ms * (hot[i, 0] * uy - hot[i, 1] * ux)
+
             vx *= damp
             vy *= damp
             hot[i, 2] = vx
@@ -594,6 +594,25 @@ def run(
     _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, n_steps)
     _unpack(hot, pos, vel, omg)
     return n_steps
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz", "afn"})
+def _end_plate_torque(hot, frc, inv_m, mass, w_drum, end_w, dt):
+    """Moment about the axis (N m, counter-clockwise +) of the end plates' reaction to this step's end-plate
+    friction (``run``'s velocity update, recomputed here so that the update itself stays as it was): the
+    plates take the opposite of each disk's impulse ``m dv`` at its centre."""
+    tq = 0.0
+    for i in range(hot.shape[0]):
+        vx = hot[i, 2] + frc[i, 0] * inv_m[i] * dt
+        vy = hot[i, 3] + frc[i, 1] * inv_m[i] * dt
+        ux = vx + w_drum * hot[i, 1]
+        uy = vy - w_drum * hot[i, 0]
+        u = math.sqrt(ux * ux + uy * uy)
+        dv = end_w * hot[i, 5] * frc[i, 3] * inv_m[i]
+        if u > 0.0:
+            s = min(dv, u) / u
+            tq += mass[i] * s * (hot[i, 0] * uy - hot[i, 1] * ux)
+    return tq / dt
 
 
 @njit(cache=True)

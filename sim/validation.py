@@ -17,7 +17,8 @@ import numpy as np
 
 from sim.drum import DrumSim
 from sim.errors import SimError
-from sim.measure import free_surface, particle_mi, twin_meter
+from sim.measure import particle_mi, twin_meter
+from sim.probe import probe
 from sim.recipe import PAPER_DRUM
 from sim.render import Renderer
 from sim.whatif import WhatIfJob, run_study, summarize
@@ -38,17 +39,16 @@ def slope_run(rpm: float, seed: int, duration_s: float = 20.0, spin_up_s: float 
     """Mean free-surface slope (after ``spin_up_s``), MI (eq. 4) over the second half, overlap p99,
     wall depth and speed of one case C run."""
     sim = DrumSim(case="C", seed=seed, rpm=rpm, **sim_kwargs)
-    sim.advance(spin_up_s)
-    sim.reset_stats()
     t0 = time.perf_counter()
     slopes, mis = [], []
     n = int(round(duration_s / 0.1))
-    for i in range(n):
-        sim.advance(0.1)
-        p = sim.particles()
-        slopes.append(free_surface(p, sim.drum).slope_deg)
-        if i >= n // 2:
-            mis.append(particle_mi(p, sim.drum).mi)
+    for i, smp in enumerate(probe(sim, n * 0.1, 0.1, spin_up_s=spin_up_s)):
+        if i == 0:  # the start, after the spin-up: the clock starts here
+            t0 = time.perf_counter()
+            continue
+        slopes.append(smp.surface.slope_deg)
+        if i > n // 2:
+            mis.append(smp.mi.mi)
     wall = time.perf_counter() - t0
     st = sim.stats()
     return {"rpm": rpm, "seed": seed, "dt_ms": sim.substep_s() * 1e3,
@@ -83,10 +83,8 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
     meter = twin_meter(r)
     out: dict = {"t": [], "mi": [], "mi_sig": [], "mi_lin": [], "mi_vision": []}
     d0 = None
-    for i in range(int(round(duration_s / every_s)) + 1):
-        if i:
-            sim.advance(every_s)
-        p = sim.particles()
+    for smp in probe(sim, int(round(duration_s / every_s)) * every_s, every_s):
+        p = smp.particles
         m = particle_mi(p, PAPER_DRUM, d0)
         if d0 is None:
             d0 = m.d_px
@@ -94,7 +92,7 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
         frame = r.render(p)
         assert frame is not None  # a renderer without realism never drops a frame
         rd = meter.measure(frame)
-        out["t"].append(sim.t_s)
+        out["t"].append(smp.sim_t_s)
         out["mi"].append(m.mi)
         out["mi_sig"].append(m.mi_sigmoid)
         out["mi_lin"].append(m.mi_linear)
