@@ -19,11 +19,11 @@ from sim.drum import DrumSim
 from sim.errors import SimError
 from sim.measure import particle_mi, twin_meter
 from sim.probe import probe
-from sim.recipe import PAPER_DRUM
+from sim.recipe import PAPER_DRUM, PAPER_RECIPE
 from sim.render import Renderer
 from sim.whatif import WhatIfJob, run_study, summarize
 
-SECTIONS = ("convergence", "cases", "case-a-long", "plateau", "calibration", "transfer", "branch")
+SECTIONS = ("convergence", "cases", "case-a-long", "plateau", "calibration", "transfer", "branch", "power")
 
 
 def _plt():
@@ -194,6 +194,61 @@ def plateau(out_dir: Path, rpms=(5, 10, 20, 30, 40, 50, 60), seeds=(0, 1, 2), du
     return summ
 
 
+def power(out_dir: Path, rpms=(2, 5, 10, 20, 30, 40, 50, 60), seeds=(0, 1, 2), duration_s: float = 30.0,
+          target_mi: float = 0.6) -> list[dict]:
+    """Drive power, torque and time to ``target_mi`` against rpm for the paper bed from a segregated start
+    (case A), with the seed spread; beside each rpm the torque of a rigid bed held at the measured slope
+    (``sim.power.rigid_bed_torque_nm``: the 3D bed's weight x the lever arm of a circular segment's
+    centroid) and the flowing bed's own weight moment; a plot of power against rpm."""
+    from sim.power import class_masses_kg, depth_scale, gravity_torque_nm, rigid_bed_torque_nm
+
+    plt = _plt()
+    jobs = [WhatIfJob(rpm=float(r), duration_s=duration_s, case="A", seed=s, sample_s=0.25, target_mi=target_mi)
+            for r in rpms for s in seeds]
+    results = run_study(jobs, workers=1)
+    rows = summarize(results)
+    sim = DrumSim(case="C", seed=0, rpm=5.0, settle_s=0.2)
+    mass = class_masses_kg(sim)[0][sim.particles().cls]
+    bed_kg = float(mass.sum()) * depth_scale(sim)
+    for row in rows:
+        rs = [r for r in results if r.job.rpm == row["rpm"]]
+        slope = float(np.nanmean([np.nanmean(r.slope_deg[-max(1, r.slope_deg.size // 3):]) for r in rs]))
+        row["slope_deg"] = slope
+        row["rigid_torque_nm"] = rigid_bed_torque_nm(bed_kg, PAPER_RECIPE.fill, PAPER_DRUM.radius_m, slope)
+        row["torque_over_rigid"] = row["torque_nm"] / row["rigid_torque_nm"]
+    # the flowing bed against its own weight moment (angular momentum balance), seed 0 at each rpm
+    for row in rows:
+        twin = DrumSim(case="A", seed=0, rpm=row["rpm"])
+        samples = list(probe(twin, 10.0, 0.1, spin_up_s=5.0, include_start=False))
+        tq = float(np.mean([s.bed_torque_nm for s in samples]))
+        wm = float(np.mean([gravity_torque_nm(s.particles, mass) for s in samples]))
+        row["torque_over_weight_moment"] = tq / wm
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 3.8))
+    x = [e["rpm"] for e in rows]
+    ax1.errorbar(x, [e["power_w"] for e in rows], yerr=[e["power_sd_w"] for e in rows], fmt="o-", capsize=3,
+                 label="twin (mean +- sd of seeds)")
+    ax1.plot(x, [e["rigid_torque_nm"] * e["rpm"] * 2 * np.pi / 60 for e in rows], "s--", color="0.5",
+             label="rigid bed at the twin's slope")
+    ax1.set_xlabel("rpm")
+    ax1.set_ylabel("drive power (W, 300 x 100 mm drum)")
+    ax1.set_title(f"paper bed, plateau part of {duration_s:g} s, {len(seeds)} seeds")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=8)
+    ax2.errorbar(x, [e["time_to_target_s"] for e in rows], yerr=[e["time_to_target_sd_s"] for e in rows],
+                 fmt="o-", capsize=3, label=f"time to MI {target_mi:g}")
+    ax2b = ax2.twinx()
+    ax2b.plot(x, [e["energy_to_target_j"] for e in rows], "^-", color="C1", label="energy to it")
+    ax2.set_xlabel("rpm")
+    ax2.set_ylabel("time to target (s), from case A")
+    ax2b.set_ylabel("energy to target (J)", color="C1")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8, loc="upper center")
+    fig.tight_layout()
+    fig.savefig(out_dir / "validation-power-rpm.png", dpi=110)
+    plt.close(fig)
+    return rows
+
+
 def calibration(rpm: float = 10.0, targets=(20.0, 30.0, 40.0, 45.0, 75.0)) -> list[dict]:
     """Calibration reach at ``rpm``: each target's fit, or the out-of-range error."""
     from sim.calibrate import calibrate
@@ -276,6 +331,8 @@ def main(argv: list[str] | None = None) -> None:
             summary[s] = plateau(out_dir)
         elif s == "calibration":
             summary[s] = calibration()
+        elif s == "power":
+            summary[s] = power(out_dir)
         elif s == "transfer":
             # plants at both ends of the (sliding, rolling) plane and one near the top of the range
             summary[s] = [transfer(plant=p) for p in ((0.5, 0.05), (0.15, 0.6), (0.6, 0.3))]
@@ -290,4 +347,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["SECTIONS", "branch", "calibration", "case_a_long", "case_curves", "cases", "convergence", "main",
-           "plateau", "slope_run", "snapshots", "transfer"]
+           "plateau", "power", "slope_run", "snapshots", "transfer"]

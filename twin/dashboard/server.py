@@ -44,7 +44,7 @@ from twin.dashboard.guard import (
     tokens_match,
 )
 from twin.dashboard.scene import TwinScene
-from twin.state import Controls, LiveState, Snapshot, forward_fill
+from twin.state import Controls, LiveState, Snapshot, WhatIfView, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
@@ -65,6 +65,25 @@ def _rgb(image_bgr: np.ndarray) -> np.ndarray:
         size = (DISPLAY_PX, max(1, round(h * DISPLAY_PX / w)))
         image_bgr = cv2.resize(image_bgr, size, interpolation=cv2.INTER_LINEAR)
     return np.ascontiguousarray(image_bgr[..., ::-1])
+
+
+def whatif_table_md(w: WhatIfView) -> str:
+    """The what-if table (markdown): per rpm the plateau MI, regime, time and energy to the target MI
+    and the drive power (whole drum)."""
+    target = "target" if w.target_mi is None else f"MI {w.target_mi:g}"
+    lines = [f"| rpm | plateau MI | regime | time to {target} (s) | power (W) | energy (J) |",
+             "|---:|---:|---|---:|---:|---:|"]
+    lines += [
+        f"| {r:g} | {_fmt(p)} | {g} | {_fmt(_at(w.time_to_target_s, i), '.1f')} | "
+        f"{_fmt(_at(w.power_w, i), '.2f')} | {_fmt(_at(w.energy_to_target_j, i), '.0f')} |"
+        for i, (r, p, g) in enumerate(zip(w.rpms, w.plateau_mi, w.regime, strict=True))
+    ]
+    return "\n".join(lines)
+
+
+def _at(values: tuple[float, ...], i: int) -> float:
+    """``values[i]``, NaN past its end (a study without that column)."""
+    return values[i] if i < len(values) else float("nan")
 
 
 def _fmt(value: Any, spec: str = ".3f") -> str:
@@ -658,11 +677,7 @@ class Dashboard:
                 "y": {"auto": False, "range": (0.0, 1.0)},
             }
             self._whatif_plot.data = (t, *ys)
-        lines = ["| rpm | plateau MI | regime |", "|---:|---:|---|"]
-        lines += [
-            f"| {r:g} | {_fmt(p)} | {g} |" for r, p, g in zip(w.rpms, w.plateau_mi, w.regime, strict=True)
-        ]
-        self._whatif_table.content = "\n".join(lines)
+        self._whatif_table.content = whatif_table_md(w)
 
     def stop(self) -> None:
         """Stop the update thread and the server."""
