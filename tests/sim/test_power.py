@@ -3,6 +3,7 @@ rigid bed, the torque's sign and its scaling with the drum's depth, time and ene
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -172,3 +173,19 @@ def test_pymunk_reads_the_drums_contact_impulses_as_a_torque():
         turning.advance(0.05)
         vals.append(turning.drum_torque_nm())
     assert np.mean(vals) < 0
+
+
+def test_the_whatif_command_reports_power_and_time_to_the_target_and_refuses_a_bad_target():
+    from tests.cli import assert_one_line_error, cli
+
+    r = cli("whatif", "--rpm", "30", "--duration", 6, "--case", "A", "--seeds", 2, "--sample-s", 0.25,
+            "--workers", 1, "--target-mi", 0.3, "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    (row,) = out["rpm"]
+    assert out["target_mi"] == 0.3 and row["power_w"] > 0 and row["power_sd_w"] is not None
+    assert row["time_to_target_reached"] == 2 and 0 < row["time_to_target_s"] < 6
+    never = json.loads(cli("whatif", "--rpm", "30", "--duration", 1, "--workers", 1, "--target-mi", 1.0,
+                           "--json").out)["rpm"][0]
+    assert never["time_to_target_s"] is None and never["energy_to_target_j"] is None  # NaN -> null
+    assert_one_line_error(cli("whatif", "--rpm", "30", "--duration", 1, "--target-mi", 1.5), "--target-mi")
