@@ -32,9 +32,9 @@ Model (the standard linear spring-dashpot DEM of Cundall & Strack 1979, in 2D):
   step into ``acc[ACC_TORQUE]`` (N m; counter-clockwise positive, ``ACC_TORQUE_STEPS`` steps): the
   wall's tangential forces at its radius ``R`` (the normal forces are radial: no moment), the
   angular impulses of rolling friction at the wall over the step, and the reaction of the end
-  plates' friction at each disk's centre (that share sampled every ``END_TORQUE_EVERY`` steps and
-  weighted by it: its own loop costs a tenth of a step). (What the drive must supply to keep the drum turning at
-  a steady speed is minus this.)
+  plates' friction at each disk's centre (that share sampled every ``END_TORQUE_EVERY`` steps, its
+  mean over the samples counted for every step of the call: its own loop costs a tenth of a step).
+  (What the drive must supply to keep the drum turning at a steady speed is minus this.)
 * **Integration**: symplectic Euler (``v += F/m dt`` then ``x += v dt``) at a fixed step.
 * **Neighbours**: a Verlet list (pairs ``j > i`` within ``r_i + r_j + skin``, sorted
   by ``j``, in compressed rows) rebuilt whenever a disk has moved more than half the skin since
@@ -388,6 +388,8 @@ def run(
         weight[i] = -g * mass[i]
     inv_dt = 1.0 / dt
     tq_sum = 0.0  # torque of the bed on the drum (N m, counter-clockwise +), summed over this call's steps
+    end_sum = 0.0  # the end plates' share at the sampled steps (N m), and their count
+    end_cnt = 0
     # this step's contacts in visiting order (i, then the wall, then i's partners j): for rolling friction
     roll_start = np.zeros(n + 1, dtype=np.int64)
     roll_j = np.empty(cap + n, dtype=np.int64)  # partner, -1 = the wall
@@ -431,6 +433,7 @@ def run(
         if far > half_skin2:
             skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
             if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+                tq_sum += step * end_sum / max(end_cnt, 1)
                 _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, step)
                 _unpack(hot, pos, vel, omg)
                 return step
@@ -558,8 +561,9 @@ def run(
         else:
             for i in range(n):
                 ang[i] += hot[i, 4] * dt
-        if end_w > 0.0 and step % END_TORQUE_EVERY == 0:  # sampled: an unbiased share at 1/16 of the cost
-            tq_sum += END_TORQUE_EVERY * _end_plate_torque(hot, frc, inv_m, mass, w_drum, end_w, dt)
+        if end_w > 0.0 and step % END_TORQUE_EVERY == 0:  # sampled (at 1/16 of the cost)
+            end_sum += _end_plate_torque(hot, frc, inv_m, mass, w_drum, end_w, dt)
+            end_cnt += 1
         # velocities and positions; the largest move since the list was built; forces reset
         far = 0.0
         for i in range(n):
@@ -592,6 +596,7 @@ def run(
             frc[i, 2] = 0.0
             frc[i, 3] = 0.0
         ds[DS_ANGLE] += w_drum * dt
+    tq_sum += n_steps * end_sum / max(end_cnt, 1)  # the sampled mean over every step of the call
     _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, n_steps)
     _unpack(hot, pos, vel, omg)
     return n_steps
