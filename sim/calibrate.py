@@ -31,8 +31,8 @@ import numpy as np
 from sim.drum import DrumSim, check_rpm
 from sim.engine import make_twin
 from sim.errors import SimError
-from sim.measure import free_surface
 from sim.mixer import Mixer
+from sim.probe import probe
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 
 FRICTION_RANGE = (0.05, 1.0)  # sliding friction searched (geometric)
@@ -98,13 +98,11 @@ def twin_surface(
                         **sim_kwargs)
     else:
         sim = DrumSim(drum, recipe, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling, **sim_kwargs)
-    sim.advance(spin_up_s)
     slopes, curvs = [], []
-    for _ in range(max(1, int(round(window_s / sample_s)))):
-        sim.advance(sample_s)
-        fs = free_surface(sim.particles(), drum)
-        slopes.append(fs.slope_deg)
-        curvs.append(fs.curvature)
+    n = max(1, int(round(window_s / sample_s)))
+    for smp in probe(sim, n * sample_s, sample_s, spin_up_s=spin_up_s, include_start=False):
+        slopes.append(smp.surface.slope_deg)
+        curvs.append(smp.surface.curvature)
     s = np.asarray(slopes, dtype=float)
     c = np.asarray(curvs, dtype=float)
     s, c = s[np.isfinite(s)], c[np.isfinite(c)]

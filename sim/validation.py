@@ -17,12 +17,13 @@ import numpy as np
 
 from sim.drum import DrumSim
 from sim.errors import SimError
-from sim.measure import free_surface, particle_mi, twin_meter
-from sim.recipe import PAPER_DRUM
+from sim.measure import particle_mi, twin_meter
+from sim.probe import probe
+from sim.recipe import PAPER_DRUM, PAPER_RECIPE
 from sim.render import Renderer
 from sim.whatif import WhatIfJob, run_study, summarize
 
-SECTIONS = ("convergence", "cases", "case-a-long", "plateau", "calibration", "transfer", "branch")
+SECTIONS = ("convergence", "cases", "case-a-long", "plateau", "calibration", "transfer", "branch", "power")
 
 
 def _plt():
@@ -38,17 +39,16 @@ def slope_run(rpm: float, seed: int, duration_s: float = 20.0, spin_up_s: float 
     """Mean free-surface slope (after ``spin_up_s``), MI (eq. 4) over the second half, overlap p99,
     wall depth and speed of one case C run."""
     sim = DrumSim(case="C", seed=seed, rpm=rpm, **sim_kwargs)
-    sim.advance(spin_up_s)
-    sim.reset_stats()
     t0 = time.perf_counter()
     slopes, mis = [], []
     n = int(round(duration_s / 0.1))
-    for i in range(n):
-        sim.advance(0.1)
-        p = sim.particles()
-        slopes.append(free_surface(p, sim.drum).slope_deg)
-        if i >= n // 2:
-            mis.append(particle_mi(p, sim.drum).mi)
+    for i, smp in enumerate(probe(sim, n * 0.1, 0.1, spin_up_s=spin_up_s)):
+        if i == 0:  # the start, after the spin-up: the clock starts here
+            t0 = time.perf_counter()
+            continue
+        slopes.append(smp.surface.slope_deg)
+        if i > n // 2:
+            mis.append(smp.mi.mi)
     wall = time.perf_counter() - t0
     st = sim.stats()
     return {"rpm": rpm, "seed": seed, "dt_ms": sim.substep_s() * 1e3,
@@ -83,10 +83,8 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
     meter = twin_meter(r)
     out: dict = {"t": [], "mi": [], "mi_sig": [], "mi_lin": [], "mi_vision": []}
     d0 = None
-    for i in range(int(round(duration_s / every_s)) + 1):
-        if i:
-            sim.advance(every_s)
-        p = sim.particles()
+    for smp in probe(sim, int(round(duration_s / every_s)) * every_s, every_s):
+        p = smp.particles
         m = particle_mi(p, PAPER_DRUM, d0)
         if d0 is None:
             d0 = m.d_px
@@ -94,7 +92,7 @@ def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every
         frame = r.render(p)
         assert frame is not None  # a renderer without realism never drops a frame
         rd = meter.measure(frame)
-        out["t"].append(sim.t_s)
+        out["t"].append(smp.sim_t_s)
         out["mi"].append(m.mi)
         out["mi_sig"].append(m.mi_sigmoid)
         out["mi_lin"].append(m.mi_linear)
@@ -196,6 +194,61 @@ def plateau(out_dir: Path, rpms=(5, 10, 20, 30, 40, 50, 60), seeds=(0, 1, 2), du
     return summ
 
 
+def power(out_dir: Path, rpms=(2, 5, 10, 20, 30, 40, 50, 60), seeds=(0, 1, 2), duration_s: float = 30.0,
+          target_mi: float = 0.6) -> list[dict]:
+    """Drive power, torque and time to ``target_mi`` against rpm for the paper bed from a segregated start
+    (case A), with the seed spread; beside each rpm the torque of a rigid bed held at the measured slope
+    (``sim.power.rigid_bed_torque_nm``: the 3D bed's weight x the lever arm of a circular segment's
+    centroid) and the flowing bed's own weight moment; a plot of power against rpm."""
+    from sim.power import class_masses_kg, depth_scale, gravity_torque_nm, rigid_bed_torque_nm
+
+    plt = _plt()
+    jobs = [WhatIfJob(rpm=float(r), duration_s=duration_s, case="A", seed=s, sample_s=0.25, target_mi=target_mi)
+            for r in rpms for s in seeds]
+    results = run_study(jobs, workers=1)
+    rows = summarize(results)
+    sim = DrumSim(case="C", seed=0, rpm=5.0, settle_s=0.2)
+    mass = class_masses_kg(sim)[0][sim.particles().cls]
+    bed_kg = float(mass.sum()) * depth_scale(sim)
+    for row in rows:
+        rs = [r for r in results if r.job.rpm == row["rpm"]]
+        slope = float(np.nanmean([np.nanmean(r.slope_deg[-max(1, r.slope_deg.size // 3):]) for r in rs]))
+        row["slope_deg"] = slope
+        row["rigid_torque_nm"] = rigid_bed_torque_nm(bed_kg, PAPER_RECIPE.fill, PAPER_DRUM.radius_m, slope)
+        row["torque_over_rigid"] = row["torque_nm"] / row["rigid_torque_nm"]
+    # the flowing bed against its own weight moment (angular momentum balance), seed 0 at each rpm
+    for row in rows:
+        twin = DrumSim(case="A", seed=0, rpm=row["rpm"])
+        samples = list(probe(twin, 10.0, 0.1, spin_up_s=5.0, include_start=False))
+        tq = float(np.mean([s.bed_torque_nm for s in samples]))
+        wm = float(np.mean([gravity_torque_nm(s.particles, mass) for s in samples]))
+        row["torque_over_weight_moment"] = tq / wm
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 3.8))
+    x = [e["rpm"] for e in rows]
+    ax1.errorbar(x, [e["power_w"] for e in rows], yerr=[e["power_sd_w"] for e in rows], fmt="o-", capsize=3,
+                 label="twin (mean +- sd of seeds)")
+    ax1.plot(x, [e["rigid_torque_nm"] * e["rpm"] * 2 * np.pi / 60 for e in rows], "s--", color="0.5",
+             label="rigid bed at the twin's slope")
+    ax1.set_xlabel("rpm")
+    ax1.set_ylabel("drive power (W, 300 x 100 mm drum)")
+    ax1.set_title(f"paper bed, plateau part of {duration_s:g} s, {len(seeds)} seeds")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=8)
+    ax2.errorbar(x, [e["time_to_target_s"] for e in rows], yerr=[e["time_to_target_sd_s"] for e in rows],
+                 fmt="o-", capsize=3, label=f"time to MI {target_mi:g}")
+    ax2b = ax2.twinx()
+    ax2b.plot(x, [e["energy_to_target_j"] for e in rows], "^-", color="C1", label="energy to it")
+    ax2.set_xlabel("rpm")
+    ax2.set_ylabel("time to target (s), from case A")
+    ax2b.set_ylabel("energy to target (J)", color="C1")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8, loc="upper center")
+    fig.tight_layout()
+    fig.savefig(out_dir / "validation-power-rpm.png", dpi=110)
+    plt.close(fig)
+    return rows
+
+
 def calibration(rpm: float = 10.0, targets=(20.0, 30.0, 40.0, 45.0, 75.0)) -> list[dict]:
     """Calibration reach at ``rpm``: each target's fit, or the out-of-range error."""
     from sim.calibrate import calibrate
@@ -278,6 +331,8 @@ def main(argv: list[str] | None = None) -> None:
             summary[s] = plateau(out_dir)
         elif s == "calibration":
             summary[s] = calibration()
+        elif s == "power":
+            summary[s] = power(out_dir)
         elif s == "transfer":
             # plants at both ends of the (sliding, rolling) plane and one near the top of the range
             summary[s] = [transfer(plant=p) for p in ((0.5, 0.05), (0.15, 0.6), (0.6, 0.3))]
@@ -292,4 +347,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["SECTIONS", "branch", "calibration", "case_a_long", "case_curves", "cases", "convergence", "main",
-           "plateau", "slope_run", "snapshots", "transfer"]
+           "plateau", "power", "slope_run", "snapshots", "transfer"]

@@ -201,7 +201,7 @@ class LiveLoop:
         )
         self.whatif = WhatIfWorker(
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
-            study=seams.whatif_study,
+            study=seams.whatif_study, target_mi=endpoint_config(config, seams).target_mi,
         )
         sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
         self._limits = sup_config.limits

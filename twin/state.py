@@ -58,6 +58,10 @@ class WhatIfView:
     plateau_mi: tuple[float, ...] = ()
     regime: tuple[str, ...] = ()
     seq: int = 0
+    target_mi: float | None = None  # the study's target MI (None: none)
+    time_to_target_s: tuple[float, ...] = ()  # per rpm, s (NaN: not reached in the study)
+    power_w: tuple[float, ...] = ()  # per rpm, drive power over the plateau part, W (whole drum)
+    energy_to_target_j: tuple[float, ...] = ()  # per rpm, J (NaN: not reached)
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@ rigid bed, the torque's sign and its scaling with the drum's depth, time and ene
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -19,6 +20,7 @@ from sim.power import (
     rigid_bed_torque_nm,
     segment_centroid_m,
 )
+from sim.probe import probe
 from sim.recipe import PAPER_RECIPE
 from sim.whatif import WhatIfJob, energy_to, run_job, run_study, summarize, time_to_target
 
@@ -72,17 +74,15 @@ def test_the_bed_resists_the_rotation_whichever_way_the_drum_turns(direction):
     wall the drum turns towards (its centroid right of the axis for ccw, left for cw)."""
     mixer = replace(paper_mixer(), direction=direction)
     sim = DrumSim(mixer=mixer, case="C", seed=1, rpm=10.0)
-    sim.advance(2.0)
-    sim.drum_torque_nm()
-    sim.advance(2.0)
-    tq = sim.drum_torque_nm()
-    p = sim.particles()
-    mass = class_masses_kg(sim)[0][p.cls]
+    mass = class_masses_kg(sim)[0][sim.particles().cls]
+    samples = list(probe(sim, 3.0, 0.05, spin_up_s=2.0, include_start=False))
+    tq = float(np.mean([s.bed_torque_nm for s in samples]))
     assert tq < 0
     assert float(drive_power_w(tq, 10.0)) > 0
-    assert direction * float(np.dot(mass, p.x_m)) > 0
-    # the flowing bed in the mean: its own weight moment (angular momentum balance), within 10 %
-    assert tq == pytest.approx(gravity_torque_nm(p, mass, direction), rel=0.10)
+    assert all(direction * float(np.dot(mass, s.particles.x_m)) > 0 for s in samples)
+    # the flowing bed in the mean: its own weight moment (angular momentum balance), within 3 %
+    weight_moment = float(np.mean([gravity_torque_nm(s.particles, mass, direction) for s in samples]))
+    assert tq == pytest.approx(weight_moment, rel=0.03)
     assert math.isnan(sim.drum_torque_nm())  # the mean restarts at each call: no step since
 
 
@@ -173,3 +173,32 @@ def test_pymunk_reads_the_drums_contact_impulses_as_a_torque():
         turning.advance(0.05)
         vals.append(turning.drum_torque_nm())
     assert np.mean(vals) < 0
+
+
+def test_the_whatif_command_reports_power_and_time_to_the_target_and_refuses_a_bad_target():
+    from tests.cli import assert_one_line_error, cli
+
+    r = cli("whatif", "--rpm", "30", "--duration", 6, "--case", "A", "--seeds", 2, "--sample-s", 0.25,
+            "--workers", 1, "--target-mi", 0.3, "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    (row,) = out["rpm"]
+    assert out["target_mi"] == 0.3 and row["power_w"] > 0 and row["power_sd_w"] is not None
+    assert row["time_to_target_reached"] == 2 and 0 < row["time_to_target_s"] < 6
+    never = json.loads(cli("whatif", "--rpm", "30", "--duration", 1, "--workers", 1, "--target-mi", 1.0,
+                           "--json").out)["rpm"][0]
+    assert never["time_to_target_s"] is None and never["energy_to_target_j"] is None  # NaN -> null
+    assert_one_line_error(cli("whatif", "--rpm", "30", "--duration", 1, "--target-mi", 1.5), "--target-mi")
+
+
+def test_the_flowing_beds_mean_torque_is_its_mean_weight_moment_within_half_a_percent():
+    """Angular momentum balance: over 10 s of a cascading bed (20 rpm, end plates on) the drum's mean
+    torque equals the mean moment of the bed's weight. Slices of 353 steps (0.1 s) are not a multiple of
+    the end plates' sampling (every 16 steps): a sampled share weighted per sample instead of per step
+    read 1.7 % high here."""
+    twin = DrumSim(case="A", seed=0, rpm=20.0)
+    mass = class_masses_kg(twin)[0][twin.particles().cls]
+    samples = list(probe(twin, 10.0, 0.1, spin_up_s=5.0, include_start=False))
+    tq = np.mean([s.bed_torque_nm for s in samples])
+    wm = np.mean([gravity_torque_nm(s.particles, mass) for s in samples])
+    assert tq == pytest.approx(wm, rel=0.005)

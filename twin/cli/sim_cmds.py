@@ -90,7 +90,8 @@ def sim_cmd(
 
     from sim.engine import engine_for, make_twin
     from sim.errors import check_number
-    from sim.measure import free_surface, particle_mi, twin_meter
+    from sim.measure import twin_meter
+    from sim.probe import probe
     from sim.render import Realism, Renderer
     from sim.whatif import flow_regime, froude, froude_regime
 
@@ -125,15 +126,13 @@ def sim_cmd(
     try:
         with _progress("sim") as prog:
             task = prog.add_task("sim", total=n + 1)
-            for i in range(n + 1):
-                if i > 0:
-                    sim.advance(duration / n)
-                p = sim.particles()
-                frame = renderer.render(p, sim.t_s)
-                pm = particle_mi(p, sim.drum)
-                fs = free_surface(p, sim.drum)
+            for i, smp in enumerate(probe(sim, duration, duration / n)):
+                p = smp.particles
+                frame = renderer.render(p, smp.sim_t_s)
+                pm = smp.mi
+                fs = smp.surface
                 curv.append(fs.curvature)
-                air.append(sim.stats().airborne if i > 0 else float("nan"))
+                air.append(smp.airborne if i > 0 else float("nan"))
                 if frame is not None:
                     rd = meter.measure(frame)
                     mi, mi_s, mi_l, sl, valid = rd.mi, rd.mi_sigmoid, rd.mi_linear, rd.slope_deg, rd.valid
@@ -144,7 +143,7 @@ def sim_cmd(
                 if writer is not None and last is not None:
                     writer.write(last)
                 rows.append({
-                    "t_s": round(sim.t_s, 6), "rpm": sim.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
+                    "t_s": round(smp.sim_t_s, 6), "rpm": smp.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
                     "mi_linear": mi_l, "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
                     "slope_deg_particles": fs.slope_deg, "valid": int(bool(valid)),
                 })
@@ -326,9 +325,12 @@ def whatif_cmd(
     plot: Path | None = typer.Option(None, "--plot", help="PNG of MI against time per rpm"),
     config: Path | None = typer.Option(None, "--config", help=CONFIG_HELP),
     engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
+    target_mi: float | None = typer.Option(None, "--target-mi",
+                                           help="MI to reach: time and energy to it per rpm (default: none)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
-    """Run the twin for several rpm values and report the plateau MI and regime of each."""
+    """Run the twin for several rpm values and report the plateau MI and regime of each, the drive power
+    (whole drum) and, with --target-mi, the time and energy to reach it (seed mean and sd)."""
     from sim.drum import check_rpm
     from sim.engine import engine_for
     from sim.errors import check_number
@@ -346,12 +348,14 @@ def whatif_cmd(
     check_number("--sample-s", sample_s, 0.0, duration, lo_open=True)
     if fill is not None:
         check_number("--fill", fill, 0.0, 0.85, lo_open=True)
+    if target_mi is not None:
+        check_number("--target-mi", target_mi, 0.0, 1.0)
     if workers is not None:
         check_number("--workers", workers, 1, 256, integer=True)
     if workers is not None and scheduler:
         raise SimError("give --workers or --scheduler, not both")
     jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s,
-                      mixer=mixer, engine=engine) for r in rpms for s in range(seeds)]
+                      mixer=mixer, engine=engine, target_mi=target_mi) for r in rpms for s in range(seeds)]
     t0 = time.perf_counter()
     with _progress("whatif") as prog:
         task = prog.add_task("whatif", total=len(jobs))
@@ -371,17 +375,28 @@ def whatif_cmd(
         _plot_whatif(results, plot)
     summary = summarize(results)
     out = {"rpm": summary, "duration_s": duration, "case": case.upper(), "seeds": seeds, "wall_s": wall,
-           "scheduler": scheduler, "workers": workers, "engine": engine_for(mixer, engine)}
+           "scheduler": scheduler, "workers": workers, "engine": engine_for(mixer, engine), "target_mi": target_mi}
     if as_json:
         print_json(out)
     else:
         from rich.table import Table
 
-        t = Table("rpm", "regime (flow)", "Fr", "airborne", "plateau MI", "sd", "t plateau (s)")
+        t = Table("rpm", "regime (flow)", "Fr", "airborne", "plateau MI", "sd", "t plateau (s)", "power (W)",
+                  "t to target (s)", "energy (J)")
         for e in summary:
             t.add_row(f"{e['rpm']:g}", e["regime"], f"{e['froude']:.3f}", f"{e['airborne']:.3f}",
-                      f"{e['plateau_mi']:.3f}", f"{e['plateau_mi_sd']:.3f}", f"{e['t_plateau_s']:.0f}")
+                      f"{e['plateau_mi']:.3f}", f"{e['plateau_mi_sd']:.3f}", f"{e['t_plateau_s']:.0f}",
+                      _pm(e["power_w"], e["power_sd_w"], ".2f"),
+                      _pm(e["time_to_target_s"], e["time_to_target_sd_s"], ".1f"),
+                      _pm(e["energy_to_target_j"], e["energy_to_target_sd_j"], ".1f"))
         console.print(t)
+
+
+def _pm(mean: float, sd: float, fmt: str) -> str:
+    """``mean +- sd`` (``-`` for NaN, the sd left out when NaN)."""
+    if not math.isfinite(mean):
+        return "-"
+    return f"{mean:{fmt}}" + (f" +- {sd:{fmt}}" if math.isfinite(sd) else "")
 
 
 def _plot_whatif(results, path: Path) -> None:

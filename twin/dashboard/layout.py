@@ -15,7 +15,7 @@ import viser
 from control.errors import ControlError
 from control.limits import Limits
 from twin.dashboard.scene import TwinScene
-from twin.state import Panel, Snapshot, forward_fill
+from twin.state import Panel, Snapshot, WhatIfView, forward_fill
 
 MODE_LABELS = ("OFF", "MANUAL", "AUTO")
 _BLANK = np.full((240, 240, 3), 24, dtype=np.uint8)
@@ -80,6 +80,25 @@ def numbers_markdown(n: Panel) -> str:
         lines.append("*Trend not settled yet: no segregation decision until it is.*  ")
     lines.append(f"**Last decision:** {decision or '–'}  \n{reason or ''}")
     return "\n".join(lines)
+
+
+def whatif_table_md(w: WhatIfView) -> str:
+    """The what-if table (markdown): per rpm the plateau MI, regime, time and energy to the target MI
+    and the drive power (whole drum)."""
+    target = "target" if w.target_mi is None else f"MI {w.target_mi:g}"
+    lines = [f"| rpm | plateau MI | regime | time to {target} (s) | power (W) | energy (J) |",
+             "|---:|---:|---|---:|---:|---:|"]
+    lines += [
+        f"| {r:g} | {_fmt(p)} | {g} | {_fmt(_at(w.time_to_target_s, i), '.1f')} | "
+        f"{_fmt(_at(w.power_w, i), '.2f')} | {_fmt(_at(w.energy_to_target_j, i), '.0f')} |"
+        for i, (r, p, g) in enumerate(zip(w.rpms, w.plateau_mi, w.regime, strict=True))
+    ]
+    return "\n".join(lines)
+
+
+def _at(values: tuple[float, ...], i: int) -> float:
+    """``values[i]``, NaN past its end (a study without that column)."""
+    return values[i] if i < len(values) else float("nan")
 
 
 def axis_range(*series: np.ndarray, step: float, pad: float = 0.0) -> tuple[float, float] | None:
@@ -250,9 +269,5 @@ class Layout:
                 "y": {"auto": False, "range": (0.0, 1.0)},
             }
             self._whatif_plot.data = (t, *ys)
-        lines = ["| rpm | plateau MI | regime |", "|---:|---:|---|"]
-        lines += [
-            f"| {r:g} | {_fmt(p)} | {g} |" for r, p, g in zip(w.rpms, w.plateau_mi, w.regime, strict=True)
-        ]
-        self._whatif_table.content = "\n".join(lines)
+        self._whatif_table.content = whatif_table_md(w)
 

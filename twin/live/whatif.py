@@ -37,7 +37,8 @@ class _OperatorStudy:
 
 
 class WhatIfWorker:
-    """See module doc. ``study`` replaces the process pool (tests)."""
+    """See module doc. ``study`` replaces the process pool (tests). ``target_mi``: the MI every study reports
+    the time and energy to (the config's endpoint target; None: none)."""
 
     def __init__(
         self,
@@ -48,8 +49,10 @@ class WhatIfWorker:
         scheduler: str | None = None,
         workers: int = 1,
         study: Study | None = None,
+        target_mi: float | None = None,
     ) -> None:
         self.view = view
+        self.target_mi = target_mi
         self.sink = sink
         self.state = state
         self.scheduler = scheduler
@@ -210,7 +213,8 @@ class WhatIfWorker:
         status = f"running {len(rpms)} rpm x {duration_s:g} s ({reason})"
         self.state.set_whatif(WhatIfView(status=status, seq=self._seq))
         t0 = time.monotonic()
-        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state, target_mi=target_mi) for r in rpms]
+        target = self.target_mi if target_mi is None else target_mi  # AUTO's request, else the run's
+        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state, target_mi=target) for r in rpms]
         try:
             results = list(self._run_jobs(jobs))
         except Exception as exc:
@@ -223,11 +227,12 @@ class WhatIfWorker:
             self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
             raise
         preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results, strict=False)}
-        rows = None if target_mi is None else {  # issue 24: time and energy to the target (sim.whatif)
-            float(r): RpmPrediction(float(r), float(res.plateau_mi), float(getattr(res, "time_to_target_s", np.nan)),
-                                    float(getattr(res, "energy_to_target_j", np.nan)),
-                                    float(getattr(res, "plateau_power_w", np.nan)))
-            for r, res in zip(rpms, results, strict=False)}
+        times = tuple(float(getattr(res, "time_to_target_s", np.nan)) for res in results)
+        powers = tuple(float(getattr(res, "plateau_power_w", np.nan)) for res in results)
+        energies = tuple(float(getattr(res, "energy_to_target_j", np.nan)) for res in results)
+        rows = None if target is None else {  # issue 24: time and energy to the target (sim.whatif)
+            float(r): RpmPrediction(float(r), preds[float(r)], t, e, p)
+            for r, t, e, p in zip(rpms, times, energies, powers, strict=False)}
         self._seq += 1
         t_done = self.view.now_s()
         self.state.set_whatif(
@@ -238,17 +243,16 @@ class WhatIfWorker:
                 mi=tuple(np.asarray(res.mi, float) for res in results),
                 plateau_mi=tuple(preds.values()),
                 regime=tuple(str(getattr(res, "regime", "")) for res in results),
-                seq=self._seq,
+                seq=self._seq, target_mi=target, time_to_target_s=times, power_w=powers,
+                energy_to_target_j=energies,
             )
         )
         self.sink.event(
             "whatif", t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
             predictions={str(k): v for k, v in preds.items()}, took_s=time.monotonic() - t0,
-            **({} if rows is None else {
-                "target_mi": target_mi,
-                "time_to_target_s": {str(k): v.time_to_target_s for k, v in rows.items()},
-                "energy_to_target_j": {str(k): v.energy_j for k, v in rows.items()},
-                "power_w": {str(k): v.power_w for k, v in rows.items()}}),
+            target_mi=target, time_to_target_s=dict(zip(map(str, preds), times, strict=False)),
+            power_w=dict(zip(map(str, preds), powers, strict=False)),
+            energy_to_target_j=dict(zip(map(str, preds), energies, strict=False)),
         )
         return preds, rows
 
