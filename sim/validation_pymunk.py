@@ -99,39 +99,49 @@ def _ms(values) -> dict:
             "n": int(v.size), "values": [float(x) for x in v]}
 
 
-def convergence(out_dir: Path, seeds=(0, 1, 2), steps_ms=(4.0, 2.0, 1.0, 0.5), iterations=(5, 10, 20, 40),
-                rpm: float = 10.0, spin_up_s: float = 2.0, window_s: float = 4.0) -> dict:
-    """Slope at 10 rpm on the cut-disc rig against the step (at 10 iterations) and the solver
-    iterations (at the default 2 ms step), several seeds."""
+def convergence(out_dir: Path, seeds=(0, 1, 2, 3), steps_ms=(4.0, 3.0, 2.0, 1.0, 0.5), iterations=(10, 20, 40),
+                iter_steps_ms=(2.0, 4.0), rpm: float = 10.0, spin_up_s: float = 2.0, window_s: float = 8.0) -> dict:
+    """Slope, MI (eq. 4) and spread ratio at 10 rpm on the cut-disc rig against the step (at 10
+    iterations) and the solver iterations (at each of ``iter_steps_ms``), several seeds."""
     m = rig(True)
     runs = []
-    grid = [(h, 10) for h in steps_ms] + [(2.0, it) for it in iterations if it != 10]
+    grid = [(h, 10) for h in steps_ms] + [(h, it) for h in iter_steps_ms for it in iterations if it != 10]
     for h, it in grid:
         for s in seeds:
             r = series(m, rpm, s, window_s, spin_up_s=spin_up_s, every_s=0.25,
                        **{**CONTACT, "dt_s": h * 1e-3, "iterations": it})
             runs.append({"dt_ms": h, "iterations": it, "seed": s, "slope_deg": float(np.nanmean(r["slope"])),
+                         "mi": float(np.nanmean(r["mi"])), "ratio": float(np.nanmean(r["ratio"])),
                          "overlap_p99_r": r["overlap_p99_r"], "wall_max_mm": r["wall_max_mm"], "rtf": r["rtf"]})
+            print(json.dumps(runs[-1]), file=sys.stderr, flush=True)
+
+    def cell(sel: list[dict]) -> dict:
+        return {"slope": _ms([r["slope_deg"] for r in sel]), "mi": _ms([r["mi"] for r in sel]),
+                "ratio": _ms([r["ratio"] for r in sel]),
+                "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
+                "rtf": float(np.mean([r["rtf"] for r in sel]))}
+
     summary: dict = {"by_step": {}, "by_iterations": {}}
     for h in steps_ms:
-        sel = [r for r in runs if r["dt_ms"] == h and r["iterations"] == 10]
-        summary["by_step"][f"{h:g}"] = {"slope": _ms([r["slope_deg"] for r in sel]),
-                                        "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
-                                        "rtf": float(np.mean([r["rtf"] for r in sel]))}
-    for it in iterations:
-        sel = [r for r in runs if r["dt_ms"] == 2.0 and r["iterations"] == it]
-        summary["by_iterations"][str(it)] = {"slope": _ms([r["slope_deg"] for r in sel]),
-                                             "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
-                                             "rtf": float(np.mean([r["rtf"] for r in sel]))}
+        summary["by_step"][f"{h:g}"] = cell([r for r in runs if r["dt_ms"] == h and r["iterations"] == 10])
+    for h in iter_steps_ms:
+        for it in iterations:
+            summary["by_iterations"][f"{h:g}/{it}"] = cell([r for r in runs if r["dt_ms"] == h
+                                                             and r["iterations"] == it])
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
-    for ax, key, xs, lab in ((axes[0], "by_step", steps_ms, "step (ms), 10 iterations"),
-                             (axes[1], "by_iterations", iterations, "solver iterations, 2 ms step")):
-        mean = [summary[key][f"{x:g}" if key == "by_step" else str(x)]["slope"]["mean"] for x in xs]
-        sd = [summary[key][f"{x:g}" if key == "by_step" else str(x)]["slope"]["sd"] for x in xs]
-        ax.errorbar(xs, mean, yerr=sd, marker="o", capsize=3)
+    mean = [summary["by_step"][f"{x:g}"]["slope"]["mean"] for x in steps_ms]
+    sd = [summary["by_step"][f"{x:g}"]["slope"]["sd"] for x in steps_ms]
+    axes[0].errorbar(steps_ms, mean, yerr=sd, marker="o", capsize=3)
+    axes[0].set_xlabel("step (ms), 10 iterations")
+    for h in iter_steps_ms:
+        mean = [summary["by_iterations"][f"{h:g}/{it}"]["slope"]["mean"] for it in iterations]
+        sd = [summary["by_iterations"][f"{h:g}/{it}"]["slope"]["sd"] for it in iterations]
+        axes[1].errorbar(iterations, mean, yerr=sd, marker="o", capsize=3, label=f"{h:g} ms step")
+    axes[1].set_xlabel("solver iterations")
+    axes[1].legend(fontsize=8)
+    for ax in axes:
         ax.set_xscale("log", base=2)
-        ax.set_xlabel(lab)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel(f"slope at {rpm:g} rpm (deg)")
     fig.suptitle(f"pymunk twin, cut-disc rig: slope vs step and iterations ({len(seeds)} seeds, mean +- sd)")

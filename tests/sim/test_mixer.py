@@ -194,15 +194,21 @@ def test_shape_of_a_disc_is_round():
     assert Shape("disc", 0.01).is_round and not Shape("cut_disc", 0.01, wedge_deg=90).is_round
 
 
-def test_seeding_a_shaped_mixer_from_the_camera_is_a_clear_error_until_its_engine_can_place_one():
+def test_a_shaped_mixer_seeded_from_the_camera_runs_on_pymunk_with_each_class_where_the_camera_sees_it():
     from sim.from_image import seed_from_labels
+    from sim.pymunk_twin import PymunkDrumSim
     from vision.roi import DrumROI
 
-    m = parse_mixer(_table(PMMA.replace('name = "white"', 'name = "white"\nshape = "polygon"')), None)
-    labels = np.zeros((64, 64), np.uint8)
-    labels[40:60, 10:54] = 1
-    with pytest.raises(SimError, match=r"pymunk|camera"):
-        seed_from_labels(labels, DrumROI(32.0, 32.0, 30.0), ["blue", "white"], mixer=m, rpm=5.0)
+    m = parse_mixer(_table(PMMA.replace('name = "white"', 'name = "white"\nshape = "cut_disc"')), None)
+    labels = np.zeros((200, 200), np.uint8)
+    labels[100:190, 20:100] = 1  # blue on the lower left, white on the lower right
+    labels[100:190, 100:180] = 2
+    sim = seed_from_labels(labels, DrumROI(100.0, 100.0, 95.0), ["blue", "white"], mixer=m, rpm=5.0, settle_s=0.1)
+    assert isinstance(sim, PymunkDrumSim) and sim.case == "image"
+    p = sim.particles()
+    assert np.bincount(p.cls).tolist() == list(resolve_counts(m))
+    assert p.x_m[p.cls == 0].mean() < -0.02 and p.x_m[p.cls == 1].mean() > 0.02  # not re-placed by a case
+    assert sim.mixer is m and sim.rpm_actual == 5.0
 
 
 def test_a_mixer_seeded_from_labels_places_its_own_classes_where_the_camera_sees_them():
