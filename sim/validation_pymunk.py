@@ -31,6 +31,7 @@ from sim.pymunk_twin import radial_spread_m
 SECTIONS = ("convergence", "segregation", "baffles", "dem", "calibration")
 RIG_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "pmma-cutdisc.toml"
 RIG_BAFFLES = Baffles(count=4, height_m=0.020, thickness_m=0.004)  # 4 lifters, 2 disc diameters high
+RIG_TALL_BAFFLES = Baffles(count=4, height_m=0.050, thickness_m=0.004)  # 4 lifters, 5 disc diameters high
 # The studies' contacts: the paper's friction and rolling friction, no end-plate friction. With the
 # Taberlet plate model at the monolayer's gap (3 mm, r / W = 1.7) the bed stands at 49-64 deg at
 # 10 rpm over the whole calibration search (against 32 deg in the real frames): a monolayer is not
@@ -40,13 +41,17 @@ RIG_BAFFLES = Baffles(count=4, height_m=0.020, thickness_m=0.004)  # 4 lifters, 
 CONTACT: dict[str, Any] = {"end_friction": 0.0, "dt_s": 0.002}
 
 
-def rig(cut: bool = True, baffles: Baffles | None = None) -> Mixer:
+def rig(cut: bool = True, baffles: Baffles | None = None, wedge_deg: float | None = None) -> Mixer:
     """The worked example's mixer (``configs/pmma-cutdisc.toml``); ``cut`` False: the white class a
-    disc of the same diameter (the disc/disc bed); ``baffles``: lifters on the wall."""
+    disc of the same diameter (the disc/disc bed); ``baffles``: lifters on the wall; ``wedge_deg``:
+    the cut's angle instead of the config's 90 deg (a variant)."""
     table = tomllib.loads(RIG_CONFIG.read_text())
     m = parse_mixer(table, [c["name"] for c in table["classes"]], source=str(RIG_CONFIG))
     if not cut:
         m = replace(m, particles=tuple(replace(p, shape=Shape("disc", p.shape.diameter_m)) for p in m.particles))
+    elif wedge_deg is not None:
+        m = replace(m, particles=tuple(replace(p, shape=replace(p.shape, wedge_deg=float(wedge_deg)))
+                                       if p.shape.kind == "cut_disc" else p for p in m.particles))
     return replace(m, baffles=baffles)
 
 
@@ -204,12 +209,14 @@ def _t_plateau(t: np.ndarray, mi: np.ndarray, frac: float = 0.9) -> float:
     return float(t[hit[0]]) if hit.size else math.nan
 
 
-def baffles(out_dir: Path, seeds=(0, 1, 2), rpm: float = 10.0, duration_s: float = 30.0) -> dict:
-    """The cut-disc rig from case A (blue left, white right) at 10 rpm, with and without four lifters:
+def baffles(out_dir: Path, seeds=(0, 1, 2, 3), rpm: float = 10.0, duration_s: float = 30.0,
+            lifters: Baffles = RIG_TALL_BAFFLES) -> dict:
+    """The cut-disc rig from case A (blue left, white right) at 10 rpm, with and without ``lifters``:
     time to 90 % of the plateau MI and the plateau MI."""
     out: dict = {}
     curves = {}
-    for name, bf in (("plain", None), ("4 baffles", RIG_BAFFLES)):
+    label = f"{lifters.count} lifters {lifters.height_m * 1e3:g} mm"
+    for name, bf in (("plain", None), (label, lifters)):
         rs = [series(rig(True, bf), rpm, s, duration_s, case="A", every_s=0.25, **CONTACT) for s in seeds]
         curves[name] = rs
         out[name] = {"plateau_mi": _ms([_late(r["mi"]) for r in rs]),
@@ -327,5 +334,5 @@ if __name__ == "__main__":
     main()
 
 
-__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "SECTIONS", "baffles", "calibration", "convergence", "dem", "main",
-           "pymunk_slope_deg", "rig", "segregation", "series"]
+__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "baffles", "calibration",
+           "convergence", "dem", "main", "pymunk_slope_deg", "rig", "segregation", "series"]
