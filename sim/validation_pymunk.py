@@ -93,6 +93,35 @@ def series(mixer: Mixer, rpm: float, seed: int, duration_s: float, *, engine: st
     return res
 
 
+SEGREGATION_SD = 3.0  # the issue's test: a spread ratio this many seed standard deviations from 1 segregates
+
+
+def sd_from_one(ratios) -> float:
+    """How far the seeds' mean spread ratio is from 1, in seed standard deviations (``ddof=1``:
+    the scatter of one seed's run, not the standard error of the mean); inf for no scatter."""
+    v = np.asarray(ratios, dtype=float)
+    if v.size < 2:
+        raise SimError("the seed scatter needs at least two seeds")
+    sd = float(np.std(v, ddof=1))
+    return abs(float(np.mean(v)) - 1.0) / sd if sd > 0 else math.inf
+
+
+def segregates(ratios) -> bool:
+    """The issue's criterion: the spread ratio differs from 1 by more than ``SEGREGATION_SD`` seed sd."""
+    return sd_from_one(ratios) > SEGREGATION_SD
+
+
+def difference_in_se(a, b) -> float:
+    """|mean(a) - mean(b)| over its standard error (Welch): how measurable a change between two sets
+    of seeded runs is (a baffled drum against a plain one); inf for no scatter."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.size < 2 or y.size < 2:
+        raise SimError("a difference of seeded runs needs at least two seeds each")
+    se = math.sqrt(float(np.var(x, ddof=1)) / x.size + float(np.var(y, ddof=1)) / y.size)
+    d = abs(float(np.mean(x)) - float(np.mean(y)))
+    return d / se if se > 0 else (math.inf if d > 0 else 0.0)
+
+
 def _late(a: np.ndarray, frac: float = 1 / 3) -> float:
     k = max(1, int(round(len(a) * frac)))
     return float(np.nanmean(a[-k:]))
@@ -171,7 +200,7 @@ def segregation(out_dir: Path, seeds=(0, 1, 2, 3), rpms=(5.0, 10.0, 20.0), durat
             out[name][f"{rpm:g}"] = {
                 "ratio": ratio, "mi": _ms([_late(r["mi"]) for r in rs]),
                 "slope_deg": _ms([_late(r["slope"]) for r in rs]),
-                "ratio_minus_1_over_sd": abs(ratio["mean"] - 1.0) / ratio["sd"] if ratio["sd"] > 0 else math.inf,
+                "ratio_minus_1_over_sd": sd_from_one(ratio["values"]),
                 "rtf": float(np.mean([r["rtf"] for r in rs])),
             }
     plt = _plt()
@@ -334,5 +363,6 @@ if __name__ == "__main__":
     main()
 
 
-__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "baffles", "calibration",
-           "convergence", "dem", "main", "pymunk_slope_deg", "rig", "segregation", "series"]
+__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "SEGREGATION_SD", "baffles",
+           "calibration", "convergence", "dem", "difference_in_se", "main", "pymunk_slope_deg", "rig", "sd_from_one",
+           "segregates", "segregation", "series"]
