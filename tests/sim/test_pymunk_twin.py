@@ -234,7 +234,7 @@ def test_from_placement_starts_from_the_given_bed() -> None:
     # inflated to full size: no deep overlaps left between neighbours
     assert sim.stats().overlap_p99_r < 0.1
     sim.advance(0.1)
-    assert sim.n_steps == 100  # runs on its fixed step
+    assert sim.n_steps == round(0.1 / sim.substep_s())  # runs on its fixed step
     # the same placement gives the same twin, bit for bit
     again = P.from_placement(m, pos, cls, np.zeros(40), rpm=10.0, settle_s=0.2, seed=1)
     again.advance(0.1)
