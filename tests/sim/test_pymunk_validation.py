@@ -41,3 +41,15 @@ def test_difference_in_standard_errors():
         difference_in_se((1.0,), (1.0, 2.0))
     with pytest.raises(SimError):
         sd_from_one((1.0,))
+
+
+# measured (docs/validation.md section 10): the cut-disc rig from case A at 10 rpm, 30 s, MI (eq. 4) over
+# the last 10 s, seeds 0-3, plain drum against 4 lifters 50 mm high and 4 mm thick
+PLAIN_MI = (0.7804, 0.8069, 0.7670, 0.7895)
+TALL_LIFTERS_MI = (0.9126, 0.8917, 0.9325, 0.8342)
+
+
+def test_tall_lifters_change_the_plateau_mi_measurably():
+    assert difference_in_se(TALL_LIFTERS_MI, PLAIN_MI) > 3.0
+    assert min(TALL_LIFTERS_MI) > max(PLAIN_MI)  # every baffled seed above every plain one
+    assert difference_in_se(PLAIN_MI[:2], PLAIN_MI[2:]) < 3.0  # two halves of one set: not a change
