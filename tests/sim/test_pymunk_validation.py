@@ -53,3 +53,14 @@ def test_tall_lifters_change_the_plateau_mi_measurably():
     assert difference_in_se(TALL_LIFTERS_MI, PLAIN_MI) > 3.0
     assert min(TALL_LIFTERS_MI) > max(PLAIN_MI)  # every baffled seed above every plain one
     assert difference_in_se(PLAIN_MI[:2], PLAIN_MI[2:]) < 3.0  # two halves of one set: not a change
+
+
+# measured (docs/validation.md section 10): the rig with the white class half discs (a 180-degree cut),
+# 10 rpm, case C, 60 s, seeds 0-3, the spread ratio over the last 30 s and the last 20 s
+HALF_DISC_30S = (0.9067, 0.9134, 0.8514, 0.8392)
+HALF_DISC_20S = (0.8981, 0.9273, 0.8522, 0.8359)
+
+
+def test_half_discs_segregate_at_three_sd_over_30_s():
+    assert segregates(HALF_DISC_30S) and sum(HALF_DISC_30S) / 4 < 1.0  # towards the core
+    assert not segregates(HALF_DISC_20S)  # at the threshold: a shorter window does not reach it
