@@ -64,3 +64,18 @@ HALF_DISC_20S = (0.8981, 0.9273, 0.8522, 0.8359)
 def test_half_discs_segregate_at_three_sd_over_30_s():
     assert segregates(HALF_DISC_30S) and sum(HALF_DISC_30S) / 4 < 1.0  # towards the core
     assert not segregates(HALF_DISC_20S)  # at the threshold: a shorter window does not reach it
+
+
+def test_the_half_disc_variant_config_is_the_studied_rig():
+    import tomllib
+    from pathlib import Path
+
+    from sim.mixer import parse_mixer, resolve_counts
+    from sim.validation_pymunk import rig
+
+    path = Path(__file__).resolve().parents[2] / "configs" / "pmma-halfdisc.toml"
+    table = tomllib.loads(path.read_text())
+    m = parse_mixer(table, [c["name"] for c in table["classes"]], source=str(path))
+    assert m.particles[1].shape.kind == "cut_disc" and m.particles[1].shape.wedge_deg == 180.0
+    assert m == rig(True, wedge_deg=180.0)
+    assert resolve_counts(m) == (125, 125)
