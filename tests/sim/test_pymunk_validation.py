@@ -59,11 +59,14 @@ def test_tall_lifters_change_the_plateau_mi_measurably():
 # 10 rpm, case C, 60 s, seeds 0-3, the spread ratio over the last 30 s and the last 20 s
 HALF_DISC_30S = (0.9067, 0.9134, 0.8514, 0.8392)
 HALF_DISC_20S = (0.8981, 0.9273, 0.8522, 0.8359)
+DISC_DISC_30S = (0.9929, 0.9734, 0.9645, 1.0214)  # the disc/disc control, run the same way
 
 
-def test_half_discs_segregate_at_three_sd_over_30_s():
+def test_half_discs_segregate_at_three_sd_over_30_s_and_discs_do_not():
     assert segregates(HALF_DISC_30S) and sum(HALF_DISC_30S) / 4 < 1.0  # towards the core
     assert not segregates(HALF_DISC_20S)  # at the threshold: a shorter window does not reach it
+    assert not segregates(DISC_DISC_30S)  # the control bed of equal discs does not segregate
+    assert difference_in_se(HALF_DISC_30S, DISC_DISC_30S) > 3.0
 
 
 def test_the_half_disc_variant_config_is_the_studied_rig():
