@@ -20,7 +20,7 @@ from sim.recipe import DrumSpec
 
 ENGINES: tuple[str, ...] = ("dem", "pymunk")
 
-__all__ = ["ENGINES", "Twin", "check_engine", "engine_for", "from_state", "make_twin", "twin_class"]
+__all__ = ["ENGINES", "Twin", "check_engine", "engine_for", "from_placement", "from_state", "make_twin", "twin_class"]
 
 
 @runtime_checkable
@@ -171,3 +171,47 @@ def from_state(state: Any) -> Twin:
         return DrumSim.from_state(state)
     twin: Twin = twin_class("pymunk").from_state(state)
     return twin
+
+
+def from_placement(
+    mixer: Mixer,
+    pos_m: Any,
+    classes: Any,
+    angle_rad: Any,
+    rpm: float,
+    settle_s: float = 0.3,
+    *,
+    engine: str | None = None,
+    seed: int = 0,
+    friction: float | None = None,
+    rolling: float | None = None,
+) -> Twin:
+    """A twin of ``mixer`` on ``engine`` (``engine_for``) whose particles the caller placed
+    (``sim.from_image``: where the camera sees each class): centres ``pos_m`` (n, 2; m, drum frame)
+    at the engines' placement size (``sim.drum._SHRINK``) without overlaps, class indices
+    ``classes`` (n,), angles ``angle_rad`` (n,; rad); inflated, settled for ``settle_s`` with the
+    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: defaults."""
+    import numpy as np
+
+    from sim.drum import DrumSim, SimParams, SimState, _check_params
+
+    name = engine_for(mixer, engine)
+    base = SimParams()
+    params = SimParams(friction=base.friction if friction is None else float(friction),
+                       rolling=base.rolling if rolling is None else float(rolling))
+    _check_params(params)
+    if name == "pymunk":
+        twin: Twin = twin_class(name).from_placement(mixer, pos_m, classes, angle_rad, rpm, settle_s, seed=int(seed),
+                                                     friction=params.friction, rolling=params.rolling)
+        return twin
+    from sim.mixer import disk_classes
+
+    cls = np.asarray(classes, dtype=np.int64)
+    n = cls.size
+    state = SimState(
+        drum=mixer.drum, recipe=None, classes=disk_classes(mixer), case="image", seed=int(seed), params=params,
+        t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls,
+        pos_m=np.asarray(pos_m, dtype=np.float64), vel_m_s=np.zeros((n, 2)),
+        angle_rad=np.asarray(angle_rad, dtype=np.float64), omega_rad_s=np.zeros(n), mixer=mixer,
+    )
+    return DrumSim.from_placement(state, rpm, settle_s)  # same construction as DrumSim.__init__

@@ -8,8 +8,8 @@ addition at 80 % size with no overlaps; a disk that finds no free pixel of its c
 falls back to any particle pixel, then to anywhere in the drum. The disks are then
 inflated and settled exactly as a fresh ``DrumSim`` is, so the twin starts from the
 bed the camera shows (a what-if from "now" starts from the live state). A mixer that needs
-the pymunk engine is seeded through ``PymunkDrumSim.from_placement`` (same arguments as
-``DrumSim.from_placement`` takes through its state: the mixer, centres, classes, angles).
+the pymunk engine is seeded through ``PymunkDrumSim.from_placement`` (the mixer, centres,
+classes, angles: what ``DrumSim.from_placement`` takes through its state).
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 
 from sim.drum import _SHRINK, DrumSim, SimParams, SimState, _check_params, check_rpm
-from sim.engine import engine_for, twin_class
+from sim.engine import from_placement
 from sim.errors import SimError
-from sim.mixer import Mixer, disk_classes, resolve
+from sim.mixer import Mixer, resolve
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 _TRIES_PER_DISK = 400
@@ -129,27 +129,19 @@ def seed_from_labels(
         rolling=base.rolling if rolling is None else float(rolling),
     )
     _check_params(params)
-    name = "dem" if mixer is None else engine_for(mixer, engine)
-    if name == "dem":
-        classes = tuple(slice_2d(recipe, drum)) if mixer is None else disk_classes(mixer)
-    else:
-        assert mixer is not None
-        classes = tuple(DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer))
+    classes = tuple(slice_2d(recipe, drum)) if mixer is None else tuple(
+        DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer))
     rng = np.random.default_rng(seed)
     pos, cls = place_from_labels(labels, roi, classes, label_names, drum, rng)
     n = cls.size
     angles = rng.uniform(0, 2 * math.pi, n)
-    if name != "dem":
-        engine_cls = twin_class(name)
-        if not hasattr(engine_cls, "from_placement"):
-            raise SimError(f"the {name} engine cannot be seeded from the camera yet")
-        return engine_cls.from_placement(mixer=mixer, pos_m=pos, cls=cls, angle_rad=angles, rpm=rpm,
-                                         settle_s=settle_s, seed=int(seed), friction=params.friction,
-                                         rolling=params.rolling)
+    if mixer is not None:  # the mixer's engine (engine_for), placed the same way on either
+        return from_placement(mixer, pos, cls, angles, rpm, settle_s, engine=engine, seed=int(seed),
+                              friction=params.friction, rolling=params.rolling)
     state = SimState(
-        drum=drum, recipe=None if mixer is not None else recipe, classes=classes, case="image", seed=int(seed),
+        drum=drum, recipe=recipe, classes=classes, case="image", seed=int(seed),
         params=params, t_s=0.0, rpm_target=0.0, rpm_actual=0.0, drum_angle_rad=0.0, cls=cls, pos_m=pos,
-        vel_m_s=np.zeros((n, 2)), angle_rad=angles, omega_rad_s=np.zeros(n), mixer=mixer,
+        vel_m_s=np.zeros((n, 2)), angle_rad=angles, omega_rad_s=np.zeros(n), mixer=None,
     )
     return DrumSim.from_placement(state, rpm, settle_s)  # same construction as DrumSim.__init__
 

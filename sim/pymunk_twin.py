@@ -49,11 +49,13 @@ from __future__ import annotations
 import math
 import pickle
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pymunk
 import pymunk.autogeometry
 import pymunk.batch as pbatch
+from numba import njit
 
 from sim.drum import (
     _OVERLAP_BINS,
@@ -76,7 +78,7 @@ from sim.errors import SimError
 from sim.mixer import Mixer, Shape, resolve, shape_outline_m
 from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
-DEFAULT_DT_S = 0.001  # the fixed step: the converged one (docs/validation.md section 10; 2 ms reads 1.6 deg low)
+DEFAULT_DT_S = 0.002  # the fixed step: 0.5-2 ms agree within the seed scatter, 3-4 ms do not (docs/validation.md 10)
 DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
 WALL_SEGMENTS = 180
 CORNER_R = 0.02  # corner radius of polygon shapes, in the particle's radius
@@ -159,6 +161,121 @@ def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:
     return float(mass_kg * j / area)
 
 
+@njit(cache=True, error_model="numpy")
+def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_sorted: np.ndarray,
+               batch_of: np.ndarray, rows: np.ndarray, vel_rows: np.ndarray, round_x: np.ndarray,
+               inv_i_x: np.ndarray, r_x: np.ndarray, r_over_m: np.ndarray, h: float, w_drum: float,
+               end_k: float, mu_r: float, inv_r_min: float, hist: np.ndarray, acc: np.ndarray) -> bool:
+    """One step's contacts (the batch rows of ``pymunk.batch.get_space_arbiters``: body ids ``ints``
+    (m, 3), impulse, normal, distance ``fl`` (m, 5)) -> overlap statistics into ``hist``/``acc``, and
+    the bodies' new velocities (``rows``: x, y, vx, vy, omega per batch row) into ``vel_rows`` after
+    rolling friction (``mu_r``) and end-plate friction (``end_k``, s). True if ``vel_rows`` was written.
+
+    The contacts are taken in a canonical order (particle pair, then normal): Chipmunk's contact
+    cache is a hash set keyed by memory addresses, and the sums must not depend on where a restored
+    copy lives in memory (bit-exact branches)."""
+    n = batch_of.size
+    nbins = hist.size - 1
+    m_all = ints.shape[0]
+    a_ = np.empty(m_all, np.int64)
+    b_ = np.empty(m_all, np.int64)
+    keep = np.empty(m_all, np.int64)
+    m = 0
+    for k in range(m_all):
+        if fl[k, 4] < 0.0:  # touching
+            a_[m] = part_of_sorted[np.searchsorted(id_sorted, ints[k, 0])]
+            b_[m] = part_of_sorted[np.searchsorted(id_sorted, ints[k, 1])]
+            keep[m] = k
+            m += 1
+    key = a_[:m] * (n + 1) + b_[:m]
+    order = np.argsort(key, kind="mergesort")
+    # ties (one particle pair, several convex pieces): by the normal, insertion sort within each run
+    i = 0
+    while i < m:
+        j = i + 1
+        while j < m and key[order[j]] == key[order[i]]:
+            j += 1
+        for p in range(i + 1, j):
+            q = p
+            while q > i:
+                u, v = keep[order[q - 1]], keep[order[q]]
+                if fl[u, 2] > fl[v, 2] or (fl[u, 2] == fl[v, 2] and fl[u, 3] > fl[v, 3]):
+                    order[q - 1], order[q] = order[q], order[q - 1]
+                    q -= 1
+                else:
+                    break
+        i = j
+    ov_max = 0.0
+    wall_max = 0.0
+    touched = np.zeros(n + 1, np.bool_)
+    fn = np.empty(m)
+    for t in range(m):
+        o = order[t]
+        k = keep[o]
+        a, b = a_[o], b_[o]
+        fn[t] = abs(fl[k, 0] * fl[k, 2] + fl[k, 1] * fl[k, 3]) / h  # normal force, N
+        depth = -fl[k, 4]
+        touched[a] = True
+        touched[b] = True
+        if a == n or b == n:
+            wall_max = max(wall_max, depth)
+        else:
+            ov = depth * inv_r_min
+            ov_max = max(ov_max, ov)
+            hist[min(int(ov * (nbins / 2.0)), nbins)] += 1
+    n_touched = 0
+    for p in range(n):
+        if touched[p]:
+            n_touched += 1
+    acc[0] = m
+    acc[1] = ov_max
+    acc[2] = wall_max
+    acc[3] = 1.0 - n_touched / n if n else np.nan
+    if m == 0 or rows.shape[0] == 0 or (end_k <= 0.0 and mu_r <= 0.0):
+        return False
+    vel_rows[:, :] = rows[:, 2:5]
+    if mu_r > 0.0:
+        dom = np.zeros(n + 1)
+        for t in range(m):
+            o = order[t]
+            a, b = a_[o], b_[o]
+            if not (round_x[a] and round_x[b]):
+                continue
+            if b == n:
+                r_eff = r_x[a]
+            elif a == n:
+                r_eff = r_x[b]
+            else:
+                r_eff = r_x[a] * r_x[b] / (r_x[a] + r_x[b] + 1e-300)
+            wa = w_drum if a == n else rows[batch_of[a], 4]
+            wb = w_drum if b == n else rows[batch_of[b], 4]
+            w_rel = wa - wb
+            k_inv = inv_i_x[a] + inv_i_x[b]
+            dw = min(mu_r * h * r_eff * fn[t] * k_inv, abs(w_rel))  # change of w_rel, rad/s
+            tq = np.sign(w_rel) * dw / k_inv  # angular impulse on b (on a: minus), N m s
+            dom[b] += tq * inv_i_x[b]
+            dom[a] -= tq * inv_i_x[a]
+        for p in range(n):
+            vel_rows[batch_of[p], 2] += dom[p]
+    if end_k > 0.0:
+        sfn = np.zeros(n + 1)
+        for t in range(m):
+            o = order[t]
+            sfn[a_[o]] += fn[t]
+            sfn[b_[o]] += fn[t]
+        for p in range(n):
+            row = batch_of[p]
+            x, y = rows[row, 0], rows[row, 1]
+            ux = vel_rows[row, 0] + w_drum * y
+            uy = vel_rows[row, 1] - w_drum * x
+            u = math.hypot(ux, uy)
+            if u > 0.0:
+                s = min(end_k * r_over_m[p] * sfn[p], u) / u
+                vel_rows[row, 0] -= s * ux
+                vel_rows[row, 1] -= s * uy
+    return True
+
+
 class PymunkDrumSim(FixedStepTwin):
     """The pymunk drum twin of a ``Mixer`` (see the module doc). Seeded and reproducible."""
 
@@ -189,6 +306,20 @@ class PymunkDrumSim(FixedStepTwin):
         case = str(case).upper()
         if case not in CASES:
             raise SimError(f"case must be one of {', '.join(CASES)} (got {case!r})")
+        rpm = self._configure(mixer, case, seed, rpm, friction, rolling, restitution=restitution,
+                              wall_friction=wall_friction, end_friction=end_friction, accel_rpm_s=accel_rpm_s,
+                              dt_s=dt_s, iterations=iterations)
+        disks = [DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer)]
+        rng = np.random.default_rng(seed)
+        pos, cls = _place(disks, case, mixer.drum.radius_m, rng)
+        angles = rng.uniform(0, 2 * math.pi, cls.size)
+        self._start(pos, cls, angles, rpm, 0.0 if case == "B" else settle_s)
+
+    def _configure(self, mixer: Mixer, case: str, seed: int, rpm: float, friction: float, rolling: float, *,
+                   restitution: float = DEFAULT_RESTITUTION, wall_friction: float | None = None,
+                   end_friction: float | None = None, accel_rpm_s: float = DEFAULT_ACCEL_RPM_S,
+                   dt_s: float | None = None, iterations: int = DEFAULT_ITERATIONS) -> float:
+        """Check and keep the run's parameters (one-line SimErrors); the checked rpm."""
         params = SimParams(float(friction), float(rolling), float(restitution),
                            None if wall_friction is None else float(wall_friction), float(accel_rpm_s),
                            DEFAULT_DT_S if dt_s is None else float(dt_s),
@@ -199,17 +330,57 @@ class PymunkDrumSim(FixedStepTwin):
             raise SimError("the mixer has no particle classes")
         rpm = check_rpm(rpm, mixer.drum)
         self.mixer, self.case, self.seed, self.params = mixer, case, int(seed), params
-        disks = [DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer)]
-        rng = np.random.default_rng(seed)
-        pos, cls = _place(disks, case, mixer.drum.radius_m, rng)
-        angles = rng.uniform(0, 2 * math.pi, cls.size)
+        return rpm
+
+    @classmethod
+    def from_placement(
+        cls,
+        mixer: Mixer,
+        pos_m: np.ndarray,
+        classes: np.ndarray,
+        angle_rad: np.ndarray,
+        rpm: float,
+        settle_s: float = 0.3,
+        *,
+        seed: int = 0,
+        friction: float = DEFAULT_FRICTION,
+        rolling: float = DEFAULT_ROLLING,
+        **kwargs: Any,
+    ) -> PymunkDrumSim:
+        """A twin of ``mixer`` whose particles are placed by the caller (``sim.from_image``: where the
+        camera sees each class): centroids ``pos_m`` (n, 2; m, drum frame) at ``_SHRINK`` of their
+        size without overlaps, class indices ``classes`` (n,), angles ``angle_rad`` (n,; rad). Inflated,
+        settled for ``settle_s`` with the drum at rest and started at ``rpm``, as ``__init__`` does;
+        ``kwargs`` as ``__init__``'s (``end_friction``, ``dt_s``, ``iterations``, ...). Case "image"."""
+        pos = np.asarray(pos_m, dtype=np.float64)
+        k = np.asarray(classes)
+        ang = np.asarray(angle_rad, dtype=np.float64)
+        n = k.size
+        if pos.shape != (n, 2) or ang.shape != (n,) or k.ndim != 1:
+            raise SimError(f"a placement needs (n, 2) centres, n classes and n angles (got {pos.shape}, "
+                           f"{k.shape}, {ang.shape})")
+        if n == 0:
+            raise SimError("a placement needs at least one particle")
+        if not (np.issubdtype(k.dtype, np.integer) and 0 <= int(k.min()) and int(k.max()) < len(mixer.particles)):
+            raise SimError(f"placement classes must be indices 0..{len(mixer.particles) - 1} of the mixer's classes")
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
+            raise SimError("placement centres and angles must be finite")
+        if float(np.hypot(pos[:, 0], pos[:, 1]).max()) >= mixer.drum.radius_m:
+            raise SimError(f"a placed particle lies outside the {mixer.drum.diameter_m * 1e3:g} mm drum")
+        sim = cls.__new__(cls)
+        rpm = sim._configure(mixer, "image", seed, rpm, friction, rolling, **kwargs)
+        sim._start(pos, k.astype(np.int64), ang, rpm, max(0.0, float(settle_s)))
+        return sim
+
+    def _start(self, pos: np.ndarray, cls: np.ndarray, angles: np.ndarray, rpm: float, settle_s: float) -> None:
+        """Build the space from placed particles (``_SHRINK`` size), inflate and settle, start at ``rpm``."""
         self._cls = cls
         self._set_tables()
         self._new_space(pos, angles)
         self.t_s, self.n_steps, self._acc_s = 0.0, 0, 0.0
         self._rpm_target = self._rpm_actual = 0.0
         self.reset_stats()
-        self._settle(0.0 if case == "B" else settle_s)
+        self._settle(settle_s)
         self.reset_stats()
         self._rpm_target = self._rpm_actual = rpm  # the drum starts at full speed
 
@@ -283,6 +454,9 @@ class PymunkDrumSim(FixedStepTwin):
         space.collision_slop = SLOP_R * self._r_min
         space.collision_bias = OVERLAP_LEFT_PER_S  # the same correction rate in time whatever the step
         space.collision_persistence = 1  # the contact cache holds this step's contacts only (statistics, F_n)
+        # broad phase: Chipmunk's bounding-box tree. Its spatial hash costs 25 % less CPU per step on the
+        # cut-disc rig but orders its cells' contents by the shapes' memory addresses: two copies of one
+        # snapshot then solve their contacts in different orders and part by 1e-17 m (not bit-exact)
         self._space, self._drum, self._bodies = space, drum, bodies
         buf = pbatch.Buffer()
         pbatch.get_space_bodies(space, pbatch.BodyFields.BODY_ID, buf)
@@ -291,7 +465,7 @@ class PymunkDrumSim(FixedStepTwin):
         n = len(bodies)
         # batch order -> particle index (the drum: n)
         self._batch_of = np.array([index[b.id] for b in bodies], dtype=np.int64)  # particle -> batch row
-        self._id_sorted = np.sort(ids)
+        self._id_sorted = np.sort(ids.astype(np.int64))
         part_of_id = {b.id: i for i, b in enumerate(bodies)}
         part_of_id[drum.id] = n
         self._part_of_sorted = np.array([part_of_id[int(v)] for v in self._id_sorted.tolist()], dtype=np.int64)
@@ -301,6 +475,8 @@ class PymunkDrumSim(FixedStepTwin):
         self._vel_rows = np.zeros((ids.size, 3))  # vx, vy, omega per batch row, written back after a step
         self._sbuf = pbatch.Buffer()
         self._sbuf.set_float_buf(self._vel_rows)
+        self._no_rows = np.zeros((0, 5))
+        self._acc_stats = np.zeros(4)  # one step's contacts, max overlap (small radii), max wall depth (m), airborne
         self._set_coefficients()
 
     def _set_coefficients(self) -> None:
@@ -405,72 +581,32 @@ class PymunkDrumSim(FixedStepTwin):
                 self.n_steps += 1
 
     def _after_step(self, h: float, w_drum: float, end_k: float, mu_r: float) -> None:
-        """Contact statistics, rolling friction and end-plate friction of the step just taken."""
-        n = self._cls.size
+        """Contact statistics, rolling friction and end-plate friction of the step just taken
+        (``_post_step``, compiled: one batch read of the contacts, one of the bodies, one write)."""
         ab = self._abuf
         ab.clear()
         pbatch.get_space_arbiters(self._space, _ARB, ab)
-        ints = np.frombuffer(ab.int_buf(), dtype=np.uintp).reshape(-1, 3)
+        ints = np.frombuffer(ab.int_buf(), dtype=np.int64).reshape(-1, 3)  # addresses: below 2**63
         fl = np.frombuffer(ab.float_buf(), dtype=np.float64).reshape(-1, 5)
-        live = fl[:, 4] < 0.0  # touching
-        ints, fl = ints[live], fl[live]
-        ij = self._part_of_sorted[np.searchsorted(self._id_sorted, ints[:, :2])]
-        # the cache is a hash set keyed by memory addresses: put the contacts in a canonical order so that
-        # sums over them do not depend on where a restored copy lives in memory (bit-exact branches)
-        order = np.lexsort((fl[:, 3], fl[:, 2], ij[:, 1], ij[:, 0]))
-        ij, fl = ij[order], fl[order]
-        ia, ib = ij[:, 0], ij[:, 1]
-        fn = np.abs(fl[:, 0] * fl[:, 2] + fl[:, 1] * fl[:, 3]) * (1.0 / h)  # normal force, N
-        depth = -fl[:, 4]
+        friction = ints.shape[0] > 0 and (end_k > 0.0 or mu_r > 0.0)
+        if friction:
+            bb = self._bbuf
+            bb.clear()
+            pbatch.get_space_bodies(self._space, _BOD, bb)
+            rows = np.frombuffer(bb.float_buf(), dtype=np.float64).reshape(-1, 5)
+        else:
+            rows = self._no_rows
+        acc = self._acc_stats
+        write = _post_step(ints, fl, self._id_sorted, self._part_of_sorted, self._batch_of, rows, self._vel_rows,
+                           self._round_x, self._inv_i_x, self._r_x, self._r_over_m, h, w_drum, end_k, mu_r,
+                           1.0 / self._r_min, self._hist, acc)
         self._stat_steps += 1
-        m = ia.size
-        if m:
-            wall = (ia == n) | (ib == n)
-            self._contacts += m
-            ov = depth[~wall] * (1.0 / self._r_min)
-            if ov.size:
-                self._ov_max = max(self._ov_max, float(ov.max()))
-                self._hist += np.bincount(np.minimum((ov * (_OVERLAP_BINS / 2.0)).astype(np.int64), _OVERLAP_BINS),
-                                          minlength=_OVERLAP_BINS + 1)
-            if wall.any():
-                self._wall_max = max(self._wall_max, float(depth[wall].max()))
-        touched = np.bincount(ij.ravel(), minlength=n + 1)[:n] > 0
-        self._airborne = 1.0 - float(touched.mean()) if n else float("nan")
-        if not m or (end_k <= 0.0 and mu_r <= 0.0):
-            return
-        bb = self._bbuf
-        bb.clear()
-        pbatch.get_space_bodies(self._space, _BOD, bb)
-        rows = np.frombuffer(bb.float_buf(), dtype=np.float64).reshape(-1, 5)
-        st = rows[self._batch_of]  # x, y, vx, vy, omega per particle (a copy)
-        if mu_r > 0.0:
-            rr = self._round_x[ia] & self._round_x[ib]
-            if rr.any():
-                a, b, f = ia[rr], ib[rr], fn[rr]
-                om = np.append(st[:, 4], w_drum)
-                r = self._r_x
-                r_eff = np.where(b == n, r[a], np.where(a == n, r[b], r[a] * r[b] / (r[a] + r[b] + 1e-300)))
-                w_rel = om[a] - om[b]
-                ia_i, ib_i = self._inv_i_x[a], self._inv_i_x[b]
-                k_inv = ia_i + ib_i
-                dw = np.minimum(mu_r * h * r_eff * f * k_inv, np.abs(w_rel))  # change of w_rel, rad/s
-                tq = np.sign(w_rel) * dw / k_inv  # angular impulse on b (on a: minus), N m s
-                dom = np.bincount(b, weights=tq * ib_i, minlength=n + 1) - np.bincount(a, weights=tq * ia_i,
-                                                                                       minlength=n + 1)
-                st[:, 4] += dom[:n]
-        if end_k > 0.0:
-            sfn = np.bincount(ij.ravel(), weights=np.repeat(fn, 2), minlength=n + 1)[:n]
-            ux = st[:, 2] + w_drum * st[:, 1]
-            uy = st[:, 3] - w_drum * st[:, 0]
-            u = np.hypot(ux, uy)
-            dv = end_k * self._r_over_m * sfn
-            s = np.divide(np.minimum(dv, u), u, out=np.zeros(n), where=u > 0)
-            st[:, 2] -= s * ux
-            st[:, 3] -= s * uy
-        vr = self._vel_rows
-        vr[:] = rows[:, 2:5]
-        vr[self._batch_of] = st[:, 2:5]
-        pbatch.set_space_bodies(self._space, _VEL, self._sbuf)
+        self._contacts += int(acc[0])
+        self._ov_max = max(self._ov_max, float(acc[1]))
+        self._wall_max = max(self._wall_max, float(acc[2]))
+        self._airborne = float(acc[3])
+        if write and friction:
+            pbatch.set_space_bodies(self._space, _VEL, self._sbuf)
 
     # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:

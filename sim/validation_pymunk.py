@@ -31,22 +31,27 @@ from sim.pymunk_twin import radial_spread_m
 SECTIONS = ("convergence", "segregation", "baffles", "dem", "calibration")
 RIG_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "pmma-cutdisc.toml"
 RIG_BAFFLES = Baffles(count=4, height_m=0.020, thickness_m=0.004)  # 4 lifters, 2 disc diameters high
+RIG_TALL_BAFFLES = Baffles(count=4, height_m=0.050, thickness_m=0.004)  # 4 lifters, 5 disc diameters high
 # The studies' contacts: the paper's friction and rolling friction, no end-plate friction. With the
 # Taberlet plate model at the monolayer's gap (3 mm, r / W = 1.7) the bed stands at 49-64 deg at
 # 10 rpm over the whole calibration search (against 32 deg in the real frames): a monolayer is not
 # the thick quasi-2D flow that model describes (docs/validation.md section 10).
-# The studies ran at a 2 ms step (half the cost of the converged 1 ms default; their slopes read
-# 1.6 deg low, section 10), except ``convergence``, which sets its own.
+# The studies run at the 2 ms default step (0.5-2 ms agree within the seed scatter, section 10),
+# except ``convergence``, which sets its own.
 CONTACT: dict[str, Any] = {"end_friction": 0.0, "dt_s": 0.002}
 
 
-def rig(cut: bool = True, baffles: Baffles | None = None) -> Mixer:
+def rig(cut: bool = True, baffles: Baffles | None = None, wedge_deg: float | None = None) -> Mixer:
     """The worked example's mixer (``configs/pmma-cutdisc.toml``); ``cut`` False: the white class a
-    disc of the same diameter (the disc/disc bed); ``baffles``: lifters on the wall."""
+    disc of the same diameter (the disc/disc bed); ``baffles``: lifters on the wall; ``wedge_deg``:
+    the cut's angle instead of the config's 90 deg (a variant)."""
     table = tomllib.loads(RIG_CONFIG.read_text())
     m = parse_mixer(table, [c["name"] for c in table["classes"]], source=str(RIG_CONFIG))
     if not cut:
         m = replace(m, particles=tuple(replace(p, shape=Shape("disc", p.shape.diameter_m)) for p in m.particles))
+    elif wedge_deg is not None:
+        m = replace(m, particles=tuple(replace(p, shape=replace(p.shape, wedge_deg=float(wedge_deg)))
+                                       if p.shape.kind == "cut_disc" else p for p in m.particles))
     return replace(m, baffles=baffles)
 
 
@@ -88,6 +93,35 @@ def series(mixer: Mixer, rpm: float, seed: int, duration_s: float, *, engine: st
     return res
 
 
+SEGREGATION_SD = 3.0  # the issue's test: a spread ratio this many seed standard deviations from 1 segregates
+
+
+def sd_from_one(ratios) -> float:
+    """How far the seeds' mean spread ratio is from 1, in seed standard deviations (``ddof=1``:
+    the scatter of one seed's run, not the standard error of the mean); inf for no scatter."""
+    v = np.asarray(ratios, dtype=float)
+    if v.size < 2:
+        raise SimError("the seed scatter needs at least two seeds")
+    sd = float(np.std(v, ddof=1))
+    return abs(float(np.mean(v)) - 1.0) / sd if sd > 0 else math.inf
+
+
+def segregates(ratios) -> bool:
+    """The issue's criterion: the spread ratio differs from 1 by more than ``SEGREGATION_SD`` seed sd."""
+    return sd_from_one(ratios) > SEGREGATION_SD
+
+
+def difference_in_se(a, b) -> float:
+    """|mean(a) - mean(b)| over its standard error (Welch): how measurable a change between two sets
+    of seeded runs is (a baffled drum against a plain one); inf for no scatter."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.size < 2 or y.size < 2:
+        raise SimError("a difference of seeded runs needs at least two seeds each")
+    se = math.sqrt(float(np.var(x, ddof=1)) / x.size + float(np.var(y, ddof=1)) / y.size)
+    d = abs(float(np.mean(x)) - float(np.mean(y)))
+    return d / se if se > 0 else (math.inf if d > 0 else 0.0)
+
+
 def _late(a: np.ndarray, frac: float = 1 / 3) -> float:
     k = max(1, int(round(len(a) * frac)))
     return float(np.nanmean(a[-k:]))
@@ -99,39 +133,49 @@ def _ms(values) -> dict:
             "n": int(v.size), "values": [float(x) for x in v]}
 
 
-def convergence(out_dir: Path, seeds=(0, 1, 2), steps_ms=(4.0, 2.0, 1.0, 0.5), iterations=(5, 10, 20, 40),
-                rpm: float = 10.0, spin_up_s: float = 2.0, window_s: float = 4.0) -> dict:
-    """Slope at 10 rpm on the cut-disc rig against the step (at 10 iterations) and the solver
-    iterations (at the default 2 ms step), several seeds."""
+def convergence(out_dir: Path, seeds=(0, 1, 2, 3), steps_ms=(4.0, 3.0, 2.0, 1.0, 0.5), iterations=(10, 20, 40),
+                iter_steps_ms=(2.0, 4.0), rpm: float = 10.0, spin_up_s: float = 2.0, window_s: float = 8.0) -> dict:
+    """Slope, MI (eq. 4) and spread ratio at 10 rpm on the cut-disc rig against the step (at 10
+    iterations) and the solver iterations (at each of ``iter_steps_ms``), several seeds."""
     m = rig(True)
     runs = []
-    grid = [(h, 10) for h in steps_ms] + [(2.0, it) for it in iterations if it != 10]
+    grid = [(h, 10) for h in steps_ms] + [(h, it) for h in iter_steps_ms for it in iterations if it != 10]
     for h, it in grid:
         for s in seeds:
             r = series(m, rpm, s, window_s, spin_up_s=spin_up_s, every_s=0.25,
                        **{**CONTACT, "dt_s": h * 1e-3, "iterations": it})
             runs.append({"dt_ms": h, "iterations": it, "seed": s, "slope_deg": float(np.nanmean(r["slope"])),
+                         "mi": float(np.nanmean(r["mi"])), "ratio": float(np.nanmean(r["ratio"])),
                          "overlap_p99_r": r["overlap_p99_r"], "wall_max_mm": r["wall_max_mm"], "rtf": r["rtf"]})
+            print(json.dumps(runs[-1]), file=sys.stderr, flush=True)
+
+    def cell(sel: list[dict]) -> dict:
+        return {"slope": _ms([r["slope_deg"] for r in sel]), "mi": _ms([r["mi"] for r in sel]),
+                "ratio": _ms([r["ratio"] for r in sel]),
+                "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
+                "rtf": float(np.mean([r["rtf"] for r in sel]))}
+
     summary: dict = {"by_step": {}, "by_iterations": {}}
     for h in steps_ms:
-        sel = [r for r in runs if r["dt_ms"] == h and r["iterations"] == 10]
-        summary["by_step"][f"{h:g}"] = {"slope": _ms([r["slope_deg"] for r in sel]),
-                                        "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
-                                        "rtf": float(np.mean([r["rtf"] for r in sel]))}
-    for it in iterations:
-        sel = [r for r in runs if r["dt_ms"] == 2.0 and r["iterations"] == it]
-        summary["by_iterations"][str(it)] = {"slope": _ms([r["slope_deg"] for r in sel]),
-                                             "overlap_p99_r": float(np.mean([r["overlap_p99_r"] for r in sel])),
-                                             "rtf": float(np.mean([r["rtf"] for r in sel]))}
+        summary["by_step"][f"{h:g}"] = cell([r for r in runs if r["dt_ms"] == h and r["iterations"] == 10])
+    for h in iter_steps_ms:
+        for it in iterations:
+            summary["by_iterations"][f"{h:g}/{it}"] = cell([r for r in runs if r["dt_ms"] == h
+                                                             and r["iterations"] == it])
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
-    for ax, key, xs, lab in ((axes[0], "by_step", steps_ms, "step (ms), 10 iterations"),
-                             (axes[1], "by_iterations", iterations, "solver iterations, 2 ms step")):
-        mean = [summary[key][f"{x:g}" if key == "by_step" else str(x)]["slope"]["mean"] for x in xs]
-        sd = [summary[key][f"{x:g}" if key == "by_step" else str(x)]["slope"]["sd"] for x in xs]
-        ax.errorbar(xs, mean, yerr=sd, marker="o", capsize=3)
+    mean = [summary["by_step"][f"{x:g}"]["slope"]["mean"] for x in steps_ms]
+    sd = [summary["by_step"][f"{x:g}"]["slope"]["sd"] for x in steps_ms]
+    axes[0].errorbar(steps_ms, mean, yerr=sd, marker="o", capsize=3)
+    axes[0].set_xlabel("step (ms), 10 iterations")
+    for h in iter_steps_ms:
+        mean = [summary["by_iterations"][f"{h:g}/{it}"]["slope"]["mean"] for it in iterations]
+        sd = [summary["by_iterations"][f"{h:g}/{it}"]["slope"]["sd"] for it in iterations]
+        axes[1].errorbar(iterations, mean, yerr=sd, marker="o", capsize=3, label=f"{h:g} ms step")
+    axes[1].set_xlabel("solver iterations")
+    axes[1].legend(fontsize=8)
+    for ax in axes:
         ax.set_xscale("log", base=2)
-        ax.set_xlabel(lab)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel(f"slope at {rpm:g} rpm (deg)")
     fig.suptitle(f"pymunk twin, cut-disc rig: slope vs step and iterations ({len(seeds)} seeds, mean +- sd)")
@@ -156,7 +200,7 @@ def segregation(out_dir: Path, seeds=(0, 1, 2, 3), rpms=(5.0, 10.0, 20.0), durat
             out[name][f"{rpm:g}"] = {
                 "ratio": ratio, "mi": _ms([_late(r["mi"]) for r in rs]),
                 "slope_deg": _ms([_late(r["slope"]) for r in rs]),
-                "ratio_minus_1_over_sd": abs(ratio["mean"] - 1.0) / ratio["sd"] if ratio["sd"] > 0 else math.inf,
+                "ratio_minus_1_over_sd": sd_from_one(ratio["values"]),
                 "rtf": float(np.mean([r["rtf"] for r in rs])),
             }
     plt = _plt()
@@ -194,12 +238,14 @@ def _t_plateau(t: np.ndarray, mi: np.ndarray, frac: float = 0.9) -> float:
     return float(t[hit[0]]) if hit.size else math.nan
 
 
-def baffles(out_dir: Path, seeds=(0, 1, 2), rpm: float = 10.0, duration_s: float = 30.0) -> dict:
-    """The cut-disc rig from case A (blue left, white right) at 10 rpm, with and without four lifters:
+def baffles(out_dir: Path, seeds=(0, 1, 2, 3), rpm: float = 10.0, duration_s: float = 30.0,
+            lifters: Baffles = RIG_TALL_BAFFLES) -> dict:
+    """The cut-disc rig from case A (blue left, white right) at 10 rpm, with and without ``lifters``:
     time to 90 % of the plateau MI and the plateau MI."""
     out: dict = {}
     curves = {}
-    for name, bf in (("plain", None), ("4 baffles", RIG_BAFFLES)):
+    label = f"{lifters.count} lifters {lifters.height_m * 1e3:g} mm"
+    for name, bf in (("plain", None), (label, lifters)):
         rs = [series(rig(True, bf), rpm, s, duration_s, case="A", every_s=0.25, **CONTACT) for s in seeds]
         curves[name] = rs
         out[name] = {"plateau_mi": _ms([_late(r["mi"]) for r in rs]),
@@ -317,5 +363,6 @@ if __name__ == "__main__":
     main()
 
 
-__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "SECTIONS", "baffles", "calibration", "convergence", "dem", "main",
-           "pymunk_slope_deg", "rig", "segregation", "series"]
+__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "SEGREGATION_SD", "baffles",
+           "calibration", "convergence", "dem", "difference_in_se", "main", "pymunk_slope_deg", "rig", "sd_from_one",
+           "segregates", "segregation", "series"]

@@ -36,8 +36,13 @@ SAME_SIZE = 0.10  # diameters this close (relative to the smallest) are one size
 PEAK_MIN_R = 0.3  # a distance-transform peak counts as a particle centre from this many diameters deep
 PEAK_SPACING = 0.6  # peaks closer than this many diameters are one particle
 
-__all__ = ["CHORD_MEDIAN", "ClassCensus", "MixerCensus", "census", "count_particles", "rotation_from_slope",
-           "run_diameter_px", "same_size", "single_particles"]
+CROP_PAD_PX = 2  # background pixels around a particle's crop
+CROP_OPEN_D = 0.25  # a crop's opening (spurs, bridges to neighbours off), in particle diameters
+CROP_AREA = (0.4, 1.3)  # a single particle's blob: this many times a disc of the measured diameter
+
+__all__ = ["CHORD_MEDIAN", "CROP_AREA", "CROP_OPEN_D", "CROP_PAD_PX", "ClassCensus", "MixerCensus", "census",
+           "count_particles", "rotation_from_slope", "run_diameter_px", "same_size", "single_particle_crops",
+           "single_particles"]
 
 
 def run_diameter_px(mask: np.ndarray) -> float:
@@ -73,12 +78,9 @@ def count_particles(mask: np.ndarray, diameter_px: float) -> int:
     return int(n - 1)
 
 
-def single_particles(mask: np.ndarray, diameter_px: float) -> np.ndarray:
-    """The blobs of a boolean map that hold exactly one particle centre (``count_particles``'s
-    peaks), for a size that touching particles do not lengthen. ``diameter_px``: a first guess."""
-    m = np.asarray(mask, dtype=bool)
-    if not (math.isfinite(diameter_px) and diameter_px > 2):
-        return m
+def _peaks_per_blob(m: np.ndarray, diameter_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """The blobs of a boolean map (labels, 0 the background) and the particle centres
+    (``_peaks``' plateaus) each holds."""
     n, blobs = cv2.connectedComponents(m.astype(np.uint8))
     # a peak is a small plateau: count each blob's peak plateaus, not its peak pixels
     npk, plateaus = cv2.connectedComponents(_peaks(m, diameter_px).astype(np.uint8))
@@ -88,9 +90,66 @@ def single_particles(mask: np.ndarray, diameter_px: float) -> np.ndarray:
         ys, xs = np.nonzero(plateaus)
         first[plateaus[ys, xs]] = blobs[ys, xs]
         per_blob = np.bincount(first[1:], minlength=n)
+    return blobs, per_blob
+
+
+def single_particles(mask: np.ndarray, diameter_px: float) -> np.ndarray:
+    """The blobs of a boolean map that hold exactly one particle centre (``count_particles``'s
+    peaks), for a size that touching particles do not lengthen. ``diameter_px``: a first guess."""
+    m = np.asarray(mask, dtype=bool)
+    if not (math.isfinite(diameter_px) and diameter_px > 2):
+        return m
+    blobs, per_blob = _peaks_per_blob(m, diameter_px)
     one = per_blob == 1
     one[0] = False
     return np.asarray(one[blobs])
+
+
+def single_particle_crops(mask: np.ndarray, diameter_px: float, max_n: int = 12) -> list[np.ndarray]:
+    """Boolean crops (``CROP_PAD_PX`` of background around each) of up to ``max_n`` single particles
+    of a boolean class map (blobs of at most one ``_peaks`` centre and ``CROP_AREA`` of a disc of
+    ``diameter_px``; opened by ``CROP_OPEN_D``, holes filled), those whose area is nearest
+    the median single blob's first; blobs touching the map's border are left out. For tracing the
+    particles' outline (the caller's: ``sim.mixer.shape_from_crops``)."""
+    m = np.asarray(mask, dtype=bool)
+    if not (math.isfinite(diameter_px) and diameter_px > 2):
+        return []
+    blobs, per_blob = _peaks_per_blob(m, diameter_px)
+    # one particle: at most one centre (a cut disc is too thin for a disc's centre) and about one
+    # particle's area
+    disc_px = math.pi / 4 * diameter_px ** 2
+    n, _, stats, _ = cv2.connectedComponentsWithStats(m.astype(np.uint8))
+    h, w = m.shape
+    keep = [j for j in range(1, n)
+            if per_blob[j] <= 1 and CROP_AREA[0] * disc_px <= stats[j, cv2.CC_STAT_AREA] <= CROP_AREA[1] * disc_px
+            and stats[j, cv2.CC_STAT_LEFT] > 0 and stats[j, cv2.CC_STAT_TOP] > 0
+            and stats[j, cv2.CC_STAT_LEFT] + stats[j, cv2.CC_STAT_WIDTH] < w
+            and stats[j, cv2.CC_STAT_TOP] + stats[j, cv2.CC_STAT_HEIGHT] < h]
+    if not keep:
+        return []
+    areas = np.array([stats[j, cv2.CC_STAT_AREA] for j in keep], dtype=float)
+    order = np.argsort(np.abs(areas - np.median(areas)), kind="stable")[:max_n]
+    out = []
+    p = CROP_PAD_PX
+    k = max(3, int(round(CROP_OPEN_D * diameter_px)) | 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    for i in order:
+        j = keep[int(i)]
+        x, y = stats[j, cv2.CC_STAT_LEFT], stats[j, cv2.CC_STAT_TOP]
+        bw, bh = stats[j, cv2.CC_STAT_WIDTH], stats[j, cv2.CC_STAT_HEIGHT]
+        crop = np.zeros((bh + 2 * p, bw + 2 * p), np.uint8)
+        crop[p:p + bh, p:p + bw] = (blobs[y:y + bh, x:x + bw] == j)
+        # spurs and bridges to a neighbour's pixels off (an opening), the largest piece kept
+        crop = cv2.morphologyEx(crop, cv2.MORPH_OPEN, kernel)
+        nc, pieces, pst, _ = cv2.connectedComponentsWithStats(crop)
+        if nc < 2:
+            continue
+        crop = (pieces == 1 + int(np.argmax(pst[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+        # holes (highlights, print lines) filled: the outline is the outer boundary
+        cnts, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(crop, cnts, -1, 1, thickness=cv2.FILLED)
+        out.append(crop.astype(bool))
+    return out
 
 
 def same_size(diameters_px: Sequence[float]) -> tuple[list[float], bool]:

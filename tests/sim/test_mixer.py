@@ -194,15 +194,21 @@ def test_shape_of_a_disc_is_round():
     assert Shape("disc", 0.01).is_round and not Shape("cut_disc", 0.01, wedge_deg=90).is_round
 
 
-def test_seeding_a_shaped_mixer_from_the_camera_is_a_clear_error_until_its_engine_can_place_one():
+def test_a_shaped_mixer_seeded_from_the_camera_runs_on_pymunk_with_each_class_where_the_camera_sees_it():
     from sim.from_image import seed_from_labels
+    from sim.pymunk_twin import PymunkDrumSim
     from vision.roi import DrumROI
 
-    m = parse_mixer(_table(PMMA.replace('name = "white"', 'name = "white"\nshape = "polygon"')), None)
-    labels = np.zeros((64, 64), np.uint8)
-    labels[40:60, 10:54] = 1
-    with pytest.raises(SimError, match=r"pymunk|camera"):
-        seed_from_labels(labels, DrumROI(32.0, 32.0, 30.0), ["blue", "white"], mixer=m, rpm=5.0)
+    m = parse_mixer(_table(PMMA.replace('name = "white"', 'name = "white"\nshape = "cut_disc"')), None)
+    labels = np.zeros((200, 200), np.uint8)
+    labels[100:190, 20:100] = 1  # blue on the lower left, white on the lower right
+    labels[100:190, 100:180] = 2
+    sim = seed_from_labels(labels, DrumROI(100.0, 100.0, 95.0), ["blue", "white"], mixer=m, rpm=5.0, settle_s=0.1)
+    assert isinstance(sim, PymunkDrumSim) and sim.case == "image"
+    p = sim.particles()
+    assert np.bincount(p.cls).tolist() == list(resolve_counts(m))
+    assert p.x_m[p.cls == 0].mean() < -0.02 and p.x_m[p.cls == 1].mean() > 0.02  # not re-placed by a case
+    assert sim.mixer is m and sim.rpm_actual == 5.0
 
 
 def test_a_mixer_seeded_from_labels_places_its_own_classes_where_the_camera_sees_them():
@@ -218,3 +224,55 @@ def test_a_mixer_seeded_from_labels_places_its_own_classes_where_the_camera_sees
     assert np.bincount(p.cls).tolist() == list(resolve_counts(m))
     assert p.x_m[p.cls == 0].mean() < 0 < p.x_m[p.cls == 1].mean()
     assert sim.mixer is m and sim.rpm_actual == 5.0 and sim.direction == -1
+
+
+def _stamp(shape, centres_px, size=(120, 160), seed=0) -> np.ndarray:
+    """A boolean map with ``shape`` (its outline in px) drawn at each centre, turned at random."""
+    import cv2
+
+    from sim.mixer import shape_outline_m
+
+    rng = np.random.default_rng(seed)
+    im = np.zeros(size, np.uint8)
+    v = shape_outline_m(shape)
+    for cx, cy in centres_px:
+        a = rng.uniform(0, 2 * np.pi)
+        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        pts = (v @ rot.T + (cx, cy)) * 16
+        cv2.fillPoly(im, [pts.astype(np.int32)], 1, shift=4)
+    return im.astype(bool)
+
+
+CENTRES = [(20 + 30 * i, 20 + 30 * j) for i in range(5) for j in range(3)]
+
+
+def test_single_particle_crops_leave_out_touching_pairs_and_the_border():
+    from vision.census import single_particle_crops
+
+    m = _stamp(Shape("disc", 22.0), CENTRES[:6])
+    m |= _stamp(Shape("disc", 22.0), [(130, 95), (151, 95)])  # two touching discs: one blob, two centres
+    m |= _stamp(Shape("disc", 22.0), [(5, 100)])  # cut by the border
+    crops = single_particle_crops(m, 22.0, max_n=20)
+    assert len(crops) == 6
+    for c in crops:
+        assert c.sum() == pytest.approx(np.pi * 11 ** 2, rel=0.15)
+
+
+@pytest.mark.parametrize(("shape", "kind"), [
+    (Shape("disc", 22.0), "disc"),
+    (Shape("cut_disc", 22.0, wedge_deg=90.0), "vertices"),
+    (Shape("pellet", 26.0, width_m=12.0, corner_m=3.0), "vertices"),
+])
+def test_classes_shape_from_its_traced_particles(shape, kind):
+    from sim.mixer import shape_area_m2, shape_from_crops
+    from vision.census import single_particle_crops
+
+    crops = single_particle_crops(_stamp(shape, CENTRES, seed=2), 22.0)
+    assert len(crops) >= 8
+    got, how = shape_from_crops(crops, 0.0088, 0.4)  # 0.4 mm per px
+    assert got.kind == kind, how
+    assert "traced from" in how
+    if kind == "vertices":  # the outline, in mm: the particle's own area (px area x 0.4^2) within 15 %
+        area_mm2 = shape_area_m2(got) * 1e6
+        assert area_mm2 == pytest.approx(shape_area_m2(shape) * 0.16, rel=0.15)
+        assert "not round" in how

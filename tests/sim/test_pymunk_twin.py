@@ -212,3 +212,44 @@ def test_render_draws_the_shapes_and_the_baffles() -> None:
     baffled = r.render(Particles(**base, baffles_m=(box,)))
     assert baffled is not None and count(baffled, RIM_BGR) > count(discs, RIM_BGR) + 50
 
+
+
+def test_from_placement_starts_from_the_given_bed() -> None:
+    m = _small_rig(n=20)
+    from sim.pymunk_twin import PymunkDrumSim as P
+
+    # two clusters: class 0 in a column on the left, class 1 on the right, well inside the drum
+    ys = np.linspace(-0.036, 0.0, 5)
+    left = np.array([(x, y) for x in (-0.007, -0.017, -0.027, -0.037) for y in ys])
+    pos = np.vstack([left, left * np.array([-1.0, 1.0])])
+    cls = np.repeat([0, 1], 20)
+    sim = P.from_placement(m, pos, cls, np.zeros(40), rpm=10.0, settle_s=0.2, seed=1)
+    p = sim.particles()
+    assert sim.case == "image" and sim.t_s == 0.0 and sim.rpm_actual == pytest.approx(10.0)
+    assert np.array_equal(p.cls, cls)
+    assert p.x_m[cls == 0].mean() < -0.01 and p.x_m[cls == 1].mean() > 0.01  # settled, not re-placed by a case
+    assert np.mean(p.x_m[cls == 0] < 0.0) > 0.8 and np.mean(p.x_m[cls == 1] > 0.0) > 0.8
+    r = np.hypot(p.x_m, p.y_m)
+    assert np.all(r < m.drum.radius_m)
+    # inflated to full size: no deep overlaps left between neighbours
+    assert sim.stats().overlap_p99_r < 0.1
+    sim.advance(0.1)
+    assert sim.n_steps == round(0.1 / sim.substep_s())  # runs on its fixed step
+    # the same placement gives the same twin, bit for bit
+    again = P.from_placement(m, pos, cls, np.zeros(40), rpm=10.0, settle_s=0.2, seed=1)
+    again.advance(0.1)
+    assert np.array_equal(again.particles().x_m, sim.particles().x_m)
+
+
+def test_from_placement_rejects_a_bad_placement_in_one_line() -> None:
+    m = _small_rig(n=2)
+    pos = np.array([[0.0, -0.03], [0.01, -0.03]])
+    for bad in (
+        dict(pos_m=pos[:1], classes=np.array([0, 1]), angle_rad=np.zeros(2)),  # shapes differ
+        dict(pos_m=pos, classes=np.array([0, 2]), angle_rad=np.zeros(2)),  # no class 2
+        dict(pos_m=pos * 10, classes=np.array([0, 1]), angle_rad=np.zeros(2)),  # outside the drum
+        dict(pos_m=pos, classes=np.array([0, 1]), angle_rad=np.array([0.0, np.nan])),
+    ):
+        with pytest.raises(SimError) as exc:
+            PymunkDrumSim.from_placement(m, rpm=5.0, **bad)
+        assert "\n" not in str(exc.value)

@@ -469,17 +469,27 @@ def suggest_cmd(
 
 SUGGEST_DENSITY_KG_M3 = 1190.0  # PMMA: a camera cannot see density
 CENSUS_MAX_FRAMES = 24  # frames `classes suggest --drum-diameter-mm` keeps for the mixer's census
+CROPS_PER_FRAME = 4  # single particles per class and frame traced for the class's shape
 
 
 def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm: float | None) -> str:
     """The twin's ``[drum]`` and ``[[particles]]`` tables measured in ``frames`` (``vision.census``),
-    every number commented with where it came from; round particles (discs)."""
+    every number commented with where it came from; each class's shape round or the outline traced
+    from its single particles in the frames (``sim.mixer.shape_from_crops``)."""
     import numpy as np
 
     from sim.errors import SimError
-    from sim.mixer import MAX_FILL, Mixer, ParticleKind, Shape, mixer_to_toml
+    from sim.mixer import MAX_FILL, Mixer, ParticleKind, mixer_to_toml, shape_from_crops
     from sim.recipe import PACKING_2D, DrumSpec
-    from vision.census import SAME_SIZE, census, count_particles, run_diameter_px, same_size, single_particles
+    from vision.census import (
+        SAME_SIZE,
+        census,
+        count_particles,
+        run_diameter_px,
+        same_size,
+        single_particle_crops,
+        single_particles,
+    )
     from vision.suggest import drum_labels
 
     counted = [(j + 1, c) for j, c in enumerate(cfg.classes) if not c.reject]
@@ -496,6 +506,8 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     own = [float(np.nanmedian(col)) if np.isfinite(col).any() else math.nan for col in np.asarray(dia).T]
     sizes, _ = same_size(own)
     cnt = [[count_particles(lab == j, sizes[i]) for i, (j, _) in enumerate(counted)] for lab in labels]
+    crops = [[c for lab in labels for c in single_particle_crops(lab == j, sizes[i], CROPS_PER_FRAME)]
+             for i, (j, _) in enumerate(counted)]  # each class's single particles, to trace their outline
     r_px = float(np.median([r.r_px for r in rois]))
     cen = census(names, np.asarray(cpx), np.asarray(rpx), np.asarray(dia), np.asarray(cnt), slopes, r_px,
                  PACKING_2D)
@@ -518,14 +530,16 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     else:
         notes["drum.depth_mm"] = "--drum-depth-mm"
     kinds = []
-    for c in cen.classes:
+    for i, c in enumerate(cen.classes):
         w = f"particles.{c.name}"
         d_mm = c.diameter_px * px_mm
         why = (f"; its own {c.run_diameter_px:.1f} px, the classes within {100 * SAME_SIZE:.0f}%: one size"
                if cen.same_size else "")
+        shape, how = shape_from_crops(crops[i], d_mm * 1e-3, px_mm, f"class {c.name!r}")
         notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px (median horizontal run / 0.91 of its single "
-                                     f"particles, {cen.frames} frames){why}")
-        notes[f"{w}.shape"] = "round assumed; edit for polygons, pellets, cut discs"
+                                     f"particles, {cen.frames} frames){why}" if shape.kind == "disc" else
+                                     "the traced outline's circumscribed diameter")
+        notes[f"{w}.shape"] = how
         notes[f"{w}.share"] = (f"{c.count:.0f} particles per frame x their area; the class's pixel share is "
                                f"{c.pixel_share:.3f}")
         notes[f"{w}.density_kg_m3"] = "PMMA (assumed: a camera cannot see density)"
@@ -533,7 +547,7 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
         if drum_depth_mm is not None and drum_depth_mm < d_mm:  # flat discs: as thick as the drum is deep
             thick = drum_depth_mm * 1e-3
             notes[f"{w}.thickness_mm"] = "assumed: the drum's depth (the discs are wider than the drum is deep)"
-        kinds.append(ParticleKind(c.name, Shape("disc", d_mm * 1e-3), SUGGEST_DENSITY_KG_M3,
+        kinds.append(ParticleKind(c.name, shape, SUGGEST_DENSITY_KG_M3,
                                   share=round(c.share, 3), thickness_m=thick,
                                   colour_bgr=next(k.display_bgr for _, k in counted if k.name == c.name)))
     fill = min(max(cen.fill, 0.05), MAX_FILL) if math.isfinite(cen.fill) else 0.5

@@ -1,0 +1,39 @@
+"""``drumtwin calibrate`` on the pymunk engine (a shaped mixer): its reachable range, exit 2 outside it."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from tests.cli import assert_one_line_error, cli
+
+REPO = Path(__file__).resolve().parents[2]
+CUTDISC_RIG = REPO / "configs" / "pmma-cutdisc.toml"
+SHORT = ("--spin-up-s", "0.5", "--window-s", "0.5", "--dt-ms", "2")  # short twin runs: the range, not its value
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_calibrate_runs_the_cut_disc_rig_on_pymunk_says_its_range_and_exits_2_outside_it():
+    # the DEM cannot hold cut discs: asking for it is refused before anything runs
+    assert_one_line_error(cli("calibrate", "--config", CUTDISC_RIG, "--engine", "dem", "--rpm", "10",
+                              "--slope-deg", "30"), "compiled DEM", "pymunk")
+    r = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
+    assert_one_line_error(r, "outside the twin's reachable range", "at 10 rpm")
+    m = re.search(r"range (\d+\.\d)-(\d+\.\d) deg", r.err)
+    assert m, r.err
+    lo, hi = float(m.group(1)), float(m.group(2))
+    assert 0.0 < lo < hi < 89.0
+    # a target inside the range calibrates on pymunk, and the range is the same (seeded, bit-exact runs)
+    target = round(0.5 * (lo + hi), 1)
+    r = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", str(-target), "--max-evals", "2",
+            *SHORT, "--json")
+    assert r.code == 0, r.err
+    out = json.loads(r.out)
+    assert out["engine"] == "pymunk"
+    assert out["range_deg"] == pytest.approx([lo, hi], abs=0.051)  # the message prints one decimal
+    assert lo - 1.0 <= abs(out["twin_slope_deg"]) <= hi + 1.0 and out["twin_slope_deg"] < 0
+    assert 0.05 <= out["friction"] <= 1.0 and 0.0 <= out["rolling"] <= 1.0
