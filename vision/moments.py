@@ -197,11 +197,12 @@ def _add_run_py(hist, c, j0, j1, x0, step):  # pragma: no cover - compiled
     hist[c, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
 
 
-def _add_cells_py(orow, j0, j1, step, shift, cend):  # pragma: no cover - compiled
-    """Adds the run of grid columns [j0, j1) to the occupancy cells it covers."""
+def _add_cells_py(orow, j0, j1, step, shift, cend, ox):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) to the occupancy cells it covers (grid column j
+    at ``j * step + ox`` px from the cells' origin)."""
     j = j0
     while j < j1:
-        q = (j * step) >> shift
+        q = (j * step + ox) >> shift
         je = min(cend[q], j1)
         orow[q] += je - j
         j = je
@@ -216,12 +217,13 @@ def _make_kernel(opening: bool):
     constant of the closure, so the plain kernel carries none of its code)."""
 
     def kernel(  # pragma: no cover - compiled
-        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark, gocc
+        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark, gocc,
+        occ_ox, occ_oy,
     ):
         """Sums into ``out`` (n_classes + 2, 6) int64; row k-1 is class k, row n_classes glare
         (label n_classes + 1), the last row dark pixels.
 
-        ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
+        ``occ`` (cells of 2^occ_shift px from (x0 - occ_ox, y0 - occ_oy)): bed pixels per cell -- the
         classified pixels (before any opening), or the dark pixels when ``occ_dark``; ``gocc``
         the same cells' glare pixels (after any opening). With
         ``opening``, grid row i + 2 is classified into a label row (five kept, zero outside
@@ -240,7 +242,7 @@ def _make_kernel(opening: bool):
         ebuf = np.zeros((3, width + 2 if opening else 1), np.uint8)  # eroded rows
         cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
         for q in range(occ.shape[1]):
-            cend[q] = (((q + 1) << occ_shift) + step - 1) // step
+            cend[q] = (((q + 1) << occ_shift) - occ_ox + step - 1) // step
         for i in range(-2 if opening else 0, nrows):
             if opening:
                 # classify grid row i + 2 into its label row
@@ -283,8 +285,8 @@ def _make_kernel(opening: bool):
                 continue
             y = y0 + i * step
             row = img[y]
-            orow = occ[(i * step) >> occ_shift]
-            grow = gocc[(i * step) >> occ_shift]
+            orow = occ[(i * step + occ_oy) >> occ_shift]
+            grow = gocc[(i * step + occ_oy) >> occ_shift]
             hist[:, :] = 0
             if opening:
                 cur = lbuf[i % 5]
@@ -300,12 +302,12 @@ def _make_kernel(opening: bool):
                     c = np.int64(cur[j + 1])
                     if c != 0:
                         if not occ_dark and c <= n_classes:  # the bed before the opening
-                            orow[(j * step) >> occ_shift] += 1
+                            orow[(j * step + occ_ox) >> occ_shift] += 1
                         # kept when it or a neighbour survived the erosion (only its own class can)
                         if ec[j + 1] == 0 and ec[j] == 0 and ec[j + 2] == 0 and eu[j + 1] == 0 and ed[j + 1] == 0:
                             c = 0
                         elif c > n_classes:
-                            grow[(j * step) >> occ_shift] += 1
+                            grow[(j * step + occ_ox) >> occ_shift] += 1
                     if c != rc:
                         if rc > 0:
                             _add_run(hist, rc, rj, j, x0, step)
@@ -329,17 +331,17 @@ def _make_kernel(opening: bool):
                     if rc > 0:
                         _add_run(hist, rc, rj, j, x0, step)
                         if rc > n_classes:
-                            _add_cells(grow, rj, j, step, occ_shift, cend)
+                            _add_cells(grow, rj, j, step, occ_shift, cend, occ_ox)
                         elif not occ_dark:
-                            _add_cells(orow, rj, j, step, occ_shift, cend)
+                            _add_cells(orow, rj, j, step, occ_shift, cend, occ_ox)
                     rc = c
                     rj = j
                 if rc > 0:
                     _add_run(hist, rc, rj, b, x0, step)
                     if rc > n_classes:
-                        _add_cells(grow, rj, b, step, occ_shift, cend)
+                        _add_cells(grow, rj, b, step, occ_shift, cend, occ_ox)
                     elif not occ_dark:
-                        _add_cells(orow, rj, b, step, occ_shift, cend)
+                        _add_cells(orow, rj, b, step, occ_shift, cend, occ_ox)
             nd = 0
             sxd = 0
             sxxd = 0
@@ -350,7 +352,7 @@ def _make_kernel(opening: bool):
                         sxd += x
                         sxxd += x * x
                         if occ_dark:
-                            orow[(x - x0) >> occ_shift] += 1
+                            orow[(x - x0 + occ_ox) >> occ_shift] += 1
             for kk in range(1, n_classes + 2):
                 n = hist[kk, 0]
                 if n:
@@ -399,6 +401,7 @@ def frame_moments(
     occ_shift: int = 3,
     opening: bool = False,
     glare_cells: np.ndarray | None = None,
+    cell_offset_xy: tuple[int, int] = (0, 0),
 ) -> np.ndarray:
     """Moments of every class (and of glare and dark pixels) over the ROI's row spans.
 
@@ -413,19 +416,24 @@ def frame_moments(
     rims and gaps that chroma blur (JPEG) or anti-aliasing give the wrong class, and
     keeps whole particles (at least 3 grid pixels across). ``occupancy`` (int32, at least
     ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
-    ``2^occ_shift`` px, counted from ``origin_xy``: the classified pixels (before the
-    opening), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
+    ``2^occ_shift`` px, counted from ``origin_xy`` minus ``cell_offset_xy`` (px, each
+    within 0 .. 2^occ_shift - 1: the cells may start left of and above the grid's first
+    pixel): the classified pixels (before the opening), or the dark pixels when
+    ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
+    ox, oy = int(cell_offset_xy[0]), int(cell_offset_xy[1])
+    if not (0 <= ox < (1 << occ_shift) and 0 <= oy < (1 << occ_shift)):
+        raise VisionError(f"cell offset {cell_offset_xy} must be within 0..{(1 << occ_shift) - 1} px")
     if out is None:
         out = np.empty((tables.n_classes + 2, 6), np.int64)
     x0, y0 = origin_xy
     if occupancy is None:
-        rows = (len(first) * step >> occ_shift) + 1
-        cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
+        rows = ((len(first) * step + oy) >> occ_shift) + 1
+        cols = ((int(np.max(last, initial=0)) * step + ox) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
     if glare_cells is None:
         glare_cells = np.empty_like(occupancy)
     _compiled(bool(opening))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
                            tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0),
-                           glare_cells)
+                           glare_cells, ox, oy)
     return out
