@@ -27,7 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from vision.colours import Classifier, ColourClass, class_lut, counted_classes, lut_labels
+from vision.colours import Classifier, ColourClass, class_lut, class_mean_lab, counted_classes, lut_labels
 from vision.errors import VisionError
 
 __all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "kernel_labels", "open_labels",
@@ -139,9 +139,7 @@ def _finish_tables(fine: np.ndarray, classes: tuple[ColourClass, ...]) -> ClassT
 
 def _chroma(c: ColourClass) -> float:
     """CIELAB chroma of a learned class's mean colour (its components' weighted mean)."""
-    w = np.array([comp.weight for comp in c.lab])
-    ab = np.array([comp.mean_lab[1:] for comp in c.lab])
-    return float(np.hypot(*(w @ ab / w.sum())))
+    return float(np.hypot(*class_mean_lab(c)[1:]))
 
 
 def class_tables(classes: Sequence[ColourClass] | Classifier) -> ClassTables:
