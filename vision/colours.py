@@ -177,6 +177,15 @@ def _check_range(name: str, rng) -> HSVRange:
     return (lo, hi)
 
 
+def class_mean_lab(c: ColourClass) -> np.ndarray:
+    """CIELAB (L, a, b) of a class's colour: its learned components' weighted mean, or the
+    display colour of an HSV class."""
+    if c.lab:
+        w = np.array([comp.weight for comp in c.lab])
+        return np.array([comp.mean_lab for comp in c.lab]).T @ w / w.sum()
+    return bgr_to_lab(np.array([[c.display_bgr]], np.uint8)).reshape(3).astype(np.float64)
+
+
 def is_learned(classes: Sequence[ColourClass]) -> bool:
     """True when the class set is a learned (CIELAB) model."""
     return any(c.learned for c in classes)

@@ -106,7 +106,7 @@ class Reading:
 @dataclass
 class _Geometry:
     roi: DrumROI
-    box: tuple[int, int, int, int]  # x0, y0, x1, y1 of the ROI's bounding box, px
+    box: tuple[int, int, int, int]  # x0, y0, x1, y1 of the ROI's bounding box, px (x0, y0: the grid's first pixel)
     first: np.ndarray  # per grid row of the box: first and one-past-last grid column inside the ROI
     last: np.ndarray
     roi_px: float  # grid pixels inside the ROI
@@ -118,6 +118,12 @@ class _Geometry:
     gocc: np.ndarray  # glare pixels per cell (filled by the kernel)
     outside: float = 0.0  # share of the ROI's area outside the image
     sample: np.ndarray | None = None  # flat indices of the ROI pixels the light is estimated from
+    cell_off: tuple[int, int] = (0, 0)  # the occupancy cells start this far (px) left of / above box[:2]
+
+    @property
+    def cells_xy(self) -> tuple[int, int]:
+        """Image px of the occupancy grid's corner (may lie left of or above the image)."""
+        return self.box[0] - self.cell_off[0], self.box[1] - self.cell_off[1]
 
 
 class Meter:
@@ -272,16 +278,16 @@ class Meter:
         assert roi is not None
         s = self.stride
         shift = occupancy_shift(roi.r_px, s)
-        box = _anchored_box(roi_bbox(roi, shape_hw), roi, 1 << shift)
-        in_box = _mask_in_box(roi, box)  # the ROI's pixels in the image
-        inside = in_box[::s, ::s]
+        clipped = roi_bbox(roi, shape_hw)
+        box, off = _anchored_grid(clipped, roi, s, 1 << shift)
+        inside = _mask_in_box(roi, box)[::s, ::s]
         first, last = row_spans(inside)
-        area = cell_areas(inside, s, shift)
+        area = cell_areas(inside, s, shift, off)
         full = float(((1 << shift) + s - 1) // s) ** 2
-        in_view = float(in_box.sum())
+        in_view = float(_mask_in_box(roi, clipped).sum())  # the ROI's pixels in the image
         g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
                       np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64),
-                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi.area_px))
+                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi.area_px), cell_off=off)
         self._geoms[shape_hw] = g
         return g
 
@@ -316,7 +322,8 @@ class Meter:
         self._n_frames += 1
         dark = self.dark_v_max if self.bed == "dark" else -1
         sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
-                             occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc)
+                             occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc,
+                             cell_offset_xy=g.cell_off)
         k = len(self.classes)
         rows = sums.tolist()  # Python ints: one conversion, not one per element
         if self.glare_fill and rows[k][0] > 0:
@@ -331,10 +338,11 @@ class Meter:
         ci, cj = np.nonzero(g.gocc)
         cell = 1 << g.shift
         margin = (HALO + RING) * math.sqrt(n_glare / math.pi) + 6.0  # grid px beyond the glare's cells
-        ia = max(0, int(ci.min() * cell / s - margin))
-        ib = min(len(g.first), int(math.ceil((ci.max() + 1) * cell / s + margin)))
-        ja = max(0, int(cj.min() * cell / s - margin))
-        jb = min(int(g.last.max()), int(math.ceil((cj.max() + 1) * cell / s + margin)))
+        ox, oy = g.cell_off
+        ia = max(0, int((ci.min() * cell - oy) / s - margin))
+        ib = min(len(g.first), int(math.ceil(((ci.max() + 1) * cell - oy) / s + margin)))
+        ja = max(0, int((cj.min() * cell - ox) / s - margin))
+        jb = min(int(g.last.max()), int(math.ceil(((cj.max() + 1) * cell - ox) / s + margin)))
         sub = np.ascontiguousarray(img[y0 + ia * s: y0 + ib * s: s, x0 + ja * s: x0 + jb * s: s])
         jj = np.arange(ja, ja + sub.shape[1])
         rows = slice(ia, ia + sub.shape[0])
@@ -395,7 +403,7 @@ class Meter:
         image_deg = _NAN
         if m00 >= min_bed:
             if t is None:
-                surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.box[:2], g.shift, roi.r_px, g.work)
+                surf = surface_from_occupancy(g.occ, g.area, g.full_area, g.cells_xy, g.shift, roi.r_px, g.work)
                 mid = surf.mid_px
                 image_deg = surf.slope_deg
             else:
@@ -420,15 +428,22 @@ class Meter:
         )
 
 
-def _anchored_box(box: tuple[int, int, int, int], roi: DrumROI, cell: int) -> tuple[int, int, int, int]:
-    """The box grown up and left (by less than a cell, while it stays in the image) so that
-    occupancy cell edges fall on the pixel edge nearest the drum centre: then a camera turned
-    by a quarter turn or mirrored bins the bed into the same cells, turned (the free surface
-    is the same fit, not one on cells shifted by a fraction)."""
+def _anchored_grid(box: tuple[int, int, int, int], roi: DrumROI, step: int,
+                   cell: int) -> tuple[tuple[int, int, int, int], tuple[int, int]]:
+    """The stride grid and the occupancy cells anchored on the drum centre, so that a camera
+    turned by a quarter turn or mirrored samples the same pixels of the drum and bins them
+    into the same cells, turned (the free surface is the same fit, not one on pixels or cells
+    shifted by a fraction): the grid through the pixel nearest the centre (the box's first
+    pixel moved right/down by less than ``step``), cell edges on the pixel edge nearest the
+    centre (the cells start left of/above that pixel by the returned offset, px, less than
+    ``cell``; they may start outside the image when the drum fills it). Before, the box itself
+    was anchored unless that left the image, and the stride grid's phase followed it: on real
+    frames a mirror moved the slope by up to 2.9 deg (0022, 0036, 0064)."""
     x0, y0, x1, y1 = box
+    px, py = round(roi.cx_px), round(roi.cy_px)  # the pixel nearest the centre
+    gx, gy = x0 + (px - x0) % step, y0 + (py - y0) % step
     ex, ey = round(roi.cx_px + 0.5), round(roi.cy_px + 0.5)  # pixel index right of / below that edge
-    ax, ay = x0 - (x0 - ex) % cell, y0 - (y0 - ey) % cell
-    return (ax if ax >= 0 else x0, ay if ay >= 0 else y0, x1, y1)
+    return (gx, gy, x1, y1), ((gx - ex) % cell, (gy - ey) % cell)
 
 
 def gravity_matrix(camera_rotation_deg: float, mirror: bool) -> np.ndarray | None:
@@ -465,7 +480,7 @@ def _turn_grid(t: np.ndarray, g: _Geometry, occ: np.ndarray) -> tuple[np.ndarray
     cs = float(1 << g.shift)
     roi = g.roi
     c = np.array([roi.cx_px, roi.cy_px])
-    o = np.array([g.box[0] + 0.5 * cs, g.box[1] + 0.5 * cs])  # centre of cell (0, 0)
+    o = np.array(g.cells_xy) + 0.5 * cs  # centre of cell (0, 0)
     span = roi.r_px + max(roi.half_w_px or 0.0, roi.half_h_px or 0.0)
     n = int(math.ceil(2.0 * span / cs)) + 4
     nominal = c - (0.5 * n) * cs

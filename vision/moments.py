@@ -9,9 +9,11 @@ classifier itself on every BGR colour, so the result is exact, pixel for pixel. 
 x, y, x^2, y^2 and xy (integers, exact), plus the same for dark pixels
 (V = max(B, G, R) <= ``dark_v_max``) for a backlit bed. Within a row it follows runs of
 one class: a pixel that continues the run costs one table look-up and one compare, and
-a run's sums (and its pixels per free-surface occupancy cell) are added in closed form
-when it ends. The optional class opening (``opening``: a one-pixel erosion, then a
-dilation back inside the class) classifies each row into a label row first and is a
+a run's sums are added from prefix sums of x and x^2 when it ends; its pixels per
+free-surface occupancy cell are two marks (+1 at its start, -1 past its end) that go into
+the cells once per cell row (one walk over the columns, not one per run and cell). The
+optional class opening (``opening``: a one-pixel erosion, then a dilation back inside the
+class) classifies each row into a label row first and is a
 separate compiled kernel, so the plain one carries none of it. Clipped light gets a label
 of its own (``GLARE_MIN``): its moments and cells tell the meter where to fill it in
 (``vision.glare``).
@@ -25,7 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from vision.colours import Classifier, ColourClass, class_lut, counted_classes, lut_labels
+from vision.colours import Classifier, ColourClass, class_lut, class_mean_lab, counted_classes, lut_labels
 from vision.errors import VisionError
 
 __all__ = ["GLARE_MIN", "MOMENT_FIELDS", "ClassTables", "class_tables", "frame_moments", "kernel_labels", "open_labels",
@@ -137,9 +139,7 @@ def _finish_tables(fine: np.ndarray, classes: tuple[ColourClass, ...]) -> ClassT
 
 def _chroma(c: ColourClass) -> float:
     """CIELAB chroma of a learned class's mean colour (its components' weighted mean)."""
-    w = np.array([comp.weight for comp in c.lab])
-    ab = np.array([comp.mean_lab[1:] for comp in c.lab])
-    return float(np.hypot(*(w @ ab / w.sum())))
+    return float(np.hypot(*class_mean_lab(c)[1:]))
 
 
 def class_tables(classes: Sequence[ColourClass] | Classifier) -> ClassTables:
@@ -186,29 +186,32 @@ def kernel_labels(image_bgr: np.ndarray, lut: np.ndarray, inside: np.ndarray, op
     return open_labels(labels) if opening else labels
 
 
-def _add_run_py(hist, c, j0, j1, x0, step):  # pragma: no cover - compiled
-    """Adds the run of grid columns [j0, j1) (px x0 + j * step) to class c's row sums:
-    n, sum x, sum x^2, in closed form."""
-    ln = j1 - j0
-    xs = x0 + j0 * step
-    t2 = ln * (ln - 1)
-    hist[c, 0] += ln
-    hist[c, 1] += ln * xs + step * (t2 // 2)
-    hist[c, 2] += ln * xs * xs + xs * step * t2 + step * step * (t2 * (2 * ln - 1) // 6)
+def _add_run_py(hist, c, j0, j1, s1, s2):  # pragma: no cover - compiled
+    """Adds the run of grid columns [j0, j1) to class c's row sums: n, sum x, sum x^2, from
+    the prefix sums ``s1``, ``s2`` of the grid columns' x and x^2 (exact integers)."""
+    hist[c, 0] += j1 - j0
+    hist[c, 1] += s1[j1] - s1[j0]
+    hist[c, 2] += s2[j1] - s2[j0]
 
 
-def _add_cells_py(orow, j0, j1, step, shift, cend):  # pragma: no cover - compiled
-    """Adds the run of grid columns [j0, j1) to the occupancy cells it covers."""
-    j = j0
-    while j < j1:
-        q = (j * step) >> shift
-        je = min(cend[q], j1)
-        orow[q] += je - j
-        j = je
+def _flush_cells_py(dcol, gdcol, colcell, orow, grow, width):  # pragma: no cover - compiled
+    """Adds the bed and glare runs marked in ``dcol``/``gdcol`` (+1 at a run's first grid
+    column, -1 past its last) to the cells of one cell row (``colcell``: each grid column's
+    cell), and clears the marks."""
+    pd = 0
+    pg = 0
+    for j in range(width + 1):
+        pd += dcol[j]
+        pg += gdcol[j]
+        dcol[j] = 0
+        gdcol[j] = 0
+        q = colcell[j]
+        orow[q] += pd
+        grow[q] += pg
 
 
 _add_run = _add_run_py  # replaced by their compiled forms before a kernel is compiled
-_add_cells = _add_cells_py
+_flush_cells = _flush_cells_py
 
 
 def _make_kernel(opening: bool):
@@ -216,12 +219,13 @@ def _make_kernel(opening: bool):
     constant of the closure, so the plain kernel carries none of its code)."""
 
     def kernel(  # pragma: no cover - compiled
-        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark, gocc
+        img, y0, x0, step, first, last, coarse, fine, n_classes, dark_v_max, out, occ, occ_shift, occ_dark, gocc,
+        occ_ox, occ_oy,
     ):
         """Sums into ``out`` (n_classes + 2, 6) int64; row k-1 is class k, row n_classes glare
         (label n_classes + 1), the last row dark pixels.
 
-        ``occ`` (cells of 2^occ_shift px from the box origin): bed pixels per cell -- the
+        ``occ`` (cells of 2^occ_shift px from (x0 - occ_ox, y0 - occ_oy)): bed pixels per cell -- the
         classified pixels (before any opening), or the dark pixels when ``occ_dark``; ``gocc``
         the same cells' glare pixels (after any opening). With
         ``opening``, grid row i + 2 is classified into a label row (five kept, zero outside
@@ -236,11 +240,23 @@ def _make_kernel(opening: bool):
         width = 0
         for i in range(nrows):
             width = max(width, last[i])
+        s1 = np.empty(width + 1, np.int64)  # prefix sums of the grid columns' x and x^2 (px)
+        s2 = np.empty(width + 1, np.int64)
+        s1[0] = 0
+        s2[0] = 0
+        for j in range(width):
+            x = x0 + j * step
+            s1[j + 1] = s1[j] + x
+            s2[j + 1] = s2[j] + x * x
+        dcol = np.zeros(1 if opening else width + 1, np.int64)  # plain kernel: +1 at a bed run's start, -1 past its end
+        gdcol = np.zeros(1 if opening else width + 1, np.int64)  # the same for glare runs
+        colcell = np.empty(width + 1, np.int64)  # occupancy cell of each grid column
+        for j in range(width + 1):
+            colcell[j] = min((j * step + occ_ox) >> occ_shift, occ.shape[1] - 1)
+        pending = False
+        pci = 0
         lbuf = np.zeros((5, width + 2 if opening else 1), np.uint8)  # label rows: the opening only
         ebuf = np.zeros((3, width + 2 if opening else 1), np.uint8)  # eroded rows
-        cend = np.empty(occ.shape[1], np.int64)  # first grid column past occupancy cell q
-        for q in range(occ.shape[1]):
-            cend[q] = (((q + 1) << occ_shift) + step - 1) // step
         for i in range(-2 if opening else 0, nrows):
             if opening:
                 # classify grid row i + 2 into its label row
@@ -283,8 +299,13 @@ def _make_kernel(opening: bool):
                 continue
             y = y0 + i * step
             row = img[y]
-            orow = occ[(i * step) >> occ_shift]
-            grow = gocc[(i * step) >> occ_shift]
+            ci = (i * step + occ_oy) >> occ_shift
+            orow = occ[ci]
+            grow = gocc[ci]
+            if not opening and pending and ci != pci:  # the marks of the last cell row into its cells
+                _flush_cells(dcol, gdcol, colcell, occ[pci], gocc[pci], width)
+                pending = False
+            pci = ci
             hist[:, :] = 0
             if opening:
                 cur = lbuf[i % 5]
@@ -300,19 +321,19 @@ def _make_kernel(opening: bool):
                     c = np.int64(cur[j + 1])
                     if c != 0:
                         if not occ_dark and c <= n_classes:  # the bed before the opening
-                            orow[(j * step) >> occ_shift] += 1
+                            orow[(j * step + occ_ox) >> occ_shift] += 1
                         # kept when it or a neighbour survived the erosion (only its own class can)
                         if ec[j + 1] == 0 and ec[j] == 0 and ec[j + 2] == 0 and eu[j + 1] == 0 and ed[j + 1] == 0:
                             c = 0
                         elif c > n_classes:
-                            grow[(j * step) >> occ_shift] += 1
+                            grow[(j * step + occ_ox) >> occ_shift] += 1
                     if c != rc:
                         if rc > 0:
-                            _add_run(hist, rc, rj, j, x0, step)
+                            _add_run(hist, rc, rj, j, s1, s2)
                         rc = c
                         rj = j
                 if rc > 0:
-                    _add_run(hist, rc, rj, b, x0, step)
+                    _add_run(hist, rc, rj, b, s1, s2)
             else:
                 for j in range(a, b):
                     x = x0 + j * step
@@ -327,19 +348,25 @@ def _make_kernel(opening: bool):
                         if c == rc:
                             continue
                     if rc > 0:
-                        _add_run(hist, rc, rj, j, x0, step)
+                        _add_run(hist, rc, rj, j, s1, s2)
                         if rc > n_classes:
-                            _add_cells(grow, rj, j, step, occ_shift, cend)
+                            gdcol[rj] += 1
+                            gdcol[j] -= 1
                         elif not occ_dark:
-                            _add_cells(orow, rj, j, step, occ_shift, cend)
+                            dcol[rj] += 1
+                            dcol[j] -= 1
+                        pending = True
                     rc = c
                     rj = j
                 if rc > 0:
-                    _add_run(hist, rc, rj, b, x0, step)
+                    _add_run(hist, rc, rj, b, s1, s2)
                     if rc > n_classes:
-                        _add_cells(grow, rj, b, step, occ_shift, cend)
+                        gdcol[rj] += 1
+                        gdcol[b] -= 1
                     elif not occ_dark:
-                        _add_cells(orow, rj, b, step, occ_shift, cend)
+                        dcol[rj] += 1
+                        dcol[b] -= 1
+                    pending = True
             nd = 0
             sxd = 0
             sxxd = 0
@@ -350,7 +377,7 @@ def _make_kernel(opening: bool):
                         sxd += x
                         sxxd += x * x
                         if occ_dark:
-                            orow[(x - x0) >> occ_shift] += 1
+                            orow[(x - x0 + occ_ox) >> occ_shift] += 1
             for kk in range(1, n_classes + 2):
                 n = hist[kk, 0]
                 if n:
@@ -368,6 +395,9 @@ def _make_kernel(opening: bool):
                 out[n_classes + 1, 4] += nd * y * y
                 out[n_classes + 1, 5] += sxd * y
 
+        if not opening and pending:
+            _flush_cells(dcol, gdcol, colcell, occ[pci], gocc[pci], width)
+
     return kernel
 
 
@@ -375,13 +405,13 @@ _kernels: dict[bool, object] = {}
 
 
 def _compiled(opening: bool = False):
-    global _add_run, _add_cells
+    global _add_run, _flush_cells
     k = _kernels.get(opening)
     if k is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
         _add_run = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_run_py)
-        _add_cells = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_add_cells_py)
+        _flush_cells = numba.njit(nogil=True, cache=True, boundscheck=False, inline="always")(_flush_cells_py)
         k = _kernels[opening] = numba.njit(nogil=True, cache=True, boundscheck=False)(_make_kernel(opening))
     return k
 
@@ -399,6 +429,7 @@ def frame_moments(
     occ_shift: int = 3,
     opening: bool = False,
     glare_cells: np.ndarray | None = None,
+    cell_offset_xy: tuple[int, int] = (0, 0),
 ) -> np.ndarray:
     """Moments of every class (and of glare and dark pixels) over the ROI's row spans.
 
@@ -413,19 +444,24 @@ def frame_moments(
     rims and gaps that chroma blur (JPEG) or anti-aliasing give the wrong class, and
     keeps whole particles (at least 3 grid pixels across). ``occupancy`` (int32, at least
     ``ceil(box_h / 2^occ_shift)`` x ``ceil(box_w / 2^occ_shift)``) receives the bed pixels per square cell of
-    ``2^occ_shift`` px, counted from ``origin_xy``: the classified pixels (before the
-    opening), or the dark pixels when ``dark_v_max`` >= 0 (see ``vision.slope``).
+    ``2^occ_shift`` px, counted from ``origin_xy`` minus ``cell_offset_xy`` (px, each
+    within 0 .. 2^occ_shift - 1: the cells may start left of and above the grid's first
+    pixel): the classified pixels (before the opening), or the dark pixels when
+    ``dark_v_max`` >= 0 (see ``vision.slope``).
     """
+    ox, oy = int(cell_offset_xy[0]), int(cell_offset_xy[1])
+    if not (0 <= ox < (1 << occ_shift) and 0 <= oy < (1 << occ_shift)):
+        raise VisionError(f"cell offset {cell_offset_xy} must be within 0..{(1 << occ_shift) - 1} px")
     if out is None:
         out = np.empty((tables.n_classes + 2, 6), np.int64)
     x0, y0 = origin_xy
     if occupancy is None:
-        rows = (len(first) * step >> occ_shift) + 1
-        cols = ((int(np.max(last, initial=0)) * step) >> occ_shift) + 1
+        rows = ((len(first) * step + oy) >> occ_shift) + 1
+        cols = ((int(np.max(last, initial=0)) * step + ox) >> occ_shift) + 1
         occupancy = np.empty((rows, cols), np.int32)
     if glare_cells is None:
         glare_cells = np.empty_like(occupancy)
     _compiled(bool(opening))(image_bgr, int(y0), int(x0), int(step), first, last, tables.coarse, tables.fine,
                            tables.n_classes, int(dark_v_max), out, occupancy, int(occ_shift), bool(dark_v_max >= 0),
-                           glare_cells)
+                           glare_cells, ox, oy)
     return out

@@ -101,12 +101,13 @@ def occupancy_shift(r_px: float, step: int = 1) -> int:
     return max(1, int(round(math.log2(cell))))
 
 
-def cell_areas(inside: np.ndarray, step: int, shift: int) -> np.ndarray:
+def cell_areas(inside: np.ndarray, step: int, shift: int, offset_xy: tuple[int, int] = (0, 0)) -> np.ndarray:
     """Grid pixels of the ROI per occupancy cell: ``inside`` is the ROI mask of the box
-    sampled at ``step`` (as the meter visits it); float64, one entry per cell."""
+    sampled at ``step`` (as the meter visits it), the cells starting ``offset_xy`` px left
+    of and above its first pixel; float64, one entry per cell."""
     h, w = inside.shape
-    ys = (np.arange(h) * step) >> shift
-    xs = (np.arange(w) * step) >> shift
+    ys = (np.arange(h) * step + offset_xy[1]) >> shift
+    xs = (np.arange(w) * step + offset_xy[0]) >> shift
     out = np.zeros((int(ys[-1]) + 1 if h else 1, int(xs[-1]) + 1 if w else 1), np.float64)
     np.add.at(out, (ys[:, None], xs[None, :]), inside.astype(np.float64))
     return out

@@ -53,7 +53,15 @@ import cv2
 import numpy as np
 
 from vision.census import run_diameter_px
-from vision.colours import ColourClass, LabComponent, bgr_to_lab, class_lut, classify, counted_classes
+from vision.colours import (
+    ColourClass,
+    LabComponent,
+    bgr_to_lab,
+    class_lut,
+    class_mean_lab,
+    classify,
+    counted_classes,
+)
 from vision.config import MeterConfig
 from vision.errors import VisionError
 from vision.meter import gravity_matrix
@@ -74,6 +82,7 @@ __all__ = [
     "opening_stride",
     "particle_diameter_px",
     "propose_rotation_deg",
+    "relearn_classes",
     "sample_drum_pixels",
     "suggest_classes",
 ]
@@ -465,6 +474,40 @@ def suggest_classes(
             return replace(cfg, opening=True, stride=stride) if verdict or stride > 1 else cfg
         stride //= 2
     return cfg
+
+
+def relearn_classes(
+    cfg: MeterConfig, frames: Iterable[np.ndarray] | np.ndarray, rois: Sequence[DrumROI] | None = None,
+    seed: int = 0, per_frame: int | None = None,
+) -> MeterConfig:
+    """``cfg`` with its classes learned again from recent frames of the live bed (when the
+    light has moved beyond what ``vision.photometric`` maps back: ``lighting_changed:``),
+    keeping the names, the order and the display colours of its counted classes, so the
+    MI's first and second class stay the same particles: :func:`suggest_classes` on the
+    frames (as many classes, the same camera turn and mirror), each new class taking the
+    name of the old one nearest in colour (CIELAB means; the assignment with the smallest
+    total distance). The light reference is the frames' (the new set-up); every other
+    meter setting (stride, opening, validity) stays ``cfg``'s. A pure function: the caller
+    builds the meter (``make_meter``, 1-3 s) and swaps it in between frames."""
+    old = cfg.counted
+    new = suggest_classes(frames, k=len(old), seed=seed, per_frame=per_frame, rois=rois,
+                          camera_rotation_deg=cfg.camera_rotation_deg, mirror=cfg.mirror)
+    fresh = new.counted
+    if len(fresh) != len(old):
+        raise VisionError(f"re-learning found {len(fresh)} particle classes in the frames, not {len(old)}")
+    a = [class_mean_lab(c) for c in old]
+    b = [class_mean_lab(c) for c in fresh]
+    perm = min(itertools.permutations(range(len(old))),
+               key=lambda p: sum(float(np.linalg.norm(a[i] - b[j])) for i, j in enumerate(p)))
+    classes = tuple(replace(fresh[j], name=old[i].name, display_bgr=old[i].display_bgr) for i, j in enumerate(perm))
+    taken = {c.name for c in classes}
+    rejects = tuple(c if c.name not in taken else replace(c, name=f"{c.name}_reject")
+                    for c in new.classes if c.reject)
+    rows = new.light_reference_classes
+    assert rows is not None  # (suggest_classes always writes it)
+    return replace(cfg, classes=classes + rejects, light_reference=new.light_reference,
+                   light_reference_classes=(rows[0], *(rows[1 + j] for j in perm)), warnings=new.warnings,
+                   source=f"{cfg.source} (classes re-learned)")
 
 
 def propose_rotation_deg(frames: Sequence[np.ndarray], rois: Sequence[DrumROI]) -> float:

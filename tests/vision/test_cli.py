@@ -214,8 +214,10 @@ def test_bench_vision_json():
     r = cli("bench", "vision", "--json", "--seconds", "0.02")
     assert r.code == 0, r.err
     res = json.loads(r.out)
-    for k in ("centroid_fps", "glcm_fps", "lacey_fps", "centroid_fps_1080p"):
+    for k in ("centroid_fps", "glcm_fps", "lacey_fps", "centroid_fps_1080p", "centroid_cpu_fps",
+              "centroid_cpu_fps_tracked", "glcm_cpu_fps", "centroid_fps_light_moved", "rebake_s"):
         assert res[k] > 0
+    assert res["glcm_cpu_ratio"] == pytest.approx(res["centroid_cpu_fps"] / res["glcm_cpu_fps"])
 
 
 def test_help_lists_commands():

@@ -237,7 +237,7 @@ def test_a_fresh_compile_with_bounds_checks_gives_the_label_maps_sums(monkeypatc
     monkeypatch.setattr(numba.config, "BOUNDSCHECK", 1)
     monkeypatch.setattr(moments, "_kernels", {})
     monkeypatch.setattr(moments, "_add_run", moments._add_run_py)
-    monkeypatch.setattr(moments, "_add_cells", moments._add_cells_py)
+    monkeypatch.setattr(moments, "_flush_cells", moments._flush_cells_py)
     img = _stripe_image()
     img[2:4, 7:9] = BLACK
     tables = class_tables(DEFAULT_CLASSES)

@@ -49,13 +49,15 @@ def jpeg_pair(cols, quality: int, size=(400, 300), slopes=(25.0, 35.0), mixes=(0
 THREE = (*DEFAULT_CLASSES, ColourClass("grey", (((0, 0, 100), (179, 40, 200)),), (150, 150, 150)))
 
 
+@pytest.mark.parametrize("off", [(0, 0), (5, 3)])
 @pytest.mark.parametrize("opening", [False, True])
 @pytest.mark.parametrize("step, classes, dark", [(1, DEFAULT_CLASSES, -1), (2, DEFAULT_CLASSES, -1),
                                                  (3, THREE, -1), (1, THREE, 80)])
-def test_compiled_pass_matches_the_label_map(step, classes, dark, opening):
-    """Every class's moments (runs summed in closed form), the glare's and the occupancy
+def test_compiled_pass_matches_the_label_map(step, classes, dark, opening, off):
+    """Every class's moments (runs summed from prefix sums), the glare's and the occupancy
     grids equal those of the label map, opened or not; the bed grid counts the classes
-    before the opening, the glare grid the glare after it."""
+    before the opening, the glare grid the glare after it; cells that start ``off`` px left
+    of and above the grid's first pixel (the meter anchors them on the drum centre)."""
     img = drum_frame((320, 240), mix=0.6, seed=2)
     img[100:140, 60:260] = (120, 125, 130)  # a grey band: the third class
     img[60:72, 150:171] = 255  # clipped light: glare (no class claims it)
@@ -67,10 +69,11 @@ def test_compiled_pass_matches_the_label_map(step, classes, dark, opening):
     first, last = row_spans(inside)
     tables = class_tables(classes)
     n = len(classes)
-    occ = np.full(((inside.shape[0] * step >> 3) + 1, (inside.shape[1] * step >> 3) + 1), 7, np.int32)
+    occ = np.full((((inside.shape[0] * step + off[1]) >> 3) + 1, ((inside.shape[1] * step + off[0]) >> 3) + 1), 7,
+                  np.int32)
     gocc = np.full_like(occ, 5)
     got = frame_moments(img, tables, (x0, y0), first, last, step, dark, occupancy=occ, opening=opening,
-                        glare_cells=gocc)
+                        glare_cells=gocc, cell_offset_xy=off)
     assert got.shape == (n + 2, 6)
     sub = np.ascontiguousarray(img[y0:y1:step, x0:x1:step][: inside.shape[0], : inside.shape[1]])
     raw = np.where(inside, lut_labels(sub, tables.fine), 0)
@@ -88,7 +91,7 @@ def test_compiled_pass_matches_the_label_map(step, classes, dark, opening):
     bed = darkpx if dark >= 0 else (raw > 0) & (raw <= n)
     for grid, m in ((occ, bed), (gocc, lab == n + 1)):
         want_occ = np.zeros_like(occ)
-        np.add.at(want_occ, ((ys * step) >> 3, (xs * step) >> 3), m.astype(np.int32))
+        np.add.at(want_occ, ((ys * step + off[1]) >> 3, (xs * step + off[0]) >> 3), m.astype(np.int32))
         assert (grid == want_occ).all()
 
 

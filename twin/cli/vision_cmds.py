@@ -603,5 +603,7 @@ def bench_vision(
     t.add_row("Lacey 640x480", f"{res['lacey_fps']:,.1f}", f"{c / res['lacey_fps']:.1f}x slower")
     t.add_row("centroid 1920x1080 (every pixel)", f"{res['centroid_fps_1080p']:,.0f}", "")
     t.add_row("centroid 1920x1080, stride 2", f"{res['centroid_fps_1080p_stride2']:,.0f}", "")
+    t.add_row("per CPU second: centroid / tracked 640x480", f"{res['centroid_cpu_fps']:,.0f} / "
+              f"{res['centroid_cpu_fps_tracked']:,.0f}", f"GLCM {res['glcm_cpu_ratio']:.1f}x slower")
     console.print(t)
     console.print("paper (Raspberry Pi 5): 68 fps centroid, 2.8x GLCM, 21.6x Lacey", highlight=False)

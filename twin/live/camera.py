@@ -17,7 +17,7 @@ import numpy as np
 from control.endpoint import EndpointDetector
 from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
-from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView
+from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView, SwapClasses
 from twin.records import CameraRate, FrameReading, TrendSettled, TrendUnsettled
 from twin.state import LiveState
 from vision.errors import VisionError
@@ -103,9 +103,11 @@ class CameraWorker:
         overlay_hz: float = 0.0,
         overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
+        commands: queue.SimpleQueue[SwapClasses] | None = None,
     ) -> None:
         self.frames = frames
         self.meter = meter
+        self.commands = commands  # SwapClasses: a new meter from the next frame on
         self.out = out
         self.box = box
         self.state = state
@@ -141,6 +143,8 @@ class CameraWorker:
                 self.box.set(CameraInfo(t, wall, frame.image, roi, n, False))  # it came (alarms)
             if t_first is None and math.isfinite(t):
                 t_first = t
+            while self.commands is not None and not self.commands.empty():
+                self.meter = self.commands.get_nowait().meter
             try:
                 reading = self.meter.measure(frame.image)
                 found = True

@@ -189,6 +189,16 @@ class SetManualRpm:
 SupervisorCommand = SetMode | SetManualRpm
 
 
+@dataclass(frozen=True)
+class SwapClasses:
+    """Measure from the next camera frame on with ``meter``: one built off the camera thread
+    (1-3 s) from ``vision.suggest.relearn_classes``' config (the classes re-learned from the
+    live bed after ``lighting_changed:``; names and order kept)."""
+
+    meter: Any
+    source: str = "operator"
+
+
 # -- the read-only view -----------------------------------------------------------------------
 class RunView:
     """What a worker may read: run time and the newest snapshots (never the loop itself).
