@@ -147,7 +147,7 @@ def test_mill_set_rpm_takes_its_limits_from_the_configs_drum(tmp_path) -> None:
     for cfg, d in ((big, 1000), (mid, 400), (small, 100)):
         assert load_mixer(cfg)[0].drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
         want = RunConfig(meter_config=cfg)
-        assert supervisor_config(want, crit(d)).limits.rpm_range[1] == pytest.approx(min(45.0, 0.6 * crit(d)),
+        assert supervisor_config(None, crit(d), want).limits.rpm_range[1] == pytest.approx(min(45.0, 0.6 * crit(d)),
                                                                                       rel=1e-3)
     with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=200.0))) as emu:
         emu.open_tcp(0)
