@@ -10,9 +10,9 @@ declare -A TESTS=(
   [control/protocol.py]="tests/control/test_protocol.py tests/control/test_protocol_rules.py"
   [control/device.py]="tests/control/test_device.py tests/control/test_device_rules.py"
   [vision/moments.py]="tests/vision/test_moments_pure.py"
-  [control/supervisor.py]="tests/control/test_supervisor.py"
-  [control/trend.py]="tests/control/test_trend.py"
-  [sim/calibrate.py]="tests/sim/test_calibrate.py tests/sim/test_calibrate_range.py"
+  [control/supervisor.py]="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py"
+  [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py"
+  [sim/calibrate.py]="tests/sim/test_calibrate.py tests/sim/test_calibrate_range.py tests/sim/test_calibrate_rules.py"
 )
 mod=${1:-}
 if [ -z "$mod" ] || [ "$mod" = list ]; then
