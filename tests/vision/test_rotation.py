@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.learned import learn
 from tests.vision.helpers import tilted_bed
 from vision.config import parse_config
 from vision.meter import Meter
@@ -86,7 +87,7 @@ def test_a_turned_camera_without_its_rotation_says_why_there_is_no_slope():
 def real(real_drum_dir):
     names = ("0002", "0036", "0097")
     frames = [read_image(real_drum_dir / "images" / f"{n}.jpg")[0] for n in names]
-    return frames, suggest_classes(frames[:1], per_frame=4000)
+    return frames, learn(frames[:1], per_frame=4000)  # suggest_classes, once per code version (tests/learned.py)
 
 
 @pytest.mark.parametrize(("rot", "mirror"), TURNS[1:])
