@@ -150,3 +150,45 @@ def test_missing_samples_may_be_none():
     """Missing frames arrive as NaN or None (as ``MITrend.update`` takes them): both are skipped."""
     got = moving_average([0.2, None, 0.6, math.nan, 1.0], 2)
     assert list(got) == pytest.approx([0.2, 0.2, 0.4, 0.4, 0.8])
+
+
+def test_a_rate_at_its_bound_loses_its_covariance_with_the_level_once():
+    """At rest (rpm 0) level and rate are a constant-velocity pair: predicting ``dt`` gives
+    P00' = P00 + 2 dt P01 + dt^2 P11 + q dt^3 / 3, P01' = P01 + dt P11 + q dt^2 / 2, P11' = P11 + q dt.
+    The update that pushes the rate past its bound projects it back and zeroes P01, so the first
+    prediction after it has no 2 dt P01 term; the rate, now exactly at the bound, is not projected
+    again, so the second has it."""
+    cfg = TrendConfig(max_rate_per_s=0.01, meas_sd=0.01, min_meas_sd=0.01)  # R fixed at 1e-4: q = rate_q
+    tr = MITrend(cfg)
+    est = [tr.update(i / 10, 0.9 - 0.02 * i / 10, 0.0) for i in range(200)]
+    e0 = est[-1]
+    assert e0.rate == -0.01 and e0.meas_sd == pytest.approx(0.01, rel=1e-12)
+    dt, q = 0.1, cfg.rate_q
+    e1 = tr.update(e0.t_s + dt, math.nan, 0.0)
+    e2 = tr.update(e0.t_s + 2 * dt, math.nan, 0.0)
+    p00, p11 = e0.level_sd**2, e0.rate_sd**2
+    p00_1 = p00 + dt**2 * p11 + q * dt**3 / 3
+    p01_1, p11_1 = dt * p11 + q * dt**2 / 2, p11 + q * dt
+    assert e1.level_sd**2 == pytest.approx(p00_1, rel=1e-9)
+    assert e1.rate_sd**2 == pytest.approx(p11_1, rel=1e-9) and e1.rate_sd > 0
+    assert e2.level_sd**2 == pytest.approx(p00_1 + 2 * dt * p01_1 + dt**2 * p11_1 + q * dt**3 / 3, rel=1e-9)
+    assert e1.rate == e2.rate == -0.01
+
+
+def test_reset_forgets_everything():
+    """After ``reset`` the next valid MI starts the filter as at first: time may start again,
+    the noise estimate is the configured one, and a trend that had settled is judged afresh
+    (with ``settle_frames = 1`` the first band, 2 * 1.96 * 0.05 = 0.196, is too wide for a
+    settle band of 0.14; a stale 'settled' would allow 1.5 * 0.14 = 0.21)."""
+    cfg = TrendConfig(settle_frames=1, settle_band=0.14)
+    tr = MITrend(cfg)
+    rng = np.random.default_rng(3)
+    est = [tr.update(i / 30, 0.6 + rng.normal(0, 0.01), 10.0) for i in range(300)]
+    tr.update(10.0, 0.99, 10.0)  # one rejected glitch
+    assert est[-1].settled and tr.rejections == 1
+    tr.reset()
+    assert tr.update(0.5, math.nan, 10.0).rejections == 0  # (time started again: no error)
+    e = tr.update(1.0, 0.3, 10.0)
+    assert e.reinit and e.accepted and e.level == 0.3 and e.n_since_init == 1
+    assert e.meas_sd == 0.05 and e.rejections == 0 and e.hi95 - e.lo95 == pytest.approx(2 * 1.96 * 0.05, rel=1e-3)
+    assert not e.settled
