@@ -26,7 +26,8 @@ from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events
 
-pytestmark = pytest.mark.xdist_group("live")
+# the whole-loop tests share one worker (the option check and the worker-on-a-pty test run anywhere)
+LIVE = pytest.mark.xdist_group("live")
 
 DELTA = load_profile("delta-ms300")
 
@@ -42,6 +43,7 @@ def delta() -> Iterator[DriveEmulator]:
         emu.close()
 
 
+@LIVE
 @pytest.mark.timeout(300)
 def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_safe_state(tmp_path: Path) -> None:
     """The embedded demo on a Delta drive emulator (`drumtwin run --drive delta-ms300`)."""
@@ -77,6 +79,7 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
     assert all(any("mill link" in a for a in alarms) for alarms in report["alarms"])
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: DriveEmulator, tmp_path: Path) -> None:
     """Another host starts the drive once the run is up and goes away: the run (OFF) only
@@ -118,6 +121,7 @@ CHILD = textwrap.dedent("""
 """)
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_kill_9_of_the_run_stops_the_drive_through_its_comm_loss_trip(delta: DriveEmulator, tmp_path: Path) -> None:
     """The run (`drumtwin run`'s run_live in its own process; the operator's start and
@@ -150,6 +154,7 @@ def test_kill_9_of_the_run_stops_the_drive_through_its_comm_loss_trip(delta: Dri
     assert max(w.t_s for w in writes) < delta.now_s() - 2.0  # nothing written since the kill
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_a_drive_without_a_comm_loss_trip_is_refused_and_runs_only_with_the_logged_override(
     delta: DriveEmulator, tmp_path: Path
@@ -223,6 +228,7 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
         emu.close()
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_run_drive_puts_the_embedded_demo_on_a_drive_emulator(tmp_path: Path) -> None:
     """`drumtwin run --drive siemens-v20`: the demo's mill is that drive over Modbus RTU."""
