@@ -187,8 +187,39 @@ def test_reset_forgets_everything():
     tr.update(10.0, 0.99, 10.0)  # one rejected glitch
     assert est[-1].settled and tr.rejections == 1
     tr.reset()
-    assert tr.update(0.5, math.nan, 10.0).rejections == 0  # (time started again: no error)
-    e = tr.update(1.0, 0.3, 10.0)
+    e = tr.update(1.0, 0.3, 10.0)  # (time started again: no error)
     assert e.reinit and e.accepted and e.level == 0.3 and e.n_since_init == 1
     assert e.meas_sd == 0.05 and e.rejections == 0 and e.hi95 - e.lo95 == pytest.approx(2 * 1.96 * 0.05, rel=1e-3)
     assert not e.settled
+
+
+def test_after_reset_missing_frames_report_nothing():
+    tr = MITrend()
+    tr.update(0.0, 0.5, 10.0)
+    tr.update(0.1, 0.99, 10.0)  # rejected
+    tr.reset()
+    e = tr.update(0.0, math.nan, 10.0)
+    assert not e.valid and e.rejections == 0 and not e.settled
+
+
+def _noisy_bed(tr: MITrend, n: int = 96) -> float:
+    """0.5 +- 0.02 alternating at 32 frames/s (binary-exact times); returns the last time."""
+    for i in range(n):
+        e = tr.update(i / 32, 0.5 + (0.02 if i % 2 else -0.02), 0.0)
+        assert e.accepted
+    return (n - 1) / 32
+
+
+@pytest.mark.parametrize(("gap_s", "learns"), [(0.0, False), (1.0, True), (1.5, False), (3.0, False)])
+def test_the_noise_is_learned_only_from_accepted_pairs_at_most_1_s_apart(gap_s, learns):
+    """Consecutive accepted samples feed the noise estimate when 0 < dt <= 1 s: a pair at the same
+    time or across a longer gap (NaN frames in between) says nothing about the frame-to-frame noise."""
+    tr = MITrend()
+    t = _noisy_bed(tr)
+    before = tr.estimate(t).meas_sd
+    for k in range(1, 4):
+        if k / 4 * gap_s > 0 and k / 4 * gap_s < gap_s:
+            assert not tr.update(t + k / 4 * gap_s, math.nan, 0.0).accepted
+    e = tr.update(t + gap_s, 0.52, 0.0)
+    assert e.accepted
+    assert (e.meas_sd != before) is learns, (e.meas_sd, before)
