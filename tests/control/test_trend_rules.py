@@ -223,3 +223,25 @@ def test_the_noise_is_learned_only_from_accepted_pairs_at_most_1_s_apart(gap_s, 
     e = tr.update(t + gap_s, 0.52, 0.0)
     assert e.accepted
     assert (e.meas_sd != before) is learns, (e.meas_sd, before)
+
+
+def test_the_noise_estimate_is_a_running_mean_at_first():
+    """With a long time constant the weight of each new pair is 1 / (pairs + 1): after k pairs of
+    difference d the variance is (meas_sd^2 + k d^2 / 2) / (k + 1), the configured value counting once."""
+    tr = MITrend(TrendConfig(noise_tau_s=1e9))
+    for i in range(40):
+        e = tr.update(i / 32, 0.5 + (0.01 if i % 2 else -0.01), 0.0)
+        assert e.accepted
+        assert e.meas_sd**2 == pytest.approx((0.05**2 + i * 0.02**2 / 2) / (i + 1), rel=1e-9)
+
+
+def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pair():
+    """``noise_tau_s`` 0.25 s, frames 0.5 s apart: the weight is capped at 1, so the variance is
+    half the last pair's squared difference, whatever came before."""
+    tr = MITrend(TrendConfig(noise_tau_s=0.25))
+    z = [0.5 + 0.01 * (i % 3) for i in range(30)]  # steps +0.01, +0.01, -0.02
+    for i, v in enumerate(z):
+        e = tr.update(i / 2, v, 0.0)
+        assert e.accepted
+        if i:
+            assert e.meas_sd == pytest.approx(max(abs(v - z[i - 1]) / math.sqrt(2.0), 0.002), rel=1e-9)
