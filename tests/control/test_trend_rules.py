@@ -245,3 +245,15 @@ def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pair():
         assert e.accepted
         if i:
             assert e.meas_sd == pytest.approx(max(abs(v - z[i - 1]) / math.sqrt(2.0), 0.002), rel=1e-9)
+
+
+def test_a_fresh_trend_has_no_rejections_and_counts_its_initialisations():
+    tr = MITrend()
+    assert tr.n_reinit == 0 and tr.rejections == 0
+    e = tr.update(0.0, math.nan, 10.0)
+    assert e.rejections == 0 and not e.valid
+    tr.update(0.1, 0.4, 10.0)
+    assert tr.n_reinit == 1  # the first valid sample initialises
+    for i in range(60):  # a real step: rejected until the share re-initialises the level
+        tr.update(0.2 + i / 30, 0.9, 10.0)
+    assert tr.n_reinit == 2 and tr.estimate(2.2).level == pytest.approx(0.9, abs=0.02)
