@@ -257,3 +257,10 @@ def test_a_fresh_trend_has_no_rejections_and_counts_its_initialisations():
     for i in range(60):  # a real step: rejected until the share re-initialises the level
         tr.update(0.2 + i / 30, 0.9, 10.0)
     assert tr.n_reinit == 2 and tr.estimate(2.2).level == pytest.approx(0.9, abs=0.02)
+
+
+def test_a_fresh_trend_is_judged_by_the_settle_band_itself():
+    """(As after ``reset``:) the first band, 0.196, is too wide for a settle band of 0.14; only a
+    trend that had settled may keep 1.5 times it."""
+    e = MITrend(TrendConfig(settle_frames=1, settle_band=0.14)).update(0.0, 0.3, 10.0)
+    assert e.hi95 - e.lo95 == pytest.approx(0.196, abs=1e-3) and not e.settled
