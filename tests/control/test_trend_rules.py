@@ -264,3 +264,21 @@ def test_a_fresh_trend_is_judged_by_the_settle_band_itself():
     trend that had settled may keep 1.5 times it."""
     e = MITrend(TrendConfig(settle_frames=1, settle_band=0.14)).update(0.0, 0.3, 10.0)
     assert e.hi95 - e.lo95 == pytest.approx(0.196, abs=1e-3) and not e.settled
+
+
+def test_the_first_prediction_uses_the_documented_initial_uncertainty():
+    """At the first sample P = diag(R, init_rate_sd^2, init_ripple_sd^2, init_ripple_sd^2) (R = meas_sd^2);
+    the ripple pair is isotropic, so turning it by w dt leaves its variance. The second sample's
+    squared Mahalanobis distance is then y^2 / (P00' + P22' + R) with P00' = R + dt^2 init_rate_sd^2 +
+    rate_q dt^3 / 3 and P22' = init_ripple_sd^2 + ripple_q dt."""
+    cfg = TrendConfig()
+    tr = MITrend(cfg)
+    e0 = tr.update(0.0, 0.5, 15.0)
+    r = cfg.meas_sd**2
+    assert e0.level_sd == pytest.approx(cfg.meas_sd, rel=1e-12) and e0.rate_sd == pytest.approx(cfg.init_rate_sd,
+                                                                                                rel=1e-12)
+    dt = 1 / 30
+    e1 = tr.update(dt, 0.6, 15.0)
+    p00 = r + dt**2 * cfg.init_rate_sd**2 + cfg.rate_q * dt**3 / 3
+    p22 = cfg.init_ripple_sd**2 + cfg.ripple_q * dt
+    assert e1.nis == pytest.approx(0.1**2 / (p00 + p22 + r), rel=1e-9)
