@@ -59,14 +59,18 @@ def test_config_from_window_scales_both_noise_densities_by_the_variance_ratio():
      ({"meas_sd": math.nan}, "positive"), ({"settle_band": math.nan}, "settle_band")],
 )
 def test_trend_config_refuses_each_bad_value(kw, match):
-    with pytest.raises(ControlError, match=match):
+    with pytest.raises(ControlError, match=match) as exc:
         TrendConfig(**kw)
+    if match == "positive":
+        assert str(exc.value) == ("trend noise levels must be positive (meas_sd, min_meas_sd, rate_q, gate_d2, "
+                                  "noise_tau_s, max_rate_per_s)")
 
 
 @pytest.mark.parametrize(
     "kw",
     [{"ripple_q": 0.0}, {"unsettle_share": 0.6, "reinit_share": 0.6}, {"reinit_share": 1.0, "unsettle_share": 1.0},
-     {"reinit_min": 1}, {"settle_frames": 0}, {"min_meas_sd": 1e-9, "meas_sd": 1e-9}],
+     {"reinit_min": 1}, {"settle_frames": 0}, {"min_meas_sd": 1e-9, "meas_sd": 1e-9}, {"gate_d2": 0.5},
+     {"noise_tau_s": 0.5}, {"max_rate_per_s": 0.5}, {"reinit_window_s": 0.1}],
 )
 def test_trend_config_accepts_the_edges(kw):
     TrendConfig(**kw)
@@ -282,3 +286,14 @@ def test_the_first_prediction_uses_the_documented_initial_uncertainty():
     p00 = r + dt**2 * cfg.init_rate_sd**2 + cfg.rate_q * dt**3 / 3
     p22 = cfg.init_ripple_sd**2 + cfg.ripple_q * dt
     assert e1.nis == pytest.approx(0.1**2 / (p00 + p22 + r), rel=1e-9)
+
+
+def test_the_reinit_window_holds_the_samples_at_its_start():
+    """Window 0.5 s at 32 frames/s (binary-exact times): 17 valid samples, both ends included.
+    After a step every new sample is rejected; the share 0.6 is reached at the 11th
+    (11 >= 0.6 * 17 = 10.2; a window without its first sample would re-init at the 10th)."""
+    tr = MITrend(TrendConfig(reinit_window_s=0.5))
+    t = _noisy_bed(tr, 64)
+    step = [tr.update(t + k / 32, 0.9, 0.0) for k in range(1, 20)]
+    first = next(k for k, e in enumerate(step, start=1) if e.reinit)
+    assert first == 11 and not any(e.accepted for e in step[:10])
