@@ -61,9 +61,13 @@ def test_config_from_window_scales_both_noise_densities_by_the_variance_ratio():
 def test_trend_config_refuses_each_bad_value(kw, match):
     with pytest.raises(ControlError, match=match) as exc:
         TrendConfig(**kw)
-    if match == "positive":
-        assert str(exc.value) == ("trend noise levels must be positive (meas_sd, min_meas_sd, rate_q, gate_d2, "
-                                  "noise_tau_s, max_rate_per_s)")
+    full = {"positive": "trend noise levels must be positive (meas_sd, min_meas_sd, rate_q, gate_d2, "
+                        "noise_tau_s, max_rate_per_s)",
+            "reinit_window_s": "trend re-init needs reinit_window_s > 0 and 0 < unsettle_share <= reinit_share <= 1",
+            "reinit_min": "reinit_min must be >= 1, settle_frames >= 0 and settle_band > 0"}
+    full["unsettle_share"] = full["reinit_share"] = full["reinit_window_s"]
+    full["settle_frames"] = full["settle_band"] = full["reinit_min"]
+    assert str(exc.value) == full[match]
 
 
 @pytest.mark.parametrize(
