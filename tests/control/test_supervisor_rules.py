@@ -125,3 +125,32 @@ def test_a_twin_in_doubt_puts_auto_in_the_safe_state_with_the_reason():
     d, _ = sup.step(0.5, SupervisorInputs(**{**inp, "last_valid_mi_s": 0.5, "twin_doubt": "what-if failed"}))  # type: ignore[arg-type]
     assert sup.safe and "twin stale: what-if failed" in sup.safe_reason
     assert d is not None and "what-if failed" in d.reason
+
+
+def test_config_edges_and_messages():
+    SupervisorConfig(vision_timeout_s=0.5)
+    with pytest.raises(ControlError) as exc:
+        SupervisorConfig(seg_level=0.6, clear_level=0.5)
+    assert str(exc.value) == "clear_level must be >= seg_level (hysteresis)"
+
+
+def test_a_fresh_or_reset_detector_is_clear_and_says_why_when_it_detects():
+    cfg = SupervisorConfig(detect_dwell_s=1.0, clear_dwell_s=1.0, radial_clear=0.6)
+    d = SegregationDetector(cfg)
+    assert d.segregated is False and d.why == "" and not d.suspect
+    assert d.update(0.0, est(0.9), None) is False  # good, not segregated: no change
+    assert d.update(0.5, est(0.3, settled=False), None) is False
+    assert not d.update(1.0, est(0.3, -0.02), None) and d.update(2.0, est(0.3, -0.02), None)
+    assert d.why == "MI 0.300 < 0.5; MI falling -0.0200/s < -0.01/s"
+    # clearing needs the radial factor too: a good level with a radial factor below radial_clear stays
+    for t in (3.0, 4.0, 5.0, 6.0):
+        assert not d.update(t, est(0.9), 0.55) and d.segregated
+    d.reset()
+    assert d.segregated is False and d.why == ""
+
+
+def test_the_time_without_mi_or_twin_counts_from_the_first_step():
+    auto = Supervisor(SupervisorConfig(vision_timeout_s=5.0, require_twin=True, twin_timeout_s=60.0), mode=Mode.AUTO)
+    assert auto.faults(5.0, SupervisorInputs()) == []  # before any step: counted from now
+    auto.step(0.0, SupervisorInputs())
+    assert auto.faults(5.5, SupervisorInputs(twin_updated_s=5.0)) == ["no valid MI for 5.5 s"]
