@@ -69,3 +69,10 @@ def test_an_unknown_path_is_refused_by_name():
 def test_bad_arguments_are_refused_before_any_simulation(args, kw, match):
     with pytest.raises(SimError, match=match):
         calibrate(*args, **kw)
+
+
+def test_a_small_target_is_a_valid_angle_refused_only_by_the_range():
+    """0.5 deg is a slope (0 < |target| < 90): it passes the argument check and is then refused
+    because the twin cannot be that flat at 10 rpm, naming the range."""
+    with pytest.raises(SimError, match=r"target slope 0\.5 deg is outside the twin's reachable range"):
+        calibrate(0.5, 10.0, spin_up_s=0.5, window_s=0.5)
