@@ -2,6 +2,9 @@
 # Mutation testing of one pure core with mutmut (not in CI: minutes per module).
 #   bash scripts/mutation.sh vision/mixing.py        # score + surviving mutants (with their diffs)
 #   bash scripts/mutation.sh list                    # the modules and the tests that guard them
+#   bash scripts/mutation.sh control/trend.py 'control.trend.x_moving_average*' ...
+#                                                    # only the mutants matching these names (fnmatch; the
+#                                                    # score then counts only those: for a busy machine)
 # Runs in a throw-away clone of the committed tree (HEAD), so the work tree is never mutated.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,9 +13,9 @@ declare -A TESTS=(
   [control/protocol.py]="tests/control/test_protocol.py tests/control/test_protocol_rules.py"
   [control/device.py]="tests/control/test_device.py tests/control/test_device_rules.py"
   [vision/moments.py]="tests/vision/test_moments_pure.py"
-  [control/supervisor.py]="tests/control/test_supervisor.py"
-  [control/trend.py]="tests/control/test_trend.py"
-  [sim/calibrate.py]="tests/sim/test_calibrate.py tests/sim/test_calibrate_range.py"
+  [control/supervisor.py]="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py"
+  [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py"
+  [sim/calibrate.py]="tests/sim/test_calibrate.py tests/sim/test_calibrate_range.py tests/sim/test_calibrate_rules.py"
 )
 mod=${1:-}
 if [ -z "$mod" ] || [ "$mod" = list ]; then
@@ -46,14 +49,17 @@ pytest_add_cli_args = ["-p", "no:xdist", "-q", "-o", "addopts=", "-x"]
 also_copy = ["vision", "sim", "control", "twin", "tests", "configs", "docs", "README.md"]
 TOML
 echo "mutation: $mod against ${TESTS[$mod]}" >&2
-"$venv/bin/mutmut" run --max-children "${MUTMUT_CHILDREN:-2}" >"$work/run.log" 2>&1 || { tail -20 "$work/run.log" >&2; exit 1; }
-"$venv/bin/mutmut" results --all true >"$work/results.txt" 2>/dev/null || "$venv/bin/mutmut" results >"$work/results.txt"
+shift
+"$venv/bin/mutmut" run --max-children "${MUTMUT_CHILDREN:-2}" "$@" >"$work/run.log" 2>&1 || { tail -20 "$work/run.log" >&2; exit 1; }
+"$venv/bin/mutmut" results --all true >"$work/all.txt" 2>/dev/null || "$venv/bin/mutmut" results >"$work/all.txt"
+if [ $# -gt 0 ]; then grep -v ': not checked' "$work/all.txt" >"$work/results.txt" || true; else cp "$work/all.txt" "$work/results.txt"; fi
 total=$(grep -c ': ' "$work/results.txt" || true)
 killed=$(grep -c ': killed' "$work/results.txt" || true)
 survived=$(grep ': survived' "$work/results.txt" | awk -F: '{print $1}' | tr -d ' ' || true)
 nsurv=$(echo -n "$survived" | grep -c . || true)
 echo "module: $mod"
 echo "date: $(date -u +%F)"
+[ $# -eq 0 ] || echo "mutants matching: $*"
 echo "mutants: $total  killed: $killed  survived: $nsurv  score: $(python3 -c "print(f'{100*$killed/max($total,1):.1f}%')")"
 for m in $survived; do
   echo "--- $m"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,3 +20,21 @@ def real_drum_dir() -> Path:
     if not path.is_dir():
         raise FileNotFoundError(f"test data missing: {path}")
     return path
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir."""
+    from tests import learned
+
+    cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
+    learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
+
+
+@pytest.fixture
+def memo_learning() -> Iterator[None]:
+    """``vision.suggest.suggest_classes`` memoised for this test (tests/learned.py): the same
+    result for the same frames, arguments and code, learned once per key."""
+    from tests.learned import memoised_learning
+
+    with memoised_learning():
+        yield

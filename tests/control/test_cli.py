@@ -24,7 +24,7 @@ def cli(capsys, *args: str) -> tuple[int, str, str]:
 
 
 @pytest.mark.timeout(300)  # a hang guard, not a speed check: it learns classes on 27 real frames
-def test_bench_trend_json(capsys):
+def test_bench_trend_json(capsys, memo_learning):  # (the 27 frames' classes: tests/learned.py)
     code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2", "--real-seeds", "1")
     assert code == 0
     d = json.loads(out)

@@ -12,6 +12,7 @@ import pytest
 
 from control.trend import MITrend, TrendEstimate
 from control.trendbench import RealFrameMI, real_sequences, run_trend_bench
+from tests.learned import memoised_learning
 from twin.cli.control_cmds import real_frame_mi
 from twin.loop import trend_config
 
@@ -20,7 +21,8 @@ FPS = 30.0
 
 @pytest.fixture(scope="module")
 def frames_mi(real_drum_dir) -> RealFrameMI:
-    return real_frame_mi(real_drum_dir / "images")
+    with memoised_learning():  # the classes of the 27 frames, learned once per code version (tests/learned.py)
+        return real_frame_mi(real_drum_dir / "images")
 
 
 def run_loop_trend(mi: np.ndarray, rpm: float = 5.0) -> list[TrendEstimate]:

@@ -156,7 +156,7 @@ def _white_circles(image: np.ndarray) -> int:
 
 
 @pytest.mark.timeout(300)
-def test_classes_suggest_measures_the_pmma_discs_and_shares(real_drum_dir):
+def test_classes_suggest_measures_the_pmma_discs_and_shares(real_drum_dir, memo_learning):
     """Must show: the disc size within 10 % of the labels' boxes, the shares within 5 points."""
     r = cli("classes", "suggest", real_drum_dir / "images", "--drum-diameter-mm", "250")
     assert r.code == 0, r.err

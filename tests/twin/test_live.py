@@ -35,7 +35,8 @@ from vision.synthetic import drum_frame
 
 # The whole-loop runs are heavy (a demo with its plant twin, vision and twin workers): under
 # pytest-xdist they share one worker, one after another, while the other worker runs the rest.
-pytestmark = pytest.mark.xdist_group("live")
+# (the option checks run anywhere: only the tests marked @LIVE share the worker)
+LIVE = pytest.mark.xdist_group("live")
 
 DRUMTWIN = [str(Path(sys.executable).parent / "drumtwin")]
 SPEED = 4.0
@@ -103,6 +104,7 @@ def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     return {"auto": base / "auto", "off": base / "off"}
 
 
+@LIVE
 @pytest.mark.timeout(180)
 def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_off) -> None:
     auto, off = auto_and_off["auto"], auto_and_off["off"]
@@ -125,6 +127,7 @@ def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_of
     assert read_metadata(off)["summary"]["decisions"] == 0
 
 
+@LIVE
 def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
     """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from two run logs."""
     png = tmp_path / "auto-vs-off.png"
@@ -165,6 +168,7 @@ def tcp_mill():
         emu.close()
 
 
+@LIVE
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("mode", ["off", "auto"])
 def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mode: str) -> None:
@@ -186,6 +190,7 @@ def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mo
         assert any(e["kind"] == "decision" and e["safe"] for e in events)
 
 
+@LIVE
 @pytest.mark.timeout(60)
 def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path) -> None:
     _, url = tcp_mill
@@ -202,6 +207,7 @@ def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path
     assert json.loads(lines[0])["log_dir"] == str(tmp_path / "run")
 
 
+@LIVE
 @pytest.mark.timeout(60)
 def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tmp_path: Path, monkeypatch) -> None:
     """The disk fills up after a few frame rows: the run ends at once, the mill (running, by
@@ -235,6 +241,7 @@ def test_a_full_disk_mid_run_is_a_one_line_error_and_a_stopped_mill(tcp_mill, tm
     assert len(read_frames(tmp_path / "run")) == 5
 
 
+@LIVE
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("n_frames", [100, 15])
 def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path, n_frames: int) -> None:
@@ -253,6 +260,7 @@ def test_a_video_without_a_drum_is_a_one_line_error(tcp_mill, tmp_path: Path, n_
     assert [a.cmd for a in emu.applied] == ["STP"]  # nothing but the stop on the way out
 
 
+@LIVE
 @pytest.mark.timeout(60)
 def test_a_camera_warming_up_without_a_drum_is_flagged_not_the_end_of_the_run(tcp_mill, tmp_path: Path) -> None:
     """A webcam's first frames are often black: the first frame (a new size) had no drum to
@@ -299,6 +307,7 @@ def test_bad_run_options_are_one_line_errors(tmp_path: Path) -> None:
     assert not log.exists()  # refused at start, before any log or thread
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     """Unplug the mill: fault and safe state; the board's watchdog stops the drive and it
@@ -358,6 +367,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     assert all(r["rpm_actual"] != "" for r in rows[rows.index(lost[-1]) + 1:])  # known again after it
 
 
+@LIVE
 @pytest.mark.timeout(120)
 def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path) -> None:
     """Ctrl-C in a terminal signals the whole process group, the calibration and what-if
@@ -380,6 +390,7 @@ def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: 
     assert any(e["kind"] == "stop" for e in read_events(tmp_path / "run"))
 
 
+@LIVE
 @pytest.mark.timeout(120)
 def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     proc = subprocess.Popen(
@@ -405,6 +416,7 @@ def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     assert kill_wall - rows[-1]["wall_s"] < 1.0
 
 
+@LIVE
 @pytest.mark.browser
 @pytest.mark.timeout(300)
 def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -> None:
@@ -473,6 +485,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     assert any(e["kind"] == "decision" and e["decision"] == "manual" for e in events)
 
 
+@LIVE
 @pytest.mark.browser
 @pytest.mark.timeout(240)
 def test_bench_dashboard_counts_image_updates_in_chromium() -> None:

@@ -27,7 +27,8 @@ from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events
 
-pytestmark = pytest.mark.xdist_group("live")
+# the whole-loop tests share one worker (the option check and the worker-on-a-pty test run anywhere)
+LIVE = pytest.mark.xdist_group("live")
 
 DELTA = load_profile("delta-ms300")
 
@@ -43,6 +44,7 @@ def delta() -> Iterator[DriveEmulator]:
         emu.close()
 
 
+@LIVE
 @pytest.mark.timeout(300)
 def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_safe_state(tmp_path: Path) -> None:
     """The embedded demo on a Delta drive emulator (`drumtwin run --drive delta-ms300`)."""
@@ -78,6 +80,7 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
     assert all(any("mill link" in a for a in alarms) for alarms in report["alarms"])
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: DriveEmulator, tmp_path: Path) -> None:
     """Another host starts the drive once the run is up and goes away: the run (OFF) only
@@ -103,6 +106,7 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
     assert not any(e["kind"] == "mill_command" for e in events)
 
 
+@LIVE
 @pytest.mark.timeout(300)
 def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
     delta: DriveEmulator, page, tmp_path: Path
@@ -166,6 +170,7 @@ def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
     assert len(keepalive) > 10 and {w.value for w in keepalive} <= commanded, (keepalive[-3:], commanded)
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_a_drive_without_a_comm_loss_trip_is_refused_and_runs_only_with_the_logged_override(
     delta: DriveEmulator, tmp_path: Path
@@ -262,6 +267,7 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
         emu.close()
 
 
+@LIVE
 @pytest.mark.timeout(240)
 def test_run_drive_puts_the_embedded_demo_on_a_drive_emulator(tmp_path: Path) -> None:
     """`drumtwin run --drive siemens-v20`: the demo's mill is that drive over Modbus RTU."""

@@ -63,7 +63,8 @@ def _looped_video(images: Path, path: Path, seconds: float, fps: float = 30.0) -
 @pytest.mark.slow
 @pytest.mark.xdist_group("live")
 @pytest.mark.timeout(240)
-def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: Path, tmp_path: Path) -> None:
+def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: Path, tmp_path: Path,
+                                                               memo_learning: None) -> None:
     """Issue 21: `drumtwin run --video` of the 27 frames looped, classes from `classes
     suggest`, the mill emulator at 5 rpm, AUTO. The old trend locked at 0.43, AUTO called
     it segregated and stepped the setpoint to 45 rpm. Now: the trend within 0.05 of the

@@ -19,6 +19,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.learned import learn
 from tests.vision.helpers import jpeg
 from tests.vision.test_real_frames import label_centroid
 from vision.colours import classify
@@ -133,7 +134,7 @@ def real(real_drum_dir):
         lab = label_centroid(real_drum_dir / "labels" / f"{name}.txt", fr.image.shape[1], fr.image.shape[0])
         if lab is not None:
             frames[name] = (fr.image, lab)
-    cfg = suggest_classes([frames["0002"][0]], per_frame=4000)
+    cfg = learn([frames["0002"][0]], per_frame=4000)  # suggest_classes, once per code version (tests/learned.py)
     return frames, cfg
 
 

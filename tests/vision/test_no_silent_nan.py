@@ -19,13 +19,13 @@ import pytest
 
 from control.trend import MITrend
 from tests.cli import cli
+from tests.learned import learn
 from tests.twin.test_mill_worker import Sink
 from tests.twin.test_workers import Boxes
 from tests.vision import helpers as H
 from twin.live.camera import CameraReading, ProcessWorker
 from vision.config import config_to_toml
 from vision.sources import read_image
-from vision.suggest import suggest_classes
 from vision.synthetic import PERTURBATIONS, light_change, particle_drum, perturb
 
 MI_CAUSES = ("few_pixels:", "collapsed:", "roi_outside_frame:", "lighting_changed:", "bad_frame:")
@@ -70,7 +70,7 @@ def unflagged(row: dict, flags: list[str], classes: list[str], empty_is_nan: boo
 def frames(real_drum_dir):
     """(name, image) pairs and the config learned on the first real frame."""
     real = [(n, read_image(real_drum_dir / "images" / f"{n}.jpg")[0]) for n in ("0002", "0036", "0069", "0097")]
-    cfg = suggest_classes([real[0][1]], per_frame=4000)
+    cfg = learn([real[0][1]], per_frame=4000)  # suggest_classes, once per code version (tests/learned.py)
     out = list(real)
     out += [(f"{n}-side", np.ascontiguousarray(np.rot90(img))) for n, img in real[:2]]  # camera turned, not told
     out += [(f"{n}-x3", light_change(img, 3.0)) for n, img in real[:1]]

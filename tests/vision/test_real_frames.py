@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.learned import learn
 from vision.config import load_config
 from vision.sources import open_source
 from vision.suggest import suggest_classes
@@ -83,7 +84,7 @@ def test_hand_config_blue_centroid_and_mi(hand_readings, labels):
 
 
 def test_classes_learned_from_the_whole_folder(frames, labels):
-    cfg = suggest_classes(list(frames.values()))
+    cfg = learn(list(frames.values()))  # suggest_classes, learned once per code version (tests/learned.py)
     assert [c.name for c in cfg.counted] == ["blue", "white"]
     readings = measure_all(cfg, frames)
     assert all(r.valid for r in readings.values())

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.learned import learn
 from tests.vision.helpers import tilted_bed
 from vision.config import parse_config
 from vision.meter import Meter
@@ -90,7 +91,7 @@ stride grid and the occupancy cells were anchored on the drum centre (``vision.m
 @pytest.fixture(scope="module")
 def real(real_drum_dir):
     frames = [read_image(real_drum_dir / "images" / f"{n}.jpg")[0] for n in REAL_TURNED]
-    return frames, suggest_classes(frames[:1], per_frame=4000)
+    return frames, learn(frames[:1], per_frame=4000)  # suggest_classes, once per code version (tests/learned.py)
 
 
 def turned_roi(roi: DrumROI, shape_hw: tuple[int, int], rot: int, mirror: bool) -> DrumROI:
