@@ -163,6 +163,7 @@ def env(tmp_path_factory):
 BASE: dict[tuple[str, ...], list[str]] = {
     ("run",): ["--no-dashboard", "--duration", "1", "--speed", "10", "--log", "{out}/run-{case}"],
     ("compare",): ["{okrun}", "--plot", "{out}/cmp-{case}.png"],
+    ("report",): ["{okrun}", "--out", "{out}/report-{case}.html"],
     ("mi",): ["{synth}"],
     ("sim",): ["--duration", "0.2", "--size", "64", "--fps", "5"],
     ("calibrate",): ["{synth}", "--rpm", "10", "--max-evals", "1", "--max-frames", "1", "--spin-up-s", "0.5",
@@ -204,7 +205,7 @@ BASE_FOR: dict[tuple[tuple[str, ...], str], list[str]] = {
 # Parameters that name a file the command writes (bad values: a path under a regular file,
 # a directory); every other path is read (bad values: missing, a directory, empty, garbage).
 OUTPUTS = {
-    ("run", "log"), ("compare", "plot"), ("mi", "csv_out"), ("mi", "plot"), ("mi", "overlay_video"),
+    ("run", "log"), ("compare", "plot"), ("report", "out"), ("mi", "csv_out"), ("mi", "plot"), ("mi", "overlay_video"),
     ("sim", "csv_out"), ("sim", "video"), ("whatif", "csv_out"), ("whatif", "plot"),
     ("classes", "preview"),
 }
@@ -238,6 +239,7 @@ STRING_VALUES: dict[str, list[str]] = {
     "source": ["zzz"],
     "runs": ["{missing}", "{file}", "{dir}", "{badrun}", "x={missing}"],
     "title": [],  # free text: no value is bad
+    "objective": ["fastest", ""],
 }
 # Parameters whose values are read as images/videos or configs.
 IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames")}

@@ -401,6 +401,10 @@ class WhatIfResult(Record):
     duration_s: float = unit("s", "simulated time per rpm")
     predictions: Mapping[str, float] = unit("", "rpm -> plateau MI")
     took_s: float = unit("s", "wall time")
+    target_mi: float | None = opt("", "the MI the times and energies are to (the endpoint's target)")
+    time_to_target_s: Mapping[str, float] | None = opt("s", "rpm -> twin time to the target MI (NaN: not reached)")
+    power_w: Mapping[str, float] | None = opt("W", "rpm -> drive power on the plateau, whole drum (sim.power)")
+    energy_to_target_j: Mapping[str, float] | None = opt("J", "rpm -> drive energy to the target MI")
 
 
 @register
