@@ -120,13 +120,15 @@ def remove_stale_pty_dirs(tmp: str | os.PathLike[str] | None = None) -> list[Pat
             if not names <= {"mill", "mill.new", OWNER_FILE}:
                 continue
             owner = d / OWNER_FILE
-            if owner.exists():
-                text = owner.read_text(encoding="ascii", errors="replace").strip()
-                pid = int(text.split()[0]) if text.split() and text.split()[0].isdigit() else -1
-                if pid > 0 and _owner_id(pid) == text:
+            text = owner.read_text(encoding="ascii", errors="replace").strip() if owner.exists() else ""
+            pid = int(text.split()[0]) if text.split() and text.split()[0].isdigit() else -1
+            if pid > 0:
+                if _owner_id(pid) == text:
                     continue  # its owner still runs
             elif (d / "mill").exists() or time.time() - d.lstat().st_mtime < 60.0:
-                continue  # no owner file: an old emulator whose pty is alive, or one starting now
+                # no owner (or an owner file being written: it is created empty first): an old
+                # emulator whose pty is alive, or one starting now
+                continue
             for name in names:
                 (d / name).unlink(missing_ok=True)
             d.rmdir()

@@ -267,6 +267,32 @@ def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -
     assert not Path(url).parent.exists()  # a clean close removes its own
 
 
+def test_a_pty_dir_whose_owner_file_is_still_being_written_is_left_alone(tmp_path) -> None:
+    """Another run's emulator creates its owner file empty, then writes its pid: a start that
+    cleans up in between must not take that dir for a dead owner's (it did: two demo runs
+    started together, one lost its mill pty and exited 2)."""
+    import os
+    import time
+
+    from control.emulator import OWNER_FILE, PTY_DIR_PREFIX, remove_stale_pty_dirs
+
+    young = tmp_path / (PTY_DIR_PREFIX + "young")
+    young.mkdir()
+    (young / OWNER_FILE).write_text("", encoding="ascii")  # created, not written yet
+    (young / "mill").symlink_to(tmp_path / "no-such-pty")
+    old = tmp_path / (PTY_DIR_PREFIX + "old")
+    old.mkdir()
+    (old / OWNER_FILE).write_text("", encoding="ascii")
+    (old / "mill").symlink_to(tmp_path / "no-such-pty")
+    past = time.time() - 120.0
+    os.utime(old, (past, past))
+    dead = tmp_path / (PTY_DIR_PREFIX + "dead")
+    dead.mkdir()
+    (dead / OWNER_FILE).write_text("999999999 1", encoding="ascii")  # a pid no process has
+    assert sorted(remove_stale_pty_dirs(tmp_path)) == sorted([old, dead])
+    assert young.is_dir()
+
+
 # -- twin versus reality (issue 26 item 8) and a failed AUTO study (item 4) -----------------
 def test_residual_flags_direction_slope_and_mi() -> None:
     from twin.live.mismatch import MismatchTolerance, residual

@@ -79,8 +79,8 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
 
     def start(i: int) -> tuple[subprocess.Popen, Path]:
         log = tmp_path / f"run{i}"
-        proc = subprocess.Popen([*argv, "--log", str(log)], env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+        with open(tmp_path / f"run{i}.err", "wb") as err:  # read back when a run ends by itself
+            proc = subprocess.Popen([*argv, "--log", str(log)], env=env, stdout=subprocess.DEVNULL, stderr=err)
         return proc, log
 
     # two at a time (a two-core machine): the pair's two moments are checked independently
@@ -91,7 +91,8 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
             end = time.monotonic() + 150
             while time.monotonic() < end and proc.poll() is None and not _reached(milestone, tmp, log):
                 time.sleep(0.05)
-            assert proc.poll() is None, f"run {i} ended by itself (code {proc.returncode}) before {milestone}"
+            assert proc.poll() is None, (f"run {i} ended by itself (code {proc.returncode}) before {milestone}: "
+                                       f"{(tmp_path / f'run{i}.err').read_text(errors='replace')[-800:]}")
             assert _reached(milestone, tmp, log), f"run {i} never reached {milestone}"
             time.sleep(extra)
             proc.send_signal(signal.SIGKILL)

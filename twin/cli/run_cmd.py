@@ -164,8 +164,7 @@ def run(
     except OSError as exc:
         if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
             raise
-        console_err.print(f"[bold red]error:[/] {exc}", highlight=False)
-        raise typer.Exit(2) from None
+        raise TwinError(str(exc)) from None  # one line (twin.cli.main), never wrapped
     out = {
         "final_trend_mi": summary.final_trend_mi,
         "final_rpm": summary.final_rpm,
