@@ -280,7 +280,11 @@ def remote_viewer_without_token_is_read_only(page) -> None:
             other.close()
         assert "stop_mill" not in controls.names()  # the locked click did nothing
         assert events[:6] == ["dashboard_unlock_failed"] * 5 + ["dashboard_unlock_limited"]
-        assert events[-1] == "dashboard_unlocked" and "dashboard_refused" not in events
+        # the new viewer's one unlock (a throttled count of the limited viewer's attempts may
+        # follow it: noisy events are written once per 5 s window)
+        assert events.count("dashboard_unlocked") == 1 and events.index("dashboard_unlocked") >= 6
+        assert set(events[6:]) <= {"dashboard_unlocked", "dashboard_unlock_limited"}
+        assert "dashboard_refused" not in events
         assert dash.failed_unlocks == 5 and dash.refused_handshakes == 0  # chromium: own origin
     finally:
         dash.stop()

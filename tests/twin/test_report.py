@@ -189,3 +189,16 @@ def test_dashboard_numbers_show_the_endpoint_banner():
 
     assert "**MIXED** since 12.3 s" in numbers_markdown(Panel(mixed=True, mixing_time_s=12.3))
     assert "MIXED" not in numbers_markdown(Panel(mixed=False, mixing_time_s=None))
+
+
+def test_a_batch_that_mixed_and_left_the_band_keeps_its_mixing_time(tmp_path):
+    """AUTO stops the mill at the endpoint and the bed then slumps out of the band: the
+    report still gives the batch's mixing time and says when it left the band."""
+    from twin.report.build import load_run, render_html
+
+    d = write_run(tmp_path / "r", "auto", endpoint=True)
+    with open(d / "events.jsonl", "a", encoding="utf-8") as fh:
+        fh.write('{"kind": "unmixed", "t_s": 90.0, "reason": "trend 0.87 < 0.90 for 5 s"}\n')
+    page = render_html([load_run(str(d))])
+    assert "MIXED at 70.0 s" in page and ">60.0 s</b>" in page and "left the band again at 90.0 s" in page
+    assert "MIXED: mixing time" not in page  # not mixed at the end

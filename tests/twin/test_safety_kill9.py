@@ -7,9 +7,11 @@ the temp directory either (no ``drumtwin-*``, no ``pymp-*``, nothing) and no pro
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -69,9 +71,11 @@ def _wait_gone(marker: str, timeout_s: float) -> list[int]:
 
 @pytest.mark.slow
 @pytest.mark.timeout(400)
-def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next_start(tmp_path) -> None:
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next_start(tmp_path, request) -> None:
+    # the runs' temp directory: short, since multiprocessing's fork server puts an AF_UNIX
+    # socket there (108 bytes at most: pytest's tmp_path is too long for one)
+    tmp = Path(tempfile.mkdtemp(prefix="k9-", dir="/tmp"))
+    request.addfinalizer(lambda: shutil.rmtree(tmp, ignore_errors=True))
     marker = f"kill9-{os.getpid()}-{time.time_ns()}"
     env = _env(tmp, marker)
     argv = [str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--mode", "auto", "--duration", "3600"]

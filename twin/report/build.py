@@ -266,9 +266,17 @@ def _run_column(run: RunData, idx: int) -> dict[str, str]:
         "</details>")
     ch_rows = [(_fmt(c[0], ".1f"), html.escape(str(c[1])), _fmt(c[2], ".1f"), html.escape(str(c[3]))[:300])
                for c in end["changes"]]
-    banner = (f'<p class="mixed">MIXED: mixing time <b class="mixing-time">{_fmt(mt, ".1f")} s</b>, plateau MI '
-              f'{_fmt(end["plateau_mi"])}</p>' if mt is not None else '<p class="none">Not mixed at the end of '
-              'the log (no mixing time).</p>')
+    first = next((c for c in end["changes"] if c[1] == "mixed"), None)
+    if mt is not None:
+        banner = (f'<p class="mixed">MIXED: mixing time <b class="mixing-time">{_fmt(mt, ".1f")} s</b>, plateau MI '
+                  f'{_fmt(end["plateau_mi"])}</p>')
+    elif first is not None:  # the batch reached its endpoint, then left the band (e.g. the mill stopped)
+        left = next((c for c in end["changes"] if c[1] == "unmixed" and c[0] >= first[0]), None)
+        banner = (f'<p class="mixed">MIXED at {_fmt(first[0], ".1f")} s: mixing time <b class="mixing-time">'
+                  f'{_fmt(first[2], ".1f")} s</b>; it left the band again at '
+                  f'{_fmt(None if left is None else left[0], ".1f")} s: not mixed at the end of the log.</p>')
+    else:
+        banner = '<p class="none">Not mixed at the end of the log (no mixing time).</p>'
     out["endpoint"] = banner + f"<p>source: {html.escape(end['source'])}</p>" + (
         _table(ch_rows, ("t s", "change", "mixing time s", "why")) if ch_rows else "")
     energy_html, energy_plot = _energy(run)
