@@ -70,13 +70,12 @@ def mill_limits(config: Path | None) -> Limits:
     with the critical speed of the config's drum (the demo's drum without a config or
     without a ``[drum]``). A bad config is a one-line error."""
     from twin.cli.sim_cmds import load_mixer
-    from twin.config import RunConfig
     from twin.loop import supervisor_config
 
     if config is None:
-        return supervisor_config(config=RunConfig()).limits
+        return supervisor_config().limits
     mixer, _ = load_mixer(config)
-    return supervisor_config(None, mixer.drum.critical_rpm, RunConfig(meter_config=config)).limits
+    return supervisor_config(None, mixer.drum.critical_rpm).limits
 
 
 def _client(ctx: typer.Context) -> MillClient | ModbusMill:

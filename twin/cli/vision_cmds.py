@@ -268,11 +268,9 @@ def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, 
         from dataclasses import asdict, replace
 
         from control.endpoint import EndpointConfig, endpoint_of_series
-        from twin.config import RunConfig
         from twin.loop import endpoint_config, trend_config
 
-        run_cfg = RunConfig()
-        cfg: EndpointConfig = endpoint_config(run_cfg)
+        cfg: EndpointConfig = endpoint_config()
         cfg = cfg if target_mi is None else replace(cfg, target_mi=target_mi)
         res = endpoint_of_series(ts, mis, cfg, trend_config())
         out.update(mixing_time_s=res.mixing_time_s, plateau_mi=res.plateau_mi, endpoint=asdict(cfg),

@@ -189,13 +189,11 @@ def endpoint_of(run: RunData) -> dict[str, Any]:
                 "changes": [(e.get("t_s"), e.get("kind"), e.get("mixing_time_s"), e.get("reason", ""))
                             for e in changes]}
     from control.endpoint import endpoint_of_series
-    from twin.config import RunConfig
     from twin.loop import endpoint_config, trend_config
 
-    cfg = RunConfig()
     t, mi = run.series("t_s"), run.series("mi")
     ok = np.isfinite(t)
-    res = endpoint_of_series(t[ok], mi[ok], endpoint_config(cfg), trend_config())
+    res = endpoint_of_series(t[ok], mi[ok], endpoint_config(), trend_config())
     return {"source": "offline (no endpoint events in the log: the run's raw MI replayed through the detector)",
             "mixing_time_s": res.mixing_time_s, "plateau_mi": res.plateau_mi, "changes": list(res.changes)}
 
