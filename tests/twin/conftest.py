@@ -39,7 +39,7 @@ def page(browser) -> Iterator[object]:
     ctx = browser.new_context(viewport={"width": 1600, "height": 1000})
     try:
         pg = ctx.new_page()
-        pg.set_default_timeout(20_000)
+        pg.set_default_timeout(90_000)  # a loaded 2-core CI machine loads viser slowly
         yield pg
     finally:
         ctx.close()

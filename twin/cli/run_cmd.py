@@ -243,10 +243,10 @@ def bench_dashboard(
     import sys
     import tempfile
 
-    from twin.dashboard.ratebench import check_bench_args, measure_dashboard_rate
+    from twin.dashboard.ratebench import FIRST_IMAGE_S, check_bench_args, measure_dashboard_rate
 
     check_bench_args(seconds, warmup, speed, port)
-    budget = warmup + seconds + 90.0
+    budget = warmup + seconds + 2 * FIRST_IMAGE_S + 30.0  # the demo outlives the browser's waits
     with tempfile.TemporaryDirectory(prefix="drumtwin-bench-dash-") as tmp:
         cmd = [sys.executable, "-c", "from twin.cli import main; main()", "run", "--port", str(port),
                "--speed", str(speed), "--duration", str(budget * speed), "--log", str(Path(tmp) / "run")]

@@ -16,10 +16,11 @@ from pathlib import Path
 
 from twin.errors import TwinError
 
-__all__ = ["CHROMIUM", "IMG_SELECTOR", "DashboardRate", "check_bench_args", "measure_dashboard_rate"]
+__all__ = ["CHROMIUM", "FIRST_IMAGE_S", "IMG_SELECTOR", "DashboardRate", "check_bench_args", "measure_dashboard_rate"]
 
 CHROMIUM = Path("/usr/bin/chromium")
 IMG_SELECTOR = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
+FIRST_IMAGE_S = 120.0  # budget (s) for the page to load, and then for its first image
 
 _COUNT_JS = """([sel, ms]) => new Promise(resolve => {
   const imgs = Array.from(document.querySelectorAll(sel));
@@ -78,8 +79,10 @@ def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15
                                         args=["--no-sandbox", "--no-first-run"])
             try:
                 page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                page.goto(url, timeout=20_000)
-                page.wait_for_selector(IMG_SELECTOR, timeout=30_000)
+                # generous budgets: on a loaded 2-core machine chromium can take tens of
+                # seconds to load and run viser's client bundle before the first image
+                page.goto(url, timeout=FIRST_IMAGE_S * 1000)
+                page.wait_for_selector(IMG_SELECTOR, timeout=FIRST_IMAGE_S * 1000)
                 deadline = time.monotonic() + 30.0
                 while len(page.query_selector_all(IMG_SELECTOR)) < 2 and time.monotonic() < deadline:
                     time.sleep(0.2)
