@@ -41,7 +41,8 @@ def check_objective(objective: str) -> str:
 class RpmPrediction:
     """The twin's prediction at one rpm: plateau MI, time to reach the target MI (s; None
     or inf: not within the study), drive power (W) and energy to the target (J), with
-    their seed spreads (sd, same units; None: one seed)."""
+    their seed spreads (sd, same units; None: one seed); ``start_mi``: the twin's MI where the
+    study started."""
 
     rpm: float
     plateau_mi: float
@@ -50,6 +51,7 @@ class RpmPrediction:
     power_w: float | None = None
     time_sd_s: float | None = None
     energy_sd_j: float | None = None
+    start_mi: float | None = None  # the twin's MI at the start state of the study (None: unknown)
 
     def value(self, objective: str) -> float:
         """The quantity ``objective`` minimises (s or J; inf when the target is not reached),
@@ -71,6 +73,19 @@ class Choice:
     move: bool
     values: Mapping[float, float]
     reason: str
+
+
+def stale_start(rows: Iterable[RpmPrediction], level: float | None, target_mi: float | None) -> str:
+    """Why a study's times to the target do not describe the bed now ("" when they do): it started
+    from a twin bed already at the target (``start_mi`` >= ``target_mi``: every time is 0) while the
+    trend ``level`` now is below it (the bed segregated while the study waited or ran)."""
+    if target_mi is None or level is None or not math.isfinite(level) or level >= target_mi:
+        return ""
+    starts = [float(r.start_mi) for r in rows if r.start_mi is not None and math.isfinite(r.start_mi)]
+    if not starts or min(starts) < target_mi:
+        return ""
+    return (f"the study started from a twin bed at MI {min(starts):.3f} >= target {target_mi:g}, "
+            f"the trend is {level:.3f} now")
 
 
 def _power(r: RpmPrediction) -> float:

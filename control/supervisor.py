@@ -47,7 +47,10 @@ Objective and endpoint (issue 24, ``control.objective``, ``control.endpoint``)
     drive energy to it) and ``control.objective.choose`` picks the rpm that reaches the
     target soonest / with least energy (rows missing: the plateau scoring, said in the
     reason); a decision is then also due while the trend is below ``target_mi`` and the
-    batch is not mixed. ``stop_at_endpoint``: in AUTO, once the application reports the
+    batch is not mixed. A study that started from a twin bed already at the target while the
+    trend is below it now (``control.objective.stale_start``) is asked again once (a *hold*
+    decision says so). The request carries ``max_rate_rpm_per_s`` so the twin ramps as the mill.
+    ``stop_at_endpoint``: in AUTO, once the application reports the
     batch mixed (``inputs.mixed``, from ``control.endpoint``), one ``endpoint`` decision
     stops the mill (its reason names the mixing time) and AUTO then holds hands off until
     a mode is set again. OFF and MANUAL never act on the endpoint (the application
@@ -92,7 +95,7 @@ from typing import NamedTuple
 
 from control.errors import ControlError
 from control.limits import Limits
-from control.objective import RpmPrediction, check_objective, choose
+from control.objective import RpmPrediction, check_objective, choose, stale_start
 from control.trend import TrendEstimate
 
 
@@ -233,12 +236,14 @@ class SupervisorInputs:
 @dataclass(frozen=True)
 class PredictionRequest:
     """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``
-    (``target_mi``: also the time and energy to reach it, for the "time"/"energy" objectives)."""
+    (``target_mi``: also the time and energy to reach it, for the "time"/"energy" objectives;
+    ``ramp_rpm_s``: the rate the rpm will be ramped at, so the twin ramps as the mill will)."""
 
     t_s: float
     rpms: tuple[float, ...]
     horizon_s: float
     target_mi: float | None = None
+    ramp_rpm_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -258,7 +263,9 @@ class Decision:
 
     ``kind``: ``mode`` | ``manual`` | ``move`` | ``ramp`` | ``hold`` | ``safe`` |
     ``recover``; ``rpm``: the setpoint to send now (``SET_RPM``); ``target_rpm``: where a
-    ramp is heading; ``scores``: candidate rpm -> score when predictions were used.
+    ramp is heading; ``scores``: candidate rpm -> score when predictions were used;
+    ``chosen``: the "time"/"energy" row of the rpm picked (its predicted time s and energy J to
+    the target) and ``prediction_t_s`` when the study it came from was asked (run s).
     """
 
     t_s: float
@@ -272,6 +279,8 @@ class Decision:
     inputs: SupervisorInputs | None = None
     predictions: Mapping[float, float] | None = None
     scores: Mapping[float, float] | None = None
+    chosen: RpmPrediction | None = None
+    prediction_t_s: float | None = None
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready record (for run logs): the decision and the inputs it was made on."""
@@ -289,6 +298,9 @@ class Decision:
             "level": None if tr is None else tr.level,
             "rate": None if tr is None else tr.rate,
             "predictions": None if self.predictions is None else {str(k): v for k, v in self.predictions.items()},
+            "predicted_time_to_target_s": None if self.chosen is None else self.chosen.time_to_target_s,
+            "predicted_energy_j": None if self.chosen is None else self.chosen.energy_j,
+            "prediction_t_s": self.prediction_t_s,
             "inputs": None
             if inp is None
             else {
@@ -408,6 +420,7 @@ class Supervisor:
         self._last_cmd_s = -math.inf
         self._last_eval_s = -math.inf
         self._due_since: float | None = None  # AUTO decision due, waiting for predictions
+        self._restudy_t: float | None = None  # a stale "time"/"energy" study was asked again at this time
         self._clear_since: float | None = None
         self._predictions: PredictionResult | None = None
         self._last_inputs: SupervisorInputs | None = None
@@ -428,7 +441,7 @@ class Supervisor:
         self.detector.reset()
         self.safe, self.safe_reason, self._latched_stop = False, "", False
         self._endpoint_stopped = False
-        self._clear_since = self._due_since = None
+        self._clear_since = self._due_since = self._restudy_t = None
         self.target_rpm = self.commanded_rpm
         lo, hi = self.config.rpm_limits
         if new is Mode.MANUAL and self.manual_rpm is None and self.commanded_rpm is not None \
@@ -663,14 +676,20 @@ class Supervisor:
         if preds is None:
             if self._due_since is None:  # ask once per decision, then wait a bounded time
                 self._due_since = now_s
-                self._request = PredictionRequest(now_s, c.candidates(current), c.horizon_s, c.target_mi)
+                self._request = self._prediction_request(now_s, current)
                 return None
             if now_s - self._due_since < c.prediction_wait_s:
                 return None
         self._due_since = None
         why = self.detector.why or ("segregation" if self.detector.segregated else f"below target MI {c.target_mi}")
         if preds is not None and c.objective != "plateau" and preds.rows:
-            return self._choose_objective(now_s, current, preds, why)
+            stale = stale_start(preds.rows.values(), inputs.trend.level, c.target_mi)
+            if stale and (self._restudy_t is None or preds.t_s < self._restudy_t):  # ask once more, then use it
+                self._predictions, self._restudy_t, self._due_since = None, now_s, now_s
+                self._request = self._prediction_request(now_s, current)
+                return self._emit(now_s, Action.NONE, "hold", f"{why}; objective {c.objective}: {stale}: "
+                                  "asking the twin again from the bed now", predictions=preds.predictions)
+            return self._choose_objective(now_s, current, preds, why + (f"; {stale} (asked again)" if stale else ""))
         if preds is not None:
             return self._choose(now_s, current, preds, why, inputs)
         target = c.clamp(current + c.fallback_step_rpm)
@@ -680,19 +699,25 @@ class Supervisor:
             now_s, target, "move", f"segregation ({why}); no predictions -> fallback rule {current:g} -> {target:g} rpm"
         )
 
+    def _prediction_request(self, now_s: float, current: float) -> PredictionRequest:
+        c = self.config
+        return PredictionRequest(now_s, c.candidates(current), c.horizon_s, c.target_mi,
+                                 c.max_rate_rpm_per_s if c.max_rate_rpm_per_s > 0 else None)
+
     def _choose_objective(self, now_s: float, current: float, preds: PredictionResult, why: str) -> Decision:
         """"time"/"energy" (``control.objective.choose``) on the per-rpm rows."""
         c = self.config
         assert preds.rows is not None
         ch = choose(preds.rows.values(), c.objective, current, c.rpm_limits, c.target_mi,
                     min_rel_gain=c.objective_min_rel_gain)
-        self._last_eval_s = now_s
+        self._last_eval_s, self._restudy_t = now_s, None
         scores = {r: -v for r, v in ch.values.items()}  # higher is better, as the plateau scores
+        row = None if ch.rpm is None else preds.rows.get(ch.rpm)
         if ch.rpm is None or not ch.move:
             return self._emit(now_s, Action.NONE, "hold", f"{why}; {ch.reason}", predictions=preds.predictions,
-                              scores=scores)
+                              scores=scores, chosen=row, prediction_t_s=preds.t_s)
         return self._start_move(now_s, ch.rpm, "move", f"{why}; {ch.reason}", predictions=preds.predictions,
-                                scores=scores)
+                                scores=scores, chosen=row, prediction_t_s=preds.t_s)
 
     def _choose(
         self, now_s: float, current: float, preds: PredictionResult, why: str, inputs: SupervisorInputs

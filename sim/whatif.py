@@ -8,9 +8,10 @@ cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within se
 
 Time to mix and drive power (issue 24): a job with a ``target_mi`` reports the time the twin
 takes to reach it from the start state (``time_to_target``: the first time a centred moving
-average of MI over ``TARGET_SMOOTH_S`` reaches it; 0 if the start is already there; NaN if the
-run never gets there), the drive power over the plateau part (``sim.power``: the bed's torque
-on the drum times its speed, scaled from the slice to the drum's depth) and the energy up to
+average of MI over ``TARGET_SMOOTH_S`` reaches it and stays there for ``TARGET_DWELL_S``; 0 if the
+start is already there; NaN if the run never gets there), the drive power over the plateau part
+(``sim.power``: the bed's torque on the drum times its speed, scaled from the slice to the drum's depth)
+and the energy up to
 the target. ``target_mi`` None: no target (those fields NaN); the application passes its
 config's endpoint target (``control.endpoint``), which is the one definition of it.
 
@@ -45,6 +46,7 @@ __all__ = [
     "AIRBORNE_CATARACTING",
     "CURVATURE_CASCADING",
     "DEFAULT_CONNECT_TIMEOUT_S",
+    "TARGET_DWELL_S",
     "TARGET_SMOOTH_S",
     "WhatIfJob",
     "WhatIfResult",
@@ -63,6 +65,7 @@ __all__ = [
 
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 TARGET_SMOOTH_S = 2.0  # window of the centred moving average of MI that must reach the target (s)
+TARGET_DWELL_S = 5.0  # ... and stay at or above it for this long (s): a noisy touch is not "there"
 _REGIMES = ((1e-4, "slumping"), (1e-2, "rolling"), (1e-1, "cascading"), (1.0, "cataracting"))
 
 
@@ -122,6 +125,8 @@ class WhatIfJob:
     mixer: Mixer | None = None  # the user's mixer (replaces ``drum`` and ``recipe``); ``fill`` overrides its fill
     engine: str | None = None  # "dem" | "pymunk"; None: the mixer's (``sim.engine.engine_for``)
     target_mi: float | None = None  # MI to reach (time/energy to it); None: no target (module doc)
+    ramp_rpm_s: float | None = None  # from ``start``: the drum ramps to ``rpm`` at most this fast (rpm/s; the
+    # supervisor's rate limit, as the plant will); None: the twin's own acceleration limit
 
     @property
     def bed_drum(self) -> DrumSpec:
@@ -212,16 +217,16 @@ def plateau(t_s: np.ndarray, mi: np.ndarray, tail: float = 1.0 / 3.0) -> tuple[f
 
 
 def time_to_target(t_s: np.ndarray, mi: np.ndarray, target: float | None,
-                   smooth_s: float = TARGET_SMOOTH_S) -> float:
-    """Time (s, from ``t_s[0]``) at which MI reaches ``target``: 0 if the first sample does, else the first
-    centre time of a moving average over ``smooth_s`` that does (NaN samples left out); NaN if none does
-    or ``target`` is None."""
+                   smooth_s: float = TARGET_SMOOTH_S, dwell_s: float = TARGET_DWELL_S) -> float:
+    """Time (s, from ``t_s[0]``) at which MI reaches ``target`` and stays: the first centre time of a moving
+    average over ``smooth_s`` (NaN samples left out) from which that average stays at or above ``target``
+    for ``dwell_s`` (the series must cover the whole dwell); 0 when that holds from the first window on.
+    NaN if it never does or ``target`` is None. Both the twin's curves and the plant's logged camera MI
+    (``twin.report``) are measured with it."""
     t = np.asarray(t_s, float)
     y = np.asarray(mi, float)
     if target is None or t.size == 0:
         return math.nan
-    if math.isfinite(y[0]) and y[0] >= target:
-        return 0.0
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     w = max(1, int(round(smooth_s / dt))) if dt > 0 else 1
     w = min(w, t.size)
@@ -230,8 +235,14 @@ def time_to_target(t_s: np.ndarray, mi: np.ndarray, target: float | None,
     den = np.convolve(ok.astype(float), np.ones(w), mode="valid")
     sm = np.divide(num, den, out=np.full(num.size, np.nan), where=den > 0)
     tc = np.convolve(t, np.ones(w) / w, mode="valid")
-    hit = np.nonzero(sm >= target)[0]
-    return float(tc[hit[0]] - t[0]) if hit.size else math.nan
+    above = sm >= target  # NaN compares False
+    below = np.nonzero(~above)[0]
+    for i in np.nonzero(above)[0]:
+        nxt = below[np.searchsorted(below, i)] if below.size and below[-1] > i else None
+        held_to = tc[nxt] if nxt is not None else tc[-1]
+        if held_to - tc[i] >= dwell_s - 1e-9:
+            return 0.0 if i == 0 else float(tc[i] - t[0])
+    return math.nan
 
 
 def energy_to(t_s: np.ndarray, power_w: np.ndarray, t_end_s: float) -> float:
@@ -252,6 +263,15 @@ def energy_to(t_s: np.ndarray, power_w: np.ndarray, t_end_s: float) -> float:
     return float(e)
 
 
+def _ramped(state: Any, ramp_rpm_s: float | None) -> Any:
+    """``state`` whose drum follows its setpoint at most ``ramp_rpm_s`` (rpm/s): the lower of that and its own
+    acceleration limit (``SimParams.accel_rpm_s``, both engines); None: ``state`` unchanged."""
+    if ramp_rpm_s is None:
+        return state
+    params = state.params
+    return replace(state, params=replace(params, accel_rpm_s=min(float(params.accel_rpm_s), float(ramp_rpm_s))))
+
+
 def run_job(job: WhatIfJob) -> WhatIfResult:
     """Run one what-if job in this process (pure: same job, same result)."""
     t0 = time.perf_counter()
@@ -259,7 +279,7 @@ def run_job(job: WhatIfJob) -> WhatIfResult:
         raise SimError(f"what-if duration must be > 0 s (got {job.duration_s})")
     sim: Any
     if job.start is not None:
-        sim = from_state(job.start)
+        sim = from_state(_ramped(job.start, job.ramp_rpm_s))
         sim.set_rpm(job.rpm)
         drum = sim.drum
     elif job.mixer is not None:
@@ -310,6 +330,8 @@ def _check_jobs(jobs: Sequence[WhatIfJob]) -> list[WhatIfJob]:
             raise SimError(f"what-if duration must be > 0 s (got {j.duration_s})")
         if j.target_mi is not None and not (math.isfinite(j.target_mi) and 0.0 <= j.target_mi <= 1.0):
             raise SimError(f"target MI must be in [0, 1] (got {j.target_mi})")
+        if j.ramp_rpm_s is not None and not (math.isfinite(j.ramp_rpm_s) and j.ramp_rpm_s > 0):
+            raise SimError(f"what-if ramp must be > 0 rpm/s (got {j.ramp_rpm_s})")
         if not (0 < j.sample_s <= j.duration_s):
             raise SimError(f"sample interval must be in (0, duration] (got {j.sample_s} s)")
         if j.start is None and j.fill is not None and j.mixer is not None and any(

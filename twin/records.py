@@ -220,6 +220,10 @@ class DecisionMade(Record):
     rate: float | None = unit("1/s", "trend rate")
     predictions: Mapping[str, float] | None = unit("", "rpm -> predicted plateau MI")
     inputs: Mapping[str, object] | None = unit("", "the supervisor's inputs (see control.supervisor)")
+    predicted_time_to_target_s: float | None = opt("s", "objective time/energy: the twin's time to the target MI "
+                                                   "at the rpm picked, from the study's start")
+    predicted_energy_j: float | None = opt("J", "objective time/energy: the twin's drive energy to the target there")
+    prediction_t_s: float | None = opt("s", "run time the supervisor asked for the study behind the pick")
 
     @classmethod
     def of(cls, d: Decision) -> DecisionMade:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from sim.drum import DrumSim
+from sim.errors import SimError
 from sim.mixer import paper_mixer
 from sim.power import (
     class_masses_kg,
@@ -22,7 +23,7 @@ from sim.power import (
 )
 from sim.probe import probe
 from sim.recipe import PAPER_RECIPE
-from sim.whatif import WhatIfJob, energy_to, run_job, run_study, summarize, time_to_target
+from sim.whatif import TARGET_DWELL_S, WhatIfJob, energy_to, run_job, run_study, summarize, time_to_target
 
 
 def _tilted(state, beta_deg: float) -> DrumSim:
@@ -117,16 +118,22 @@ def test_time_to_target_on_synthetic_curves():
     noisy = ramp.copy()
     noisy[4] = 0.9  # one outlier at 2 s does not count as reaching 0.5
     assert time_to_target(t, noisy, 0.5) > 3.0
+    touch = ramp.copy()
+    touch[6:10] = 0.8  # 2 s above 0.7 at 3-4.5 s, then back below: not there (the dwell); there at 7 s
+    assert time_to_target(t, touch, 0.7) == pytest.approx(7.0, abs=0.3)
+    assert math.isnan(time_to_target(t[t <= 8.0], ramp[t <= 8.0], 0.5))  # crossed at 5 s, the run ends before the dwell
     assert energy_to(t, np.full(t.size, 2.0), 5.0) == pytest.approx(10.0)
     assert energy_to(t, np.full(t.size, 2.0), 5.25) == pytest.approx(10.5)
     assert math.isnan(energy_to(t, np.full(t.size, 2.0), math.nan))
 
 
 def test_time_and_energy_to_target_from_the_twin_with_the_spread_of_three_seeds():
-    """A segregated bed (case A) at 30 rpm reaches MI 0.3 within 6 s in each of three seeds (time > 0,
+    """A segregated bed (case A) at 30 rpm reaches MI 0.3 (and stays there for the dwell) within 6 s in each
+    of three seeds (time > 0,
     energy ~ power x time); nobody reaches 0.999 (NaN time and energy). The per-rpm row carries the
     seed mean and sd of each."""
-    jobs = [WhatIfJob(rpm=30.0, duration_s=6.0, case="A", seed=s, sample_s=0.25, target_mi=0.3) for s in range(3)]
+    jobs = [WhatIfJob(rpm=30.0, duration_s=6.0 + TARGET_DWELL_S, case="A", seed=s, sample_s=0.25, target_mi=0.3)
+            for s in range(3)]
     res = run_study(jobs, workers=1)
     for r in res:
         s = r.summary()
@@ -178,7 +185,7 @@ def test_pymunk_reads_the_drums_contact_impulses_as_a_torque():
 def test_the_whatif_command_reports_power_and_time_to_the_target_and_refuses_a_bad_target():
     from tests.cli import assert_one_line_error, cli
 
-    r = cli("whatif", "--rpm", "30", "--duration", 6, "--case", "A", "--seeds", 2, "--sample-s", 0.25,
+    r = cli("whatif", "--rpm", "30", "--duration", 11, "--case", "A", "--seeds", 2, "--sample-s", 0.25,
             "--workers", 1, "--target-mi", 0.3, "--json")
     assert r.code == 0, r.err
     out = json.loads(r.out)
@@ -202,3 +209,24 @@ def test_the_flowing_beds_mean_torque_is_its_mean_weight_moment_within_half_a_pe
     tq = np.mean([s.bed_torque_nm for s in samples])
     wm = np.mean([gravity_torque_nm(s.particles, mass) for s in samples])
     assert tq == pytest.approx(wm, rel=0.005)
+
+
+@pytest.mark.parametrize("engine", ["dem", "pymunk"])
+def test_a_whatif_from_a_state_ramps_the_drum_at_the_supervisors_rate(engine):
+    """AUTO's studies carry the supervisor's rate limit: from a bed at 5 rpm the twin's drum reaches 25 rpm
+    at 4 rpm/s (5 s), as the mill will, not at the twin's own 20 rpm/s (1 s); the start state is not
+    changed (its own limit is kept for the next study)."""
+    from sim.engine import make_twin
+
+    twin = make_twin(paper_mixer(), engine, case="C", seed=0, rpm=5.0)
+    twin.advance(0.3)
+    state = twin.snapshot()
+    fast = run_job(WhatIfJob(rpm=25.0, duration_s=6.0, start=state, sample_s=0.5))
+    slow = run_job(WhatIfJob(rpm=25.0, duration_s=6.0, start=state, sample_s=0.5, ramp_rpm_s=4.0))
+    at = {round(float(t), 1): float(r) for t, r in zip(slow.t_s - slow.t_s[0], slow.rpm_actual, strict=True)}
+    assert abs(at[2.5]) == pytest.approx(5.0 + 4.0 * 2.5, abs=1.0)
+    assert abs(at[5.5]) == pytest.approx(25.0, abs=0.5)
+    assert abs(fast.rpm_actual[fast.t_s - fast.t_s[0] >= 1.5][0]) == pytest.approx(25.0, abs=0.5)
+    assert state.params.accel_rpm_s == 20.0
+    with pytest.raises(SimError, match="ramp"):
+        run_study([WhatIfJob(rpm=25.0, duration_s=1.0, start=state, ramp_rpm_s=0.0)], workers=1)

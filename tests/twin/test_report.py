@@ -202,3 +202,47 @@ def test_a_batch_that_mixed_and_left_the_band_keeps_its_mixing_time(tmp_path):
     page = render_html([load_run(str(d))])
     assert "MIXED at 70.0 s" in page and ">60.0 s</b>" in page and "left the band again at 90.0 s" in page
     assert "MIXED: mixing time" not in page  # not mixed at the end
+
+
+def test_the_report_compares_the_twins_time_to_mix_with_the_plants(tmp_path):
+    """A constructed AUTO run: a first move at 30 s is cut short (the safe state: the mill never gets to
+    45 rpm), the second at 50 s ramps 5 -> 45 rpm by 60 s and carries the twin's 16 s; the camera MI sits
+    at 0.8 with a 1 s touch of 0.97 at 52 s and is 0.95 from 70 s on. The plant's time is counted from
+    the decision that got the mill there, to MI that reached the target and stayed (not the touch):
+    20.3 s, so the error is (16 - 20.3) / 20.3 = -21 %; the HTML shows it."""
+    from twin.report import time_to_mix_check
+    from twin.report.build import render_html
+
+    d = tmp_path / "ttm"
+    t = np.arange(0.0, 120.0, 1 / FPS)
+    rng = np.random.default_rng(3)
+    mi = np.where(t >= 70.0, 0.95, 0.8) + rng.normal(0, 0.005, t.size)
+    mi[(t >= 52.0) & (t < 53.0)] = 0.97
+    rpm = np.where(t < 50.0, 5.0, np.minimum(45.0, 5.0 + 4.0 * (t - 50.0)))
+    with RunLog(d, columns=FRAME_ROW_COLUMNS) as log:
+        log.set_metadata(config={"mode": "auto", "target_mi": 0.9})
+        log.event("start", 0.0, mode="auto")
+        for i, ti in enumerate(t):
+            log.frame(dict(t_s=ti, frame=i, mi=mi[i], trend_mi=mi[i], rpm_setpoint=rpm[i], rpm_actual=rpm[i],
+                           mode="auto", valid=True))
+        log.event("whatif", 29.0, reason="AUTO", requested_t_s=20.0, predictions={"5.0": 0.8, "45.0": 0.96},
+                  time_to_target_s={"5.0": math.nan, "45.0": 16.0}, target_mi=0.9)
+        for t_d in (30.0, 50.0):
+            log.event("decision", t_d, decision="move", action="set_rpm", rpm=9.0, target_rpm=45.0, reason="x",
+                      predictions={"5.0": 0.8, "45.0": 0.96}, predicted_time_to_target_s=16.0, prediction_t_s=19.0)
+        log.event("stop", 119.9, frames=len(t))
+    c = time_to_mix_check(load_run(d))
+    assert c is not None
+    assert c["t_decision_s"] == 50.0 and c["rpm"] == 45.0 and c["t_reached_s"] == pytest.approx(59.8, abs=0.11)
+    assert c["predicted_s"] == 16.0 and c["state_t_s"] == 20.0 and c["target_mi"] == 0.9
+    assert c["actual_s"] == pytest.approx(20.3, abs=0.3)
+    assert c["error_pct"] == pytest.approx(100 * (16.0 - c["actual_s"]) / c["actual_s"])
+    assert -25 < c["error_pct"] < -18
+    page = render_html([load_run(d)])
+    assert "Twin&#x27;s time to mix against the plant&#x27;s" in page or "Twin's time to mix" in page
+    assert f'<b class="ttm-error">{c["error_pct"]:+.0f}</b>' in page
+    # an older run log without the decision's field: the prediction is the study's, matched by its predictions
+    lines = (d / "events.jsonl").read_text(encoding="utf-8").splitlines()
+    (d / "events.jsonl").write_text("\n".join(ln.replace('"predicted_time_to_target_s": 16.0, ', "")
+                                              for ln in lines) + "\n", encoding="utf-8")
+    assert time_to_mix_check(load_run(d))["predicted_s"] == 16.0

@@ -153,7 +153,7 @@ class WhatIfWorker:
         try:
             if pred is not None:
                 try:
-                    preds, rows = self._study(pred.rpms, pred.horizon_s, "AUTO", pred.target_mi)
+                    preds, rows = self._study(pred.rpms, pred.horizon_s, "AUTO", pred.target_mi, pred.ramp_rpm_s)
                 except Exception as exc:
                     self._report_auto(f"{type(exc).__name__}: {exc}")
                     return True
@@ -198,8 +198,8 @@ class WhatIfWorker:
             return run_study(jobs, scheduler=self.scheduler)
         return run_study(jobs, workers=self.workers, pool=self._get_pool())
 
-    def _study(self, rpms: Sequence[float], duration_s: float, reason: str, target_mi: float | None = None
-               ) -> tuple[dict[float, float], dict[float, RpmPrediction] | None]:
+    def _study(self, rpms: Sequence[float], duration_s: float, reason: str, target_mi: float | None = None,
+               ramp_rpm_s: float | None = None) -> tuple[dict[float, float], dict[float, RpmPrediction] | None]:
         """Run one study; plateau MI per rpm and (``target_mi`` given) the rows to the target
         (time, drive power and energy: ``sim.whatif``) for AUTO's objective."""
         from sim.whatif import WhatIfJob
@@ -214,7 +214,8 @@ class WhatIfWorker:
         self.state.set_whatif(WhatIfView(status=status, seq=self._seq))
         t0 = time.monotonic()
         target = self.target_mi if target_mi is None else target_mi  # AUTO's request, else the run's
-        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state, target_mi=target) for r in rpms]
+        jobs = [WhatIfJob(rpm=float(r), duration_s=float(duration_s), start=state, target_mi=target,
+                          ramp_rpm_s=ramp_rpm_s) for r in rpms]  # AUTO's: the twin ramps as the mill will
         try:
             results = list(self._run_jobs(jobs))
         except Exception as exc:
@@ -231,8 +232,8 @@ class WhatIfWorker:
         powers = tuple(float(getattr(res, "plateau_power_w", np.nan)) for res in results)
         energies = tuple(float(getattr(res, "energy_to_target_j", np.nan)) for res in results)
         rows = None if target is None else {  # issue 24: time and energy to the target (sim.whatif)
-            float(r): RpmPrediction(float(r), preds[float(r)], t, e, p)
-            for r, t, e, p in zip(rpms, times, energies, powers, strict=False)}
+            float(r): RpmPrediction(float(r), preds[float(r)], t, e, p, start_mi=_first(getattr(res, "mi", ())))
+            for r, t, e, p, res in zip(rpms, times, energies, powers, results, strict=False)}
         self._seq += 1
         t_done = self.view.now_s()
         self.state.set_whatif(
@@ -263,3 +264,8 @@ class WhatIfWorker:
         self._closed = True
         pool, self._pool = self._pool, None
         close_pool(pool)
+
+
+def _first(mi: Sequence[float]) -> float | None:
+    """The first MI of a study's curve (its start state), None when it has none."""
+    return float(mi[0]) if len(mi) else None

@@ -198,6 +198,86 @@ def endpoint_of(run: RunData) -> dict[str, Any]:
             "mixing_time_s": res.mixing_time_s, "plateau_mi": res.plateau_mi, "changes": list(res.changes)}
 
 
+def _num(v: Any) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+
+
+def _rpm_key(k: Any) -> float | None:
+    """An rpm key of a logged mapping ("45.0") as a number (None: not one)."""
+    try:
+        return float(k)
+    except (TypeError, ValueError):
+        return None
+
+
+def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
+    """The twin's predicted time to mix at the rpm AUTO picked against the plant's (docs/endpoint.md).
+
+    The decision: the first ``move`` whose target rpm the mill reached (within 1 rpm) before the next
+    ``move`` (a ramp cut short by the safe state does not count) and that carries a predicted time
+    (``predicted_time_to_target_s``, objective time/energy) or whose predictions are a what-if study's
+    with times. ``predicted_s``: the study's time to the target at that rpm (from its start state, the
+    rpm ramped as the mill does); ``actual_s``: from the decision until the logged raw camera MI reaches
+    the target and stays (``sim.whatif.time_to_target``: the twin's own definition); ``endpoint_s``:
+    until the endpoint's mixing time; ``error_pct``: 100 (predicted - actual) / actual;
+    ``state_t_s``: when the study's start state was taken. None when the run has no such decision."""
+    from sim.whatif import time_to_target
+
+    studies = [e for e in run.events if e.get("kind") == "whatif" and isinstance(e.get("time_to_target_s"), dict)]
+    moves = [e for e in run.events if e.get("kind") == "decision" and e.get("decision") == "move"
+             and _num(e.get("t_s")) is not None and _num(e.get("target_rpm")) is not None]
+    t, mi, rpm_act = run.series("t_s"), run.series("mi"), run.series("rpm_actual")
+    for i, d in enumerate(moves):
+        t_d, rpm = float(d["t_s"]), float(d["target_rpm"])
+        t_next = float(moves[i + 1]["t_s"]) if i + 1 < len(moves) else math.inf
+        reached = np.nonzero(np.isfinite(t) & (t >= t_d) & (t < t_next) & (np.abs(rpm_act - rpm) <= 1.0))[0]
+        if reached.size == 0:
+            continue
+        study = next((w for w in reversed(studies) if w.get("predictions") == d.get("predictions")
+                      and (_num(w.get("t_s")) or math.inf) <= t_d + 1e-6), None)
+        pred = _num(d.get("predicted_time_to_target_s"))
+        if pred is None and study is not None:
+            pred = _num(next((v for k, v in study["time_to_target_s"].items() if _rpm_key(k) == rpm), None))
+        if pred is None:
+            continue
+        meta_cfg = run.metadata.get("config")
+        cfg: dict[str, Any] = meta_cfg if isinstance(meta_cfg, dict) else {}
+        target = _num(None if study is None else study.get("target_mi")) or _num(cfg.get("target_mi"))
+        if target is None:
+            from twin.loop import endpoint_config
+
+            target = endpoint_config().target_mi
+        after = np.isfinite(t) & (t >= t_d)
+        actual = None
+        if after.sum() >= 2:
+            tt = t[after]
+            hit = time_to_target(tt, mi[after], target)
+            actual = float(hit + tt[0] - t_d) if math.isfinite(hit) else None
+        first_mixed = next((e for e in run.events if e.get("kind") == "mixed" and (_num(e.get("t_s")) or -1) >= t_d),
+                           None)
+        mt = None if first_mixed is None else _num(first_mixed.get("mixing_time_s"))
+        return {"t_decision_s": t_d, "rpm": rpm, "t_reached_s": float(t[reached[0]]), "target_mi": target,
+                "predicted_s": pred, "state_t_s": None if study is None else _num(study.get("requested_t_s")),
+                "actual_s": actual, "endpoint_s": None if mt is None else max(0.0, mt - t_d),
+                "error_pct": None if not actual else 100.0 * (pred - actual) / actual,
+                "predicted_energy_j": _num(d.get("predicted_energy_j"))}
+    return None
+
+
+def _time_to_mix_html(run: RunData) -> str:
+    c = time_to_mix_check(run)
+    if c is None:
+        return '<p class="none">No AUTO move (whose rpm the mill reached) with a predicted time to mix.</p>'
+    rows = [("decision at s", _fmt(c["t_decision_s"], ".1f")), ("rpm picked", _fmt(c["rpm"], "g")),
+            ("mill at that rpm at s", _fmt(c["t_reached_s"], ".1f")), ("target MI", _fmt(c["target_mi"], "g")),
+            ("twin state of the study from s", _fmt(c["state_t_s"], ".1f")),
+            ("twin: predicted time to target s", _fmt(c["predicted_s"], ".1f")),
+            ("plant: time to target s (raw MI, 2 s mean, held 5 s)", _fmt(c["actual_s"], ".1f")),
+            ("error %", f'<b class="ttm-error">{_fmt(c["error_pct"], "+.0f")}</b>'),
+            ("plant: time to the endpoint's mixing time s", _fmt(c["endpoint_s"], ".1f"))]
+    return "<h4>Twin's time to mix against the plant's</h4>" + _table(rows)
+
+
 def _energy(run: RunData) -> tuple[str, str | None]:
     """Energy used (frames ``power_w``, integrated over run time) and predicted (what-if
     events with ``energy_to_target_j`` per rpm): HTML and an optional plot."""
@@ -276,7 +356,7 @@ def _run_column(run: RunData, idx: int) -> dict[str, str]:
     else:
         banner = '<p class="none">Not mixed at the end of the log (no mixing time).</p>'
     out["endpoint"] = banner + f"<p>source: {html.escape(end['source'])}</p>" + (
-        _table(ch_rows, ("t s", "change", "mixing time s", "why")) if ch_rows else "")
+        _table(ch_rows, ("t s", "change", "mixing time s", "why")) if ch_rows else "") + _time_to_mix_html(run)
     energy_html, energy_plot = _energy(run)
     out["energy"] = energy_html + ("" if energy_plot is None else _img("energy", idx, energy_plot, "energy used"))
     cfg = run.metadata.get("config")
