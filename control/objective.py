@@ -76,16 +76,22 @@ class Choice:
 
 
 def stale_start(rows: Iterable[RpmPrediction], level: float | None, target_mi: float | None) -> str:
-    """Why a study's times to the target do not describe the bed now ("" when they do): it started
-    from a twin bed already at the target (``start_mi`` >= ``target_mi``: every time is 0) while the
-    trend ``level`` now is below it (the bed segregated while the study waited or ran)."""
+    """Why a study's times to the target do not describe the bed now ("" when they do): the study
+    started from a twin bed already at the target (every ``start_mi`` >= ``target_mi``, or a row that
+    is there at once: time 0 s) while the trend ``level`` now is below it (the bed segregated while the
+    study waited or ran, or the twin's bed is more mixed than the plant's)."""
     if target_mi is None or level is None or not math.isfinite(level) or level >= target_mi:
         return ""
+    rows = list(rows)
     starts = [float(r.start_mi) for r in rows if r.start_mi is not None and math.isfinite(r.start_mi)]
-    if not starts or min(starts) < target_mi:
-        return ""
-    return (f"the study started from a twin bed at MI {min(starts):.3f} >= target {target_mi:g}, "
-            f"the trend is {level:.3f} now")
+    at_once = [float(r.rpm) for r in rows if r.time_to_target_s is not None and r.time_to_target_s == 0.0]
+    if starts and min(starts) >= target_mi:
+        return (f"the study started from a twin bed at MI {min(starts):.3f} >= target {target_mi:g}, "
+                f"the trend is {level:.3f} now")
+    if at_once:
+        return (f"the study's twin bed was at the target {target_mi:g} at once ({', '.join(f'{r:g}' for r in at_once)}"
+                f" rpm: 0 s), the trend is {level:.3f} now")
+    return ""
 
 
 def _power(r: RpmPrediction) -> float:
