@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 from control.errors import ControlError
 from control.trend import MITrend, TrendConfig
@@ -58,16 +58,44 @@ class EndpointConfig:
 
     def __post_init__(self) -> None:
         vals = (self.target_mi, self.band, self.dwell_s, self.block_s, self.exit_band, self.exit_dwell_s)
-        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in vals):
             raise ControlError("endpoint settings must be finite numbers (target_mi, band, dwell_s, block_s, ...)")
         if not 0.0 <= self.target_mi <= 1.0:
             raise ControlError(f"endpoint target_mi must be in [0, 1], got {self.target_mi}")
-        if not (0.0 < self.band < 0.5 and self.dwell_s > 0 and self.block_s > 0 and self.exit_band > 0
-                and self.exit_dwell_s >= 0):
-            raise ControlError("endpoint needs 0 < band < 0.5, dwell_s > 0, block_s > 0, exit_band > 0, "
-                               "exit_dwell_s >= 0")
-        if self.block_sd_max is not None and not (math.isfinite(self.block_sd_max) and self.block_sd_max > 0):
-            raise ControlError(f"endpoint block_sd_max must be > 0 (or none), got {self.block_sd_max}")
+        for key, lo, hi, lo_open in _RANGES:
+            v = getattr(self, key)
+            if not ((lo < v if lo_open else lo <= v) and v <= hi):
+                raise ControlError(f"endpoint {key} must be in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {v}")
+        sd = self.block_sd_max
+        if sd is not None and not (isinstance(sd, (int, float)) and not isinstance(sd, bool) and math.isfinite(sd)
+                                   and 0 < sd <= 1):
+            raise ControlError(f"endpoint block_sd_max must be in (0, 1] (or off), got {sd}")
+
+
+_RANGES = (("band", 0.0, 0.5, True), ("dwell_s", 0.0, 3600.0, True), ("block_s", 0.0, 3600.0, True),
+           ("exit_band", 0.0, 1.0, True), ("exit_dwell_s", 0.0, 3600.0, False))
+"""(key, low, high, low open) of the endpoint's ranged settings (MI, s)."""
+
+ENDPOINT_KEYS = ("target_mi", "band", "dwell_s", "block_s", "block_sd_max", "exit_band", "exit_dwell_s")
+"""The settings of an ``[endpoint]`` table / the ``--endpoint-*`` options (:class:`EndpointConfig`'s fields)."""
+
+
+def endpoint_settings(table: Mapping[str, object], base: EndpointConfig | None = None) -> EndpointConfig:
+    """``base`` (default: :class:`EndpointConfig`'s defaults, the one definition of them) with the keys
+    of ``table`` replaced. ``block_sd_max`` 0 or false turns the moving-block criterion off. An unknown
+    key, a value that is no number or one out of range: a one-line ControlError naming the key."""
+    unknown = sorted(set(table) - set(ENDPOINT_KEYS))
+    if unknown:
+        raise ControlError(f"endpoint: unknown key(s) {unknown} (allowed: {', '.join(ENDPOINT_KEYS)})")
+    vals: dict[str, float | None] = {}
+    for key, v in table.items():
+        if key == "block_sd_max" and (v is False or v is None or v == 0):
+            vals[key] = None
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ControlError(f"endpoint {key} must be a number, got {v!r}")
+        else:
+            vals[key] = float(v)
+    return replace(base or EndpointConfig(), **vals)  # type: ignore[arg-type]  # __post_init__ checks
 
 
 @dataclass(frozen=True)

@@ -41,8 +41,7 @@ def check_objective(objective: str) -> str:
 class RpmPrediction:
     """The twin's prediction at one rpm: plateau MI, time to reach the target MI (s; None
     or inf: not within the study), drive power (W) and energy to the target (J), with
-    their seed spreads (sd, same units; None: one seed); ``start_mi``: the twin's MI where the
-    study started."""
+    their seed spreads (sd, same units; None: one seed)."""
 
     rpm: float
     plateau_mi: float
@@ -51,7 +50,6 @@ class RpmPrediction:
     power_w: float | None = None
     time_sd_s: float | None = None
     energy_sd_j: float | None = None
-    start_mi: float | None = None  # the twin's MI at the start state of the study (None: unknown)
 
     def value(self, objective: str) -> float:
         """The quantity ``objective`` minimises (s or J; inf when the target is not reached),
@@ -76,22 +74,17 @@ class Choice:
 
 
 def stale_start(rows: Iterable[RpmPrediction], level: float | None, target_mi: float | None) -> str:
-    """Why a study's times to the target do not describe the bed now ("" when they do): the study
-    started from a twin bed already at the target (every ``start_mi`` >= ``target_mi``, or a row that
-    is there at once: time 0 s) while the trend ``level`` now is below it (the bed segregated while the
-    study waited or ran, or the twin's bed is more mixed than the plant's)."""
+    """Why a study's times to the target do not describe the bed now ("" when they do): the study's
+    twin bed was at the target at once (a row of 0 s: its MI held the target from the start) while
+    the trend ``level`` now is below it (the bed segregated while the study waited or ran, or the
+    twin's bed was more mixed than the plant's)."""
     if target_mi is None or level is None or not math.isfinite(level) or level >= target_mi:
         return ""
-    rows = list(rows)
-    starts = [float(r.start_mi) for r in rows if r.start_mi is not None and math.isfinite(r.start_mi)]
     at_once = [float(r.rpm) for r in rows if r.time_to_target_s is not None and r.time_to_target_s == 0.0]
-    if starts and min(starts) >= target_mi:
-        return (f"the study started from a twin bed at MI {min(starts):.3f} >= target {target_mi:g}, "
-                f"the trend is {level:.3f} now")
-    if at_once:
-        return (f"the study's twin bed was at the target {target_mi:g} at once ({', '.join(f'{r:g}' for r in at_once)}"
-                f" rpm: 0 s), the trend is {level:.3f} now")
-    return ""
+    if not at_once:
+        return ""
+    return (f"the study's twin bed was at the target {target_mi:g} at once ({', '.join(f'{r:g}' for r in at_once)}"
+            f" rpm: 0 s), the trend is {level:.3f} now")
 
 
 def _power(r: RpmPrediction) -> float:

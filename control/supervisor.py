@@ -47,7 +47,7 @@ Objective and endpoint (issue 24, ``control.objective``, ``control.endpoint``)
     drive energy to it) and ``control.objective.choose`` picks the rpm that reaches the
     target soonest / with least energy (rows missing: the plateau scoring, said in the
     reason); a decision is then also due while the trend is below ``target_mi`` and the
-    batch is not mixed. A study that started from a twin bed already at the target while the
+    batch is not mixed. A study whose twin bed was at the target at once (a 0 s row) while the
     trend is below it now (``control.objective.stale_start``) is asked again once (a *hold*
     decision says so). The request carries ``max_rate_rpm_per_s`` so the twin ramps as the mill.
     ``stop_at_endpoint``: in AUTO, once the application reports the

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from twin.errors import TwinError
@@ -106,6 +107,7 @@ class RunConfig:
     objective: str = "plateau"  # AUTO's objective: plateau | time | energy (control.objective)
     target_mi: float | None = None  # the endpoint's and the objective's target MI (None: twin.loop.LOOP_ENDPOINT)
     stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed (control.endpoint)
+    endpoint: Mapping[str, float] = field(default_factory=dict)  # endpoint settings (control.endpoint.ENDPOINT_KEYS)
     drive: str | None = None  # demo only: the mill is this drive profile's emulator over Modbus RTU
 
     @property
@@ -180,6 +182,7 @@ class RunConfig:
             raise TwinError(f"--objective: {exc}") from None
         if self.target_mi is not None and not (math.isfinite(self.target_mi) and 0.0 <= self.target_mi <= 1.0):
             raise TwinError(f"--target-mi must be a number in [0, 1], got {self.target_mi}")
+        check_endpoint_options(self.endpoint)
         if not self.demo and self.speed != 1.0:
             raise TwinError("--speed only applies to the embedded demo (real mills run in real time)")
         if self.control_token is not None and not self.control_token.strip():
@@ -200,3 +203,24 @@ class RunConfig:
         d = to_jsonable(self)
         d["control_token"] = "***" if self.control_token else None
         return d
+
+
+def endpoint_options(**values: float | None) -> dict[str, float]:
+    """The ``--endpoint-*`` options given (``band=``, ``dwell_s=``, ...; None: not given) as settings
+    for ``control.endpoint.endpoint_settings``; checked (:func:`check_endpoint_options`)."""
+    out = {k: float(v) for k, v in values.items() if v is not None}
+    check_endpoint_options(out)
+    return out
+
+
+def check_endpoint_options(values: Mapping[str, float]) -> None:
+    """Endpoint settings from options: a one-line TwinError naming the option (``--endpoint-dwell-s``)."""
+    from control.endpoint import endpoint_settings
+    from control.errors import ControlError
+
+    for key, v in values.items():
+        try:
+            endpoint_settings({key: v})
+        except ControlError as exc:
+            raise TwinError(f"--endpoint-{key.replace('_', '-')}: {exc}") from None
+

@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from control.endpoint import EndpointConfig, EndpointDetector
+from control.endpoint import EndpointConfig, EndpointDetector, endpoint_settings
 from control.errors import ControlError
 from control.limits import Limits
 from control.supervisor import Mode, Supervisor, SupervisorConfig
@@ -452,11 +452,12 @@ LOOP_ENDPOINT: dict[str, float | int | bool] = dict(target_mi=0.9)
 
 
 def endpoint_config(config: RunConfig | None = None, seams: Seams | None = None) -> EndpointConfig:
-    """The endpoint detector's settings for a run (``RunConfig.target_mi``, then
-    ``seams.endpoint`` override ``LOOP_ENDPOINT``)."""
+    """The endpoint detector's settings for a run (``RunConfig.endpoint``, ``RunConfig.target_mi``, then
+    ``seams.endpoint`` override ``LOOP_ENDPOINT``, which overrides ``EndpointConfig``'s defaults)."""
     target = {} if config is None or config.target_mi is None else {"target_mi": float(config.target_mi)}
+    options = {} if config is None else dict(config.endpoint)  # --endpoint-* (twin.config.endpoint_options)
     over = seams.endpoint if seams is not None else {}
-    return EndpointConfig(**{**LOOP_ENDPOINT, **target, **over})
+    return endpoint_settings({**LOOP_ENDPOINT, **options, **target, **over})
 
 
 def trend_config(seams: Seams | None = None) -> TrendConfig:

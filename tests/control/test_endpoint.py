@@ -108,3 +108,45 @@ def test_block_sd_is_the_sample_sd_of_the_finite_values():
 def test_bad_settings_are_one_line_control_errors(bad):
     with pytest.raises(ControlError):
         EndpointConfig(**bad)
+
+
+def test_endpoint_settings_replace_the_one_set_of_defaults_and_refuse_bad_values_in_one_line():
+    from control.endpoint import ENDPOINT_KEYS, endpoint_settings
+
+    d = EndpointConfig()
+    assert endpoint_settings({}) == d  # the defaults are EndpointConfig's, nowhere else
+    c = endpoint_settings({"band": 0.03, "dwell_s": 20, "block_s": 8.0, "block_sd_max": 0.04, "target_mi": 0.92,
+                           "exit_band": 0.1, "exit_dwell_s": 0})
+    assert (c.band, c.dwell_s, c.block_s, c.block_sd_max, c.target_mi, c.exit_band, c.exit_dwell_s) == (
+        0.03, 20.0, 8.0, 0.04, 0.92, 0.1, 0.0)
+    assert endpoint_settings({"block_sd_max": False}).block_sd_max is None  # TOML false: MBSD off
+    assert endpoint_settings({"block_sd_max": 0}).block_sd_max is None  # an option's 0: off
+    assert endpoint_settings({"band": 0.05}, base=c).dwell_s == 20.0  # on top of a base
+    assert set(ENDPOINT_KEYS) == {f.name for f in __import__("dataclasses").fields(EndpointConfig)}
+    for bad, match in (({"dwel_s": 5}, "unknown key"), ({"band": "wide"}, "band must be a number"),
+                       ({"dwell_s": True}, "dwell_s must be a number"), ({"band": 0.6}, "band must be in"),
+                       ({"dwell_s": 1e308}, "dwell_s must be in"), ({"block_s": 0}, "block_s must be in"),
+                       ({"block_sd_max": 2.0}, "block_sd_max must be in"),
+                       ({"block_sd_max": -1.0}, "block_sd_max must be in"),
+                       ({"exit_dwell_s": -1}, "exit_dwell_s must be in"), ({"target_mi": 1.5}, "target_mi"),
+                       ({"band": math.nan}, "finite")):
+        with pytest.raises(ControlError, match=match) as exc:
+            endpoint_settings(bad)
+        assert "\n" not in str(exc.value)
+
+
+def test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_exit_2(tmp_path):
+    from tests.cli import assert_one_line_error, cli
+    from twin.config import RunConfig, endpoint_options
+    from twin.loop import endpoint_config
+
+    opts = endpoint_options(band=0.03, dwell_s=12.0, block_s=None, block_sd_max=0.0)
+    assert opts == {"band": 0.03, "dwell_s": 12.0, "block_sd_max": 0.0}
+    c = endpoint_config(RunConfig(endpoint=opts, target_mi=0.8).resolved())
+    assert (c.band, c.dwell_s, c.block_s, c.block_sd_max, c.target_mi) == (0.03, 12.0, 5.0, None, 0.8)
+    assert endpoint_config().dwell_s == EndpointConfig().dwell_s  # no option: the dataclass's default
+    for opt, bad in (("--endpoint-band", "0.7"), ("--endpoint-dwell-s", "-1"), ("--endpoint-block-s", "nan"),
+                     ("--endpoint-block-sd-max", "3")):
+        assert_one_line_error(cli("run", "--no-dashboard", opt, bad, "--log", tmp_path / "r"), opt)
+        assert_one_line_error(cli("mi", "x.png", "--endpoint", opt, bad), opt)
+    assert not (tmp_path / "r").exists()

@@ -90,16 +90,13 @@ def test_already_at_the_target_energy_ties_go_to_the_lower_power():
     assert "25 rpm 0.0 J at 2.10 W" in choose(rows, "energy", 5.0, LIMITS, 0.9).reason
 
 
-def test_a_study_whose_bed_starts_at_the_target_is_stale_while_the_trend_is_below_it():
+def test_a_study_whose_bed_is_at_the_target_at_once_is_stale_while_the_trend_is_below_it():
     from control.objective import stale_start
 
-    at_target = [RpmPrediction(r, 0.95, 0.0 if r > 5 else None, start_mi=0.97) for r in (5.0, 25.0)]
-    assert "started from a twin bed at MI 0.970 >= target 0.9" in stale_start(at_target, 0.80, 0.9)
-    assert stale_start(at_target, 0.92, 0.9) == ""  # the trend is there too: the times are right
-    assert stale_start(at_target, 0.80, None) == "" and stale_start(at_target, math.nan, 0.9) == ""
-    # the start just below the target, but the smoothed MI is there from the first window on: 0 s
-    at_once = [RpmPrediction(5.0, 0.87, None, start_mi=0.89), RpmPrediction(25.0, 0.91, 0.0, start_mi=0.89)]
-    assert "at once (25 rpm: 0 s)" in stale_start(at_once, 0.80, 0.9)
-    below = [RpmPrediction(5.0, 0.87, None, start_mi=0.75), RpmPrediction(25.0, 0.93, 9.0, start_mi=0.75)]
-    assert stale_start(below, 0.80, 0.9) == ""
-    assert stale_start([RpmPrediction(25.0, 0.93, 9.0)], 0.80, 0.9) == ""  # start unknown, nothing at once
+    at_once = [RpmPrediction(5.0, 0.87, None), RpmPrediction(25.0, 0.91, 0.0), RpmPrediction(45.0, 0.95, 0.0)]
+    assert "at the target 0.9 at once (25, 45 rpm: 0 s), the trend is 0.800" in stale_start(at_once, 0.80, 0.9)
+    assert stale_start(at_once, 0.92, 0.9) == ""  # the trend is there too: 0 s is right
+    assert stale_start(at_once, 0.80, None) == "" and stale_start(at_once, math.nan, 0.9) == ""
+    # the twin started at MI 0.903 but its smoothed MI took 10 s to hold the target: the times are news
+    later = [RpmPrediction(5.0, 0.87, None), RpmPrediction(25.0, 0.93, 10.75), RpmPrediction(45.0, 0.95, 9.75)]
+    assert stale_start(later, 0.88, 0.9) == ""

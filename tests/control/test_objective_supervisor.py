@@ -92,11 +92,12 @@ def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
     assert (d.objective, d.stop_at_endpoint) == ("plateau", False)
 
 
-def _stepper(start_mi: float, level: float = 0.80):
-    """A "time" supervisor at ``level`` whose requests are answered at once with ROWS started at ``start_mi``."""
+def _stepper(at_once: bool, level: float = 0.80):
+    """A "time" supervisor at ``level`` whose requests are answered at once with ROWS (``at_once``: the
+    25 rpm row says 0 s, the twin's bed was at the target from the start)."""
     from dataclasses import replace
 
-    rows = {r: replace(v, start_mi=start_mi) for r, v in ROWS.items()}
+    rows = {r: replace(v, time_to_target_s=0.0) if at_once and r == 25.0 else v for r, v in ROWS.items()}
     sup = Supervisor(SupervisorConfig(objective="time", target_mi=0.9, min_rpm=5.0, max_rpm=45.0, critical_rpm=None,
                                       max_critical_frac=1.0, max_rate_rpm_per_s=3.0, detect_dwell_s=5.0),
                      mode=Mode.AUTO)
@@ -133,12 +134,12 @@ def replace_t(inp: SupervisorInputs, t: float) -> SupervisorInputs:
 
 def test_a_study_from_a_bed_already_at_the_target_is_asked_again_once_then_used():
     """The demo's first study often starts from the still-mixed twin (MI 0.97) and lands a minute later
-    while the trend is 0.8: its times are all 0 s, which says nothing of the bed now. The supervisor
+    while the trend is 0.8: its times are 0 s, which says nothing of the bed now. The supervisor
     asks again once (a hold decision says why); the second answer is used even if it is stale too."""
-    decisions, requests = _stepper(start_mi=0.97)
+    decisions, requests = _stepper(at_once=True)
     holds = [d for d in decisions if d.kind == "hold"]
     assert len(requests) == 2
-    assert holds and "started from a twin bed at MI 0.970 >= target 0.9" in holds[0].reason
+    assert holds and "at the target 0.9 at once (25 rpm: 0 s), the trend is 0.800" in holds[0].reason
     assert "asking the twin again" in holds[0].reason and holds[0].action is Action.NONE
     move = decisions[-1]
     assert move.kind == "move" and move.target_rpm == 25.0 and "(asked again)" in move.reason
@@ -146,7 +147,7 @@ def test_a_study_from_a_bed_already_at_the_target_is_asked_again_once_then_used(
 
 
 def test_a_study_from_the_bed_below_the_target_is_used_and_the_decision_carries_its_prediction():
-    decisions, requests = _stepper(start_mi=0.75)
+    decisions, requests = _stepper(at_once=False)
     assert len(requests) == 1 and [d.kind for d in decisions] == ["move"]
     move = decisions[0]
     assert requests[0].ramp_rpm_s == 3.0  # the twin ramps as the mill will

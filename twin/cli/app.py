@@ -25,6 +25,13 @@ app.add_typer(bench_app, name="bench")
 console = Console()
 console_err = Console(stderr=True)
 
+ENDPOINT_HELP = {  # the --endpoint-* options of run and mi (defaults: control.endpoint.EndpointConfig)
+    "band": "Endpoint: half-width of the plateau band (MI).",
+    "dwell_s": "Endpoint: how long the trend must stay in the band (s).",
+    "block_s": "Endpoint: moving block of raw MI (s).",
+    "block_sd_max": "Endpoint: largest sd of raw MI in the block of a mixed batch (0: off).",
+}
+
 
 def print_json(obj: object) -> None:
     """Print ``obj`` as one line of strict JSON on stdout (NaN/inf -> null, numpy -> plain)."""

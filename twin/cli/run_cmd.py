@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from twin.cli.app import app, bench_app, check_outputs, console_err, print_json
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console_err, print_json
 from twin.errors import TwinError
 
 if TYPE_CHECKING:
@@ -137,13 +137,17 @@ def run(
     objective: str = typer.Option("plateau", "--objective", help="AUTO's objective: plateau, time or energy."),
     target_mi: float = typer.Option(None, "--target-mi", help="Target MI of the endpoint and the objective."),
     stop_at_endpoint: bool = typer.Option(False, "--stop-at-endpoint", help="AUTO stops the mill once mixed."),
+    endpoint_band: float = typer.Option(None, "--endpoint-band", help=ENDPOINT_HELP["band"]),
+    endpoint_dwell_s: float = typer.Option(None, "--endpoint-dwell-s", help=ENDPOINT_HELP["dwell_s"]),
+    endpoint_block_s: float = typer.Option(None, "--endpoint-block-s", help=ENDPOINT_HELP["block_s"]),
+    endpoint_block_sd_max: float = typer.Option(None, "--endpoint-block-sd-max", help=ENDPOINT_HELP["block_sd_max"]),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
 
     With no arguments: the embedded demo (hidden plant, emulated mill on a pty, AUTO) and
     the dashboard on http://127.0.0.1:8080.
     """
-    from twin.config import RunConfig, check_port_free
+    from twin.config import RunConfig, check_port_free, endpoint_options
 
     try:
         cfg = RunConfig(
@@ -152,6 +156,8 @@ def run(
             host=host, control_token=control_token, scheduler=scheduler, engine=engine,
             estop_needs_token=estop_needs_token, objective=objective, target_mi=target_mi,
             stop_at_endpoint=stop_at_endpoint,
+            endpoint=endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
+                                      block_sd_max=endpoint_block_sd_max),
             drive=None if drive is None else _drive_profile(drive, camera, video, mill),
         ).resolved()
         if cfg.dashboard:  # issue 26: a port in use is refused, not swapped for another

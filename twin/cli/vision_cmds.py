@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console, console_err, print_json
 from vision.errors import VisionError
 
 if TYPE_CHECKING:
@@ -92,6 +92,10 @@ def mi_cmd(
     target_mi: float = typer.Option(None, "--target-mi", help="--endpoint: plateau MI a mixed batch reaches "
                                     "(default: the run's, control.endpoint)."),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout (the CSV only with --csv)."),
+    endpoint_band: float = typer.Option(None, "--endpoint-band", help=ENDPOINT_HELP["band"]),
+    endpoint_dwell_s: float = typer.Option(None, "--endpoint-dwell-s", help=ENDPOINT_HELP["dwell_s"]),
+    endpoint_block_s: float = typer.Option(None, "--endpoint-block-s", help=ENDPOINT_HELP["block_s"]),
+    endpoint_block_sd_max: float = typer.Option(None, "--endpoint-block-sd-max", help=ENDPOINT_HELP["block_sd_max"]),
 ) -> None:
     """Mixing index per frame: CSV row per frame, optional plot and overlay video."""
     import cv2
@@ -108,6 +112,10 @@ def mi_cmd(
     _check_number("--max-frames", max_frames, 0, 10**12)
     if target_mi is not None:
         _check_number("--target-mi", target_mi, 0.0, 1.0)
+    from twin.config import endpoint_options
+
+    ep_options = endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
+                                  block_sd_max=endpoint_block_sd_max)
     cfg = load_config(config)
     _warn(cfg.warnings)
     manual_roi = parse_roi(roi) if roi else None
@@ -243,7 +251,7 @@ def mi_cmd(
         _plot(plot, ts, mis, avgs, method.value, window)
     console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
     if endpoint or json_out:
-        summary = _mi_summary(ts, mis, method.value, endpoint, target_mi)
+        summary = _mi_summary(ts, mis, method.value, endpoint, target_mi, ep_options)
         if json_out:
             print_json(summary)
         elif endpoint:
@@ -252,7 +260,8 @@ def mi_cmd(
                               f"(plateau MI {summary['plateau_mi']:.3f})"), highlight=False)
 
 
-def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, target_mi: float | None) -> dict:
+def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, target_mi: float | None,
+                ep_options: dict[str, float] | None = None) -> dict:
     """The ``--json`` summary: frames, MI statistics and (``--endpoint``) the mixing time."""
     import numpy as np
 
@@ -265,13 +274,13 @@ def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, 
                  **{k: float(stats[k]) if k in stats else None
                     for k in ("mi_first", "mi_last", "mi_mean", "mi_median", "mi_min", "mi_max")}}
     if endpoint:
-        from dataclasses import asdict, replace
+        from dataclasses import asdict
 
         from control.endpoint import EndpointConfig, endpoint_of_series
+        from twin.config import RunConfig
         from twin.loop import endpoint_config, trend_config
 
-        cfg: EndpointConfig = endpoint_config()
-        cfg = cfg if target_mi is None else replace(cfg, target_mi=target_mi)
+        cfg: EndpointConfig = endpoint_config(RunConfig(target_mi=target_mi, endpoint=ep_options or {}))
         res = endpoint_of_series(ts, mis, cfg, trend_config())
         out.update(mixing_time_s=res.mixing_time_s, plateau_mi=res.plateau_mi, endpoint=asdict(cfg),
                    endpoint_changes=[{"t_s": t, "kind": k, "mixing_time_s": m, "reason": why}

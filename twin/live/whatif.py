@@ -232,8 +232,8 @@ class WhatIfWorker:
         powers = tuple(float(getattr(res, "plateau_power_w", np.nan)) for res in results)
         energies = tuple(float(getattr(res, "energy_to_target_j", np.nan)) for res in results)
         rows = None if target is None else {  # issue 24: time and energy to the target (sim.whatif)
-            float(r): RpmPrediction(float(r), preds[float(r)], t, e, p, start_mi=_first(getattr(res, "mi", ())))
-            for r, t, e, p, res in zip(rpms, times, energies, powers, results, strict=False)}
+            float(r): RpmPrediction(float(r), preds[float(r)], t, e, p)
+            for r, t, e, p in zip(rpms, times, energies, powers, strict=False)}
         self._seq += 1
         t_done = self.view.now_s()
         self.state.set_whatif(
@@ -264,8 +264,3 @@ class WhatIfWorker:
         self._closed = True
         pool, self._pool = self._pool, None
         close_pool(pool)
-
-
-def _first(mi: Sequence[float]) -> float | None:
-    """The first MI of a study's curve (its start state), None when it has none."""
-    return float(mi[0]) if len(mi) else None
