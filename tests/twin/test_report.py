@@ -238,6 +238,8 @@ def test_the_report_compares_the_twins_time_to_mix_with_the_plants(tmp_path):
     assert c["actual_s"] == pytest.approx(20.3, abs=0.3)
     assert c["error_pct"] == pytest.approx(100 * (16.0 - c["actual_s"]) / c["actual_s"])
     assert -25 < c["error_pct"] < -18
+    assert c["plant_mi_at_decision"] == pytest.approx(0.8, abs=0.01)  # the raw MI's 2 s mean there
+    assert c["twin_mi_at_state"] is None  # no twin column logged
     page = render_html([load_run(d)])
     assert "Twin&#x27;s time to mix against the plant&#x27;s" in page or "Twin's time to mix" in page
     assert f'<b class="ttm-error">{c["error_pct"]:+.0f}</b>' in page

@@ -220,7 +220,10 @@ def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
     rpm ramped as the mill does); ``actual_s``: from the decision until the logged raw camera MI reaches
     the target and stays (``sim.whatif.time_to_target``: the twin's own definition); ``endpoint_s``:
     until the endpoint's mixing time; ``error_pct``: 100 (predicted - actual) / actual;
-    ``state_t_s``: when the study's start state was taken. None when the run has no such decision."""
+    ``state_t_s``: when the study's start state was taken; ``twin_mi_at_state``: the running twin's MI then
+    and ``plant_mi_at_decision``: the camera's raw MI at the decision (means of the logged rows within
+    1 s, the 2 s of ``time_to_target``): a twin bed more mixed than the plant's predicts too short a
+    time. None when the run has no such decision."""
     from sim.whatif import time_to_target
 
     studies = [e for e in run.events if e.get("kind") == "whatif" and isinstance(e.get("time_to_target_s"), dict)]
@@ -256,12 +259,21 @@ def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
         first_mixed = next((e for e in run.events if e.get("kind") == "mixed" and (_num(e.get("t_s")) or -1) >= t_d),
                            None)
         mt = None if first_mixed is None else _num(first_mixed.get("mixing_time_s"))
+        state_t = None if study is None else _num(study.get("requested_t_s"))
         return {"t_decision_s": t_d, "rpm": rpm, "t_reached_s": float(t[reached[0]]), "target_mi": target,
-                "predicted_s": pred, "state_t_s": None if study is None else _num(study.get("requested_t_s")),
+                "twin_mi_at_state": None if state_t is None else _mean_near(t, run.series("twin_mi"), state_t),
+                "plant_mi_at_decision": _mean_near(t, mi, t_d),
+                "predicted_s": pred, "state_t_s": state_t,
                 "actual_s": actual, "endpoint_s": None if mt is None else max(0.0, mt - t_d),
                 "error_pct": None if not actual else 100.0 * (pred - actual) / actual,
                 "predicted_energy_j": _num(d.get("predicted_energy_j"))}
     return None
+
+
+def _mean_near(t: np.ndarray, y: np.ndarray, t0: float, half_s: float = 1.0) -> float | None:
+    """Mean of the finite ``y`` with ``|t - t0| <= half_s`` (None: none)."""
+    sel = np.isfinite(t) & np.isfinite(y) & (np.abs(t - t0) <= half_s)
+    return float(np.mean(y[sel])) if sel.any() else None
 
 
 def _time_to_mix_html(run: RunData) -> str:
@@ -271,6 +283,8 @@ def _time_to_mix_html(run: RunData) -> str:
     rows = [("decision at s", _fmt(c["t_decision_s"], ".1f")), ("rpm picked", _fmt(c["rpm"], "g")),
             ("mill at that rpm at s", _fmt(c["t_reached_s"], ".1f")), ("target MI", _fmt(c["target_mi"], "g")),
             ("twin state of the study from s", _fmt(c["state_t_s"], ".1f")),
+            ("twin MI then / plant MI at the decision (2 s means)",
+             f'{_fmt(c["twin_mi_at_state"])} / {_fmt(c["plant_mi_at_decision"])}'),
             ("twin: predicted time to target s", _fmt(c["predicted_s"], ".1f")),
             ("plant: time to target s (raw MI, 2 s mean, held 5 s)", _fmt(c["actual_s"], ".1f")),
             ("error %", f'<b class="ttm-error">{_fmt(c["error_pct"], "+.0f")}</b>'),
