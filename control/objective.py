@@ -142,10 +142,24 @@ def choose(
                         for rpm, v in sorted(values.items()))
     near = [rpm for rpm in values if abs(rpm - current_rpm) <= 0.5]
     stay = values[min(near, key=lambda x: abs(x - current_rpm))] if near else math.inf
+    versus = _versus(reaching, obj, other, best, current_rpm)
     if abs(best - current_rpm) < 1e-6 or (math.isfinite(stay) and stay - vb < min_rel_gain * abs(stay)):
         return Choice(obj, best, False, values,
                       f"objective {obj}{target}: best {best:g} rpm {_fmt(obj, vb)} vs {_fmt(obj, stay)} staying at "
-                      f"{current_rpm:g} rpm (gain < {min_rel_gain:.0%}) -> stay ({listing})")
+                      f"{current_rpm:g} rpm (gain < {min_rel_gain:.0%}) -> stay ({listing}); {versus}")
     return Choice(obj, best, True, values,
                   f"objective {obj}{target}: {best:g} rpm {_fmt(obj, vb)} vs {_fmt(obj, stay)} at {current_rpm:g} "
-                  f"rpm ({listing})")
+                  f"rpm ({listing}); {versus}")
+
+
+def _versus(reaching: list[RpmPrediction], obj: str, other: str, best: float, current_rpm: float) -> str:
+    """What the other objective would pick among the same rows: the same rpm, or which and at what."""
+    finite = [r for r in reaching if math.isfinite(r.value(other))]
+    if not finite:
+        return f"{other}: no finite values to compare"
+    alt = min(finite, key=lambda r: (r.value(other), abs(r.rpm - current_rpm)))
+    if abs(float(alt.rpm) - best) < 1e-6:
+        return f"{other} picks {best:g} rpm too"
+    b = next(r for r in reaching if float(r.rpm) == best)
+    return (f"{other} would pick {float(alt.rpm):g} rpm ({_fmt(other, alt.value(other))} vs "
+            f"{_fmt(other, b.value(other))} at {best:g} rpm; {_fmt(obj, alt.value(obj))} there)")

@@ -30,11 +30,15 @@ def test_energy_picks_a_different_rpm_than_time_when_the_power_curve_says_so():
     assert en.rpm == 5.0 and en.move  # 5 rpm: 0.5 W x 300 s = 150 J; 25 rpm: 12.5 W x 60 s = 750 J
     assert "objective time" in tm.reason and "60 s" in tm.reason and "120 s" in tm.reason
     assert "objective energy" in en.reason and "150.0 J" in en.reason and "750.0 J" in en.reason
+    # the logged reason says where the two objectives part: each names the other's pick
+    assert "time would pick 25 rpm (60 s vs 300 s at 5 rpm; 750.0 J there)" in en.reason
+    assert "energy would pick 5 rpm (150.0 J vs 750.0 J at 25 rpm; 300 s there)" in tm.reason
 
 
 def test_time_and_energy_agree_when_the_power_is_flat():
     rows = [RpmPrediction(r, 0.95, t, 10.0 * t, 10.0) for r, t in ((5.0, 300.0), (25.0, 60.0), (45.0, 90.0))]
     assert choose(rows, "time", 5.0, LIMITS, 0.9).rpm == choose(rows, "energy", 5.0, LIMITS, 0.9).rpm == 25.0
+    assert "time picks 25 rpm too" in choose(rows, "energy", 5.0, LIMITS, 0.9).reason
 
 
 def test_only_rows_inside_the_limits_and_reaching_the_target_can_win():

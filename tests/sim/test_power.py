@@ -230,3 +230,34 @@ def test_a_whatif_from_a_state_ramps_the_drum_at_the_supervisors_rate(engine):
     assert state.params.accel_rpm_s == 20.0
     with pytest.raises(SimError, match="ramp"):
         run_study([WhatIfJob(rpm=25.0, duration_s=1.0, start=state, ramp_rpm_s=0.0)], workers=1)
+
+
+def test_energy_and_time_part_on_a_real_study_of_a_segregated_bed():
+    """The twin's own power curve decides: from a segregated bed (case A) to MI 0.8, 45 rpm gets there
+    first (about 4 s) but 20 rpm with the least energy (about 14 J against 18 J: its cascade mixes as
+    much per joule and the power grows with the speed). To MI 0.9 20 rpm does not stay there and both
+    objectives pick 45 rpm (docs/endpoint.md, "energy against time"). The rows are the study's summary,
+    as AUTO gets them."""
+    from control.objective import RpmPrediction, choose
+
+    jobs = [WhatIfJob(rpm=r, duration_s=16.0, case="A", seed=0, sample_s=0.5, mixer=paper_mixer(), target_mi=0.8)
+            for r in (20.0, 45.0)]
+    res = run_study(jobs, workers=1)
+
+    def rows(results) -> list[RpmPrediction]:
+        return [RpmPrediction(e["rpm"], e["plateau_mi"], e["time_to_target_s"], e["energy_to_target_j"], e["power_w"])
+                for e in summarize(results)]
+
+    by = {r.job.rpm: r for r in res}
+    assert by[45.0].time_to_target_s < by[20.0].time_to_target_s
+    assert by[20.0].energy_to_target_j < 0.9 * by[45.0].energy_to_target_j
+    tm = choose(rows(res), "time", 5.0, (5.0, 45.0), 0.8)
+    en = choose(rows(res), "energy", 5.0, (5.0, 45.0), 0.8)
+    assert (tm.rpm, en.rpm) == (45.0, 20.0)
+    assert "energy would pick 20 rpm" in tm.reason and "time would pick 45 rpm" in en.reason
+    hi = [replace(r, target_mi=0.9) for r in jobs]
+    res9 = [replace(x, time_to_target_s=time_to_target(x.t_s, x.mi, 0.9)) for x in res]
+    res9 = [replace(x, job=j, energy_to_target_j=energy_to(x.t_s, x.power_w, x.time_to_target_s))
+            for x, j in zip(res9, hi, strict=True)]
+    assert math.isnan(res9[0].time_to_target_s) or res9[0].time_to_target_s > res9[1].time_to_target_s
+    assert choose(rows(res9), "energy", 5.0, (5.0, 45.0), 0.9).rpm == 45.0
