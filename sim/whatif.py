@@ -8,11 +8,11 @@ cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within se
 
 Time to mix and drive power (issue 24): a job with a ``target_mi`` reports the time the twin
 takes to reach it from the start state (``time_to_target``: the first time a centred moving
-average of MI over ``TARGET_SMOOTH_S`` reaches it and stays there for ``TARGET_DWELL_S``; 0 if the
-start is already there; NaN if the run never gets there), the drive power over the plateau part
-(``sim.power``: the bed's torque on the drum times its speed, scaled from the slice to the drum's depth)
-and the energy up to
-the target. ``target_mi`` None: no target (those fields NaN); the application passes its
+average of MI over ``TARGET_SMOOTH_S`` reaches it and stays there to the end of the run, at least
+``TARGET_DWELL_S``; 0 if the start is already there; NaN if the run never gets there), the drive
+power over the plateau part (``sim.power``: the bed's torque on the drum times its speed, scaled from
+the slice to the drum's depth) and the energy up to the target. ``target_mi`` None: no target (those
+fields NaN); the application passes its
 config's endpoint target (``control.endpoint``), which is the one definition of it.
 
 Regime from the flow (``flow_regime``): the fraction of disks without any contact
@@ -65,7 +65,7 @@ __all__ = [
 
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 TARGET_SMOOTH_S = 2.0  # window of the centred moving average of MI that must reach the target (s)
-TARGET_DWELL_S = 5.0  # ... and stay at or above it for this long (s): a noisy touch is not "there"
+TARGET_DWELL_S = 5.0  # ... and stay there to the end, at least this long (s): a noisy touch is not "there"
 _REGIMES = ((1e-4, "slumping"), (1e-2, "rolling"), (1e-1, "cascading"), (1.0, "cataracting"))
 
 
@@ -218,11 +218,12 @@ def plateau(t_s: np.ndarray, mi: np.ndarray, tail: float = 1.0 / 3.0) -> tuple[f
 
 def time_to_target(t_s: np.ndarray, mi: np.ndarray, target: float | None,
                    smooth_s: float = TARGET_SMOOTH_S, dwell_s: float = TARGET_DWELL_S) -> float:
-    """Time (s, from ``t_s[0]``) at which MI reaches ``target`` and stays: the first centre time of a moving
-    average over ``smooth_s`` (NaN samples left out) from which that average stays at or above ``target``
-    for ``dwell_s`` (the series must cover the whole dwell); 0 when that holds from the first window on.
-    NaN if it never does or ``target`` is None. Both the twin's curves and the plant's logged camera MI
-    (``twin.report``) are measured with it."""
+    """Time (s, from ``t_s[0]``) from which MI is at ``target`` to the end of the series: the first centre
+    time of a moving average over ``smooth_s`` (NaN samples left out) after which that average never falls
+    below ``target`` again, held for at least ``dwell_s`` before the series ends; 0 when that holds from
+    the first window on. NaN if it never does (a plateau at the target that dips below it is not there)
+    or ``target`` is None. Both the twin's curves (the study's horizon) and the plant's logged camera MI
+    (``twin.report``: the same horizon after the decision) are measured with it."""
     t = np.asarray(t_s, float)
     y = np.asarray(mi, float)
     if target is None or t.size == 0:
@@ -235,14 +236,11 @@ def time_to_target(t_s: np.ndarray, mi: np.ndarray, target: float | None,
     den = np.convolve(ok.astype(float), np.ones(w), mode="valid")
     sm = np.divide(num, den, out=np.full(num.size, np.nan), where=den > 0)
     tc = np.convolve(t, np.ones(w) / w, mode="valid")
-    above = sm >= target  # NaN compares False
-    below = np.nonzero(~above)[0]
-    for i in np.nonzero(above)[0]:
-        nxt = below[np.searchsorted(below, i)] if below.size and below[-1] > i else None
-        held_to = tc[nxt] if nxt is not None else tc[-1]
-        if held_to - tc[i] >= dwell_s - 1e-9:
-            return 0.0 if i == 0 else float(tc[i] - t[0])
-    return math.nan
+    below = np.nonzero(~(sm >= target))[0]  # NaN compares False: a gap is not "there"
+    i = 0 if below.size == 0 else int(below[-1]) + 1
+    if i >= sm.size or tc[-1] - tc[i] < dwell_s - 1e-9:
+        return math.nan
+    return 0.0 if i == 0 else float(tc[i] - t[0])
 
 
 def energy_to(t_s: np.ndarray, power_w: np.ndarray, t_end_s: float) -> float:

@@ -122,6 +122,10 @@ def test_time_to_target_on_synthetic_curves():
     touch[6:10] = 0.8  # 2 s above 0.7 at 3-4.5 s, then back below: not there (the dwell); there at 7 s
     assert time_to_target(t, touch, 0.7) == pytest.approx(7.0, abs=0.3)
     assert math.isnan(time_to_target(t[t <= 8.0], ramp[t <= 8.0], 0.5))  # crossed at 5 s, the run ends before the dwell
+    dip = ramp.copy()
+    dip[(t >= 12.0) & (t < 14.0)] = 0.3  # there at 5 s, then 2 s below: "there" only from the last dip on
+    assert time_to_target(t, dip, 0.5) == pytest.approx(13.75, abs=0.3)  # the 2 s mean past the dip
+    assert math.isnan(time_to_target(t[t <= 17.0], dip[t <= 17.0], 0.5))  # after the dip, < 5 s to the end
     assert energy_to(t, np.full(t.size, 2.0), 5.0) == pytest.approx(10.0)
     assert energy_to(t, np.full(t.size, 2.0), 5.25) == pytest.approx(10.5)
     assert math.isnan(energy_to(t, np.full(t.size, 2.0), math.nan))

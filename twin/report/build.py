@@ -210,6 +210,10 @@ def _rpm_key(k: Any) -> float | None:
         return None
 
 
+DEFAULT_HORIZON_S = 40.0
+"""The plant's window after a decision when the run logged no study horizon (``RunConfig.whatif_horizon_s``)."""
+
+
 def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
     """The twin's predicted time to mix at the rpm AUTO picked against the plant's (docs/endpoint.md).
 
@@ -218,7 +222,8 @@ def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
     (``predicted_time_to_target_s``, objective time/energy) or whose predictions are a what-if study's
     with times. ``predicted_s``: the study's time to the target at that rpm (from its start state, the
     rpm ramped as the mill does); ``actual_s``: from the decision until the logged raw camera MI reaches
-    the target and stays (``sim.whatif.time_to_target``: the twin's own definition); ``endpoint_s``:
+    the target and stays there to the end of the study's horizon after the decision (or the next
+    ``move``): ``sim.whatif.time_to_target``, the twin's own definition, None when it does not; ``endpoint_s``:
     until the endpoint's mixing time; ``error_pct``: 100 (predicted - actual) / actual;
     ``state_t_s``: when the study's start state was taken; ``twin_mi_at_state``: the running twin's MI then
     and ``plant_mi_at_decision``: the camera's raw MI at the decision (means of the logged rows within
@@ -250,7 +255,8 @@ def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
             from twin.loop import endpoint_config
 
             target = endpoint_config().target_mi
-        after = np.isfinite(t) & (t >= t_d)
+        horizon = _num(None if study is None else study.get("duration_s")) or DEFAULT_HORIZON_S
+        after = np.isfinite(t) & (t >= t_d) & (t <= min(t_d + horizon, t_next))  # the study's horizon
         actual = None
         if after.sum() >= 2:
             tt = t[after]
