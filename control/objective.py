@@ -73,18 +73,24 @@ class Choice:
     reason: str
 
 
-def stale_start(rows: Iterable[RpmPrediction], level: float | None, target_mi: float | None) -> str:
+def stale_start(rows: Iterable[RpmPrediction], level: float | None, target_mi: float | None,
+                segregated: bool = False) -> str:
     """Why a study's times to the target do not describe the bed now ("" when they do): the study's
     twin bed was at the target at once (a row of 0 s: its MI held the target from the start) while
-    the trend ``level`` now is below it (the bed segregated while the study waited or ran, or the
-    twin's bed was more mixed than the plant's)."""
-    if target_mi is None or level is None or not math.isfinite(level) or level >= target_mi:
+    the trend ``level`` now is below it, or the segregation detector says the bed segregated
+    (``segregated``: a trend that overshoots to the target is no proof of a mixed bed). The bed
+    segregated while the study waited or ran, or the twin's bed was more mixed than the plant's."""
+    if target_mi is None:
+        return ""
+    below = level is not None and math.isfinite(level) and level < target_mi
+    if not (below or segregated):
         return ""
     at_once = [float(r.rpm) for r in rows if r.time_to_target_s is not None and r.time_to_target_s == 0.0]
     if not at_once:
         return ""
+    now = f"the trend is {level:.3f} now" if below else "the bed segregated"
     return (f"the study's twin bed was at the target {target_mi:g} at once ({', '.join(f'{r:g}' for r in at_once)}"
-            f" rpm: 0 s), the trend is {level:.3f} now")
+            f" rpm: 0 s), {now}")
 
 
 def _power(r: RpmPrediction) -> float:

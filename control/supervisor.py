@@ -48,7 +48,7 @@ Objective and endpoint (issue 24, ``control.objective``, ``control.endpoint``)
     target soonest / with least energy (rows missing: the plateau scoring, said in the
     reason); a decision is then also due while the trend is below ``target_mi`` and the
     batch is not mixed. A study whose twin bed was at the target at once (a 0 s row) while the
-    trend is below it now (``control.objective.stale_start``) is asked again once (a *hold*
+    trend is below it or the bed segregated (``control.objective.stale_start``) is asked again once (a *hold*
     decision says so). The request carries ``max_rate_rpm_per_s`` so the twin ramps as the mill.
     ``stop_at_endpoint``: in AUTO, once the application reports the
     batch mixed (``inputs.mixed``, from ``control.endpoint``), one ``endpoint`` decision
@@ -683,7 +683,7 @@ class Supervisor:
         self._due_since = None
         why = self.detector.why or ("segregation" if self.detector.segregated else f"below target MI {c.target_mi}")
         if preds is not None and c.objective != "plateau" and preds.rows:
-            stale = stale_start(preds.rows.values(), inputs.trend.level, c.target_mi)
+            stale = stale_start(preds.rows.values(), inputs.trend.level, c.target_mi, self.detector.segregated)
             if stale and (self._restudy_t is None or preds.t_s < self._restudy_t):  # ask once more, then use it
                 self._predictions, self._restudy_t, self._due_since = None, now_s, now_s
                 self._request = self._prediction_request(now_s, current)

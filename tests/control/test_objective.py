@@ -100,6 +100,8 @@ def test_a_study_whose_bed_is_at_the_target_at_once_is_stale_while_the_trend_is_
     at_once = [RpmPrediction(5.0, 0.87, None), RpmPrediction(25.0, 0.91, 0.0), RpmPrediction(45.0, 0.95, 0.0)]
     assert "at the target 0.9 at once (25, 45 rpm: 0 s), the trend is 0.800" in stale_start(at_once, 0.80, 0.9)
     assert stale_start(at_once, 0.92, 0.9) == ""  # the trend is there too: 0 s is right
+    # ... unless the detector says the bed segregated (the demo's trend overshot to 1.0 on raw MI 0.85)
+    assert "at once (25, 45 rpm: 0 s), the bed segregated" in stale_start(at_once, 1.0, 0.9, segregated=True)
     assert stale_start(at_once, 0.80, None) == "" and stale_start(at_once, math.nan, 0.9) == ""
     # the twin started at MI 0.903 but its smoothed MI took 10 s to hold the target: the times are news
     later = [RpmPrediction(5.0, 0.87, None), RpmPrediction(25.0, 0.93, 10.75), RpmPrediction(45.0, 0.95, 9.75)]

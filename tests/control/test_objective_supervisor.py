@@ -92,7 +92,7 @@ def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
     assert (d.objective, d.stop_at_endpoint) == ("plateau", False)
 
 
-def _stepper(at_once: bool, level: float = 0.80):
+def _stepper(at_once: bool, level: float = 0.80, rate: float = 0.0):
     """A "time" supervisor at ``level`` whose requests are answered at once with ROWS (``at_once``: the
     25 rpm row says 0 s, the twin's bed was at the target from the start)."""
     from dataclasses import replace
@@ -104,7 +104,8 @@ def _stepper(at_once: bool, level: float = 0.80):
     decisions, requests = [], []
     for i in range(80):
         t = i * 0.5
-        inp = SupervisorInputs(trend=est(t, level), actual_rpm=15.0, setpoint_rpm=15.0, mill_running=True,
+        trend = TrendEstimate(t, level, rate, 0.01, 0.001, level - 0.02, level + 0.02, True, False, settled=True)
+        inp = SupervisorInputs(trend=trend, actual_rpm=15.0, setpoint_rpm=15.0, mill_running=True,
                                last_valid_mi_s=t, twin_updated_s=t)
         d, req = sup.step(t, inp)
         if req is not None:
@@ -129,7 +130,7 @@ def _stepper(at_once: bool, level: float = 0.80):
 def replace_t(inp: SupervisorInputs, t: float) -> SupervisorInputs:
     from dataclasses import replace
 
-    return replace(inp, trend=est(t, inp.trend.level), last_valid_mi_s=t, twin_updated_s=t)
+    return replace(inp, trend=replace(inp.trend, t_s=t), last_valid_mi_s=t, twin_updated_s=t)
 
 
 def test_a_study_from_a_bed_already_at_the_target_is_asked_again_once_then_used():
@@ -157,3 +158,11 @@ def test_a_study_from_the_bed_below_the_target_is_used_and_the_decision_carries_
     from twin.records import DecisionMade
 
     assert DecisionMade.of(move).predicted_time_to_target_s == 60.0  # the run log's record carries it
+
+
+def test_a_study_at_the_target_at_once_is_stale_when_the_bed_segregated_whatever_the_trend_level():
+    """The demo's Kalman trend overshot to 1.0 while the raw MI was 0.85 (seed 1): the level alone let a
+    study of 0 s through. The segregation detector (here: the trend falling fast) says otherwise."""
+    decisions, requests = _stepper(at_once=True, level=1.0, rate=-0.05)
+    assert len(requests) == 2
+    assert "at once (25 rpm: 0 s), the bed segregated: asking the twin again" in decisions[0].reason
