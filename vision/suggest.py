@@ -79,6 +79,7 @@ __all__ = [
     "OPENING_GRID",
     "OPENING_KEEP",
     "OPENING_SHIFT",
+    "SAMPLE_BUDGET",
     "DrumSamples",
     "class_preview",
     "colour_name",
@@ -398,6 +399,10 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
     )
 
 
+SAMPLE_BUDGET = 40000
+"""``suggest_classes`` takes about this many colour samples from the whole source (split over
+the frames expected), so the colour model's fit does not grow with ``--frames``."""
+MIN_SAMPLES_PER_FRAME = 50
 KEEP_FRAMES = 24
 """``suggest_classes`` keeps at most this many frames (spread evenly over the source) for the
 checks that need whole frames (particle size, the class opening); of the others it keeps
@@ -425,7 +430,10 @@ def suggest_classes(
     total = len(frames) if isinstance(frames, Sequence) else n_frames
     if rois is not None and isinstance(frames, Sequence) and len(rois) != len(frames):
         raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
-    per = per_frame or max(2000, 40000 // max(total or 12, 1))
+    # a budget of colour samples for the whole source, not per frame: up to 20 frames the same
+    # 2,000+ a frame as before; 500 frames held 1,000,000 samples (the EM's arrays grew with
+    # them: peak RSS 723 MB at 12 frames, 811 MB at 500 of the real PMMA video)
+    per = per_frame or max(MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET // max(total or 12, 1))
     rng = np.random.default_rng(seed)
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     light_px: list[np.ndarray] = []
