@@ -61,6 +61,7 @@ from twin.live.records import (
     SetMode,
     StartMill,
     StopMill,
+    SwapClasses,
     TwinInfo,
 )
 from twin.live.supervise import SupervisorWorker
@@ -168,6 +169,8 @@ class LiveLoop:
         else:
             meter = Meter(roi=roi) if classes is None else Meter(roi=roi, classes=tuple(classes))
         self._classes = tuple(meter.colour_classes)
+        self._meter_config, self._roi = meter_config, roi  # (re-learning the classes starts from them)
+        self._camera_commands: queue.SimpleQueue[SwapClasses] = queue.SimpleQueue()
         # snapshots (one writer each)
         self.camera_box: Latest[CameraInfo] = Latest(CameraInfo())
         self.frames_box: Latest[FrameInfo] = Latest(FrameInfo())
@@ -184,6 +187,7 @@ class LiveLoop:
         self.camera = CameraWorker(
             frames, meter, readings, self.camera_box, self.state,
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,
+            commands=self._camera_commands,
         )
         self.process = ProcessWorker(
             readings, MITrend(trend_config(seams)), self.frames_box, self.view, self.events, slopes,
@@ -382,6 +386,36 @@ class LiveLoop:
     def reseed_twin(self) -> None:
         self.events.event("operator", self.now_s(), action="reseed")
         self.twin.request("reseed")
+
+    def relearn_classes(self) -> str:
+        """Operator (after ``lighting_changed:``): learn the colour classes again from the newest
+        camera frame (``vision.suggest.relearn_classes``: names and order kept, the light
+        reference the frame's) off the camera thread, then swap the meter in from the next
+        frame on (``SwapClasses``). Logged as an operator action, a refusal or failure as
+        ``operator_rejected``. Returns what the dashboard tells the operator."""
+        t, image = self.now_s(), self.camera_box.get().image
+        if image is None:
+            self.events.event("operator_rejected", t, action="relearn_classes", error="no camera frame yet")
+            return "**re-learn refused: no camera frame yet**"
+        self.events.event("operator", t, action="relearn_classes")
+        th = threading.Thread(target=self._relearn, args=(image.copy(),), name="relearn", daemon=True)
+        self._threads.append(th)
+        th.start()
+        return "re-learning the classes from the live bed ..."
+
+    def _relearn(self, image: np.ndarray) -> None:
+        from vision.config import MeterConfig
+        from vision.suggest import relearn_classes
+
+        try:
+            cfg = relearn_classes(self._meter_config or MeterConfig(self._classes), [image])
+            meter = cfg.make_meter(roi=self._roi)
+        except VisionError as exc:
+            self.events.event("operator_rejected", self.now_s(), action="relearn_classes", error=str(exc))
+            return
+        self._meter_config = cfg
+        self._camera_commands.put(SwapClasses(meter))
+        self.events.event("operator", self.now_s(), action="relearn_classes_swapped")
 
     def run_whatif(self, rpms: Sequence[float], duration_s: float) -> None:
         """Queue an operator study (bad input is an ``operator_rejected`` event, never an

@@ -52,7 +52,13 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
     ``rebake_s``: one re-bake of the 2^24 table (the cost of a light change);
     ``tracked_ratio``: tracked / plain frames/s in this run. ``*_cpu_fps``: the same paths per
     second of the thread's CPU time (on a shared machine, the numbers to compare between runs),
-    ``glcm_cpu_ratio`` their ratio."""
+    ``glcm_cpu_ratio`` their ratio. ``tracked_estimate_share``: the share of frames of the
+    tracked CPU row that ran a full light estimate (the four bench scenes differ in their
+    colour shares, so the meter's jump check starts one on nearly every frame: the worst case,
+    not the every-4th-frame default of a steady video). ``centroid_cpu_fps_light_moved``: the
+    light-moved row in CPU time (a re-bake per frame). ``centroid_cpu_fps_islands``: the island
+    filter on (``[meter] island_px``, ``vision.islands``; 30 px), ``islands_cost_ratio`` its
+    CPU frames/s over the plain path's."""
     prev = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -94,6 +100,16 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
             Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls).measure, vga, seconds, clock=cpu)
         res["glcm_cpu_fps"] = frames_per_second(GLCMMeter(roi).measure, vga, seconds, clock=cpu)
         res["glcm_cpu_ratio"] = res["centroid_cpu_fps"] / res["glcm_cpu_fps"]
+        counted = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls)
+        for i in range(40):
+            counted.measure(vga[i % len(vga)])
+        res["tracked_estimate_share"] = counted.estimates / 40
+        moved_cpu = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls, track_every=1)
+        res["centroid_cpu_fps_light_moved"] = frames_per_second(moved_cpu.measure, moved, seconds, clock=cpu)
+        say("centroid 640x480, island filter ...")
+        res["centroid_cpu_fps_islands"] = frames_per_second(Meter(roi=roi, island_px=30).measure, vga, seconds,
+                                                            clock=cpu)
+        res["islands_cost_ratio"] = res["centroid_cpu_fps_islands"] / res["centroid_cpu_fps"]
         say("Lacey 640x480 ...")
         res["lacey_fps"] = frames_per_second(LaceyMeter(roi=roi).measure, vga, seconds)
         say("centroid 1920x1080 ...")

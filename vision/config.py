@@ -6,6 +6,7 @@ Example (see ``configs/example.toml``)::
     bed = "color"          # "color" (union of classes) or "dark" (backlit drum)
     min_share = 0.005      # a class below this share of the drum's pixels -> NaN + flag
     opening = false        # true: class opening (drops thin rims/gaps of JPEG chroma blur)
+    island_px = 0          # > 0: islands of a class up to this many px inside another take its class
     roi = [320, 318, 312]  # optional manual drum circle cx, cy, r (px)
 
     [[classes]]            # two or more counted classes; the MI uses the first two
@@ -47,7 +48,7 @@ __all__ = ["MeterConfig", "config_to_toml", "load_config", "parse_config"]
 
 _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "dark_v_max", "stride", "roi",
                "roi_kind", "half_w_px", "half_h_px", "opening", "erode", "light_reference", "camera_rotation_deg",
-               "light_reference_classes",
+               "light_reference_classes", "island_px",
                "mirror"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
 _TOP_KEYS = {"meter", "classes", "drum", "particles", "drive"}
@@ -85,6 +86,10 @@ class MeterConfig:
     this (deg); the slope, curvature and overlay are given in gravity's frame."""
     mirror: bool = False
     """True when the drum is filmed through a mirror (the image is gravity's view flipped left-right, then turned)."""
+    island_px: int = 0
+    """The island filter (``vision.islands``): a component of one class of at most this many px
+    enclosed by another class takes that class (the specular highlights of glossy particles);
+    0 = off."""
     mixer_tables: dict = field(default_factory=dict, compare=False)
     """The config's ``[drum]`` and ``[[particles]]`` tables as read (the twin's mixer, parsed by
     ``sim.mixer.parse_mixer``); empty when the config has none."""
@@ -111,7 +116,7 @@ class MeterConfig:
             light_reference=None if self.light_reference is None else np.asarray(self.light_reference),
             light_reference_classes=(None if self.light_reference_classes is None
                                      else np.asarray(self.light_reference_classes)),
-            camera_rotation_deg=self.camera_rotation_deg, mirror=self.mirror,
+            camera_rotation_deg=self.camera_rotation_deg, mirror=self.mirror, island_px=self.island_px,
         )
 
 
@@ -229,6 +234,7 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     opening = meter.get("opening", False)
     if not isinstance(opening, bool):
         raise VisionError(f"{where}: opening must be true or false, got {opening!r}")
+    island_px = _int(where, "island_px", meter.get("island_px", 0), 0, 10**6)
     light_ref = None
     if "light_reference" in meter:
         try:
@@ -286,7 +292,7 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
                        warnings, opening, light_ref, light_cls, rot, mirror,
-                       {k: data[k] for k in MIXER_KEYS if k in data}, drive_table=data.get("drive", {}))
+                       island_px, {k: data[k] for k in MIXER_KEYS if k in data}, drive_table=data.get("drive", {}))
 
 
 def _nums(values, digits: int = 6) -> str:
@@ -307,6 +313,8 @@ def config_to_toml(cfg: MeterConfig, comment: str = "") -> str:
         lines.append(f"stride = {cfg.stride}")
     if cfg.opening:
         lines.append("opening = true")
+    if cfg.island_px:
+        lines.append(f"island_px = {cfg.island_px}  # highlights of glossy particles: see vision.islands")
     if cfg.camera_rotation_deg != 0.0:
         lines.append(f"camera_rotation_deg = {cfg.camera_rotation_deg:g}  # the image is gravity's view turned "
                      "counter-clockwise by this")

@@ -21,6 +21,7 @@ import numpy as np
 from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
 from vision.errors import VisionError
 from vision.glare import HALO, RING, glare_fill
+from vision.islands import island_relabel, relabel_moments
 from vision.mixing import mixing_indices
 from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables, row_spans
 from vision.photometric import (
@@ -176,6 +177,7 @@ class Meter:
         mirror: bool = False,
         track_every: int = 4,
         rebake_threshold: float = 0.03,
+        island_px: int = 0,
     ) -> None:
         self.colour_classes = check_class_set(classes)
         self.classes = counted_classes(self.colour_classes)
@@ -201,7 +203,11 @@ class Meter:
         self._class_ref = (None if light_reference_classes is None or self._light_ref is None
                            else check_class_reference(light_reference_classes, len(self.classes) + 1))
         check_meter_numbers(track_every=track_every, rebake_threshold=rebake_threshold,
-                            camera_rotation_deg=camera_rotation_deg)
+                            camera_rotation_deg=camera_rotation_deg, island_px=island_px)
+        self.island_px = int(island_px)
+        # each counted class's CIELAB L (of its display colour): islands go only into a darker class
+        self._lightness = [float(v) for v in cv2.cvtColor(
+            np.array([[c.display_bgr for c in self.classes]], np.uint8), cv2.COLOR_BGR2LAB)[0, :, 0]]
         if not isinstance(mirror, (bool, np.bool_)):
             raise VisionError(f"mirror must be true or false, got {mirror!r}")
         self.camera_rotation_deg = float(camera_rotation_deg)
@@ -215,6 +221,7 @@ class Meter:
         self._means_now = np.zeros(3)
         self._means_then = np.full(3, -1e9)  # no estimate yet
         self.rebakes = 0
+        self.estimates = 0  # full light estimates made (``vision.photometric.track_light``)
         self._sums = np.zeros((len(self.classes) + 2, 6), np.int64)
         self._roi = roi
         self._roi_given = roi is not None
@@ -237,6 +244,7 @@ class Meter:
         assert self._light_ref is not None and g.sample is not None
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine)
         self._light = est
+        self.estimates += 1
         if est.cause is not None:
             return
         if max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True)) \
@@ -326,15 +334,39 @@ class Meter:
                              cell_offset_xy=g.cell_off)
         k = len(self.classes)
         rows = sums.tolist()  # Python ints: one conversion, not one per element
+        deltas = []
+        if self.island_px > 0:
+            deltas.append(self._island_delta(img, g))
         if self.glare_fill and rows[k][0] > 0:
-            for i, d in enumerate(self._glare_delta(img, g, rows[k][0]).tolist()):
+            deltas.append(self._glare_delta(img, g, rows[k][0]))
+        for delta in deltas:
+            for i, d in enumerate(delta.tolist()):
                 rows[i] = [a + b for a, b in zip(rows[i], d, strict=True)]
         return self._reading(rows, g)
+
+    def _grid_labels(self, img: np.ndarray, g: _Geometry, ia: int, ib: int, ja: int,
+                     jb: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+        """The kernel's labels of grid rows ``ia:ib`` and columns ``ja:jb`` (0 outside the ROI's
+        spans), that window's inside mask, and the image px of its first grid pixel."""
+        s = self.stride
+        x0, y0 = g.box[:2]
+        sub = np.ascontiguousarray(img[y0 + ia * s: y0 + ib * s: s, x0 + ja * s: x0 + jb * s: s])
+        jj = np.arange(ja, ja + sub.shape[1])
+        rows = slice(ia, ia + sub.shape[0])
+        inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])  # the spans
+        return kernel_labels(sub, self._tables.fine, inside, self.opening), inside, (x0 + ja * s, y0 + ia * s)
+
+    def _island_delta(self, img: np.ndarray, g: _Geometry) -> np.ndarray:
+        """The class moments' change from the island filter (``vision.islands``) over the ROI."""
+        k = len(self.classes)
+        labels, _, origin = self._grid_labels(img, g, 0, len(g.first), 0, int(g.last.max()))
+        area = max(1, self.island_px // (self.stride * self.stride))  # image px -> grid px
+        new = island_relabel(labels, k, area, lightness=self._lightness)
+        return relabel_moments(labels, new, k, origin, self.stride)
 
     def _glare_delta(self, img: np.ndarray, g: _Geometry, n_glare: float) -> np.ndarray:
         """``vision.glare.glare_fill`` on the grid window around the frame's glare cells."""
         s = self.stride
-        x0, y0 = g.box[:2]
         ci, cj = np.nonzero(g.gocc)
         cell = 1 << g.shift
         margin = (HALO + RING) * math.sqrt(n_glare / math.pi) + 6.0  # grid px beyond the glare's cells
@@ -343,12 +375,8 @@ class Meter:
         ib = min(len(g.first), int(math.ceil(((ci.max() + 1) * cell - oy) / s + margin)))
         ja = max(0, int((cj.min() * cell - ox) / s - margin))
         jb = min(int(g.last.max()), int(math.ceil(((cj.max() + 1) * cell - ox) / s + margin)))
-        sub = np.ascontiguousarray(img[y0 + ia * s: y0 + ib * s: s, x0 + ja * s: x0 + jb * s: s])
-        jj = np.arange(ja, ja + sub.shape[1])
-        rows = slice(ia, ia + sub.shape[0])
-        inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])  # the spans
-        labels = kernel_labels(sub, self._tables.fine, inside, self.opening)
-        return glare_fill(labels, inside, len(self.classes), (x0 + ja * s, y0 + ia * s), s)
+        labels, inside, origin = self._grid_labels(img, g, ia, ib, ja, jb)
+        return glare_fill(labels, inside, len(self.classes), origin, s)
 
     def _reading(self, rows: list[list[float]], g: _Geometry) -> Reading:
         roi = g.roi
@@ -521,7 +549,7 @@ def check_meter_numbers(**values: float) -> None:
         "min_pixels": (1, 10**9, True), "dark_v_max": (0, 255, True), "stride": (1, 16, True),
         "min_share": (0.0, 0.5, False), "collapse_ratio": (0.0, 1.0, False), "history": (1, 10_000, True),
         "track_every": (1, 10_000, True), "rebake_threshold": (0.001, 1.0, False),
-        "camera_rotation_deg": (-360.0, 360.0, False),
+        "camera_rotation_deg": (-360.0, 360.0, False), "island_px": (0, 10**6, True),
     }
     for key, v in values.items():
         lo, hi, integer = limits[key]

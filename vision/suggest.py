@@ -38,6 +38,11 @@
    coarse grid the opening is always on (it costs nothing there, and the gaps it drops
    need not move a centroid on the frames given -- a mixed bed -- to move one on others).
 
+8. The island filter (``[meter] island_px``, ``vision.islands``) is turned on, at half a
+   particle's area, when it moves a class centroid on the frames given by more than
+   ``OPENING_SHIFT`` R (``needs_islands``): the specular highlights of glossy dark particles
+   take the colour of a lighter class of the same hue, small islands inside the dark particles.
+
 Classes are named by colour and sorted by name, so the TOML is the same for any frames
 of the same material pair.
 """
@@ -74,10 +79,13 @@ __all__ = [
     "OPENING_GRID",
     "OPENING_KEEP",
     "OPENING_SHIFT",
+    "SAMPLE_BUDGET",
     "DrumSamples",
     "class_preview",
     "colour_name",
     "fit_colour_model",
+    "island_area_px",
+    "needs_islands",
     "needs_opening",
     "opening_stride",
     "particle_diameter_px",
@@ -391,6 +399,10 @@ def _component(mean: np.ndarray, cov: np.ndarray, weight: float) -> LabComponent
     )
 
 
+SAMPLE_BUDGET = 40000
+"""``suggest_classes`` takes about this many colour samples from the whole source (split over
+the frames expected), so the colour model's fit does not grow with ``--frames``."""
+MIN_SAMPLES_PER_FRAME = 50
 KEEP_FRAMES = 24
 """``suggest_classes`` keeps at most this many frames (spread evenly over the source) for the
 checks that need whole frames (particle size, the class opening); of the others it keeps
@@ -418,7 +430,10 @@ def suggest_classes(
     total = len(frames) if isinstance(frames, Sequence) else n_frames
     if rois is not None and isinstance(frames, Sequence) and len(rois) != len(frames):
         raise VisionError(f"{len(rois)} drum ROIs for {len(frames)} frames")
-    per = per_frame or max(2000, 40000 // max(total or 12, 1))
+    # a budget of colour samples for the whole source, not per frame: up to 20 frames the same
+    # 2,000+ a frame as before; 500 frames held 1,000,000 samples (the EM's arrays grew with
+    # them: peak RSS 723 MB at 12 frames, 811 MB at 500 of the real PMMA video)
+    per = per_frame or max(MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET // max(total or 12, 1))
     rng = np.random.default_rng(seed)
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     light_px: list[np.ndarray] = []
@@ -471,9 +486,35 @@ def suggest_classes(
             # on a coarse grid the opening is always on: it costs nothing there (the grid is
             # faster than the full one), and the blurred gaps it drops may not move a centroid
             # on the frames given (a mixed bed) yet will on others (a segregated one)
-            return replace(cfg, opening=True, stride=stride) if verdict or stride > 1 else cfg
+            if verdict or stride > 1:
+                cfg = replace(cfg, opening=True, stride=stride)
+            break
         stride //= 2
-    return cfg
+    island = island_area_px(d)
+    return replace(cfg, island_px=island) if island and needs_islands(cfg, kf, kr, island) else cfg
+
+
+def island_area_px(particle_diameter: float) -> int:
+    """The island filter's largest island (px) for particles ``particle_diameter`` px across:
+    half a particle's area (a highlight is a small part of its particle, a whole particle of
+    the lighter class is never an island; ``particle_diameter_px`` reads low on glossy shaded
+    discs: 8.7 px for the suite's 12.4 px green discs, whose highlights are 16-20 px islands);
+    0 when the size is unknown."""
+    if not (math.isfinite(particle_diameter) and particle_diameter > 0):
+        return 0
+    return max(1, int(round(0.5 * math.pi * (0.5 * particle_diameter) ** 2)))
+
+
+def needs_islands(cfg: MeterConfig, frames: Sequence[np.ndarray], rois: Sequence[DrumROI], island_px: int) -> bool:
+    """Whether the island filter (``[meter] island_px``) moves a class centroid of ``cfg`` by
+    more than ``OPENING_SHIFT`` R on any of these frames."""
+    plain, filtered = replace(cfg, island_px=0), replace(cfg, island_px=island_px)
+    for img, roi in zip(frames, rois, strict=True):
+        a, b = plain.make_meter(roi).measure(img), filtered.make_meter(roi).measure(img)
+        for sa, sb in zip(a.classes, b.classes, strict=True):
+            if float(np.hypot(sa.cx_px - sb.cx_px, sa.cy_px - sb.cy_px)) / roi.r_px > OPENING_SHIFT:
+                return True  # (NaN, a class too small on a frame: no vote)
+    return False
 
 
 def relearn_classes(

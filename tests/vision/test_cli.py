@@ -215,9 +215,12 @@ def test_bench_vision_json():
     assert r.code == 0, r.err
     res = json.loads(r.out)
     for k in ("centroid_fps", "glcm_fps", "lacey_fps", "centroid_fps_1080p", "centroid_cpu_fps",
-              "centroid_cpu_fps_tracked", "glcm_cpu_fps", "centroid_fps_light_moved", "rebake_s"):
+              "centroid_cpu_fps_tracked", "glcm_cpu_fps", "centroid_fps_light_moved", "rebake_s",
+              "centroid_cpu_fps_light_moved", "centroid_cpu_fps_islands"):
         assert res[k] > 0
     assert res["glcm_cpu_ratio"] == pytest.approx(res["centroid_cpu_fps"] / res["glcm_cpu_fps"])
+    assert res["islands_cost_ratio"] == pytest.approx(res["centroid_cpu_fps_islands"] / res["centroid_cpu_fps"])
+    assert 0.0 < res["tracked_estimate_share"] <= 1.0
 
 
 def test_help_lists_commands():

@@ -99,6 +99,10 @@ class Viewers:
             )
             recal = gui.add_button("Recalibrate twin", icon=viser.Icon.ADJUSTMENTS, disabled=not cc.authorised)
             reseed = gui.add_button("Re-seed twin from camera", icon=viser.Icon.CAMERA, disabled=not cc.authorised)
+            relearn = gui.add_button(  # issue 22: after lighting_changed:, the classes from the live bed
+                "Re-learn classes", icon=viser.Icon.REFRESH, disabled=not cc.authorised,
+                hint="learn the colour classes again from the live bed (when the light moved too far)",
+            )
         with self.layout.whatif_folder:
             rpms = gui.add_text("What-if rpm list", "5, 20, 40, 60", disabled=not cc.authorised, order=-2)
             dur = gui.add_number(
@@ -107,7 +111,7 @@ class Viewers:
             )
             run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1.5)
             cancel = gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=not cc.authorised, order=-1)
-        cc.handles = [cc.mode, start, stop, recal, reseed, rpms, dur, run, cancel]
+        cc.handles = [cc.mode, start, stop, recal, reseed, relearn, rpms, dur, run, cancel]
         cc.estop = estop
 
         def guarded(fn: Callable[[viser.GuiEvent], None]) -> Callable[[viser.GuiEvent], None]:
@@ -156,6 +160,7 @@ class Viewers:
         cancel.on_click(guarded(lambda e: self._cancel_whatif(cc)))
         recal.on_click(guarded(lambda e: self.controls.recalibrate()))
         reseed.on_click(guarded(lambda e: self.controls.reseed_twin()))
+        relearn.on_click(guarded(lambda e: self._relearn(cc)))
 
         @run.on_click
         @guarded
@@ -176,6 +181,16 @@ class Viewers:
             cc.status.content = "**cancel: not supported by this loop**"
             return
         cc.status.content = "what-if cancelled" if cancel() else "no what-if to cancel"
+
+    def _relearn(self, cc: ClientControls) -> None:
+        """The loop's typed relearn command (``relearn_classes``: a ``SwapClasses`` for the camera
+        worker, logged as an operator action); what it answered goes to the viewer who asked."""
+        relearn = getattr(self.controls, "relearn_classes", None)
+        if relearn is None:
+            cc.status.content = "**re-learn: not supported by this loop**"
+            return
+        answer = relearn()
+        cc.status.content = answer if isinstance(answer, str) else "re-learning the classes from the live bed ..."
 
     def _sync_rpm_enabled(self, cc: ClientControls, mode: str) -> None:
         """Show ``mode`` in the viewer's selector; the rpm slider is live only in MANUAL."""

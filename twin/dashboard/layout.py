@@ -73,7 +73,7 @@ def numbers_markdown(n: Panel) -> str:
     lines.append("")
     if str(n.light_state or "").startswith("changed"):
         lines.append("**The light moved too far to map back to the set-up's: no MI.** Re-learn the classes "
-                     "from the live bed (`drumtwin classes suggest`, then restart with the new config).  ")
+                     "from the live bed: **Re-learn classes** under Controls (with the control token).  ")
     if n.mixed:  # issue 24: the batch endpoint (control.endpoint)
         lines.append(f"**MIXED** since {_fmt(n.mixing_time_s, '.1f')} s (endpoint)  ")
     if n.trend_state == "unsettled":
