@@ -213,6 +213,23 @@ def endpoint_options(**values: float | None) -> dict[str, float]:
     return out
 
 
+def config_endpoint(table: object, source: str, options: Mapping[str, float]) -> dict[str, float]:
+    """The endpoint settings of a run: the config's ``[endpoint]`` table (``table``, from
+    ``vision.config.MeterConfig.endpoint_table``) under the ``--endpoint-*`` ``options``
+    (an option wins). A table that is not one, an unknown key or a bad value: a one-line
+    TwinError naming the config ``source``."""
+    from control.endpoint import endpoint_settings
+    from control.errors import ControlError
+
+    if not isinstance(table, Mapping):
+        raise TwinError(f"config {source}: [endpoint] must be a table")
+    try:
+        endpoint_settings(table)
+    except ControlError as exc:
+        raise TwinError(f"config {source}: {exc}") from None
+    return {**{k: v for k, v in table.items()}, **options}
+
+
 def check_endpoint_options(values: Mapping[str, float]) -> None:
     """Endpoint settings from options: a one-line TwinError naming the option (``--endpoint-dwell-s``)."""
     from control.endpoint import endpoint_settings

@@ -649,6 +649,10 @@ def run_live(
         from vision.config import load_config
 
         mc = load_config(cfg.meter_config)
+        if mc.endpoint_table:  # [endpoint] under the --endpoint-* options
+            from twin.config import config_endpoint
+
+            cfg = replace(cfg, endpoint=config_endpoint(mc.endpoint_table, mc.source, cfg.endpoint))
         classes, roi = mc.classes, mc.roi
         mixer = mixer_from_config(mc)  # checked in any case; the demo's plant and twin stay the paper's
         mixer = None if cfg.demo else mixer

@@ -51,7 +51,7 @@ _METER_KEYS = {"bed", "min_pixels", "min_share", "collapse_ratio", "history", "d
                "light_reference_classes", "island_px",
                "mirror"}  # erode: a clear error
 _CLASS_KEYS = {"name", "hsv", "display_bgr", "lab_mean", "lab_cov", "lab_weight", "max_distance", "reject"}
-_TOP_KEYS = {"meter", "classes", "drum", "particles", "drive"}
+_TOP_KEYS = {"meter", "classes", "drum", "particles", "drive", "endpoint"}
 MIXER_KEYS = ("drum", "particles")  # the twin's tables (sim.mixer parses them; vision only hands them over)
 
 
@@ -96,6 +96,9 @@ class MeterConfig:
     drive_table: dict = field(default_factory=dict, compare=False)
     """The config's ``[drive]`` table as read (the mill's drive: ``control.modbus.link.drive_hz_per_rpm``
     parses it; vision only hands it over); empty when the config has none."""
+    endpoint_table: dict = field(default_factory=dict, compare=False)
+    """The config's ``[endpoint]`` table as read (the batch endpoint's settings:
+    ``control.endpoint.endpoint_settings`` parses it; vision only hands it over); empty when none."""
 
     @property
     def is_default(self) -> bool:
@@ -292,7 +295,8 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     )
     return MeterConfig(classes, roi, bed, min_pixels, dark_v_max, stride, source, min_share, collapse_ratio, history,
                        warnings, opening, light_ref, light_cls, rot, mirror,
-                       island_px, {k: data[k] for k in MIXER_KEYS if k in data}, drive_table=data.get("drive", {}))
+                       island_px, {k: data[k] for k in MIXER_KEYS if k in data}, drive_table=data.get("drive", {}),
+                       endpoint_table=data.get("endpoint", {}))
 
 
 def _nums(values, digits: int = 6) -> str:

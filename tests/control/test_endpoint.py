@@ -150,3 +150,29 @@ def test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_e
         assert_one_line_error(cli("run", "--no-dashboard", opt, bad, "--log", tmp_path / "r"), opt)
         assert_one_line_error(cli("mi", "x.png", "--endpoint", opt, bad), opt)
     assert not (tmp_path / "r").exists()
+
+
+def test_an_endpoint_table_in_the_config_is_read_under_the_options_and_a_bad_one_is_one_line_exit_2(tmp_path):
+    from pathlib import Path
+
+    from tests.cli import assert_one_line_error, cli
+    from twin.config import RunConfig, config_endpoint
+    from twin.errors import TwinError
+    from twin.loop import endpoint_config
+    from vision.config import parse_config
+
+    example = (Path(__file__).resolve().parents[2] / "configs" / "example.toml").read_text()
+    mc = parse_config(example + "\n[endpoint]\ntarget_mi = 0.8\nband = 0.03\ndwell_s = 4\n", "ep.toml")
+    assert mc.endpoint_table == {"target_mi": 0.8, "band": 0.03, "dwell_s": 4}
+    merged = config_endpoint(mc.endpoint_table, mc.source, {"dwell_s": 7.0})  # the option wins
+    c = endpoint_config(RunConfig(endpoint=merged).resolved())
+    assert (c.target_mi, c.band, c.dwell_s, c.block_s) == (0.8, 0.03, 7.0, EndpointConfig().block_s)
+    with pytest.raises(TwinError, match=r"config ep\.toml: endpoint band must be in"):
+        config_endpoint({"band": 0.9}, "ep.toml", {})
+    with pytest.raises(TwinError, match=r"config ep\.toml: \[endpoint\] must be a table"):
+        config_endpoint(3, "ep.toml", {})
+    bad = tmp_path / "bad.toml"
+    bad.write_text(example + "\n[endpoint]\nbogus = 1\n")
+    for args in (("mi", "x.png", "--endpoint"), ("run", "--no-dashboard", "--log", tmp_path / "r")):
+        assert_one_line_error(cli(*args, "--config", bad), f"config {bad}: endpoint: unknown key(s) ['bogus']")
+    assert not (tmp_path / "r").exists()

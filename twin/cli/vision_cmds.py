@@ -117,6 +117,10 @@ def mi_cmd(
     ep_options = endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
                                   block_sd_max=endpoint_block_sd_max)
     cfg = load_config(config)
+    if cfg.endpoint_table:  # [endpoint] under the --endpoint-* options
+        from twin.config import config_endpoint
+
+        ep_options = config_endpoint(cfg.endpoint_table, cfg.source, ep_options)
     _warn(cfg.warnings)
     manual_roi = parse_roi(roi) if roi else None
     meter = cfg.make_meter(roi=manual_roi, bed=bed.value if bed else None)
