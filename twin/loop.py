@@ -32,6 +32,7 @@ import platform
 import queue
 import threading
 import time
+import traceback as tb
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -46,7 +47,7 @@ from control.trend import MITrend, TrendConfig
 from sim.errors import SimError
 from twin.clock import RunClock
 from twin.config import RunConfig
-from twin.errors import TwinError
+from twin.errors import EXIT_BAD_INPUT, EXIT_WORKER_CRASHED, RunFailed, TwinError
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.mismatch import MismatchMonitor, MismatchTolerance
@@ -87,8 +88,15 @@ EXPECTED_ERRORS: tuple[type[Exception], ...] = (VisionError, SimError, ControlEr
 """A worker stopped by bad input or its environment (no drum in the frames, a camera gone):
 a one-line fault, no traceback. Anything else is a bug and logged with its traceback."""
 
+def crash_summary(exc: BaseException) -> str:
+    """An exception in one line: ``Type: first line of its message``."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
 ESSENTIAL_WORKERS = ("mill", "process", "supervisor")
-"""Workers without which the run ends (see ``LiveLoop._fail``): with the supervisor gone the
+"""Workers without which the run ends when they stop on an expected error (see ``LiveLoop._fail``;
+any other exception, a bug, in any worker ends the run: ``worker_crashed``, exit 3): with the supervisor gone the
 mill worker would feed the watchdog of a mill nobody supervises; with the mill worker gone
 the supervisor would believe a board nobody reads; without the process worker no frames
 are logged. (A camera that fails is an ended camera, unless the meter cannot read its
@@ -161,6 +169,7 @@ class LiveLoop:
         self.state = state or LiveState()
         self.mill_link = mill
         self.failure: str | None = None  # why the run had to end (see _fail)
+        self.exit_code = EXIT_BAD_INPUT  # the CLI's exit code when it had to (see _fail)
         self._fail_lock = threading.Lock()
         self.events = RunEvents(runlog, self.state, on_failure=self._fail)
         if meter_config is not None:  # a vision.config.MeterConfig: its camera turn, light reference, opening
@@ -213,6 +222,8 @@ class LiveLoop:
             on_twin_mismatch=lambda: self.twin.request("calibrate"),
         )
         self.whatif.on_auto_result = self._auto_study_result
+        if seams.crash is not None:
+            self._inject(seams.crash)
         self._threads: list[threading.Thread] = []
         self.events.publish(ModeSet(t_s=0.0, mode=config.mode))
         self.events.publish(MillState(t_s=0.0, state="connecting", connected=False, setpoint_rpm=None,
@@ -264,7 +275,7 @@ class LiveLoop:
             if quiet > limit:
                 reason = f"the supervisor worker has not run for {quiet:.1f} s"
                 self.events.fault("supervisor_stalled", reason, self.view.now_s())
-                self._fail(reason)
+                self._fail(reason, crashed=True)
                 return
 
     def _guard(self, name: str, run: Callable[[threading.Event], None]) -> Callable[[], None]:
@@ -272,9 +283,15 @@ class LiveLoop:
             try:
                 run(self.stop_event)
             except Exception as exc:  # a crashed worker is a fault, never silent
-                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: its traceback (bad input is one line)
-                    log.exception("worker %s crashed", name)
-                self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", self.view.now_s())
+                t = self.view.now_s()
+                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: the run ends (exit 3), the traceback in the log
+                    what = crash_summary(exc)
+                    log.debug("worker %s crashed", name, exc_info=True)
+                    self.events.fault("worker_crashed", f"the {name} worker crashed: {what}", t, worker=name,
+                                      error=what, traceback=tb.format_exc())
+                    self._fail(f"the {name} worker crashed: {what}", crashed=True)
+                    return
+                self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", t)
                 if name in ESSENTIAL_WORKERS:
                     self._fail(f"the {name} worker crashed: {exc}")
                 elif name == "camera" and isinstance(exc, VisionError):  # e.g. no drum in the frames
@@ -282,14 +299,44 @@ class LiveLoop:
 
         return target
 
-    def _fail(self, reason: str) -> None:
-        """The run cannot keep its rules any more (the run log cannot be written, or an
-        essential worker crashed): end it now; :meth:`stop` stops the mill on the way out
-        and ``failure`` says why (the CLI's one-line error)."""
+    def _inject(self, crash: WorkerCrash) -> None:
+        """``Seams.crash``: wrap the worker's per-pass step so it raises from ``crash.at_s`` on."""
+
+        def fire() -> None:
+            if self.view.now_s() >= crash.at_s:
+                raise RuntimeError(crash.message)
+
+        if crash.worker == "camera":
+            frames = self.camera.frames
+
+            def crashing() -> Iterator[Frame]:
+                for f in frames:
+                    fire()
+                    yield f
+
+            self.camera.frames = crashing()
+            return
+        owner, step = {"process": (self.process, "process"), "mill": (self.mill, "cycle"),
+                       "twin": (self.twin, "_serve_requests"), "whatif": (self.whatif, "serve_once"),
+                       "supervisor": (self.supervisor, "tick")}[crash.worker]
+        inner = getattr(owner, step)
+
+        def wrapped(*args: object, **kwargs: object) -> object:
+            fire()
+            return inner(*args, **kwargs)
+
+        setattr(owner, step, wrapped)
+
+    def _fail(self, reason: str, crashed: bool = False) -> None:
+        """The run cannot keep its rules any more (the run log cannot be written, an
+        essential worker stopped, any worker crashed or the supervisor hung): end it now;
+        :meth:`stop` stops the mill on the way out and ``failure`` says why (the CLI's
+        one-line error); ``crashed``: a bug, not bad input (``exit_code`` 3)."""
         with self._fail_lock:
             if self.failure is not None:
                 return
             self.failure = reason
+            self.exit_code = EXIT_WORKER_CRASHED if crashed else EXIT_BAD_INPUT
         self.stop_event.set()
 
     def now_s(self) -> float:
@@ -501,7 +548,7 @@ class Seams:
     (``sim.calibrate``); ``whatif_study``: runs what-if jobs instead of the process pool;
     ``mismatch``: the twin-against-camera tolerance; ``plant_watchdog_s``: the demo board's
     watchdog (wall s); ``on_started(loop, plant, dashboard)``: called once everything runs
-    (fault injection)."""
+    (fault injection); ``crash``: a bug injected into one worker (:class:`WorkerCrash`)."""
 
     supervisor: Overrides = field(default_factory=dict)
     trend: Overrides = field(default_factory=dict)
@@ -511,6 +558,27 @@ class Seams:
     mismatch: MismatchTolerance = field(default_factory=MismatchTolerance)
     plant_watchdog_s: float | None = None
     on_started: Callable[[LiveLoop, DemoPlant | None, Dashboard | None], None] | None = None
+    crash: WorkerCrash | None = None
+
+
+WORKERS = ("mill", "camera", "process", "twin", "whatif", "supervisor")
+"""The live loop's workers, one thread each (their thread is ``drumtwin-<name>``)."""
+
+
+@dataclass(frozen=True)
+class WorkerCrash:
+    """A bug injected into one worker (``Seams.crash``): from run time ``at_s`` on, the
+    worker's next pass on its own thread raises ``RuntimeError(message)`` (camera: its next
+    frame; process: its next reading; mill: its next cycle; twin, what-if, supervisor: their
+    next pass)."""
+
+    worker: str
+    at_s: float = 0.0
+    message: str = "injected crash"
+
+    def __post_init__(self) -> None:
+        if self.worker not in WORKERS:
+            raise ValueError(f"no worker {self.worker!r} (one of {', '.join(WORKERS)})")
 
 
 class DemoStart:
@@ -699,7 +767,7 @@ def run_live(
                 loop.events.metadata(summary=asdict(summary))
             runlog.close()
     if loop is not None and loop.failure is not None:
-        raise TwinError(f"the run stopped: {loop.failure} (log in {cfg.log_dir})")
+        raise RunFailed(f"the run stopped: {loop.failure} (log in {loop.runlog.paths.directory})", loop.exit_code)
     assert summary is not None  # the run log exists once the loop does
     return summary
 
@@ -714,5 +782,5 @@ def mixer_metadata(mixer: Mixer) -> dict[str, object]:
             "direction": mixer.direction, "monolayer": mixer.monolayer}
 
 
-__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "DemoStart", "LiveLoop", "Seams", "Summary", "endpoint_config",
-           "open_mill", "run_live", "supervisor_config", "trend_config"]
+__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "WORKERS", "DemoStart", "LiveLoop", "Seams", "Summary", "WorkerCrash",
+           "crash_summary", "endpoint_config", "open_mill", "run_live", "supervisor_config", "trend_config"]

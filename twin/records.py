@@ -155,6 +155,9 @@ class FaultRaised(Record):
     url: str | None = opt("", "mill link URL")
     mill_fault: str | None = opt("", "the board's fault code")
     frame: int | None = opt("", "camera frame index")
+    worker: str | None = opt("", "the worker that crashed (worker_crashed)")
+    error: str | None = opt("", "the exception in one line: Type: message (worker_crashed)")
+    traceback: str | None = opt("", "where it was raised (worker_crashed: the stderr shows one line)")
 
 
 @register

@@ -101,7 +101,7 @@ def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
     assert loop.failure is not None and f"{worker} worker crashed" in loop.failure
     assert link.sent[-1] == ("stop", None) and not link.board.running
     events = read_events(tmp_path / "run")
-    assert any(e["kind"] == "fault" and e["fault"] == f"thread_{worker}" for e in events)
+    assert any(e["kind"] == "fault" and e["fault"] == "worker_crashed" and e["worker"] == worker for e in events)
     assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
                for e in events)
     assert events[-1]["kind"] == "stop" and f"{worker} worker crashed" in events[-1]["failure"]
