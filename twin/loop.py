@@ -200,11 +200,14 @@ class LiveLoop:
             endpoint=EndpointDetector(endpoint_config(config, seams)),
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
+        sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
+        self._limits = sup_config.limits
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
                 classes=self._classes, mixer=mixer, engine=config.engine,
                 calibrate_kwargs={"mixer": mixer, "engine": config.engine, **seams.calibrate},
+                min_rpm=self._limits.min_rpm,  # calibrated only where the supervisor may run the drum
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
         )
@@ -212,8 +215,6 @@ class LiveLoop:
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
             study=seams.whatif_study, target_mi=endpoint_config(config, seams).target_mi,
         )
-        sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
-        self._limits = sup_config.limits
         self.supervisor = SupervisorWorker(
             Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,

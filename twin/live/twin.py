@@ -53,6 +53,7 @@ class TwinSettings:
     mixer: Mixer | None = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
     engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    min_rpm: float | None = None  # the run's lowest rpm (its supervisor's limits); None: ``control.limits.Limits``'
 
 
 def _calibrate_job(target_slope_deg: float, rpm: float, kwargs: Mapping[str, Any]) -> Any:
@@ -170,8 +171,9 @@ class TwinWorker:
     def _rpm_now(self, t: float) -> tuple[float | None, str]:
         """The drum's measured rpm to calibrate at, from the mill's actual rpm seen at run time
         ``t`` (called every step): the median over the last ``CALIBRATION_STEADY_S`` once the
-        drum has turned at >= ``control.limits.Limits().min_rpm`` and steadily (within
-        ``CALIBRATION_RPM_SPREAD`` of it) all that time; else ``(None, why)``."""
+        drum has turned at >= the run's lowest rpm (``TwinSettings.min_rpm``: the supervisor's
+        limits) and steadily (within ``CALIBRATION_RPM_SPREAD`` of it) all that time; else
+        ``(None, why)``."""
         from control.limits import Limits
 
         seen = self._rpm_seen
@@ -183,9 +185,9 @@ class TwinWorker:
             seen.append((t, rpm))
         while len(seen) > 1 and seen[1][0] <= t - CALIBRATION_STEADY_S:
             seen.popleft()  # keep one sample at or before the window's start
-        lo_rpm = Limits().min_rpm
+        lo_rpm = Limits().min_rpm if self.settings.min_rpm is None else float(self.settings.min_rpm)
         if rpm < lo_rpm:
-            return None, f"not turning: the drum turns at {rpm:.2f} rpm, below {lo_rpm:g} rpm (control.limits)"
+            return None, f"not turning: the drum turns at {rpm:.2f} rpm, below the run's {lo_rpm:g} rpm minimum"
         if t - seen[0][0] < CALIBRATION_STEADY_S:
             return None, (f"not steady yet: the drum has turned steadily for {t - seen[0][0]:.1f} of "
                           f"{CALIBRATION_STEADY_S:g} s")
