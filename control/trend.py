@@ -199,7 +199,7 @@ def kalman_filter_class() -> type:
         name = "control._filterpy_kalman_filter"
         mod = sys.modules.get(name)
         if mod is not None:
-            return mod.KalmanFilter  # type: ignore[no-any-return]
+            return mod.KalmanFilter
         spec = importlib.util.find_spec("filterpy")  # found, not imported (its __init__ imports it all)
         if spec is None or spec.origin is None:
             raise ModuleNotFoundError("filterpy is not installed", name="filterpy")
@@ -233,7 +233,7 @@ def kalman_filter_class() -> type:
                     sys.modules.pop(k, None)
                 else:
                     sys.modules[k] = v
-        return mod.KalmanFilter  # type: ignore[no-any-return]
+        return mod.KalmanFilter
 
 
 class MITrend:
