@@ -48,7 +48,7 @@ from sim.errors import SimError
 from twin.clock import RunClock
 from twin.config import RunConfig
 from twin.errors import EXIT_BAD_INPUT, EXIT_WORKER_CRASHED, RunFailed, TwinError
-from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
+from twin.live.camera import READINGS_MAX, SLOPES_MAX, CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.mismatch import MismatchMonitor, MismatchTolerance
 from twin.live.records import (
@@ -188,8 +188,8 @@ class LiveLoop:
             self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box,
             self.clock.now_s,
         )
-        readings: queue.Queue[CameraReading] = queue.Queue(maxsize=512)
-        slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
+        readings: queue.Queue[CameraReading] = queue.Queue(maxsize=READINGS_MAX)  # bounded: drops the oldest
+        slopes: queue.Queue[tuple[float, float]] = queue.Queue(maxsize=SLOPES_MAX)
         self.camera = CameraWorker(
             frames, meter, readings, self.camera_box, self.state,
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,

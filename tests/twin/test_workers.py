@@ -365,6 +365,34 @@ def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     assert q.qsize() == 1
 
 
+def test_readings_the_camera_drops_are_counted_in_the_frame_rows() -> None:
+    """The camera drops the oldest readings when the process worker is behind (a bounded queue:
+    memory stays flat on a loaded machine); they were dropped silently, now every one is counted
+    in the ``frames_dropped:N`` flag of the next row."""
+    from vision.sources import Frame
+
+    class Meter:
+        def measure(self, image):
+            return _reading(0.9)
+
+    q: queue.Queue = queue.Queue(maxsize=3)
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    frames = [Frame(index=i, t_s=i * 0.1, image=np.zeros((4, 4, 3), np.uint8)) for i in range(10)]
+    cw = CameraWorker(frames, Meter(), q, b.camera, LiveState())
+    cw.run(threading.Event())
+    assert cw.dropped == 7 and q.qsize() == 3
+    sink = Sink(LiveState())
+    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink)
+    while not q.empty():
+        pw.process(q.get_nowait())
+    flags = [row["flags"] for row in sink.rows()]
+    counts = [int(f.split(":")[1]) for fl in flags for f in fl if f.startswith("frames_dropped:")]
+    assert sum(counts) == 7 and len(flags) == 3
+    pw.process(CameraReading(1.0, 10, _reading(0.9), dropped_total=7))  # nothing new dropped: no flag
+    assert not any(f.startswith("frames_dropped") for f in sink.rows()[-1]["flags"])
+
+
 class _Result:
     def __init__(self, rpm: float) -> None:
         self.plateau_mi = rpm / 100.0

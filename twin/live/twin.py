@@ -73,7 +73,7 @@ class TwinWorker:
         sink: EventSink,
         state: LiveState,
         box: Latest[TwinInfo],
-        slopes: queue.SimpleQueue[tuple[float, float]],
+        slopes: queue.Queue[tuple[float, float]] | queue.SimpleQueue[tuple[float, float]],
     ) -> None:
         self.settings = settings
         self.view = view
