@@ -7,6 +7,7 @@ import math
 import queue
 import threading
 from dataclasses import fields, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -452,3 +453,40 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
             "operator_rejected", "operator", "operator", "operator_rejected",
         ]
         assert loop._threads == []  # only start() starts threads
+
+
+@pytest.mark.timeout(120)
+def test_the_whatif_pool_starts_under_a_long_tmpdir(tmp_path) -> None:
+    """With a long ``$TMPDIR`` the fork server's socket path was too long (``OSError: AF_UNIX path
+    too long``): every AUTO study and calibration of the run failed. The pool now makes its private
+    temp directory under a short base itself (``short_pool_tempdir``)."""
+    import os
+    import subprocess
+    import sys
+
+    long_tmp = tmp_path / ("t" * 60) / ("u" * 60)
+    long_tmp.mkdir(parents=True)
+    code = (
+        "import tempfile\n"
+        "from tests.twin.test_workers import Boxes\n"
+        "from tests.twin.test_mill_worker import Sink\n"
+        "from twin.live.whatif import WhatIfWorker\n"
+        "from twin.state import LiveState\n"
+        "from sim.whatif import froude\n"
+        "w = WhatIfWorker(Boxes('auto').view, Sink(), LiveState())\n"
+        "try:\n"
+        "    print(len(tempfile.gettempdir()), round(w._get_pool().submit(froude, 5.0).result(timeout=90), 6))\n"
+        "finally:\n"
+        "    w.close()\n"
+    )
+    env = {**os.environ, "TMPDIR": str(long_tmp)}
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=110, env=env,
+                       cwd=Path(__file__).resolve().parents[2])
+    assert p.returncode == 0, p.stderr[-1500:]
+    n, fr = p.stdout.split()
+    assert int(n) > 110  # the temp directory really was long
+    from sim.recipe import PAPER_DRUM
+    from sim.whatif import froude
+
+    assert float(fr) == pytest.approx(froude(5.0, PAPER_DRUM), abs=1e-6)
+    assert list(long_tmp.iterdir()) == []  # nothing left behind

@@ -258,7 +258,9 @@ class TwinWorker:
             raise RuntimeError("the twin worker is closed")
         if self._pool is None:
             from sim.whatif import make_pool
+            from twin.live.whatif import short_pool_tempdir
 
+            short_pool_tempdir()
             self._pool = make_pool(1)
         return self._pool
 

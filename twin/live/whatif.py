@@ -22,6 +22,7 @@ import numpy as np
 
 from control.objective import RpmPrediction
 from control.supervisor import PredictionRequest, PredictionResult
+from twin.errors import TwinError
 from twin.live.records import EventSink, RunView
 from twin.state import LiveState, WhatIfView
 
@@ -34,6 +35,39 @@ class _OperatorStudy:
     rpms: tuple[float, ...]
     duration_s: float
     reason: str
+
+
+POOL_TMP_MAX = 60
+"""Longest temp directory (characters) the process pools' fork server may put its socket under:
+an AF_UNIX path is at most 107 bytes, and multiprocessing adds ``/pymp-XXXXXXXX/listener-XXXXXXXX``."""
+
+SHORT_TMP_BASES = ("/tmp", "/var/tmp", "/dev/shm")
+
+
+def short_pool_tempdir(limit: int = POOL_TMP_MAX) -> str:
+    """multiprocessing's private temp directory of this process (``multiprocessing.util.get_temp_dir``:
+    a ``pymp-*`` directory, mode 0700, removed at exit), made under a short base when the temp
+    directory (``$TMPDIR``) is longer than ``limit``: the fork server's socket in it would be "AF_UNIX
+    path too long" and every what-if study and calibration would fail. Call before a pool starts;
+    TwinError when the directory was already made under a long path."""
+    import multiprocessing.util as mpu
+    import os
+    import tempfile
+
+    if len(tempfile.gettempdir()) > limit:
+        base = next((d for d in SHORT_TMP_BASES if os.path.isdir(d) and os.access(d, os.W_OK | os.X_OK)), None)
+        old = tempfile.tempdir
+        if base is not None:
+            tempfile.tempdir = base
+        try:
+            path = mpu.get_temp_dir()  # made once per process (the first call wins)
+        finally:
+            tempfile.tempdir = old
+    else:
+        path = mpu.get_temp_dir()
+    if len(path) > limit + len("/pymp-xxxxxxxx"):
+        raise TwinError(f"the temp directory {path} is too long for the what-if pool's socket: set TMPDIR shorter")
+    return path
 
 
 class WhatIfWorker:
@@ -186,6 +220,7 @@ class WhatIfWorker:
         if self._pool is None:
             from sim.whatif import make_pool
 
+            short_pool_tempdir()
             self._pool = make_pool(self.workers)
         return self._pool
 
