@@ -67,7 +67,7 @@ from twin.live.records import (
 from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import Study, WhatIfWorker
-from twin.records import MillState, ModeSet, Record
+from twin.records import MillState, ModeSet, Record, RunStart
 from twin.runlog import RunLog
 from twin.state import LiveState
 from vision.errors import VisionError
@@ -163,6 +163,7 @@ class LiveLoop:
     ) -> None:
         seams = seams or Seams()
         self.config = config
+        self._mixer = mixer  # None: the paper's (the demo's twin)
         self.clock = clock or RunClock(1.0)
         self.stop_event = self.clock.stop
         self.runlog = runlog
@@ -244,7 +245,13 @@ class LiveLoop:
         DrumSim(settle_s=0.0).advance(0.01)
 
     def start(self) -> LiveLoop:
-        self.events.event("start", 0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""))
+        from sim.mixer import paper_mixer
+
+        self.events.publish(RunStart(
+            t_s=0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""),
+            config=self.config.to_metadata(), versions=versions(),
+            mixer=mixer_metadata(self._mixer if self._mixer is not None else paper_mixer()),
+        ))
         override = getattr(self.mill_link, "safety_override", None)  # a drive run against its check
         if override:
             self.events.fault("mill_safety_override", f"operator override: {override}", 0.0)
@@ -607,11 +614,13 @@ class DemoStart:
         loop.start_mill()
 
 
-def _versions() -> dict[str, str]:
+def versions() -> dict[str, str]:
+    """The versions a run's results depend on (``RunStart.versions``, metadata.json)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version()}
-    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "numba", "filterpy", "pyserial", "viser"):
+    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "viser", "numba", "filterpy", "pyserial",
+                "pymodbus"):
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:
@@ -721,7 +730,7 @@ def run_live(
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
         runlog = RunLog(cfg.log_dir or default_run_dir())  # columns: twin.records.FRAME_COLUMNS
         started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
+        runlog.set_metadata(config=cfg.to_metadata(), versions=versions(), started=started)
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()

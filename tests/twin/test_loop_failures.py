@@ -131,3 +131,39 @@ def test_a_hung_supervisor_ends_the_run_and_stops_the_mill(tmp_path: Path, monke
     assert link.sent[-1] == ("stop", None) and not link.board.running
     events = read_events(tmp_path / "run")
     assert any(e["kind"] == "fault" and e["fault"] == "supervisor_stalled" for e in events)
+
+
+@pytest.mark.timeout(30)
+def test_the_run_start_record_carries_the_config_the_versions_and_the_mixer(tmp_path: Path) -> None:
+    """The ``start`` record had the mode and the mill URL only: a run log read on its own
+    (``read_events``) could not say what was run, with what, on which drum."""
+    log = RunLog(tmp_path / "run")
+    loop, _ = _loop(tmp_path, log)
+    loop.stop()
+    log.close()
+    start = next(e for e in read_events(tmp_path / "run") if e["kind"] == "start")
+    assert start["config"]["mode"] == "manual" and start["config"]["log_dir"] == str(tmp_path / "run")
+    assert {"drumtwin", "python", "numpy", "opencv-python-headless", "pymunk", "viser"} <= set(start["versions"])
+    assert start["mixer"]["drum_diameter_mm"] == pytest.approx(300.0)  # the demo's twin: the paper's drum
+    assert start["config"]["control_token"] is None
+
+
+def test_every_event_kind_emitted_by_name_is_declared_in_the_records() -> None:
+    """Each ``.event("kind", ...)`` call in twin/ names a kind of ``twin.records`` (an undeclared
+    one would be logged as an untyped event with a warning, its fields never checked), and so
+    does every kind the endpoint detector hands the process worker."""
+    import re
+
+    from control.endpoint import EndpointDetector
+    from twin.records import KINDS
+
+    root = Path(__file__).resolve().parents[2] / "twin"
+    called = {m for f in root.rglob("*.py") for m in re.findall(r"\.event\(\s*\"([a-z_]+)\"", f.read_text())}
+    called.discard("kind")  # the records module's own docstring
+    assert len(called) > 15  # the scan found the call sites
+    assert called - set(KINDS) == set()
+    import inspect
+
+    src = inspect.getsource(EndpointDetector)
+    changes = set(re.findall(r"changed\s*=\s*\"([a-z_]+)\"", src)) | set(re.findall(r"\"(mixed|unmixed)\"", src))
+    assert changes and changes <= set(KINDS)
