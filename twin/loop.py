@@ -67,7 +67,17 @@ from twin.live.records import (
 from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import Study, WhatIfWorker
-from twin.records import MillState, ModeSet, Record, RunStart
+from twin.records import (
+    MillCommandDropped,
+    MillCommandSent,
+    MillState,
+    ModeSet,
+    OperatorAction,
+    OperatorRejected,
+    Record,
+    RunStart,
+    RunStop,
+)
 from twin.runlog import RunLog
 from twin.state import LiveState
 from vision.errors import VisionError
@@ -379,12 +389,12 @@ class LiveLoop:
             try:
                 self.mill_link.stop()
             except (OSError, ControlError) as exc:
-                self.events.event("mill_command_dropped", t, command="stop", source="run_failed", reason=str(exc))
+                self.events.publish(MillCommandDropped(t_s=t, command="stop", source="run_failed", reason=str(exc)))
             else:
-                self.events.event("mill_command", t, command="stop", source="run_failed")
+                self.events.publish(MillCommandSent(t_s=t, command="stop", source="run_failed"))
         self.mill_link.close()
         f = self.frames_box.get()
-        self.events.event("stop", f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure)
+        self.events.publish(RunStop(t_s=f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure))
 
     def summary(self, wall_s: float = 0.0) -> Summary:
         f = self.frames_box.get()
@@ -415,27 +425,27 @@ class LiveLoop:
 
     def start_mill(self) -> None:
         t = self.now_s()
-        self.events.event("operator", t, action="start")
+        self.events.publish(OperatorAction(t_s=t, action="start"))
         self.events.clear_fault("emergency_stop", "mill started again", t)
         self.mill.submit(StartMill(self.mill_box.get().epoch))
 
     def stop_mill(self) -> None:
-        self.events.event("operator", self.now_s(), action="stop")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="stop"))
         self.mill.submit(StopMill())
 
     def emergency_stop(self) -> None:
         t = self.now_s()
         self.mill.submit(StopMill(source="emergency_stop", urgent=True))  # first: jumps every queue
-        self.events.event("operator", t, action="emergency_stop")
+        self.events.publish(OperatorAction(t_s=t, action="emergency_stop"))
         self.supervisor.submit(SetMode("off"))
         self.events.fault("emergency_stop", "EMERGENCY STOP pressed: mill stopped, mode OFF", t)
 
     def recalibrate(self) -> None:
-        self.events.event("operator", self.now_s(), action="recalibrate")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="recalibrate"))
         self.twin.request("calibrate")
 
     def reseed_twin(self) -> None:
-        self.events.event("operator", self.now_s(), action="reseed")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="reseed"))
         self.twin.request("reseed")
 
     def run_whatif(self, rpms: Sequence[float], duration_s: float) -> None:
@@ -445,11 +455,11 @@ class LiveLoop:
         try:  # the one set of limits (control.limits): the ``whatif`` command's caps
             rpm_list, duration = self.limits.check_whatif(rpms, duration_s)
         except ControlError as exc:
-            self.events.event("operator_rejected", t, action="whatif", error=str(exc))
+            self.events.publish(OperatorRejected(t_s=t, action="whatif", error=str(exc)))
             return
-        self.events.event("operator", t, action="whatif", rpms=rpm_list, duration_s=duration)
+        self.events.publish(OperatorAction(t_s=t, action="whatif", rpms=rpm_list, duration_s=duration))
         if not self.whatif.submit(rpm_list, duration, reason="operator"):
-            self.events.event("operator_rejected", t, action="whatif", error="a study is already running")
+            self.events.publish(OperatorRejected(t_s=t, action="whatif", error="a study is already running"))
 
     def _auto_study_result(self, error: str | None) -> None:
         """A failed AUTO what-if study is a fault: an alarm, and AUTO's safe state (the twin
@@ -465,7 +475,7 @@ class LiveLoop:
     def cancel_whatif(self) -> bool:
         """Abandon the operator's running or waiting what-if study; True when there was one."""
         cancelled = self.whatif.cancel()
-        self.events.event("operator", self.now_s(), action="whatif_cancel", cancelled=cancelled)
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="whatif_cancel", cancelled=cancelled))
         return cancelled
 
     @property

@@ -26,7 +26,15 @@ from typing import TYPE_CHECKING, Any
 from twin.clock import Cadence
 from twin.live.camera import Rate
 from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
-from twin.records import Calibrated, TwinReading, TwinStatus
+from twin.records import (
+    Calibrated,
+    CalibrationStarted,
+    CalibrationWaiting,
+    TwinLag,
+    TwinReading,
+    TwinSeeded,
+    TwinStatus,
+)
 from twin.state import LiveState
 
 if TYPE_CHECKING:
@@ -136,7 +144,7 @@ class TwinWorker:
             target = view.frames().t_s
             lag = target - self.now_s
             if lag > MAX_LAG_S:  # cannot keep up: skip ahead and say so
-                self.sink.event("twin_lag", target, lag_s=lag)
+                self.sink.publish(TwinLag(t_s=target, lag_s=lag))
                 self.t0_run += lag
                 render.restart(self.now_s)
             if lag <= 1e-6:
@@ -213,14 +221,14 @@ class TwinWorker:
                 reason = why.split(":", 1)[0]
                 if reason != self._cal_waiting:  # an event, not a fault: the twin runs on as it is
                     self._cal_waiting = reason
-                    self.sink.event("calibration_waiting", t, reason=why, rpm=self.view.mill().actual_rpm)
+                    self.sink.publish(CalibrationWaiting(t_s=t, reason=why, rpm=self.view.mill().actual_rpm))
                     self.sink.publish(TwinStatus(t_s=t, state="running, waiting to calibrate"))
                 return
             self._cal_waiting = None
             self._cal_wanted = False
             self._cal_started = (t, target, rpm, time.monotonic())
             self.sink.publish(TwinStatus(t_s=t, state="running, calibrating"))
-            self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)
+            self.sink.publish(CalibrationStarted(t_s=t, target_slope_deg=target, rpm=rpm))
             try:
                 self._cal_future = self._get_pool().submit(
                     _calibrate_job, target, rpm, dict(self.settings.calibrate_kwargs)
@@ -305,7 +313,7 @@ class TwinWorker:
         self.sim = sim
         self.t0_run = t - sim.t_s
         self._state = sim.snapshot()
-        self.sink.event("twin_seeded", t, source=how, n_particles=len(sim.particles()))
+        self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))
         self._render_and_measure()
         self._publish(t)
 

@@ -24,6 +24,7 @@ from control.objective import RpmPrediction
 from control.supervisor import PredictionRequest, PredictionResult
 from twin.errors import TwinError
 from twin.live.records import EventSink, RunView
+from twin.records import WhatIfCancelled, WhatIfError, WhatIfResult
 from twin.state import LiveState, WhatIfView
 
 Study = Callable[[Sequence[Any]], Sequence[Any]]
@@ -172,8 +173,8 @@ class WhatIfWorker:
                 pred = None
                 if study is not None:
                     self._pending_study = None
-                    self.sink.event("whatif_error", self.view.now_s(), reason=study.reason,
-                                    error="the twin is not running yet")
+                    self.sink.publish(WhatIfError(t_s=self.view.now_s(), reason=study.reason,
+                                                  error="the twin is not running yet"))
                     return False
             if pred is not None:
                 self._pending_pred = None
@@ -242,7 +243,7 @@ class WhatIfWorker:
         state = self.view.twin().state
         t_req = self.view.now_s()
         if state is None:
-            self.sink.event("whatif_error", t_req, reason=reason, error="the twin is not running yet")
+            self.sink.publish(WhatIfError(t_s=t_req, reason=reason, error="the twin is not running yet"))
             raise RuntimeError("the twin is not running yet")
         self._seq += 1
         status = f"running {len(rpms)} rpm x {duration_s:g} s ({reason})"
@@ -256,10 +257,10 @@ class WhatIfWorker:
             self._seq += 1
             if self._cancelled:
                 self.state.set_whatif(WhatIfView(status="cancelled by the operator", seq=self._seq))
-                self.sink.event("whatif_cancelled", self.view.now_s(), reason=reason)
+                self.sink.publish(WhatIfCancelled(t_s=self.view.now_s(), reason=reason))
                 raise
             self.state.set_whatif(WhatIfView(status=f"error: {exc}", seq=self._seq))
-            self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
+            self.sink.publish(WhatIfError(t_s=self.view.now_s(), reason=reason, error=str(exc)))
             raise
         preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results, strict=False)}
         times = tuple(float(getattr(res, "time_to_target_s", np.nan)) for res in results)
@@ -282,13 +283,13 @@ class WhatIfWorker:
                 energy_to_target_j=energies,
             )
         )
-        self.sink.event(
-            "whatif", t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
+        self.sink.publish(WhatIfResult(
+            t_s=t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
             predictions={str(k): v for k, v in preds.items()}, took_s=time.monotonic() - t0,
             target_mi=target, time_to_target_s=dict(zip(map(str, preds), times, strict=False)),
             power_w=dict(zip(map(str, preds), powers, strict=False)),
             energy_to_target_j=dict(zip(map(str, preds), energies, strict=False)),
-        )
+        ))
         return preds, rows
 
     def close(self) -> None:
