@@ -647,7 +647,12 @@ class Supervisor:
 
     def _endpoint_stop(self, now_s: float, inputs: SupervisorInputs) -> Decision | None:
         """AUTO with ``stop_at_endpoint``: the batch is mixed: one stop decision, then hands off."""
-        if self._endpoint_stopped:
+        if self._endpoint_stopped:  # hands off, but a fault is still the safe state, logged (once)
+            faults = self.faults(now_s, inputs)
+            if faults and not self.safe:
+                self.safe, self.safe_reason = True, "; ".join(faults)
+                self._latched_stop = True  # stopped at the endpoint: nothing to ramp, it stays stopped
+                return self._emit(now_s, Action.NONE, "safe", f"safe (stopped at the endpoint): {self.safe_reason}")
             return None
         self._endpoint_stopped = True
         self._due_since = None

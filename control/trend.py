@@ -60,9 +60,11 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
 from __future__ import annotations
 
 import math
+import threading
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -179,6 +181,61 @@ def config_from_window(mi: Sequence[float] | np.ndarray, base: TrendConfig | Non
     return replace(base, meas_sd=sd, rate_q=base.rate_q * k, ripple_q=base.ripple_q * k)
 
 
+_KF_LOCK = threading.Lock()
+
+
+def kalman_filter_class() -> type:
+    """filterpy's ``KalmanFilter`` (the class of ``filterpy/kalman/kalman_filter.py``, unchanged)
+    without the ~60 MB of resident memory its packages' imports cost: ``filterpy.kalman``'s
+    ``__init__`` imports every filter, ``filterpy.common`` imports ``scipy.linalg`` and
+    ``filterpy.stats`` ``scipy.stats``, all for ``logpdf``, which the class calls only for its
+    ``log_likelihood`` (never read here; the first call imports the real ``filterpy.stats``).
+    The module is loaded once under a private name; ``sys.modules`` holds no stand-in afterwards."""
+    import importlib.util
+    import sys
+    import types
+
+    with _KF_LOCK:
+        name = "control._filterpy_kalman_filter"
+        mod = sys.modules.get(name)
+        if mod is not None:
+            return mod.KalmanFilter
+        spec = importlib.util.find_spec("filterpy")  # found, not imported (its __init__ imports it all)
+        if spec is None or spec.origin is None:
+            raise ModuleNotFoundError("filterpy is not installed", name="filterpy")
+        root = Path(spec.origin).parent
+
+        def load(modname: str, path: Path) -> types.ModuleType:
+            spec = importlib.util.spec_from_file_location(modname, path)
+            assert spec is not None and spec.loader is not None
+            m = importlib.util.module_from_spec(spec)
+            sys.modules[modname] = m
+            spec.loader.exec_module(m)
+            return m
+
+        helpers = load("control._filterpy_helpers", root / "common" / "helpers.py")  # numpy only
+
+        def logpdf(*args: object, **kwargs: object) -> object:
+            from filterpy.stats import logpdf as real
+
+            return real(*args, **kwargs)
+
+        stats = types.ModuleType("filterpy.stats")
+        stats.logpdf = logpdf  # type: ignore[attr-defined]
+        stand_ins = {"filterpy.stats": stats, "filterpy.common": helpers}
+        saved = {k: sys.modules.get(k) for k in stand_ins}
+        try:
+            sys.modules.update(stand_ins)
+            mod = load(name, root / "kalman" / "kalman_filter.py")
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    sys.modules.pop(k, None)
+                else:
+                    sys.modules[k] = v
+        return mod.KalmanFilter
+
+
 class MITrend:
     """Online Kalman trend of MI: ``update(t_s, mi, rpm) -> TrendEstimate``.
 
@@ -187,10 +244,8 @@ class MITrend:
     """
 
     def __init__(self, config: TrendConfig | None = None) -> None:
-        from filterpy.kalman import KalmanFilter  # ~2 s import (scipy, matplotlib): only when used
-
         self.config = config or TrendConfig()
-        self.kf = KalmanFilter(dim_x=4, dim_z=1)
+        self.kf = kalman_filter_class()(dim_x=4, dim_z=1)
         self.kf.H = np.array([[1.0, 0.0, 1.0, 0.0]])
         self._t: float | None = None
         self._init = False

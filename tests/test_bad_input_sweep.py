@@ -249,7 +249,6 @@ DOCUMENTED_SUCCESS: dict[tuple[str, str, str], str] = {
     ("mi", "--config", "{drum_bad}"): "mi reads [meter] and [[classes]]; the mixer's tables are checked "
     "by the commands that build the twin (sim, calibrate, whatif, run)",
     ("mi", "--config", "{drum_huge}"): "the same",
-    ("whatif", "--rpm", "-5"): "a negative rpm turns the drum the other way (sim.drum.check_rpm bounds |rpm|)",
 }
 
 

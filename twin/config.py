@@ -13,7 +13,6 @@ from twin.errors import TwinError
 from twin.runlog import default_run_dir
 
 MODES = ("off", "manual", "auto")
-CASES = ("A", "B", "C")
 TOKEN_ENV = "DRUMTWIN_CONTROL_TOKEN"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 MAX_SPEED = 100.0  # run seconds per wall second: beyond this the demo only drops frames
@@ -125,9 +124,11 @@ class RunConfig:
         mode = self.mode.lower()
         if mode not in MODES:
             raise TwinError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        from sim.drum import CASES  # the one definition of the recipe's initial states
+
         case = self.case.upper()
         if case not in CASES:
-            raise TwinError(f"--case must be one of A, B, C, got {self.case!r}")
+            raise TwinError(f"--case must be one of {', '.join(CASES)}, got {self.case!r}")
         if not (math.isfinite(self.speed) and MIN_SPEED <= self.speed <= MAX_SPEED):
             raise TwinError(f"--speed must be a number in [{MIN_SPEED:g}, {MAX_SPEED:g}], got {self.speed}")
         if self.duration_s is not None and not (

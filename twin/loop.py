@@ -32,6 +32,7 @@ import platform
 import queue
 import threading
 import time
+import traceback as tb
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -46,8 +47,8 @@ from control.trend import MITrend, TrendConfig
 from sim.errors import SimError
 from twin.clock import RunClock
 from twin.config import RunConfig
-from twin.errors import TwinError
-from twin.live.camera import CameraReading, CameraWorker, ProcessWorker
+from twin.errors import EXIT_BAD_INPUT, EXIT_WORKER_CRASHED, RunFailed, TwinError
+from twin.live.camera import READINGS_MAX, SLOPES_MAX, CameraReading, CameraWorker, ProcessWorker
 from twin.live.mill import MillLink, MillWorker
 from twin.live.mismatch import MismatchMonitor, MismatchTolerance
 from twin.live.records import (
@@ -67,7 +68,17 @@ from twin.live.records import (
 from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import Study, WhatIfWorker
-from twin.records import MillState, ModeSet, Record
+from twin.records import (
+    MillCommandDropped,
+    MillCommandSent,
+    MillState,
+    ModeSet,
+    OperatorAction,
+    OperatorRejected,
+    Record,
+    RunStart,
+    RunStop,
+)
 from twin.runlog import RunLog
 from twin.state import LiveState
 from vision.errors import VisionError
@@ -88,8 +99,15 @@ EXPECTED_ERRORS: tuple[type[Exception], ...] = (VisionError, SimError, ControlEr
 """A worker stopped by bad input or its environment (no drum in the frames, a camera gone):
 a one-line fault, no traceback. Anything else is a bug and logged with its traceback."""
 
+def crash_summary(exc: BaseException) -> str:
+    """An exception in one line: ``Type: first line of its message``."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
 ESSENTIAL_WORKERS = ("mill", "process", "supervisor")
-"""Workers without which the run ends (see ``LiveLoop._fail``): with the supervisor gone the
+"""Workers without which the run ends when they stop on an expected error (see ``LiveLoop._fail``;
+any other exception, a bug, in any worker ends the run: ``worker_crashed``, exit 3): with the supervisor gone the
 mill worker would feed the watchdog of a mill nobody supervises; with the mill worker gone
 the supervisor would believe a board nobody reads; without the process worker no frames
 are logged. (A camera that fails is an ended camera, unless the meter cannot read its
@@ -156,12 +174,14 @@ class LiveLoop:
     ) -> None:
         seams = seams or Seams()
         self.config = config
+        self._mixer = mixer  # None: the paper's (the demo's twin)
         self.clock = clock or RunClock(1.0)
         self.stop_event = self.clock.stop
         self.runlog = runlog
         self.state = state or LiveState()
         self.mill_link = mill
         self.failure: str | None = None  # why the run had to end (see _fail)
+        self.exit_code = EXIT_BAD_INPUT  # the CLI's exit code when it had to (see _fail)
         self._fail_lock = threading.Lock()
         self.events = RunEvents(runlog, self.state, on_failure=self._fail)
         if meter_config is not None:  # a vision.config.MeterConfig: its camera turn, light reference, opening
@@ -182,8 +202,8 @@ class LiveLoop:
             self.clock.speed, self.camera_box, self.frames_box, self.mill_box, self.twin_box, self.mode_box,
             self.clock.now_s,
         )
-        readings: queue.Queue[CameraReading] = queue.Queue(maxsize=512)
-        slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
+        readings: queue.Queue[CameraReading] = queue.Queue(maxsize=READINGS_MAX)  # bounded: drops the oldest
+        slopes: queue.Queue[tuple[float, float]] = queue.Queue(maxsize=SLOPES_MAX)
         self.camera = CameraWorker(
             frames, meter, readings, self.camera_box, self.state,
             overlay_hz=config.dashboard_hz if config.dashboard else 0.0, overlay=overlay or _overlay,
@@ -195,11 +215,14 @@ class LiveLoop:
             endpoint=EndpointDetector(endpoint_config(config, seams)),
         )
         self.mill = MillWorker(mill, self.events, self.mill_box, self.view.now_s)
+        sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
+        self._limits = sup_config.limits
         self.twin = TwinWorker(
             TwinSettings(
                 case=config.case, seed=config.seed, start_rpm=config.start_rpm, size_px=config.frame_px,
                 classes=self._classes, mixer=mixer, engine=config.engine,
                 calibrate_kwargs={"mixer": mixer, "engine": config.engine, **seams.calibrate},
+                min_rpm=self._limits.min_rpm,  # calibrated only where the supervisor may run the drum
             ),
             self.view, self.events, self.state, self.twin_box, slopes,
         )
@@ -207,8 +230,6 @@ class LiveLoop:
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
             study=seams.whatif_study, target_mi=endpoint_config(config, seams).target_mi,
         )
-        sup_config = supervisor_config(seams, None if mixer is None else mixer.drum.critical_rpm, config)
-        self._limits = sup_config.limits
         self.supervisor = SupervisorWorker(
             Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,
             self.whatif, self.mode_box, period_s=config.supervisor_period_s, speed=self.clock.speed,
@@ -217,6 +238,8 @@ class LiveLoop:
             on_twin_mismatch=lambda: self.twin.request("calibrate"),
         )
         self.whatif.on_auto_result = self._auto_study_result
+        if seams.crash is not None:
+            self._inject(seams.crash)
         self._threads: list[threading.Thread] = []
         self.events.publish(ModeSet(t_s=0.0, mode=config.mode))
         self.events.publish(MillState(t_s=0.0, state="connecting", connected=False, setpoint_rpm=None,
@@ -236,7 +259,13 @@ class LiveLoop:
         DrumSim(settle_s=0.0).advance(0.01)
 
     def start(self) -> LiveLoop:
-        self.events.event("start", 0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""))
+        from sim.mixer import paper_mixer
+
+        self.events.publish(RunStart(
+            t_s=0.0, mode=self.config.mode, mill=getattr(self.mill_link, "url", ""),
+            config=self.config.to_metadata(), versions=versions(),
+            mixer=mixer_metadata(self._mixer if self._mixer is not None else paper_mixer()),
+        ))
         override = getattr(self.mill_link, "safety_override", None)  # a drive run against its check
         if override:
             self.events.fault("mill_safety_override", f"operator override: {override}", 0.0)
@@ -268,7 +297,7 @@ class LiveLoop:
             if quiet > limit:
                 reason = f"the supervisor worker has not run for {quiet:.1f} s"
                 self.events.fault("supervisor_stalled", reason, self.view.now_s())
-                self._fail(reason)
+                self._fail(reason, crashed=True)
                 return
 
     def _guard(self, name: str, run: Callable[[threading.Event], None]) -> Callable[[], None]:
@@ -276,9 +305,15 @@ class LiveLoop:
             try:
                 run(self.stop_event)
             except Exception as exc:  # a crashed worker is a fault, never silent
-                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: its traceback (bad input is one line)
-                    log.exception("worker %s crashed", name)
-                self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", self.view.now_s())
+                t = self.view.now_s()
+                if not isinstance(exc, EXPECTED_ERRORS):  # a bug: the run ends (exit 3), the traceback in the log
+                    what = crash_summary(exc)
+                    log.debug("worker %s crashed", name, exc_info=True)
+                    self.events.fault("worker_crashed", f"the {name} worker crashed: {what}", t, worker=name,
+                                      error=what, traceback=tb.format_exc())
+                    self._fail(f"the {name} worker crashed: {what}", crashed=True)
+                    return
+                self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", t)
                 if name in ESSENTIAL_WORKERS:
                     self._fail(f"the {name} worker crashed: {exc}")
                 elif name == "camera" and isinstance(exc, VisionError):  # e.g. no drum in the frames
@@ -286,14 +321,44 @@ class LiveLoop:
 
         return target
 
-    def _fail(self, reason: str) -> None:
-        """The run cannot keep its rules any more (the run log cannot be written, or an
-        essential worker crashed): end it now; :meth:`stop` stops the mill on the way out
-        and ``failure`` says why (the CLI's one-line error)."""
+    def _inject(self, crash: WorkerCrash) -> None:
+        """``Seams.crash``: wrap the worker's per-pass step so it raises from ``crash.at_s`` on."""
+
+        def fire() -> None:
+            if self.view.now_s() >= crash.at_s:
+                raise RuntimeError(crash.message)
+
+        if crash.worker == "camera":
+            frames = self.camera.frames
+
+            def crashing() -> Iterator[Frame]:
+                for f in frames:
+                    fire()
+                    yield f
+
+            self.camera.frames = crashing()
+            return
+        owner, step = {"process": (self.process, "process"), "mill": (self.mill, "cycle"),
+                       "twin": (self.twin, "_serve_requests"), "whatif": (self.whatif, "serve_once"),
+                       "supervisor": (self.supervisor, "tick")}[crash.worker]
+        inner = getattr(owner, step)
+
+        def wrapped(*args: object, **kwargs: object) -> object:
+            fire()
+            return inner(*args, **kwargs)
+
+        setattr(owner, step, wrapped)
+
+    def _fail(self, reason: str, crashed: bool = False) -> None:
+        """The run cannot keep its rules any more (the run log cannot be written, an
+        essential worker stopped, any worker crashed or the supervisor hung): end it now;
+        :meth:`stop` stops the mill on the way out and ``failure`` says why (the CLI's
+        one-line error); ``crashed``: a bug, not bad input (``exit_code`` 3)."""
         with self._fail_lock:
             if self.failure is not None:
                 return
             self.failure = reason
+            self.exit_code = EXIT_WORKER_CRASHED if crashed else EXIT_BAD_INPUT
         self.stop_event.set()
 
     def now_s(self) -> float:
@@ -328,12 +393,12 @@ class LiveLoop:
             try:
                 self.mill_link.stop()
             except (OSError, ControlError) as exc:
-                self.events.event("mill_command_dropped", t, command="stop", source="run_failed", reason=str(exc))
+                self.events.publish(MillCommandDropped(t_s=t, command="stop", source="run_failed", reason=str(exc)))
             else:
-                self.events.event("mill_command", t, command="stop", source="run_failed")
+                self.events.publish(MillCommandSent(t_s=t, command="stop", source="run_failed"))
         self.mill_link.close()
         f = self.frames_box.get()
-        self.events.event("stop", f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure)
+        self.events.publish(RunStop(t_s=f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure))
 
     def summary(self, wall_s: float = 0.0) -> Summary:
         f = self.frames_box.get()
@@ -364,27 +429,27 @@ class LiveLoop:
 
     def start_mill(self) -> None:
         t = self.now_s()
-        self.events.event("operator", t, action="start")
+        self.events.publish(OperatorAction(t_s=t, action="start"))
         self.events.clear_fault("emergency_stop", "mill started again", t)
         self.mill.submit(StartMill(self.mill_box.get().epoch))
 
     def stop_mill(self) -> None:
-        self.events.event("operator", self.now_s(), action="stop")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="stop"))
         self.mill.submit(StopMill())
 
     def emergency_stop(self) -> None:
         t = self.now_s()
         self.mill.submit(StopMill(source="emergency_stop", urgent=True))  # first: jumps every queue
-        self.events.event("operator", t, action="emergency_stop")
+        self.events.publish(OperatorAction(t_s=t, action="emergency_stop"))
         self.supervisor.submit(SetMode("off"))
         self.events.fault("emergency_stop", "EMERGENCY STOP pressed: mill stopped, mode OFF", t)
 
     def recalibrate(self) -> None:
-        self.events.event("operator", self.now_s(), action="recalibrate")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="recalibrate"))
         self.twin.request("calibrate")
 
     def reseed_twin(self) -> None:
-        self.events.event("operator", self.now_s(), action="reseed")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="reseed"))
         self.twin.request("reseed")
 
     def relearn_classes(self) -> str:
@@ -424,11 +489,11 @@ class LiveLoop:
         try:  # the one set of limits (control.limits): the ``whatif`` command's caps
             rpm_list, duration = self.limits.check_whatif(rpms, duration_s)
         except ControlError as exc:
-            self.events.event("operator_rejected", t, action="whatif", error=str(exc))
+            self.events.publish(OperatorRejected(t_s=t, action="whatif", error=str(exc)))
             return
-        self.events.event("operator", t, action="whatif", rpms=rpm_list, duration_s=duration)
+        self.events.publish(OperatorAction(t_s=t, action="whatif", rpms=rpm_list, duration_s=duration))
         if not self.whatif.submit(rpm_list, duration, reason="operator"):
-            self.events.event("operator_rejected", t, action="whatif", error="a study is already running")
+            self.events.publish(OperatorRejected(t_s=t, action="whatif", error="a study is already running"))
 
     def _auto_study_result(self, error: str | None) -> None:
         """A failed AUTO what-if study is a fault: an alarm, and AUTO's safe state (the twin
@@ -444,7 +509,7 @@ class LiveLoop:
     def cancel_whatif(self) -> bool:
         """Abandon the operator's running or waiting what-if study; True when there was one."""
         cancelled = self.whatif.cancel()
-        self.events.event("operator", self.now_s(), action="whatif_cancel", cancelled=cancelled)
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="whatif_cancel", cancelled=cancelled))
         return cancelled
 
     @property
@@ -536,7 +601,7 @@ class Seams:
     (``sim.calibrate``); ``whatif_study``: runs what-if jobs instead of the process pool;
     ``mismatch``: the twin-against-camera tolerance; ``plant_watchdog_s``: the demo board's
     watchdog (wall s); ``on_started(loop, plant, dashboard)``: called once everything runs
-    (fault injection)."""
+    (fault injection); ``crash``: a bug injected into one worker (:class:`WorkerCrash`)."""
 
     supervisor: Overrides = field(default_factory=dict)
     trend: Overrides = field(default_factory=dict)
@@ -546,6 +611,27 @@ class Seams:
     mismatch: MismatchTolerance = field(default_factory=MismatchTolerance)
     plant_watchdog_s: float | None = None
     on_started: Callable[[LiveLoop, DemoPlant | None, Dashboard | None], None] | None = None
+    crash: WorkerCrash | None = None
+
+
+WORKERS = ("mill", "camera", "process", "twin", "whatif", "supervisor")
+"""The live loop's workers, one thread each (their thread is ``drumtwin-<name>``)."""
+
+
+@dataclass(frozen=True)
+class WorkerCrash:
+    """A bug injected into one worker (``Seams.crash``): from run time ``at_s`` on, the
+    worker's next pass on its own thread raises ``RuntimeError(message)`` (camera: its next
+    frame; process: its next reading; mill: its next cycle; twin, what-if, supervisor: their
+    next pass)."""
+
+    worker: str
+    at_s: float = 0.0
+    message: str = "injected crash"
+
+    def __post_init__(self) -> None:
+        if self.worker not in WORKERS:
+            raise ValueError(f"no worker {self.worker!r} (one of {', '.join(WORKERS)})")
 
 
 class DemoStart:
@@ -573,11 +659,13 @@ class DemoStart:
         loop.start_mill()
 
 
-def _versions() -> dict[str, str]:
+def versions() -> dict[str, str]:
+    """The versions a run's results depend on (``RunStart.versions``, metadata.json)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version()}
-    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "numba", "filterpy", "pyserial", "viser"):
+    for pkg in ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "viser", "numba", "filterpy", "pyserial",
+                "pymodbus"):
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:
@@ -691,7 +779,7 @@ def run_live(
             frames = _paced(open_source(str(cfg.video)), clock) if cfg.video is not None else open_source(cfg.camera)
         runlog = RunLog(cfg.log_dir or default_run_dir())  # columns: twin.records.FRAME_COLUMNS
         started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        runlog.set_metadata(config=cfg.to_metadata(), versions=_versions(), started=started)
+        runlog.set_metadata(config=cfg.to_metadata(), versions=versions(), started=started)
         if plant is not None:
             runlog.set_metadata(plant=asdict(plant.config), mill_url="emulator pty")
         state = LiveState()
@@ -738,7 +826,7 @@ def run_live(
                 loop.events.metadata(summary=asdict(summary))
             runlog.close()
     if loop is not None and loop.failure is not None:
-        raise TwinError(f"the run stopped: {loop.failure} (log in {cfg.log_dir})")
+        raise RunFailed(f"the run stopped: {loop.failure} (log in {loop.runlog.paths.directory})", loop.exit_code)
     assert summary is not None  # the run log exists once the loop does
     return summary
 
@@ -753,5 +841,5 @@ def mixer_metadata(mixer: Mixer) -> dict[str, object]:
             "direction": mixer.direction, "monolayer": mixer.monolayer}
 
 
-__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "DemoStart", "LiveLoop", "Seams", "Summary", "endpoint_config",
-           "open_mill", "run_live", "supervisor_config", "trend_config"]
+__all__ = ["LOOP_ENDPOINT", "LOOP_SUPERVISOR", "WORKERS", "DemoStart", "LiveLoop", "Seams", "Summary", "WorkerCrash",
+           "crash_summary", "endpoint_config", "open_mill", "run_live", "supervisor_config", "trend_config"]

@@ -129,9 +129,15 @@ SERIES: tuple[str, ...] = tuple(f.name for f in fields(FrameReading) if f.metada
 @dataclass(frozen=True, kw_only=True)
 class RunStart(Record):
     kind: ClassVar[str] = "start"
-    doc: ClassVar[str] = "the workers start (config, versions, mixer: metadata.json)"
+    doc: ClassVar[str] = "the workers start: the run's configuration, versions and mixer (also in metadata.json)"
     mode: str = unit("", "supervisor mode at start")
     mill: str = unit("", "mill link URL")
+    config: Mapping[str, object] | None = unit("", "the resolved run options (RunConfig.to_metadata: the token never)",
+                                        default=None)
+    versions: Mapping[str, str] | None = unit("", "drumtwin, python, numpy, opencv, pymunk, viser, ... versions",
+                                       default=None)
+    mixer: Mapping[str, object] | None = unit("", "the twin's mixer: drum, fill, direction, particle classes",
+                                              default=None)
 
 
 @register
@@ -155,6 +161,9 @@ class FaultRaised(Record):
     url: str | None = opt("", "mill link URL")
     mill_fault: str | None = opt("", "the board's fault code")
     frame: int | None = opt("", "camera frame index")
+    worker: str | None = opt("", "the worker that crashed (worker_crashed)")
+    error: str | None = opt("", "the exception in one line: Type: message (worker_crashed)")
+    traceback: str | None = opt("", "where it was raised (worker_crashed: the stderr shows one line)")
 
 
 @register

@@ -63,3 +63,23 @@ def test_manual_only_reports_the_endpoint():
 def test_off_only_reports_the_endpoint():
     sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.OFF)
     assert run(sup, 0.0, 60.0, mixed_from=10.0) == []
+
+
+def test_after_the_endpoint_stop_auto_still_logs_its_safe_state():
+    """After the endpoint stop AUTO returned before its fault checks: a mill link lost, vision
+    lost or a stale twin afterwards gave no safe-state decision (nothing logged, ``safe`` False).
+    Now the first fault is one ``safe`` decision that sends nothing (the mill is stopped)."""
+    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.AUTO)
+    ds = run(sup, 0.0, 30.0, mixed_from=20.0)
+    assert [d.kind for d in ds if d.t_s >= 20.0] == ["endpoint"] and not sup.safe
+    out = []
+    for k in range(20):  # the link goes down after the stop
+        t = 30.0 + 0.5 * k
+        lost = SupervisorInputs(trend=est(t, 0.95), actual_rpm=None, setpoint_rpm=None, mill_running=False,
+                                mill_connected=False, last_valid_mi_s=t, twin_updated_s=t, mixed=True,
+                                mixing_time_s=12.5)
+        d, _ = sup.step(t, lost)
+        if d is not None:
+            out.append(d)
+    assert len(out) == 1 and out[0].kind == "safe" and out[0].action is Action.NONE
+    assert "mill link lost" in out[0].reason and sup.safe

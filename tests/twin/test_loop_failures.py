@@ -101,7 +101,7 @@ def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
     assert loop.failure is not None and f"{worker} worker crashed" in loop.failure
     assert link.sent[-1] == ("stop", None) and not link.board.running
     events = read_events(tmp_path / "run")
-    assert any(e["kind"] == "fault" and e["fault"] == f"thread_{worker}" for e in events)
+    assert any(e["kind"] == "fault" and e["fault"] == "worker_crashed" and e["worker"] == worker for e in events)
     assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
                for e in events)
     assert events[-1]["kind"] == "stop" and f"{worker} worker crashed" in events[-1]["failure"]
@@ -131,3 +131,19 @@ def test_a_hung_supervisor_ends_the_run_and_stops_the_mill(tmp_path: Path, monke
     assert link.sent[-1] == ("stop", None) and not link.board.running
     events = read_events(tmp_path / "run")
     assert any(e["kind"] == "fault" and e["fault"] == "supervisor_stalled" for e in events)
+
+
+@pytest.mark.timeout(30)
+def test_the_run_start_record_carries_the_config_the_versions_and_the_mixer(tmp_path: Path) -> None:
+    """The ``start`` record had the mode and the mill URL only: a run log read on its own
+    (``read_events``) could not say what was run, with what, on which drum."""
+    log = RunLog(tmp_path / "run")
+    loop, _ = _loop(tmp_path, log)
+    loop.stop()
+    log.close()
+    start = next(e for e in read_events(tmp_path / "run") if e["kind"] == "start")
+    assert start["config"]["mode"] == "manual" and start["config"]["log_dir"] == str(tmp_path / "run")
+    assert {"drumtwin", "python", "numpy", "opencv-python-headless", "pymunk", "viser"} <= set(start["versions"])
+    assert start["mixer"]["drum_diameter_mm"] == pytest.approx(300.0)  # the demo's twin: the paper's drum
+    assert start["config"]["control_token"] is None
+

@@ -74,8 +74,8 @@ SWEEP: list[tuple[tuple[str, ...], str]] = [
     (("mi", IMG, "--window", "0"), "window"),
     (("mi", IMG, "--fps", "nan"), "fps"),
     # what-if / sim: the same caps as the dashboard's what-if
-    (("whatif", "--duration", "1e9"), "--duration"),
-    (("whatif", "--rpm", "10000"), "critical speed"),
+    (("whatif", "--duration", "1e9"), "what-if duration must be in (0, 3600] s"),
+    (("whatif", "--rpm", "10000"), "what-if rpm 10000 outside (0, 77.23] rpm"),
     (("whatif", "--rpm", "5,10", "--seeds", "1001"), "--seeds"),
     (("sim", "--duration", "1e308"), "--duration"),
     # the mill CLI: the run's limits (issue 26 item 5) before any port is opened
@@ -85,6 +85,21 @@ SWEEP: list[tuple[tuple[str, ...], str]] = [
     (("mill-emulator", "--duration", "1e308"), "--duration"),
     (("compare", "/nonexistent-run", "--plot", "x.png"), ""),
 ]
+
+
+@pytest.mark.parametrize("rpm", ["0", "-5", "5,-5"])
+def test_whatif_refuses_a_zero_or_negative_rpm_with_the_dashboards_check(rpm: str) -> None:
+    """``whatif --rpm -5`` ran (sim.drum.check_rpm bounds |rpm|: the drum turned the other way)
+    and ``--rpm 0`` simulated a standing drum, where the dashboard's what-if refused both: the
+    command now refuses them with the loop's own check (``Limits.check_whatif``), word for word."""
+    from control.errors import ControlError
+    from twin.loop import supervisor_config
+
+    bad = float(rpm.split(",")[-1])
+    with pytest.raises(ControlError) as loops:  # what the dashboard's viewer is told (LiveLoop.run_whatif)
+        supervisor_config().limits.check_whatif([bad], 1.0)
+    line = assert_one_line_error(cli("whatif", "--rpm", rpm, "--duration", "0.5", "--workers", "1"))
+    assert str(loops.value) in line and "outside (0, 77.23] rpm" in line
 
 
 @pytest.mark.timeout(60)

@@ -36,15 +36,15 @@ class RecordingPool(Executor):
 class Rig:
     """A TwinWorker on the run's records, stepped at 0.1 s of run time."""
 
-    def __init__(self) -> None:
+    def __init__(self, min_rpm: float | None = None) -> None:
         self.frames: Latest[FrameInfo] = Latest(FrameInfo())
         self.mill: Latest[MillSnapshot] = Latest(MillSnapshot())
         view = RunView(1.0, Latest(CameraInfo()), self.frames, self.mill, Latest(TwinInfo()), Latest("auto"),
                        clock_now=lambda: 0.0)
         self.sink = Sink()
         self.slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
-        self.worker = TwinWorker(TwinSettings(start_rpm=5.0), view, self.sink, LiveState(), Latest(TwinInfo()),
-                                 self.slopes)
+        self.worker = TwinWorker(TwinSettings(start_rpm=5.0, min_rpm=min_rpm), view, self.sink, LiveState(),
+                                 Latest(TwinInfo()), self.slopes)
         self.pool = RecordingPool()
         self.worker._pool = self.pool
         self.t = 0.0
@@ -95,9 +95,35 @@ def test_the_twin_calibrates_only_a_turning_steady_drum_at_its_measured_rpm() ->
 
 
 def test_the_minimum_is_the_limits_lowest_rpm() -> None:
-    lo = Limits().min_rpm
+    lo = Limits().min_rpm  # without a run's limits (a worker on its own)
     below, above = Rig(), Rig()
     below.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 0.9 * lo)
     above.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 1.1 * lo)
     assert below.pool.jobs == [] and below.waiting() == ["not turning"]
     assert [job[1] for job in above.pool.jobs] == [pytest.approx(1.1 * lo)]
+
+
+def test_the_live_calibrations_minimum_is_the_runs_supervisor_minimum(tmp_path) -> None:
+    """The run's supervisor runs the drum at 5 rpm and above (``LOOP_SUPERVISOR``), but the
+    twin calibrated at anything from ``Limits().min_rpm`` (2 rpm) on: a drum creeping at 3 rpm,
+    a speed the run never commands, was taken as a calibration speed."""
+    from tests.twin.test_mill_worker import FakeLink
+    from twin.config import RunConfig
+    from twin.loop import LOOP_SUPERVISOR, LiveLoop
+    from twin.runlog import RunLog
+
+    cfg = RunConfig(dashboard=False, mode="auto", log_dir=tmp_path / "run").resolved()
+    log = RunLog(tmp_path / "run")
+    try:  # the loop hands its twin the supervisor's minimum (not started: no thread)
+        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(0.0, 0.0, False, None)), log)
+        run_min = loop.twin.settings.min_rpm
+        assert run_min == loop.limits.min_rpm == LOOP_SUPERVISOR["min_rpm"] == 5.0
+    finally:
+        log.close()
+    assert run_min > Limits().min_rpm
+    creeping, turning = Rig(min_rpm=run_min), Rig(min_rpm=run_min)
+    creeping.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 3.0)
+    turning.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 5.5)
+    assert creeping.pool.jobs == [] and creeping.waiting() == ["not turning"]
+    assert "below the run's 5 rpm minimum" in creeping.sink.kinds("calibration_waiting")[0]["reason"]
+    assert [job[1] for job in turning.pool.jobs] == [pytest.approx(5.5)]

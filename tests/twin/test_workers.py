@@ -7,6 +7,7 @@ import math
 import queue
 import threading
 from dataclasses import fields, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -365,6 +366,34 @@ def test_camera_worker_never_blocks_and_marks_the_end() -> None:
     assert q.qsize() == 1
 
 
+def test_readings_the_camera_drops_are_counted_in_the_frame_rows() -> None:
+    """The camera drops the oldest readings when the process worker is behind (a bounded queue:
+    memory stays flat on a loaded machine); they were dropped silently, now every one is counted
+    in the ``frames_dropped:N`` flag of the next row."""
+    from vision.sources import Frame
+
+    class Meter:
+        def measure(self, image):
+            return _reading(0.9)
+
+    q: queue.Queue = queue.Queue(maxsize=3)
+    b = Boxes("auto")
+    b.mill_at(5.0)
+    frames = [Frame(index=i, t_s=i * 0.1, image=np.zeros((4, 4, 3), np.uint8)) for i in range(10)]
+    cw = CameraWorker(frames, Meter(), q, b.camera, LiveState())
+    cw.run(threading.Event())
+    assert cw.dropped == 7 and q.qsize() == 3
+    sink = Sink(LiveState())
+    pw = ProcessWorker(q, MITrend(), b.frames, b.view, sink)
+    while not q.empty():
+        pw.process(q.get_nowait())
+    flags = [row["flags"] for row in sink.rows()]
+    counts = [int(f.split(":")[1]) for fl in flags for f in fl if f.startswith("frames_dropped:")]
+    assert sum(counts) == 7 and len(flags) == 3
+    pw.process(CameraReading(1.0, 10, _reading(0.9), dropped_total=7))  # nothing new dropped: no flag
+    assert not any(f.startswith("frames_dropped") for f in sink.rows()[-1]["flags"])
+
+
 class _Result:
     def __init__(self, rpm: float) -> None:
         self.plateau_mi = rpm / 100.0
@@ -424,3 +453,40 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
             "operator_rejected", "operator", "operator", "operator_rejected",
         ]
         assert loop._threads == []  # only start() starts threads
+
+
+@pytest.mark.timeout(120)
+def test_the_whatif_pool_starts_under_a_long_tmpdir(tmp_path) -> None:
+    """With a long ``$TMPDIR`` the fork server's socket path was too long (``OSError: AF_UNIX path
+    too long``): every AUTO study and calibration of the run failed. The pool now makes its private
+    temp directory under a short base itself (``short_pool_tempdir``)."""
+    import os
+    import subprocess
+    import sys
+
+    long_tmp = tmp_path / ("t" * 60) / ("u" * 60)
+    long_tmp.mkdir(parents=True)
+    code = (
+        "import tempfile\n"
+        "from tests.twin.test_workers import Boxes\n"
+        "from tests.twin.test_mill_worker import Sink\n"
+        "from twin.live.whatif import WhatIfWorker\n"
+        "from twin.state import LiveState\n"
+        "from sim.whatif import froude\n"
+        "w = WhatIfWorker(Boxes('auto').view, Sink(), LiveState())\n"
+        "try:\n"
+        "    print(len(tempfile.gettempdir()), round(w._get_pool().submit(froude, 5.0).result(timeout=90), 6))\n"
+        "finally:\n"
+        "    w.close()\n"
+    )
+    env = {**os.environ, "TMPDIR": str(long_tmp)}
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=110, env=env,
+                       cwd=Path(__file__).resolve().parents[2])
+    assert p.returncode == 0, p.stderr[-1500:]
+    n, fr = p.stdout.split()
+    assert int(n) > 110  # the temp directory really was long
+    from sim.recipe import PAPER_DRUM
+    from sim.whatif import froude
+
+    assert float(fr) == pytest.approx(froude(5.0, PAPER_DRUM), abs=1e-6)
+    assert list(long_tmp.iterdir()) == []  # nothing left behind

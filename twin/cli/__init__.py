@@ -40,11 +40,12 @@ for _name in _COMMAND_MODULES:
             raise
 
 
-def _one_line_error(msg: str) -> NoReturn:
-    """Print ``error: MSG`` (first line only) on stderr and exit with code 2."""
+def _one_line_error(msg: str, code: int = 2) -> NoReturn:
+    """Print ``error: MSG`` (first line only) on stderr and exit with ``code`` (2: bad input;
+    a ``TwinError``'s own ``exit_code``, e.g. 3 for a run whose worker crashed)."""
     msg = msg.strip().splitlines()[0] if msg.strip() else "bad input"
     console_err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    sys.exit(2)
+    sys.exit(code)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -77,6 +78,6 @@ def main(argv: list[str] | None = None) -> None:
             _one_line_error(f"a file is not text ({exc.reason} at byte {exc.start}): a binary or corrupt file")
         if isinstance(exc, RecursionError):
             _one_line_error("input nested too deeply to read (e.g. a TOML nested thousands of levels deep)")
-        _one_line_error(str(exc) if str(exc).strip() else type(exc).__name__)
+        _one_line_error(str(exc) if str(exc).strip() else type(exc).__name__, getattr(exc, "exit_code", 2))
     if isinstance(rv, int) and rv != 0:
         sys.exit(rv)

@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 import typer
 
-from control.limits import WHATIF_MAX_RUNS as MAX_WHATIF_RUNS  # the one set of limits: study size
 from control.limits import WHATIF_MAX_S as MAX_SIM_S  # and the longest simulated run of one command, s
 from sim.errors import SimError
 from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json
@@ -331,20 +330,17 @@ def whatif_cmd(
 ) -> None:
     """Run the twin for several rpm values and report the plateau MI and regime of each, the drive power
     (whole drum) and, with --target-mi, the time and energy to reach it (seed mean and sd)."""
-    from sim.drum import check_rpm
+    from control.limits import Limits
     from sim.engine import engine_for
     from sim.errors import check_number
     from sim.whatif import WhatIfJob, run_study, summarize
 
     check_outputs(csv_out, plot)  # before the study: a directory as --plot is no PNG
     mixer, _ = load_mixer(config, engine)
-    rpms = _parse_list(rpm, "--rpm")
-    for r in rpms:
-        check_rpm(r, mixer.drum)
     check_number("--seeds", seeds, 1, MAX_SEEDS, integer=True)
-    if len(rpms) * seeds > MAX_WHATIF_RUNS:
-        raise SimError(f"a what-if study is at most {MAX_WHATIF_RUNS} runs (got {len(rpms)} rpm x {seeds} seeds)")
-    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)
+    # the dashboard's and the loop's check (control.limits): rpm in (0, critical], study size, duration
+    rpms, duration = Limits(critical_rpm=mixer.drum.critical_rpm).check_whatif(_parse_list(rpm, "--rpm"), duration,
+                                                                              seeds)
     check_number("--sample-s", sample_s, 0.0, duration, lo_open=True)
     if fill is not None:
         check_number("--fill", fill, 0.0, 0.85, lo_open=True)

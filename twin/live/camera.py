@@ -31,7 +31,8 @@ NO_DRUM_GRACE_S = 5.0
 warming up: black or washed-out frames) are flagged readings (``no_drum:``); a source that
 shows no drum for longer, or ends without one, is bad input and ends the run."""
 
-READINGS_MAX = 512  # readings waiting for the process worker; beyond that the oldest go
+READINGS_MAX = 512  # readings waiting for the process worker; beyond that the oldest go (counted)
+SLOPES_MAX = 4000  # camera slope angles waiting for the twin worker (its own window keeps as many)
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,7 @@ class CameraReading:
     t_s: float
     frame: int
     reading: Reading
+    dropped_total: int = 0  # readings the camera dropped so far, this one's room included (process behind)
 
 
 class Rate:
@@ -74,17 +76,33 @@ def is_valid_mi(r: Reading) -> bool:
     return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
 
 
-def put_dropping_oldest(q: queue.Queue[T], item: T) -> None:
-    """Put without ever blocking: when ``q`` is full its oldest item is dropped."""
+def put_dropping_oldest(q: queue.Queue[T], item: T) -> int:
+    """Put without ever blocking: when ``q`` is full its oldest item is dropped; returns how
+    many items were dropped."""
+    dropped = 0
     while True:
         try:
             q.put_nowait(item)
-            return
+            return dropped
         except queue.Full:
             try:
                 q.get_nowait()
+                dropped += 1
             except queue.Empty:
                 pass
+
+
+def make_room(q: queue.Queue[T]) -> int:
+    """Drop the oldest items of a full ``q`` until one more fits; returns how many were dropped
+    (the producer then puts without blocking, as long as it is the only one)."""
+    dropped = 0
+    while q.full():
+        try:
+            q.get_nowait()
+            dropped += 1
+        except queue.Empty:
+            break
+    return dropped
 
 
 class CameraWorker:
@@ -115,6 +133,7 @@ class CameraWorker:
         self._overlay_cadence = Cadence(1.0 / overlay_hz) if overlay_hz > 0 and overlay is not None else None
         self._monotonic = monotonic
         self.fps = Rate(monotonic=monotonic)
+        self.dropped = 0  # readings dropped because the process worker was behind (frames_dropped:)
 
     def run(self, stop: threading.Event) -> None:
         """Until the source ends or fails (then ``CameraInfo.ended``: vision is lost now)."""
@@ -156,7 +175,8 @@ class CameraWorker:
             if came and reading.roi is not roi:
                 self.box.set(CameraInfo(t, wall, frame.image, reading.roi, n, False))
             self.fps.tick()
-            put_dropping_oldest(self.out, CameraReading(t, int(frame.index), reading))
+            self.dropped += make_room(self.out)  # the one producer: the put below never blocks
+            self.out.put_nowait(CameraReading(t, int(frame.index), reading, self.dropped))
             cadence = self._overlay_cadence
             if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
@@ -184,7 +204,7 @@ class ProcessWorker:
         box: Latest[FrameInfo],
         view: RunView,
         sink: EventSink,
-        slopes: queue.SimpleQueue[tuple[float, float]] | None = None,
+        slopes: queue.Queue[tuple[float, float]] | None = None,
         ma_window: int = 150,
         camera_fps: Callable[[], float] = lambda: 0.0,
         endpoint: EndpointDetector | None = None,
@@ -199,6 +219,7 @@ class ProcessWorker:
         self.camera_fps = camera_fps
         self.endpoint = endpoint or EndpointDetector()  # the batch endpoint: events mixed / unmixed
         self._settled: bool | None = None  # the trend's state last logged (None: no valid trend yet)
+        self._dropped = 0  # the camera's dropped count at the last reading processed
 
     def run(self, stop: threading.Event) -> None:
         while not stop.is_set():
@@ -235,7 +256,8 @@ class ProcessWorker:
         last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est, end.mixed, end.mixing_time_s))
         if valid and self.slopes is not None and math.isfinite(r.slope_deg):
-            self.slopes.put((item.t_s, float(r.slope_deg)))
+            put_dropping_oldest(self.slopes, (item.t_s, float(r.slope_deg)))  # bounded: a stalled twin
+        dropped, self._dropped = item.dropped_total - self._dropped, max(self._dropped, item.dropped_total)
         tw = self.view.twin()
         row = FrameReading(
             t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
@@ -244,7 +266,8 @@ class ProcessWorker:
             ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
             rpm_setpoint=_known(mill.setpoint_rpm), rpm_actual=_known(mill.actual_rpm), mode=self.view.mode(),
-            flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ()),
+            flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ())
+            + ((f"frames_dropped:{dropped}",) if dropped > 0 else ()),
             mixed=end.mixed, mixing_time_s=end.mixing_time_s,
         )
         self.sink.publish(row)  # the one way a frame leaves: the CSV row, the plots, the numbers panel

@@ -34,7 +34,7 @@ from twin.live.records import (
     StopMill,
     SupervisorCommand,
 )
-from twin.records import DecisionMade, ModeSet
+from twin.records import DecisionMade, ModeSet, OperatorAction, OperatorRejected
 
 RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
 
@@ -149,7 +149,7 @@ class SupervisorWorker:
             try:
                 d = sup.set_mode(cmd.mode, now, reason="operator")
             except ControlError as exc:
-                self.sink.event("operator_rejected", now, action="mode", mode=cmd.mode, error=str(exc))
+                self.sink.publish(OperatorRejected(t_s=now, action="mode", mode=cmd.mode, error=str(exc)))
                 return
             self.mode_box.set(sup.mode.value)
             self.sink.publish(ModeSet(t_s=now, mode=sup.mode.value))
@@ -161,9 +161,9 @@ class SupervisorWorker:
             try:
                 clamped = sup.set_manual_rpm(cmd.rpm)
             except ControlError as exc:
-                self.sink.event("operator_rejected", now, action="manual_rpm", rpm=cmd.rpm, error=str(exc))
+                self.sink.publish(OperatorRejected(t_s=now, action="manual_rpm", rpm=cmd.rpm, error=str(exc)))
                 return
-            self.sink.event("operator", now, action="manual_rpm", rpm=cmd.rpm, clamped_rpm=clamped)
+            self.sink.publish(OperatorAction(t_s=now, action="manual_rpm", rpm=cmd.rpm, clamped_rpm=clamped))
         self.tick(now)  # act now, not at the next tick
 
     def tick(self, now_s: float) -> Decision | None:

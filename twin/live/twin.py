@@ -26,7 +26,15 @@ from typing import TYPE_CHECKING, Any
 from twin.clock import Cadence
 from twin.live.camera import Rate
 from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
-from twin.records import Calibrated, TwinReading, TwinStatus
+from twin.records import (
+    Calibrated,
+    CalibrationStarted,
+    CalibrationWaiting,
+    TwinLag,
+    TwinReading,
+    TwinSeeded,
+    TwinStatus,
+)
 from twin.state import LiveState
 
 if TYPE_CHECKING:
@@ -53,6 +61,7 @@ class TwinSettings:
     mixer: Mixer | None = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
     engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    min_rpm: float | None = None  # the run's lowest rpm (its supervisor's limits); None: ``control.limits.Limits``'
 
 
 def _calibrate_job(target_slope_deg: float, rpm: float, kwargs: Mapping[str, Any]) -> Any:
@@ -72,7 +81,7 @@ class TwinWorker:
         sink: EventSink,
         state: LiveState,
         box: Latest[TwinInfo],
-        slopes: queue.SimpleQueue[tuple[float, float]],
+        slopes: queue.Queue[tuple[float, float]] | queue.SimpleQueue[tuple[float, float]],
     ) -> None:
         self.settings = settings
         self.view = view
@@ -135,7 +144,7 @@ class TwinWorker:
             target = view.frames().t_s
             lag = target - self.now_s
             if lag > MAX_LAG_S:  # cannot keep up: skip ahead and say so
-                self.sink.event("twin_lag", target, lag_s=lag)
+                self.sink.publish(TwinLag(t_s=target, lag_s=lag))
                 self.t0_run += lag
                 render.restart(self.now_s)
             if lag <= 1e-6:
@@ -170,8 +179,9 @@ class TwinWorker:
     def _rpm_now(self, t: float) -> tuple[float | None, str]:
         """The drum's measured rpm to calibrate at, from the mill's actual rpm seen at run time
         ``t`` (called every step): the median over the last ``CALIBRATION_STEADY_S`` once the
-        drum has turned at >= ``control.limits.Limits().min_rpm`` and steadily (within
-        ``CALIBRATION_RPM_SPREAD`` of it) all that time; else ``(None, why)``."""
+        drum has turned at >= the run's lowest rpm (``TwinSettings.min_rpm``: the supervisor's
+        limits) and steadily (within ``CALIBRATION_RPM_SPREAD`` of it) all that time; else
+        ``(None, why)``."""
         from control.limits import Limits
 
         seen = self._rpm_seen
@@ -183,9 +193,9 @@ class TwinWorker:
             seen.append((t, rpm))
         while len(seen) > 1 and seen[1][0] <= t - CALIBRATION_STEADY_S:
             seen.popleft()  # keep one sample at or before the window's start
-        lo_rpm = Limits().min_rpm
+        lo_rpm = Limits().min_rpm if self.settings.min_rpm is None else float(self.settings.min_rpm)
         if rpm < lo_rpm:
-            return None, f"not turning: the drum turns at {rpm:.2f} rpm, below {lo_rpm:g} rpm (control.limits)"
+            return None, f"not turning: the drum turns at {rpm:.2f} rpm, below the run's {lo_rpm:g} rpm minimum"
         if t - seen[0][0] < CALIBRATION_STEADY_S:
             return None, (f"not steady yet: the drum has turned steadily for {t - seen[0][0]:.1f} of "
                           f"{CALIBRATION_STEADY_S:g} s")
@@ -211,14 +221,14 @@ class TwinWorker:
                 reason = why.split(":", 1)[0]
                 if reason != self._cal_waiting:  # an event, not a fault: the twin runs on as it is
                     self._cal_waiting = reason
-                    self.sink.event("calibration_waiting", t, reason=why, rpm=self.view.mill().actual_rpm)
+                    self.sink.publish(CalibrationWaiting(t_s=t, reason=why, rpm=self.view.mill().actual_rpm))
                     self.sink.publish(TwinStatus(t_s=t, state="running, waiting to calibrate"))
                 return
             self._cal_waiting = None
             self._cal_wanted = False
             self._cal_started = (t, target, rpm, time.monotonic())
             self.sink.publish(TwinStatus(t_s=t, state="running, calibrating"))
-            self.sink.event("calibration_started", t, target_slope_deg=target, rpm=rpm)
+            self.sink.publish(CalibrationStarted(t_s=t, target_slope_deg=target, rpm=rpm))
             try:
                 self._cal_future = self._get_pool().submit(
                     _calibrate_job, target, rpm, dict(self.settings.calibrate_kwargs)
@@ -256,7 +266,9 @@ class TwinWorker:
             raise RuntimeError("the twin worker is closed")
         if self._pool is None:
             from sim.whatif import make_pool
+            from twin.live.whatif import short_pool_tempdir
 
+            short_pool_tempdir()
             self._pool = make_pool(1)
         return self._pool
 
@@ -301,7 +313,7 @@ class TwinWorker:
         self.sim = sim
         self.t0_run = t - sim.t_s
         self._state = sim.snapshot()
-        self.sink.event("twin_seeded", t, source=how, n_particles=len(sim.particles()))
+        self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))
         self._render_and_measure()
         self._publish(t)
 

@@ -22,7 +22,9 @@ import numpy as np
 
 from control.objective import RpmPrediction
 from control.supervisor import PredictionRequest, PredictionResult
+from twin.errors import TwinError
 from twin.live.records import EventSink, RunView
+from twin.records import WhatIfCancelled, WhatIfError, WhatIfResult
 from twin.state import LiveState, WhatIfView
 
 Study = Callable[[Sequence[Any]], Sequence[Any]]
@@ -34,6 +36,39 @@ class _OperatorStudy:
     rpms: tuple[float, ...]
     duration_s: float
     reason: str
+
+
+POOL_TMP_MAX = 60
+"""Longest temp directory (characters) the process pools' fork server may put its socket under:
+an AF_UNIX path is at most 107 bytes, and multiprocessing adds ``/pymp-XXXXXXXX/listener-XXXXXXXX``."""
+
+SHORT_TMP_BASES = ("/tmp", "/var/tmp", "/dev/shm")
+
+
+def short_pool_tempdir(limit: int = POOL_TMP_MAX) -> str:
+    """multiprocessing's private temp directory of this process (``multiprocessing.util.get_temp_dir``:
+    a ``pymp-*`` directory, mode 0700, removed at exit), made under a short base when the temp
+    directory (``$TMPDIR``) is longer than ``limit``: the fork server's socket in it would be "AF_UNIX
+    path too long" and every what-if study and calibration would fail. Call before a pool starts;
+    TwinError when the directory was already made under a long path."""
+    import multiprocessing.util as mpu
+    import os
+    import tempfile
+
+    if len(tempfile.gettempdir()) > limit:
+        base = next((d for d in SHORT_TMP_BASES if os.path.isdir(d) and os.access(d, os.W_OK | os.X_OK)), None)
+        old = tempfile.tempdir
+        if base is not None:
+            tempfile.tempdir = base
+        try:
+            path = mpu.get_temp_dir()  # made once per process (the first call wins)
+        finally:
+            tempfile.tempdir = old
+    else:
+        path = mpu.get_temp_dir()
+    if len(path) > limit + len("/pymp-xxxxxxxx"):
+        raise TwinError(f"the temp directory {path} is too long for the what-if pool's socket: set TMPDIR shorter")
+    return path
 
 
 class WhatIfWorker:
@@ -138,8 +173,8 @@ class WhatIfWorker:
                 pred = None
                 if study is not None:
                     self._pending_study = None
-                    self.sink.event("whatif_error", self.view.now_s(), reason=study.reason,
-                                    error="the twin is not running yet")
+                    self.sink.publish(WhatIfError(t_s=self.view.now_s(), reason=study.reason,
+                                                  error="the twin is not running yet"))
                     return False
             if pred is not None:
                 self._pending_pred = None
@@ -186,6 +221,7 @@ class WhatIfWorker:
         if self._pool is None:
             from sim.whatif import make_pool
 
+            short_pool_tempdir()
             self._pool = make_pool(self.workers)
         return self._pool
 
@@ -207,7 +243,7 @@ class WhatIfWorker:
         state = self.view.twin().state
         t_req = self.view.now_s()
         if state is None:
-            self.sink.event("whatif_error", t_req, reason=reason, error="the twin is not running yet")
+            self.sink.publish(WhatIfError(t_s=t_req, reason=reason, error="the twin is not running yet"))
             raise RuntimeError("the twin is not running yet")
         self._seq += 1
         status = f"running {len(rpms)} rpm x {duration_s:g} s ({reason})"
@@ -222,10 +258,10 @@ class WhatIfWorker:
             self._seq += 1
             if self._cancelled:
                 self.state.set_whatif(WhatIfView(status="cancelled by the operator", seq=self._seq))
-                self.sink.event("whatif_cancelled", self.view.now_s(), reason=reason)
+                self.sink.publish(WhatIfCancelled(t_s=self.view.now_s(), reason=reason))
                 raise
             self.state.set_whatif(WhatIfView(status=f"error: {exc}", seq=self._seq))
-            self.sink.event("whatif_error", self.view.now_s(), reason=reason, error=str(exc))
+            self.sink.publish(WhatIfError(t_s=self.view.now_s(), reason=reason, error=str(exc)))
             raise
         preds = {float(r): float(res.plateau_mi) for r, res in zip(rpms, results, strict=False)}
         times = tuple(float(getattr(res, "time_to_target_s", np.nan)) for res in results)
@@ -248,13 +284,13 @@ class WhatIfWorker:
                 energy_to_target_j=energies,
             )
         )
-        self.sink.event(
-            "whatif", t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
+        self.sink.publish(WhatIfResult(
+            t_s=t_done, reason=reason, requested_t_s=t_req, duration_s=duration_s,
             predictions={str(k): v for k, v in preds.items()}, took_s=time.monotonic() - t0,
             target_mi=target, time_to_target_s=dict(zip(map(str, preds), times, strict=False)),
             power_w=dict(zip(map(str, preds), powers, strict=False)),
             energy_to_target_j=dict(zip(map(str, preds), energies, strict=False)),
-        )
+        ))
         return preds, rows
 
     def close(self) -> None:
