@@ -22,7 +22,8 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       Mahalanobis distance ``d2 = y^2 / S`` (``d2 > gate_d2``: rejected, predict only), so
       a single glitch never moves the level (a soft Huber/Student-t weight still would,
       by a bounded amount, on every glitch). Re-initialisation is decided on the *share* of
-      rejected samples among the valid ones of the last ``reinit_window_s``: at least
+      rejected samples among the valid ones of the last ``reinit_window_s`` (never fewer
+      than the last ``reinit_min`` valid samples: a 10 fps camera has 6 in 0.6 s): at least
       ``reinit_share`` of at least ``reinit_min`` samples rejected means the process
       moved; the level restarts at the *median* of the rejected samples of the window
       (robust to the glitches in between) with rate 0. A burst shorter than
@@ -329,8 +330,10 @@ class MITrend:
 
     def _window_at(self, t_s: float) -> tuple[int, list[float]]:
         """Valid samples in the re-init window ending at ``t_s`` and the rejected values."""
-        w = self._window
-        while w and w[0][0] < t_s - self.config.reinit_window_s:
+        w, c = self._window, self.config
+        # the window: the last reinit_window_s, but never fewer than reinit_min samples (a slow
+        # camera: 10 fps has 6 samples in 0.6 s and could never re-initialise), within max_dt_s
+        while w and w[0][0] < t_s - c.reinit_window_s and (len(w) > c.reinit_min or w[0][0] < t_s - c.max_dt_s):
             w.popleft()
         return len(w), [z for _, z, rej in w if rej]
 

@@ -301,3 +301,22 @@ def test_the_reinit_window_holds_the_samples_at_its_start():
     step = [tr.update(t + k / 32, 0.9, 0.0) for k in range(1, 20)]
     first = next(k for k, e in enumerate(step, start=1) if e.reinit)
     assert first == 11 and not any(e.accepted for e in step[:10])
+
+
+@pytest.mark.parametrize("fps", [10.0, 5.0])
+def test_a_slow_camera_still_re_initialises_on_a_real_step(fps):
+    """The re-init window is the last ``reinit_window_s`` but never fewer than ``reinit_min``
+    samples: at 10 fps 0.6 s holds 6 samples (< 8), so a time-only window could never
+    re-initialise and the level crept after a step on the filter's own process noise (the
+    demo's 10 fps camera: trend 0.35 on camera MI 0.9). Here the step from 0.40 to 0.95 is
+    followed within reinit_min / fps * (1 + share) s and by a re-initialisation."""
+    tr = MITrend()
+    rng = np.random.default_rng(1)
+    n0, n1 = int(10 * fps), int(10 * fps)
+    z = np.concatenate([0.40 + rng.normal(0, 0.01, n0), 0.95 + rng.normal(0, 0.01, n1)])
+    est = [tr.update(i / fps, float(v), 5.0) for i, v in enumerate(z)]
+    after = est[n0:]
+    first = next(k for k, e in enumerate(after) if abs(e.level - 0.95) <= 0.05)
+    assert any(e.reinit for e in after[: first + 1])
+    assert first <= tr.config.reinit_min + 2
+    assert all(abs(e.level - 0.95) <= 0.05 for e in after[first:])
