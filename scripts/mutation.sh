@@ -47,7 +47,7 @@ perl -0pi -e 's/^(\s*def \w+\([^)]*\)(?:\s*->[^:]+)?:)([ \t]*# pragma: no cover 
 # Not mutated (clone only), each for a reason given in docs/mutation.md: the twin's simulation in
 # sim/calibrate.py (every mutant would run the DEM; its decision path is tested on a known slope field).
 if [ "$mod" = sim/calibrate.py ]; then
-  perl -0pi -e 's/^(def (?:twin_surface|twin_slope_deg)\()/# pragma: no mutate block\n$1/mg' "$mod"
+  perl -0pi -e 's/^(def (?:twin_surface|twin_slope_deg)\((?:[^()]|\([^()]*\))*\)[^:\n]*:)[ \t]*$/$1  # pragma: no mutate block/mg' "$mod"
 fi
 # The fast profile (clone only): hypothesis capped and derandomised, each mutant's tests fastest first
 # (durations from mutmut's stats run, inherited by the forked worker).
