@@ -1,0 +1,541 @@
+"""The supervisor's step, decision by decision (issue 27's mutation tests of control/supervisor.py).
+
+Each test drives the public API (``step``, ``set_mode``, ``set_manual_rpm``) and compares whole
+``Decision`` records -- time, mode, action, kind, the logged reason, rpm, target, safe flag, inputs,
+predictions and scores -- with values worked out by hand from the rules in the module docstring.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from control.supervisor import (
+    Action,
+    Decision,
+    Mode,
+    PredictionRequest,
+    PredictionResult,
+    SafeAction,
+    Supervisor,
+    SupervisorConfig,
+    SupervisorInputs,
+)
+from control.trend import TrendEstimate
+
+
+def est(level: float, rate: float = 0.0, settled: bool = True, t: float = 0.0) -> TrendEstimate:
+    return TrendEstimate(t, level, rate, 0.01, 0.001, level - 0.02, level + 0.02, True, False, settled=settled)
+
+
+def inp(level: float = 0.3, rpm: float | None = 10.0, t: float = 0.0, **kw) -> SupervisorInputs:
+    base: dict = dict(trend=est(level, t=t), actual_rpm=rpm, setpoint_rpm=rpm, mill_running=True,
+                      last_valid_mi_s=t, twin_updated_s=t)
+    base.update(kw)
+    return SupervisorInputs(**base)
+
+
+def cfg(**kw) -> SupervisorConfig:
+    base: dict = dict(detect_dwell_s=0.0, max_rate_rpm_per_s=100.0, prediction_wait_s=20.0)
+    base.update(kw)
+    return SupervisorConfig(**base)
+
+
+def due(
+    config: SupervisorConfig | None = None, i: SupervisorInputs | None = None
+) -> tuple[Supervisor, SupervisorInputs]:
+    """An AUTO supervisor on a segregated bed (MI 0.3) at 10 rpm that has just asked for predictions."""
+    sup = Supervisor(config or cfg(), Mode.AUTO)
+    i = i or inp()
+    d, req = sup.step(0.0, i)
+    assert d is None and req == PredictionRequest(0.0, sup.config.candidates(i.actual_rpm), 60.0, None)
+    return sup, i
+
+
+def answer(preds: dict, config: SupervisorConfig | None = None, i: SupervisorInputs | None = None,
+           t: float = 0.0) -> tuple[Supervisor, Decision | None, SupervisorInputs]:
+    sup, i = due(config, i)
+    d, req = sup.step(t, i, PredictionResult(0.0, 60.0, preds))
+    assert req is None
+    return sup, d, i
+
+
+WHY = "MI 0.300 < 0.5"
+
+
+# -- the plateau choice ---------------------------------------------------------------------------
+def test_a_move_to_the_best_score_names_the_prediction_the_score_and_staying():
+    preds = {5.0: 0.5, 10.0: 0.4, 20.0: 0.6}
+    sup, d, i = answer(preds)
+    scores = {5.0: 0.5 - 0.002 * 5, 10.0: 0.4, 20.0: 0.6 - 0.002 * 10}
+    reason = f"segregation ({WHY}); twin predicts MI 0.600 at 20 rpm (score 0.580 vs 0.400 staying at 10)"
+    assert d == Decision(0.0, Mode.AUTO, Action.SET_RPM, "move", reason, rpm=20.0, target_rpm=20.0, inputs=i,
+                         predictions=preds, scores=scores)
+    assert list(sup.events)[-1] is d and sup.commanded_rpm == 20.0 and sup.target_rpm == 20.0
+
+
+def test_a_gain_below_min_gain_holds_with_the_numbers():
+    preds = {10.0: 0.40, 20.0: 0.435}
+    sup, d, i = answer(preds)
+    reason = f"segregation ({WHY}); best 20 rpm gains +0.015 < 0.02 -> stay at 10"
+    assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold", reason, inputs=i, predictions=preds,
+                         scores={10.0: 0.40, 20.0: pytest.approx(0.415)})
+    assert sup.commanded_rpm == 10.0 and sup.target_rpm == 10.0
+
+
+def test_a_gain_of_exactly_min_gain_moves():
+    _, d, _ = answer({10.0: 0.25, 20.0: 0.25 + 0.02 + 0.002 * 10 + 1e-12}, cfg(min_gain=0.02))
+    assert d is not None and d.kind == "move" and d.rpm == 20.0
+    _, d, _ = answer({10.0: 0.25, 20.0: 0.25 + 0.02 + 0.002 * 10 - 1e-6}, cfg(min_gain=0.02))
+    assert d is not None and d.kind == "hold"
+
+
+def test_the_best_at_the_current_rpm_holds():
+    preds = {10.0: 0.9, 20.0: 0.5}
+    _, d, _ = answer(preds)
+    assert d is not None and (d.kind, d.action, d.rpm) == ("hold", Action.NONE, None)
+    assert d.reason == f"segregation ({WHY}); best 10 rpm gains +0.000 < 0.02 -> stay at 10"
+
+
+def test_staying_is_scored_at_the_nearest_candidate_within_half_an_rpm():
+    # 10.5 is the current rpm's candidate (<= 0.5 rpm away), 10.4 is nearer still; 10.6 would not be
+    preds = {10.5: 0.45, 10.4: 0.40, 30.0: 0.48}
+    _, d, _ = answer(preds, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.kind == "move" and "vs 0.400 staying at 10" in d.reason
+    _, d, _ = answer({10.5: 0.40, 30.0: 0.43}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.kind == "move" and "vs 0.400 staying at 10" in d.reason
+    # nothing within 0.5 rpm: staying is worth the trend's level (0.3)
+    _, d, _ = answer({10.6: 0.40, 30.0: 0.33}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.kind == "move" and d.rpm == 10.6 and "vs 0.300 staying at 10" in d.reason
+
+
+def test_without_a_candidate_near_and_a_level_staying_is_worth_nothing():
+    # segregated, then the trend loses its level (a settled record without a valid level)
+    sup = Supervisor(cfg(), Mode.AUTO)
+    sup.step(0.0, inp())
+    i = inp(trend=TrendEstimate(0.0, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, False, False,
+                                settled=True))
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {30.0: 0.05}))
+    assert d is not None and d.kind == "move" and d.rpm == 30.0 and "vs -inf staying at 10" in d.reason
+
+
+def test_candidates_outside_the_limits_or_without_a_number_are_not_scored():
+    lo, hi = SupervisorConfig().rpm_limits
+    preds = {lo - 1e-8: 0.9, hi + 1e-8: 0.9, lo - 1e-10: 0.31, hi + 1e-10: 0.5, 20.0: math.nan, 10.0: 0.3}
+    _, d, _ = answer(preds)
+    assert d is not None and d.scores is not None
+    assert set(d.scores) == {lo - 1e-10, hi + 1e-10, 10.0}
+    assert d.scores[hi + 1e-10] == pytest.approx(0.5 - 0.002 * (hi - 10.0))
+    assert d.scores[lo - 1e-10] == pytest.approx(0.31 - 0.002 * (10.0 - lo))
+
+
+def test_predictions_all_outside_the_limits_hold_with_the_reason():
+    preds = {100.0: 0.9, 1.0: 0.8}
+    _, d, i = answer(preds)
+    assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold",
+                         f"segregation ({WHY}); predictions empty or out of limits", inputs=i, predictions=preds)
+
+
+def test_equal_scores_go_to_the_nearer_rpm():
+    _, d, _ = answer({14.0: 0.6, 6.0: 0.5, 20.0: 0.6}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.rpm == 14.0
+    _, d, _ = answer({20.0: 0.6, 3.0: 0.6, 14.0: 0.6}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.rpm == 14.0
+
+
+def test_a_plateau_choice_under_another_objective_says_it_had_no_rows():
+    c = cfg(objective="time", target_mi=0.9)
+    sup = Supervisor(c, Mode.AUTO)
+    i = inp()
+    _, req = sup.step(0.0, i)
+    assert req == PredictionRequest(0.0, c.candidates(10.0), 60.0, 0.9)
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.3, 30.0: 0.6}))
+    assert d is not None and d.reason == (
+        f"segregation (objective time: no time/energy rows -> plateau; {WHY}); twin predicts MI 0.600 at 30 rpm "
+        "(score 0.560 vs 0.300 staying at 10)")
+
+
+def test_below_the_target_without_segregation_the_reason_says_so():
+    c = cfg(objective="time", target_mi=0.9)
+    sup = Supervisor(c, Mode.AUTO)
+    i = inp(level=0.7)  # not segregated (>= 0.5), below the target 0.9
+    _, req = sup.step(0.0, i)
+    assert req is not None
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.7, 30.0: 0.95}))
+    assert d is not None and d.reason.startswith(
+        "segregation (objective time: no time/energy rows -> plateau; below target MI 0.9); twin predicts")
+
+
+# -- when a decision is due, and the fallback rule ----------------------------------------------------
+def test_an_unanswered_request_waits_then_falls_back_one_step_up():
+    sup, _ = due(cfg(prediction_wait_s=20.0))
+    for t in (0.5, 19.5):
+        d, req = sup.step(t, inp(t=t))
+        assert d is None and req is None  # asked once, waiting
+    i = inp(t=20.0)
+    d, _ = sup.step(20.0, i)
+    assert d == Decision(20.0, Mode.AUTO, Action.SET_RPM, "move",
+                         f"segregation ({WHY}); no predictions -> fallback rule 10 -> 15 rpm", rpm=15.0,
+                         target_rpm=15.0, inputs=i)
+
+
+def test_the_fallback_at_the_upper_limit_steps_down():
+    sup, i = due(cfg(prediction_wait_s=0.0), inp(rpm=45.0))
+    d, _ = sup.step(0.0, i)
+    assert d is not None and (d.rpm, d.target_rpm) == (40.0, 40.0)
+    assert d.reason.endswith("fallback rule 45 -> 40 rpm")
+
+
+def test_with_nothing_known_of_the_mill_the_fallback_starts_from_the_safe_rpm_and_jumps():
+    sup = Supervisor(cfg(prediction_wait_s=0.0, max_rate_rpm_per_s=1.0), Mode.AUTO)
+    i = inp(rpm=None, mill_running=None)
+    assert sup.step(0.0, i) == (None, PredictionRequest(0.0, sup.config.candidates(5.0), 60.0, None))
+    d, _ = sup.step(0.0, i)
+    assert d is not None and (d.action, d.rpm, d.target_rpm) == (Action.SET_RPM, 10.0, 10.0)
+    assert d.reason.endswith("fallback rule 5 -> 10 rpm") and sup.commanded_rpm == 10.0
+
+
+def test_a_reported_actual_rpm_is_the_start_when_nothing_was_commanded():
+    sup = Supervisor(cfg(prediction_wait_s=0.0), Mode.AUTO)
+    i = inp(rpm=None, actual_rpm=math.nan, mill_running=None)  # a NaN board reading: no resync
+    sup.step(0.0, i)
+    i2 = inp(rpm=None, mill_running=None, mill_epoch=0, actual_rpm=None)
+    d, _ = sup.step(0.0, i2)
+    assert d is not None and d.reason.endswith("fallback rule 5 -> 10 rpm")
+    sup = Supervisor(cfg(prediction_wait_s=0.0), Mode.AUTO)
+    i = inp(rpm=None, actual_rpm=60.0, mill_running=None, mill_connected=False)  # no resync while unlinked
+    sup.step(0.0, i)  # safe: the link is down
+    assert sup.commanded_rpm is None
+
+
+def test_evaluations_are_min_change_interval_apart():
+    c = cfg(prediction_wait_s=0.0, min_change_interval_s=30.0)
+    sup, i = due(c)
+    d, _ = sup.step(0.0, i)
+    assert d is not None and d.rpm == 15.0
+    assert sup.step(29.5, inp(rpm=15.0, t=29.5)) == (None, None)
+    _, req = sup.step(30.0, inp(rpm=15.0, t=30.0))
+    assert req == PredictionRequest(30.0, c.candidates(15.0), 60.0, None)
+
+
+def test_old_predictions_are_not_used_and_older_ones_never_replace_newer():
+    c = cfg(prediction_max_age_s=30.0)
+    sup, i = due(c)
+    sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.3, 30.0: 0.31}))  # a hold at t = 0
+    assert sup.fresh_predictions(30.0) is not None and sup.fresh_predictions(30.0 + 1e-9) is None
+    newer = PredictionResult(5.0, 60.0, {30.0: 0.9})
+    sup.step(1.0, inp(t=1.0), newer)
+    sup.step(2.0, inp(t=2.0), PredictionResult(4.0, 60.0, {30.0: 0.1}))
+    assert sup.fresh_predictions(6.0) is newer
+    same_time = PredictionResult(5.0, 60.0, {30.0: 0.5})
+    sup.step(3.0, inp(t=3.0), same_time)
+    assert sup.fresh_predictions(6.0) is same_time
+
+
+def test_no_request_while_the_trend_is_unsettled_or_the_bed_mixed():
+    sup = Supervisor(cfg(), Mode.AUTO)
+    assert sup.step(0.0, inp(level=0.8)) == (None, None)
+    sup.step(1.0, inp(t=1.0))  # segregated, asks
+    sup2 = Supervisor(cfg(), Mode.AUTO)
+    sup2.step(0.0, inp())
+    i = inp(trend=est(0.3, settled=False))
+    assert sup2.step(1.0, i) == (None, None)
+
+
+# -- ramps -------------------------------------------------------------------------------------------
+def test_a_move_ramps_at_the_rate_limit_once_per_interval_with_its_reason():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=1.0, prediction_wait_s=0.0), Mode.AUTO)
+    i = inp()
+    sup.step(0.0, i)
+    d, _ = sup.step(0.0, i)
+    assert d is not None and (d.kind, d.rpm, d.target_rpm) == ("move", 12.0, 15.0)
+    assert sup.step(1.0 - 2e-9, i) == (None, None)  # within the interval (1e-9 of slack only)
+    d, _ = sup.step(1.0 - 5e-10, i)
+    assert d == Decision(1.0 - 5e-10, Mode.AUTO, Action.SET_RPM, "ramp", "ramp 14 rpm toward 15 (<= 2 rpm/s)",
+                         rpm=14.0, target_rpm=15.0, inputs=i)
+    d, _ = sup.step(2.0, i)
+    assert d is not None and (d.rpm, d.reason) == (15.0, "ramp 15 rpm toward 15 (<= 2 rpm/s)")
+    assert sup.step(3.0, i) == (None, None)
+
+
+def test_a_ramp_lands_on_its_target_within_a_hundredth_and_rounds_to_two_decimals():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=0.333, ramp_interval_s=1.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(10.675)
+    got = [sup.step(float(t), inp(rpm=10.0))[0] for t in range(1, 4)]
+    assert [g.rpm for g in got if g is not None] == [10.33, 10.66, 10.675]
+
+
+def test_a_rate_of_zero_means_no_rate_limit():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=0.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(40.0)
+    d, _ = sup.step(1.0, inp(rpm=10.0))
+    assert d is not None and (d.kind, d.rpm, d.target_rpm) == ("manual", 40.0, 40.0)
+    assert d.reason == "operator rpm 40"
+
+
+def test_a_ramp_down_keeps_its_sign():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=3.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=20.0))
+    sup.set_manual_rpm(10.0)
+    rpms = [d.rpm for t in range(1, 6) if (d := sup.step(float(t), inp(rpm=20.0))[0]) is not None]
+    assert rpms == [17.0, 14.0, 11.0, 10.0]
+
+
+def test_manual_without_an_operator_rpm_does_nothing_and_a_repeat_of_it_sends_nothing_new():
+    sup = Supervisor(cfg(), Mode.MANUAL)
+    board_above = inp(rpm=60.0)
+    d, _ = sup.step(0.0, board_above)  # a board above the limits: no operator rpm taken, nothing sent
+    assert d is None and sup.manual_rpm is None and sup.target_rpm == 45.0
+    assert sup.step(1.0, board_above) == (None, None)
+    sup.set_manual_rpm(20.0)
+    d, _ = sup.step(2.0, board_above)
+    assert d is not None and (d.kind, d.rpm) == ("manual", 20.0)
+    assert sup.step(3.0, board_above) == (None, None)
+
+
+# -- board resync -------------------------------------------------------------------------------------
+def test_resync_takes_the_actual_rpm_of_a_running_board_and_the_setpoint_of_a_stopped_one():
+    sup = Supervisor(cfg(), Mode.OFF)
+    sup.step(0.0, inp(actual_rpm=12.345, setpoint_rpm=20.0, mill_running=True))
+    assert (sup.commanded_rpm, sup.target_rpm) == (12.35, 12.35)  # rounded to the wire's 2 decimals
+    sup.step(1.0, inp(actual_rpm=0.0, setpoint_rpm=20.0, mill_running=False, mill_epoch=1))
+    assert sup.commanded_rpm == 20.0
+    sup.step(2.0, inp(actual_rpm=7.0, setpoint_rpm=None, mill_running=False, mill_epoch=2))
+    assert sup.commanded_rpm == 7.0  # no setpoint: the actual rpm
+    sup.step(3.0, inp(actual_rpm=None, setpoint_rpm=9.0, mill_running=True, mill_epoch=3))
+    assert sup.commanded_rpm == 9.0  # running but no actual: the setpoint
+    sup.step(4.0, inp(actual_rpm=30.0, setpoint_rpm=30.0, mill_running=True, mill_epoch=3))
+    assert sup.commanded_rpm == 9.0  # same epoch: no resync
+    sup.step(5.0, inp(actual_rpm=31.0, setpoint_rpm=31.0, mill_epoch=4, mill_connected=False))
+    assert sup.commanded_rpm == 9.0  # unlinked: nothing read
+    sup.step(6.0, inp(actual_rpm=math.inf, setpoint_rpm=math.inf, mill_epoch=5))
+    assert sup.commanded_rpm == 9.0  # not a number: ignored, and the epoch not taken
+    sup.step(7.0, inp(actual_rpm=11.0, setpoint_rpm=11.0, mill_epoch=5))
+    assert sup.commanded_rpm == 11.0
+
+
+def test_resync_during_a_ramp_keeps_the_target_and_in_off_a_board_above_stays_untouched():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(20.0)
+    sup.step(1.0, inp(rpm=10.0))  # ramping 10 -> 12 ... -> 20
+    sup.step(1.5, inp(actual_rpm=11.0, setpoint_rpm=12.0, mill_epoch=1))
+    assert (sup.commanded_rpm, sup.target_rpm) == (11.0, 20.0)
+    off = Supervisor(cfg(), Mode.OFF)
+    off.step(0.0, inp(rpm=60.0))
+    assert (off.commanded_rpm, off.target_rpm) == (60.0, 60.0)
+
+
+def test_a_mode_change_takes_the_commanded_rpm_as_the_operators_only_inside_the_limits():
+    sup = Supervisor(cfg(), Mode.OFF)
+    sup.step(0.0, inp(rpm=20.0))
+    d = sup.set_mode(Mode.MANUAL, 1.0)
+    assert d == Decision(1.0, Mode.MANUAL, Action.NONE, "mode", "mode off -> manual (operator)",
+                         inputs=inp(rpm=20.0))
+    assert sup.manual_rpm == 20.0 and sup.target_rpm == 20.0
+    sup2 = Supervisor(cfg(), Mode.OFF)
+    sup2.step(0.0, inp(rpm=45.0))
+    sup2.set_mode("manual", 1.0, reason="test")
+    assert sup2.manual_rpm == 45.0 and sup2.events[-1].reason == "mode off -> manual (test)"
+    sup3 = Supervisor(cfg(), Mode.OFF)
+    sup3.step(0.0, inp(rpm=2.0))
+    sup3.set_mode(Mode.MANUAL, 1.0)
+    assert sup3.manual_rpm == 2.0
+    for outside in (1.9, 45.1):
+        s = Supervisor(cfg(), Mode.OFF)
+        s.step(0.0, inp(rpm=outside))
+        s.set_mode(Mode.MANUAL, 1.0)
+        assert s.manual_rpm is None
+    s = Supervisor(cfg(), Mode.OFF)
+    s.step(0.0, inp(rpm=20.0))
+    s.set_mode(Mode.AUTO, 1.0)
+    assert s.manual_rpm is None
+
+
+def test_a_resync_in_manual_adopts_the_board_rpm_only_inside_the_limits():
+    sup = Supervisor(cfg(), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=2.0))
+    assert sup.manual_rpm == 2.0
+    sup = Supervisor(cfg(), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=1.0))
+    assert sup.manual_rpm is None
+    sup = Supervisor(cfg(), Mode.AUTO)
+    sup.step(0.0, inp(rpm=20.0, trend=est(0.9)))
+    assert sup.manual_rpm is None
+
+
+# -- safe state -----------------------------------------------------------------------------------------
+def test_safe_hold_names_the_rpm_and_recovers_after_recover_s_with_the_old_reason():
+    sup = Supervisor(cfg(recover_s=5.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    lost = inp(rpm=10.0, mill_connected=False)
+    d, _ = sup.step(1.0, lost)
+    assert d == Decision(1.0, Mode.MANUAL, Action.NONE, "safe", "safe hold at 10.0 rpm: mill link lost",
+                         safe=True, inputs=lost)
+    assert sup.safe and sup.safe_reason == "mill link lost"
+    assert sup.step(2.0, lost) == (None, None)  # still in fault: nothing new
+    back = inp(rpm=10.0)
+    assert sup.step(3.0, back) == (None, None)
+    assert sup.step(7.5, back) == (None, None)
+    d, _ = sup.step(8.0, back)
+    assert d == Decision(8.0, Mode.MANUAL, Action.NONE, "recover",
+                         "faults cleared for 5 s (was: mill link lost)", inputs=back)
+    assert not sup.safe and sup.safe_reason == ""
+
+
+def test_a_fault_during_recovery_restarts_its_clock():
+    sup = Supervisor(cfg(recover_s=5.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.step(1.0, inp(rpm=10.0, mill_connected=False))
+    sup.step(2.0, inp(rpm=10.0))
+    sup.step(4.0, inp(rpm=10.0, mill_connected=False))
+    assert sup.step(5.0, inp(rpm=10.0)) == (None, None)
+    assert sup.step(9.5, inp(rpm=10.0)) == (None, None)
+    d, _ = sup.step(10.0, inp(rpm=10.0))
+    assert d is not None and d.kind == "recover"
+
+
+def test_safe_ramp_goes_to_the_clamped_safe_rpm_at_the_rate_limit():
+    c = cfg(safe_action=SafeAction.RAMP, safe_rpm=1.0, max_rate_rpm_per_s=3.0, recover_s=100.0)
+    sup = Supervisor(c, Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    lost = inp(rpm=10.0, mill_connected=False)
+    d, _ = sup.step(1.0, lost)
+    assert d == Decision(1.0, Mode.MANUAL, Action.SET_RPM, "safe", "safe ramp to 2 rpm: mill link lost",
+                         rpm=7.0, target_rpm=2.0, safe=True, inputs=lost)
+    d, _ = sup.step(2.0, lost)
+    assert d == Decision(2.0, Mode.MANUAL, Action.SET_RPM, "safe", "ramp 4 rpm toward 2 (<= 3 rpm/s)",
+                         rpm=4.0, target_rpm=2.0, safe=True, inputs=lost)
+    d, _ = sup.step(3.0, inp(rpm=4.0))  # faults gone, recovering: the ramp goes on
+    assert d is not None and (d.kind, d.rpm) == ("safe", 2.0)
+
+
+def test_safe_ramp_right_after_a_command_waits_for_its_interval():
+    c = cfg(safe_action=SafeAction.RAMP, safe_rpm=5.0, max_rate_rpm_per_s=2.0)
+    sup = Supervisor(c, Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(12.0)
+    sup.step(0.0, inp(rpm=10.0))  # 10 -> 12 sent at t = 0
+    lost = inp(rpm=12.0, mill_connected=False)
+    d, _ = sup.step(0.5, lost)
+    assert d is not None and (d.action, d.rpm, d.target_rpm) == (Action.NONE, None, 5.0)
+    assert d.reason == "safe ramp to 5 rpm: mill link lost"
+
+
+def test_safe_ramp_with_nothing_known_of_the_mill_holds():
+    sup = Supervisor(cfg(safe_action=SafeAction.RAMP), Mode.MANUAL)
+    lost = inp(rpm=None, mill_connected=False)
+    d, _ = sup.step(0.0, lost)
+    assert d == Decision(0.0, Mode.MANUAL, Action.NONE, "safe", "safe hold at None rpm: mill link lost",
+                         safe=True, inputs=lost)
+
+
+def test_safe_stop_is_latched_until_a_mode_is_set():
+    sup = Supervisor(cfg(safe_action=SafeAction.STOP, recover_s=1.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    lost = inp(rpm=10.0, mill_connected=False)
+    d, _ = sup.step(1.0, lost)
+    assert d == Decision(1.0, Mode.MANUAL, Action.STOP, "safe", "safe stop: mill link lost", safe=True, inputs=lost)
+    assert sup.target_rpm == 10.0
+    for t in (2.0, 5.0, 50.0):
+        assert sup.step(t, inp(rpm=10.0)) == (None, None)
+    sup.set_manual_rpm(20.0)
+    assert sup.step(60.0, inp(rpm=10.0)) == (None, None) and sup.safe
+    sup.set_mode(Mode.MANUAL, 61.0)
+    assert not sup.safe and sup.safe_reason == ""
+    d, _ = sup.step(62.0, inp(rpm=10.0))
+    assert d is not None and (d.kind, d.rpm) == ("manual", 20.0)
+
+
+def test_a_refused_command_is_a_fault_for_the_step_it_grew_on():
+    sup = Supervisor(cfg(recover_s=2.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    refused = inp(rpm=10.0, mill_refused=1)
+    d, _ = sup.step(1.0, refused)
+    assert d is not None and d.reason == "safe hold at 10.0 rpm: the mill refused a command"
+    assert sup.step(2.0, refused) == (None, None)  # the same count: no new fault, recovering
+    assert sup.step(3.5, refused) == (None, None)
+    d, _ = sup.step(4.0, refused)
+    assert d is not None and d.kind == "recover"
+    both = inp(rpm=10.0, mill_refused=2, mill_connected=False)
+    d, _ = sup.step(5.0, both)
+    assert d is not None and d.reason == "safe hold at 10.0 rpm: mill link lost; the mill refused a command"
+
+
+def test_auto_faults_join_into_one_reason_and_the_safe_state_drops_a_pending_request():
+    sup = Supervisor(cfg(), Mode.AUTO)
+    i = inp(twin_updated_s=0.0)
+    _, req = sup.step(0.0, i)
+    assert req is not None
+    bad = inp(t=100.0, last_valid_mi_s=0.0, twin_updated_s=0.0, twin_doubt="disagrees", camera_ended=False)
+    d, _ = sup.step(100.0, bad)
+    assert d is not None and d.reason == ("safe hold at 10.0 rpm: no valid MI for 100.0 s; twin stale for 100.0 s; "
+                                          "twin stale: disagrees")
+    d, _ = sup.step(200.0, inp(t=200.0))
+    assert d is None
+    d, _ = sup.step(205.0, inp(t=205.0))
+    assert d is not None and d.kind == "recover"
+    _, req = sup.step(205.0, inp(t=205.0))
+    assert req == PredictionRequest(205.0, sup.config.candidates(10.0), 60.0, None)
+
+
+def test_recovery_resets_the_detector_and_retargets_at_the_commanded_rpm():
+    sup = Supervisor(cfg(recover_s=1.0), Mode.AUTO)
+    sup.step(0.0, inp())
+    assert sup.detector.segregated
+    sup.step(1.0, inp(t=1.0, mill_connected=False))
+    sup.step(2.0, inp(t=2.0, trend=est(0.9)))
+    d, _ = sup.step(3.0, inp(t=3.0, trend=est(0.9)))
+    assert d is not None and d.kind == "recover" and not sup.detector.segregated
+    assert sup.target_rpm == sup.commanded_rpm == 10.0
+
+
+def test_off_steps_do_nothing_but_follow_the_board():
+    sup = Supervisor(cfg(), Mode.OFF)
+    assert sup.step(0.0, inp(mill_connected=False, mill_refused=3)) == (None, None)
+    assert not sup.safe and sup.events == type(sup.events)(maxlen=10000)
+    sup.set_mode(Mode.MANUAL, 1.0)
+    sup.set_manual_rpm(20.0)
+    d, _ = sup.step(2.0, inp(mill_refused=3))  # the refusals seen in OFF are not a fault later
+    assert d is not None and d.kind == "manual"
+
+
+def test_events_keep_at_most_max_events():
+    sup = Supervisor(cfg(), Mode.OFF, max_events=2)
+    for t in range(4):
+        sup.set_mode(Mode.OFF, float(t))
+    assert [d.t_s for d in sup.events] == [2.0, 3.0]
+
+
+# -- the run log's record -----------------------------------------------------------------------------------
+def test_a_decision_as_a_log_record_has_every_input():
+    tr = TrendEstimate(1.0, 0.42, -0.01, 0.02, 0.003, 0.38, 0.46, True, False, settled=True)
+    i = SupervisorInputs(trend=tr, actual_rpm=9.5, setpoint_rpm=10.0, mill_connected=True, mill_running=True,
+                         mill_epoch=3, mill_refused=1, radial_factor=0.7, last_valid_mi_s=0.9, camera_ended=False,
+                         twin_updated_s=0.5, twin_doubt="", mixed=True, mixing_time_s=42.0)
+    d = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0, safe=False, inputs=i,
+                 predictions={5.0: 0.3, 12.0: 0.6})
+    assert d.as_dict() == {
+        "t_s": 1.0, "mode": "auto", "action": "set_rpm", "kind": "move", "reason": "why", "rpm": 12.0,
+        "target_rpm": 15.0, "safe": False, "level": 0.42, "rate": -0.01, "predictions": {"5.0": 0.3, "12.0": 0.6},
+        "inputs": {
+            "level": 0.42, "rate": -0.01, "level_sd": 0.02, "trend_settled": True, "actual_rpm": 9.5,
+            "setpoint_rpm": 10.0, "mill_connected": True, "mill_running": True, "mill_epoch": 3, "mill_refused": 1,
+            "camera_ended": False, "radial_factor": 0.7, "last_valid_mi_s": 0.9, "twin_updated_s": 0.5,
+            "twin_doubt": "", "mixed": True, "mixing_time_s": 42.0,
+        },
+    }
+    i2 = SupervisorInputs(mill_connected=False, camera_ended=True, twin_doubt="why not")
+    rec = Decision(2.0, Mode.OFF, Action.NONE, "mode", "x", safe=True, inputs=i2).as_dict()
+    assert rec["level"] is None and rec["rate"] is None and rec["predictions"] is None and rec["safe"] is True
+    assert rec["inputs"] == {
+        "level": None, "rate": None, "level_sd": None, "trend_settled": None, "actual_rpm": None,
+        "setpoint_rpm": None, "mill_connected": False, "mill_running": None, "mill_epoch": 0, "mill_refused": 0,
+        "camera_ended": True, "radial_factor": None, "last_valid_mi_s": None, "twin_updated_s": None,
+        "twin_doubt": "why not", "mixed": False, "mixing_time_s": None,
+    }
+    rec = Decision(3.0, Mode.MANUAL, Action.STOP, "safe", "y").as_dict()
+    assert rec["inputs"] is None and rec["level"] is None and rec["mode"] == "manual" and rec["action"] == "stop"
