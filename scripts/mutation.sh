@@ -11,7 +11,8 @@
 # subprocess/CLI and no simulation-heavy tests), mutmut's own per-function test selection (its stats run
 # records which tests call which function; a mutant runs only those), the tests of a mutant ordered fastest
 # first (a kill usually comes from a millisecond test), hypothesis capped at DRUMTWIN_MUTATION_EXAMPLES
-# (default 20) derandomised examples, and a CPU-time limit of ~4x the tests' time (a hang is a kill: timeout).
+# (default 20) derandomised examples without shrinking, and a CPU-time limit of ~4x the tests' time (a hang
+# is a kill: timeout).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 declare -A TESTS=(
@@ -62,11 +63,15 @@ cat >> tests/conftest.py <<'PY'
 import os as _mutation_os  # noqa: E402
 
 if _mutation_os.environ.get("DRUMTWIN_MUTATION"):
+    from hypothesis import Phase as _mutation_phase
     from hypothesis import settings as _mutation_settings
 
     _MUTATION_CAP = int(_mutation_os.environ.get("DRUMTWIN_MUTATION_EXAMPLES", "20"))
+    # a failing example kills the mutant as it is: shrinking it (seconds to minutes) tells nothing more
+    _NO_SHRINK = (_mutation_phase.explicit, _mutation_phase.reuse, _mutation_phase.generate)
     _mutation_settings.register_profile(
-        "mutation", max_examples=_MUTATION_CAP, derandomize=True, database=None, deadline=None
+        "mutation", max_examples=_MUTATION_CAP, derandomize=True, database=None, deadline=None,
+        phases=_NO_SHRINK,
     )
     _mutation_settings.load_profile("mutation")
 
@@ -77,7 +82,7 @@ if _mutation_os.environ.get("DRUMTWIN_MUTATION"):
             if own is not None:  # an explicit @settings(max_examples=...) beats a profile: cap it here
                 fn._hypothesis_internal_use_settings = _mutation_settings(
                     own, max_examples=min(own.max_examples, _MUTATION_CAP), derandomize=True, database=None,
-                    deadline=None,
+                    deadline=None, phases=_NO_SHRINK,
                 )
         try:
             from mutmut.state import state as _mutmut_state
