@@ -263,3 +263,17 @@ def test_a_narrower_drum_and_extra_arguments_reach_the_twin(field):
     assert all(c[3]["drum"] is drum and c[3]["friction_wall"] == 0.3 for c in field.calls)
     with pytest.raises(SimError, match="critical"):
         calibrate(30.0, drum.critical_rpm + 1.0, drum=drum)
+
+
+def test_a_mixers_drum_sets_the_critical_speed_and_the_mixer_and_engine_reach_the_twin(field):
+    from dataclasses import replace
+
+    from sim.mixer import paper_mixer
+
+    big = replace(paper_mixer(), drum=DrumSpec(1.0, depth_m=0.1))  # critical speed 42.3 rpm
+    assert big.drum.critical_rpm < 50.0 < PAPER_DRUM.critical_rpm
+    with pytest.raises(SimError, match="critical"):
+        calibrate(30.0, 50.0, mixer=big)  # the paper's drum would allow 50 rpm: the mixer's drum decides
+    calibrate(30.0, 10.0, mixer=big, engine="pymunk")
+    assert field.calls and all(c[3]["mixer"] is big and c[3]["engine"] == "pymunk" and c[3]["drum"] is big.drum
+                               for c in field.calls)
