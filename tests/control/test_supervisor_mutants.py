@@ -11,6 +11,7 @@ import math
 
 import pytest
 
+from control.objective import RpmPrediction, choose
 from control.supervisor import (
     Action,
     Decision,
@@ -539,3 +540,80 @@ def test_a_decision_as_a_log_record_has_every_input():
     }
     rec = Decision(3.0, Mode.MANUAL, Action.STOP, "safe", "y").as_dict()
     assert rec["inputs"] is None and rec["level"] is None and rec["mode"] == "manual" and rec["action"] == "stop"
+
+
+# -- the "time" / "energy" objectives and the endpoint ------------------------------------------------------
+ROWS = {  # as in test_objective_supervisor.py: sooner when faster, the power grows as rpm^2
+    5.0: RpmPrediction(5.0, 0.95, 300.0, 0.5 * 300.0, 0.5),
+    25.0: RpmPrediction(25.0, 0.95, 60.0, 12.5 * 60.0, 12.5),
+    45.0: RpmPrediction(45.0, 0.95, 70.0, 40.5 * 70.0, 40.5),
+}
+
+
+def objective_decision(objective: str, rows: dict, **kw) -> tuple[Supervisor, Decision | None, SupervisorInputs]:
+    c = cfg(objective=objective, target_mi=0.9, min_rpm=5.0, **kw)
+    sup = Supervisor(c, Mode.AUTO)
+    i = inp(rpm=15.0)
+    _, req = sup.step(0.0, i)
+    assert req == PredictionRequest(0.0, c.candidates(15.0), 60.0, 0.9)
+    preds = {r: v.plateau_mi for r, v in rows.items()}
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, preds, rows=rows))
+    return sup, d, i
+
+
+@pytest.mark.parametrize("objective", ["time", "energy"])
+def test_an_objective_move_is_the_choice_of_control_objective_with_the_supervisors_limits(objective):
+    sup, d, i = objective_decision(objective, ROWS)
+    ch = choose(ROWS.values(), objective, 15.0, (5.0, 45.0), 0.9, min_rel_gain=0.1)
+    assert ch.move and ch.rpm is not None
+    assert d == Decision(0.0, Mode.AUTO, Action.SET_RPM, "move", f"{WHY}; {ch.reason}", rpm=ch.rpm,
+                         target_rpm=ch.rpm, inputs=i, predictions={5.0: 0.95, 25.0: 0.95, 45.0: 0.95},
+                         scores={r: -v for r, v in ch.values.items()})
+    assert sup.step(1.0, inp(rpm=15.0, t=1.0)) == (None, None)  # evaluated: the next one 30 s on
+
+
+def test_an_objective_hold_uses_the_configured_relative_gain():
+    rows = {15.0: RpmPrediction(15.0, 0.95, 100.0, 100.0 * 4.5, 4.5), 25.0: ROWS[25.0]}  # 40 % sooner at 25
+    _, d, _ = objective_decision("time", rows)
+    assert d is not None and d.kind == "move" and d.rpm == 25.0
+    _, d, i = objective_decision("time", rows, objective_min_rel_gain=0.5)
+    ch = choose(rows.values(), "time", 15.0, (5.0, 45.0), 0.9, min_rel_gain=0.5)
+    assert not ch.move
+    assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold", f"{WHY}; {ch.reason}", inputs=i,
+                         predictions={15.0: 0.95, 25.0: 0.95}, scores={r: -v for r, v in ch.values.items()})
+
+
+def test_an_objective_with_no_row_inside_the_limits_holds():
+    rows = {60.0: RpmPrediction(60.0, 0.95, 10.0, 10.0, 1.0)}
+    sup, d, i = objective_decision("time", rows)
+    assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold",
+                         f"{WHY}; objective time: no prediction inside 5..45 rpm", inputs=i,
+                         predictions={60.0: 0.95}, scores={})
+    assert sup.step(1.0, inp(rpm=15.0, t=1.0)) == (None, None)
+
+
+def test_the_endpoint_stop_names_the_mixing_time_and_the_level_it_has():
+    def stop(**kw) -> Decision:
+        sup = Supervisor(cfg(stop_at_endpoint=True), Mode.AUTO)
+        sup.step(0.0, inp(trend=est(0.9)))
+        d, _ = sup.step(1.0, inp(t=1.0, mixed=True, **kw))
+        assert d is not None
+        return d
+
+    d = stop(trend=est(0.95), mixing_time_s=12.34)
+    assert (d.action, d.kind, d.rpm) == (Action.STOP, "endpoint", None)
+    assert d.reason == "batch mixed (mixing time 12.3 s), trend MI 0.950: stop at endpoint"
+    assert stop(trend=est(0.95)).reason == "batch mixed, trend MI 0.950: stop at endpoint"
+    assert stop(trend=None, mixing_time_s=3.0).reason == "batch mixed (mixing time 3.0 s): stop at endpoint"
+    invalid = TrendEstimate(1.0, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, False, False)
+    assert stop(trend=invalid).reason == "batch mixed: stop at endpoint"
+
+
+def test_the_endpoint_stop_ends_a_ramp_where_the_mill_is():
+    sup = Supervisor(cfg(stop_at_endpoint=True, max_rate_rpm_per_s=1.0, prediction_wait_s=0.0), Mode.AUTO)
+    sup.step(0.0, inp())
+    d, _ = sup.step(0.0, inp())
+    assert d is not None and (d.rpm, d.target_rpm) == (11.0, 15.0)  # ramping 10 -> 15
+    d, _ = sup.step(0.5, inp(t=0.5, mixed=True))
+    assert d is not None and d.kind == "endpoint" and sup.target_rpm == sup.commanded_rpm == 11.0
+    assert sup.step(1.5, inp(t=1.5, mixed=True)) == (None, None)
