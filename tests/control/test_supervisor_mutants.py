@@ -111,6 +111,41 @@ def test_staying_is_scored_at_the_nearest_candidate_within_half_an_rpm():
     assert d is not None and d.kind == "move" and d.rpm == 10.6 and "vs 0.300 staying at 10" in d.reason
 
 
+def test_staying_is_the_nearest_candidates_score_not_the_lowest_rpms():
+    # 9.6 and 10.1 are both within 0.5 rpm of 10: staying is 10.1's score (nearer), not 9.6's
+    _, d, _ = answer({9.6: 0.10, 10.1: 0.42, 30.0: 0.43}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.kind == "hold" and "gains +0.010" in d.reason
+    _, d, _ = answer({9.6: 0.42, 10.1: 0.10, 30.0: 0.43}, cfg(move_penalty_per_rpm=0.0))
+    assert d is not None and d.kind == "move" and "vs 0.100 staying at 10" in d.reason
+
+
+def test_a_gain_of_exactly_min_gain_in_binary_fractions_moves():
+    _, d, _ = answer({10.0: 0.25, 20.0: 0.5}, cfg(move_penalty_per_rpm=0.0, min_gain=0.25))
+    assert d is not None and d.kind == "move" and d.rpm == 20.0
+
+
+def test_the_best_at_the_current_rpm_holds_even_when_any_gain_would_do():
+    for min_gain in (0.0, -1.0):
+        _, d, _ = answer({10.0: 0.9, 20.0: 0.5}, cfg(min_gain=min_gain))
+        assert d is not None and d.kind == "hold", min_gain
+
+
+def test_a_best_a_micro_rpm_from_the_current_one_is_a_move():
+    # a stopped board (0 rpm) with a 0..45 rpm range: 1e-6 rpm is exactly 1e-6 away, not "the same rpm"
+    c = cfg(min_rpm=0.0, move_penalty_per_rpm=0.0)
+    i = inp(rpm=0.0, actual_rpm=0.0, setpoint_rpm=0.0, mill_running=False)
+    sup = Supervisor(c, Mode.AUTO)
+    sup.step(0.0, i)
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {0.0: 0.5, 1e-6: 0.6}))
+    assert d is not None and d.kind == "move" and d.target_rpm == 1e-6
+
+
+def test_candidates_exactly_at_the_limits_slack_are_scored():
+    lo, hi = SupervisorConfig().rpm_limits
+    _, d, _ = answer({lo - 1e-9: 0.3, hi + 1e-9: 0.3, 10.0: 0.3})
+    assert d is not None and d.scores is not None and set(d.scores) == {lo - 1e-9, hi + 1e-9, 10.0}
+
+
 def test_without_a_candidate_near_and_a_level_staying_is_worth_nothing():
     # segregated, then the trend loses its level (a settled record without a valid level)
     sup = Supervisor(cfg(), Mode.AUTO)
