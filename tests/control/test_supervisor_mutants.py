@@ -11,6 +11,7 @@ import math
 
 import pytest
 
+from control.errors import ControlError
 from control.objective import RpmPrediction, choose
 from control.supervisor import (
     Action,
@@ -652,3 +653,45 @@ def test_the_endpoint_stop_ends_a_ramp_where_the_mill_is():
     d, _ = sup.step(0.5, inp(t=0.5, mixed=True))
     assert d is not None and d.kind == "endpoint" and sup.target_rpm == sup.commanded_rpm == 11.0
     assert sup.step(1.5, inp(t=1.5, mixed=True)) == (None, None)
+
+
+# -- set_mode ----------------------------------------------------------------------------------------------------
+def test_an_unknown_mode_is_refused_by_name():
+    with pytest.raises(ControlError) as exc:
+        Supervisor(cfg()).set_mode("sideways", 0.0)
+    assert str(exc.value) == "unknown mode 'sideways' (use off, manual, auto)"
+
+
+def test_after_set_mode_a_hold_recovers_by_itself():
+    sup = Supervisor(cfg(recover_s=1.0), Mode.OFF)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_mode(Mode.MANUAL, 0.5)
+    sup.step(1.0, inp(rpm=10.0, mill_connected=False))
+    assert sup.safe
+    sup.step(2.0, inp(rpm=10.0))
+    d, _ = sup.step(3.0, inp(rpm=10.0))
+    assert d is not None and d.kind == "recover" and not sup.safe
+
+
+def test_set_mode_auto_on_a_segregated_bed_asks_for_predictions_at_the_next_step():
+    sup = Supervisor(cfg(), Mode.OFF)
+    sup.step(0.0, inp())
+    sup.set_mode(Mode.AUTO, 0.5)
+    assert sup.step(1.0, inp(t=1.0)) == (None, PredictionRequest(1.0, sup.config.candidates(10.0), 60.0, None))
+
+
+def test_an_operator_rpm_within_a_micro_rpm_of_the_target_is_the_same_rpm():
+    sup = Supervisor(cfg(min_rpm=0.0), Mode.MANUAL)
+    stopped = inp(rpm=0.0, mill_running=False)
+    sup.step(0.0, stopped)
+    assert sup.manual_rpm == 0.0 and sup.target_rpm == 0.0
+    sup.set_manual_rpm(1e-6)
+    assert sup.step(1.0, stopped) == (None, None)
+
+
+def test_manual_ramp_steps_are_ramp_decisions():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(14.0)
+    kinds = [(d.kind, d.rpm) for t in range(1, 5) if (d := sup.step(float(t), inp(rpm=10.0))[0]) is not None]
+    assert kinds == [("manual", 12.0), ("ramp", 14.0)]

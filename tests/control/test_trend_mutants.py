@@ -230,3 +230,19 @@ def test_the_comparison_tells_a_trend_with_another_model_apart():
         ref, tr = Reference(TrendConfig()), MITrend(other)
         worst = max(abs(tr.update(*s).level - ref.update(*s).level) for s in seq)
         assert worst > 1e-3, other
+
+
+def test_the_measurement_variance_is_capped_at_a_quarter():
+    """A re-init on rejected samples spread over -3..4 (MAD 3.5) would give a variance of 27: the
+    estimate stops at 0.25 (sd 0.5, MI's whole range)."""
+    tr = MITrend()
+    t = 0.0
+    for _ in range(60):
+        tr.update(t, 0.5, 0.0)
+        t += 1 / 30
+    out = []
+    for i in range(30):
+        out.append(tr.update(t, -3.0 if i % 2 else 4.0, 0.0))
+        t += 1 / 30
+    re = [e for e in out if e.reinit]
+    assert re and re[0].meas_sd == 0.5
