@@ -149,7 +149,7 @@ class Reference:
 
 
 def sequence(seed: int) -> list[tuple[float, float, float]]:
-    """(t_s, MI, rpm) at 30 fps through every branch: ripple at 10 rpm, NaN frames, single glitches, a
+    """(t_s, MI, rpm) at 30 fps through every branch: ripple at 10 rpm, a ramp, NaN frames, single glitches, a
     burst that unsettles but does not re-initialise, a step that does, ramps into both bounds and into
     the rate bound, the drum at rest, a negative and a NaN rpm, a repeated time, a 2 s gap (no noise
     learnt across it) and a 40 s gap (re-initialised)."""
@@ -166,6 +166,9 @@ def sequence(seed: int) -> list[tuple[float, float, float]]:
 
     w = 2 * math.pi * 10 / 60
     add(90, lambda s: 0.4 + 0.05 * math.cos(w * s), 10.0)
+    t_ramp = t  # a turning drum's ramp at 0.5 MI/s: the rate bound of "tight" (0.3) with ripple covariances
+    add(30, lambda s: 0.4 + 0.5 * (s - t_ramp) + 0.05 * math.cos(w * s), 10.0, 0.002)
+    add(30, lambda s: 0.4 + 0.05 * math.cos(w * s), 10.0)
     add(3, math.nan, 10.0)
     add(1, 0.95, 10.0, 0.0)  # a glitch
     add(60, lambda s: 0.4 + 0.05 * math.cos(w * s), 10.0)
