@@ -72,6 +72,7 @@ def test_the_reachable_range_is_the_low_corner_and_the_best_high_edge_point(fiel
     assert reachable_range(10.0) == pytest.approx((20.0, 45.0), abs=1e-12)
     # the low corner, then the high edge's points in order, each at |rpm| with the given seed
     assert [(c[0], c[1]) for c in field.calls] == [(0.05, 0.0)] + [(f, 1.0) for f in HIGH_EDGE]
+    assert all(c[3]["seed"] == 0 for c in field.calls)  # the default seed: calibrate's too
     field.calls.clear()
     field.sign = -1.0  # the other turning direction: the slopes' magnitudes count
     assert reachable_range(-10.0, seed=3, spin_up_s=0.5) == pytest.approx((20.0, 45.0), abs=1e-12)
@@ -277,3 +278,18 @@ def test_a_mixers_drum_sets_the_critical_speed_and_the_mixer_and_engine_reach_th
     calibrate(30.0, 10.0, mixer=big, engine="pymunk")
     assert field.calls and all(c[3]["mixer"] is big and c[3]["engine"] == "pymunk" and c[3]["drum"] is big.drum
                                for c in field.calls)
+
+
+def test_a_calibration_as_a_record_has_every_field(field):
+    field.curv = lambda f, r: f - r + 0.125
+    cal = calibrate(30.0, 10.0, target_curvature=0.25)
+    values = (cal.friction, cal.rolling, cal.twin_slope_deg, cal.residual_deg, cal.twin_curvature)
+    assert len(set(values)) == len(values)  # a field read from another would show
+    assert cal.as_dict() == {
+        "friction": cal.friction, "rolling": cal.rolling, "twin_slope_deg": cal.twin_slope_deg,
+        "residual_deg": cal.residual_deg, "target_slope_deg": 30.0, "rpm": 10.0, "evaluations": cal.evaluations,
+        "range_deg": [20.0, 45.0], "twin_curvature": cal.twin_curvature, "target_curvature": 0.25,
+        "path": cal.path,
+    }
+    assert cal.path in ("diagonal", "sliding-first", "rolling-first")
+    assert isinstance(cal.as_dict()["range_deg"], list)
