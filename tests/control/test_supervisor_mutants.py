@@ -695,3 +695,48 @@ def test_manual_ramp_steps_are_ramp_decisions():
     sup.set_manual_rpm(14.0)
     kinds = [(d.kind, d.rpm) for t in range(1, 5) if (d := sup.step(float(t), inp(rpm=10.0))[0]) is not None]
     assert kinds == [("manual", 12.0), ("ramp", 14.0)]
+
+
+# -- when AUTO decides -----------------------------------------------------------------------------------------
+def test_plateau_with_a_target_mi_never_decides_below_it():
+    # plateau (the default) with the endpoint's target_mi: only segregation makes a decision due
+    sup = Supervisor(cfg(target_mi=0.9), Mode.AUTO)
+    assert sup.step(0.0, inp(level=0.7)) == (None, None)
+
+
+def test_time_at_exactly_the_target_is_not_below_it():
+    sup = Supervisor(cfg(objective="time", target_mi=0.875), Mode.AUTO)
+    assert sup.step(0.0, inp(level=0.875)) == (None, None)
+    _, req = sup.step(1.0, inp(level=0.874, t=1.0))
+    assert req is not None
+
+
+def test_no_request_on_an_unsettled_trend_after_segregation_was_detected():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=1.0), Mode.AUTO)
+    d, req = sup.step(0.0, inp(rpm=46.0))  # a board above the limits: the ramp to 45 comes first
+    assert d is not None and d.kind == "ramp" and req is None and sup.detector.segregated
+    unsettled = inp(rpm=45.0, t=1.0, trend=est(0.3, settled=False, t=1.0), mill_epoch=0)
+    assert sup.step(1.0, unsettled) == (None, None)
+    assert sup.step(2.0, inp(rpm=45.0, t=2.0))[1] is not None
+
+
+def test_plateau_predictions_with_rows_are_scored_as_plateau():
+    sup, i = due()
+    rows = {10.0: RpmPrediction(10.0, 0.3, 100.0, 10.0), 30.0: RpmPrediction(30.0, 0.6, 50.0, 10.0)}
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.3, 30.0: 0.6}, rows=rows))
+    assert d is not None and d.reason.startswith(f"segregation ({WHY}); twin predicts MI 0.600 at 30 rpm")
+
+
+def test_the_fallback_below_the_upper_limit_steps_up_to_it():
+    sup, i = due(cfg(prediction_wait_s=0.0), inp(rpm=44.5))
+    d, _ = sup.step(0.0, i)
+    assert d is not None and d.target_rpm == 45.0 and d.reason.endswith("fallback rule 44.5 -> 45 rpm")
+
+
+def test_a_fallback_step_of_exactly_a_micro_rpm_is_a_step():
+    c = cfg(min_rpm=0.0, max_rpm=1e-6, prediction_wait_s=0.0)
+    sup = Supervisor(c, Mode.AUTO)
+    i = inp(rpm=0.0, mill_running=False)
+    sup.step(0.0, i)
+    d, _ = sup.step(0.0, i)
+    assert d is not None and d.target_rpm == 1e-6
