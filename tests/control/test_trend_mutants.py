@@ -249,3 +249,18 @@ def test_the_measurement_variance_is_capped_at_a_quarter():
         t += 1 / 30
     re = [e for e in out if e.reinit]
     assert re and re[0].meas_sd == 0.5
+
+
+def test_a_drum_speed_that_is_not_a_number_stops_the_ripple_where_it_is():
+    """NaN or infinite rpm (a status the mill could not read): the drum counts as at rest -- the
+    ripple pair, learnt while it turned, neither rotates nor enters the measurement."""
+    w = 2 * math.pi * 10 / 60
+    seq = [(i / 30, 0.5 + 0.06 * math.cos(w * i / 30), 10.0) for i in range(150)]
+    seq += [(5.0 + i / 30, 0.5, rpm) for i, rpm in enumerate([math.nan] * 15 + [math.inf] * 15)]
+    tr, ref = MITrend(), Reference(TrendConfig())
+    for t, mi, rpm in seq:
+        got, want = tr.update(t, mi, rpm), ref.update(t, mi, rpm)
+        for f in FIELDS:
+            assert getattr(got, f) == pytest.approx(getattr(want, f), rel=1e-9, abs=1e-12, nan_ok=True), (t, rpm, f)
+    held = [tr.update(6.0 + i / 30, math.nan, math.nan).ripple for i in range(3)]
+    assert abs(held[0]) > 0.01 and held[0] == held[1] == held[2]  # a ripple was learnt, and it holds still

@@ -293,3 +293,23 @@ def test_a_calibration_as_a_record_has_every_field(field):
     }
     assert cal.path in ("diagonal", "sliding-first", "rolling-first")
     assert isinstance(cal.as_dict()["range_deg"], list)
+
+
+def test_the_defaults_are_the_documented_ones(field):
+    field.slope = lambda f, r: linear(f, r) + (3.0 if r >= 0.4 else 0.0)  # 31.5 deg is never within 0.4 deg
+    cal = calibrate(31.5, 10.0)
+    assert cal.evaluations == 1 + len(HIGH_EDGE) + 8  # max_evals 8
+    assert all(c[3]["seed"] == 0 and c[3]["spin_up_s"] == 3.0 and c[3]["window_s"] == 5.0 for c in field.calls)
+    # tol_deg 0.4: a first step 0.9 deg off goes on searching, one 0.3 deg off stops
+    field.slope = linear
+    assert calibrate(30.0, 10.0).evaluations == 5  # hits 30.0: within any tolerance
+    field.slope = lambda f, r: linear(f, r) + (0.9 if 0.3 < r < 0.5 else 0.0)
+    assert calibrate(30.0, 10.0).evaluations > 5
+    field.slope = lambda f, r: linear(f, r) + (0.3 if 0.3 < r < 0.5 else 0.0)
+    assert calibrate(30.0, 10.0).evaluations == 5
+
+
+def test_a_drum_at_rest_is_refused_with_its_reason(field):
+    with pytest.raises(SimError) as exc:
+        calibrate(30.0, 0.0)
+    assert str(exc.value) == "calibration needs a turning drum (rpm > 0)" and not field.calls
