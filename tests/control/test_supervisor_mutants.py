@@ -740,3 +740,79 @@ def test_a_fallback_step_of_exactly_a_micro_rpm_is_a_step():
     sup.step(0.0, i)
     d, _ = sup.step(0.0, i)
     assert d is not None and d.target_rpm == 1e-6
+
+
+# -- moves, ramps and resyncs at their edges -----------------------------------------------------------------------
+def test_a_move_with_nothing_known_of_the_mill_jumps_with_its_whole_record():
+    sup = Supervisor(cfg(), Mode.AUTO)
+    i = inp(rpm=None, mill_running=None)
+    _, req = sup.step(0.0, i)
+    assert req is not None and sup.commanded_rpm is None
+    preds = {5.0: 0.3, 20.0: 0.6}
+    d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, preds))
+    scores = {5.0: 0.3, 20.0: pytest.approx(0.6 - 0.002 * 15)}
+    reason = f"segregation ({WHY}); twin predicts MI 0.600 at 20 rpm (score 0.570 vs 0.300 staying at 5)"
+    assert d == Decision(0.0, Mode.AUTO, Action.SET_RPM, "move", reason, rpm=20.0, target_rpm=20.0, inputs=i,
+                         predictions=preds, scores=scores)
+
+
+def test_a_move_right_after_a_ramp_step_sends_nothing_yet():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=1.0), Mode.AUTO)
+    d, _ = sup.step(0.0, inp(rpm=46.0))  # ramp 46 -> 45 sent at t = 0
+    assert d is not None and d.rpm == 45.0
+    i = inp(rpm=45.0, t=0.5)
+    _, req = sup.step(0.5, i)
+    assert req is not None
+    d, _ = sup.step(0.5, i, PredictionResult(0.5, 60.0, {45.0: 0.3, 30.0: 0.7}))
+    assert d is not None and (d.kind, d.action, d.rpm, d.target_rpm) == ("move", Action.NONE, None, 30.0)
+
+
+def test_a_resync_during_a_manual_ramp_sends_nothing_before_the_interval():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(20.0)
+    sup.step(1.0, inp(rpm=10.0))  # 10 -> 12
+    assert sup.step(1.5, inp(actual_rpm=11.0, setpoint_rpm=12.0, mill_epoch=1)) == (None, None)
+    d, _ = sup.step(2.0, inp(actual_rpm=11.0, setpoint_rpm=12.0, mill_epoch=1))
+    assert d is not None and (d.kind, d.rpm) == ("ramp", 13.0)  # on from the board's 11 rpm
+
+
+def test_manual_adopts_a_board_at_exactly_the_upper_limit():
+    sup = Supervisor(cfg(), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=45.0))
+    assert sup.manual_rpm == 45.0
+
+
+def test_a_hold_keeps_the_commanded_rpm_as_its_target():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=1.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(20.0)
+    sup.step(1.0, inp(rpm=10.0))  # ramping 10 -> 11 -> ... 20
+    sup.step(2.0, inp(rpm=11.0, mill_connected=False))
+    assert sup.safe and sup.target_rpm == sup.commanded_rpm == 11.0
+
+
+def test_a_ramp_step_is_due_at_exactly_the_interval_less_its_slack():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=1.0), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(12.0)
+    sup.step(0.0, inp(rpm=10.0))  # 10 -> 11 at t = 0
+    d, _ = sup.step(1.0 - 1e-9, inp(rpm=10.0))
+    assert d is not None and d.rpm == 12.0
+
+
+def test_the_rate_limit_is_per_second_whatever_the_ramp_interval():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=0.5), Mode.MANUAL)
+    sup.step(0.0, inp(rpm=10.0))
+    sup.set_manual_rpm(14.0)
+    rpms = [d.rpm for t in (0.0, 0.5, 1.0, 1.5) if (d := sup.step(t, inp(rpm=10.0))[0]) is not None]
+    assert rpms == [11.0, 12.0, 13.0, 14.0]  # 1 rpm per 0.5 s step
+
+
+def test_a_ramp_a_hundredth_short_does_not_snap_to_its_target():
+    sup = Supervisor(cfg(min_rpm=0.0, max_rate_rpm_per_s=0.01), Mode.MANUAL)
+    stopped = inp(rpm=0.0, mill_running=False)
+    sup.step(0.0, stopped)
+    sup.set_manual_rpm(0.02)
+    d, _ = sup.step(1.0, stopped)
+    assert d is not None and d.rpm == 0.01
