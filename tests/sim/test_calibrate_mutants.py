@@ -313,3 +313,10 @@ def test_a_drum_at_rest_is_refused_with_its_reason(field):
     with pytest.raises(SimError) as exc:
         calibrate(30.0, 0.0)
     assert str(exc.value) == "calibration needs a turning drum (rpm > 0)" and not field.calls
+
+
+def test_a_target_under_one_degree_keeps_its_sign(field):
+    field.slope = lambda f, r: 0.2 + 0.8 * linear(f, r) / 45.0  # a nearly flat bed: 0.56-1.0 deg
+    cal = calibrate(0.8, 10.0)
+    assert cal.twin_slope_deg > 0 and cal.twin_slope_deg == pytest.approx(0.8, abs=0.4)
+    assert calibrate(-0.8, 10.0).twin_slope_deg < 0
