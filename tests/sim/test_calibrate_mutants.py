@@ -320,3 +320,9 @@ def test_a_target_under_one_degree_keeps_its_sign(field):
     cal = calibrate(0.8, 10.0)
     assert cal.twin_slope_deg > 0 and cal.twin_slope_deg == pytest.approx(0.8, abs=0.4)
     assert calibrate(-0.8, 10.0).twin_slope_deg < 0
+
+
+def test_an_infinite_slope_is_no_free_surface_too(field):
+    field.slope = lambda f, r: -math.inf if 0.2 < r < 0.9 else linear(f, r)
+    cal = calibrate(30.0, 10.0)
+    assert cal.evaluations == 5 and math.isnan(cal.history[4][2]) and (cal.friction, cal.rolling) == (0.05, 0.0)
