@@ -326,3 +326,9 @@ def test_an_infinite_slope_is_no_free_surface_too(field):
     field.slope = lambda f, r: -math.inf if 0.2 < r < 0.9 else linear(f, r)
     cal = calibrate(30.0, 10.0)
     assert cal.evaluations == 5 and math.isnan(cal.history[4][2]) and (cal.friction, cal.rolling) == (0.05, 0.0)
+
+
+def test_an_end_exactly_the_tolerance_away_needs_no_search(field):
+    cal = calibrate(20.5, 10.0, tol_deg=0.5)  # binary fractions: the low corner is exactly 0.5 deg off
+    assert cal.evaluations == 4 and cal.residual_deg == -0.5
+    assert calibrate(20.5, 10.0, tol_deg=0.25).evaluations == 5
