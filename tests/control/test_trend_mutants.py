@@ -264,3 +264,13 @@ def test_a_drum_speed_that_is_not_a_number_stops_the_ripple_where_it_is():
             assert getattr(got, f) == pytest.approx(getattr(want, f), rel=1e-9, abs=1e-12, nan_ok=True), (t, rpm, f)
     held = [tr.update(6.0 + i / 30, math.nan, math.nan).ripple for i in range(3)]
     assert abs(held[0]) > 0.01 and held[0] == held[1] == held[2]  # a ripple was learnt, and it holds still
+
+
+def test_without_an_rpm_the_drum_is_at_rest():
+    seq = [(t, mi) for t, mi, _ in sequence(0)[:200]]
+    default, at_rest, turning = MITrend(), MITrend(), MITrend()
+    for t, mi in seq:
+        a, b, c = default.update(t, mi), at_rest.update(t, mi, 0.0), turning.update(t, mi, 1.0)
+        for f in FIELDS:
+            assert getattr(a, f) == pytest.approx(getattr(b, f), rel=0, abs=0, nan_ok=True), (t, f)
+    assert c.level != b.level  # a turning drum's ripple enters the measurement: the test can tell
