@@ -816,3 +816,38 @@ def test_a_ramp_a_hundredth_short_does_not_snap_to_its_target():
     sup.set_manual_rpm(0.02)
     d, _ = sup.step(1.0, stopped)
     assert d is not None and d.rpm == 0.01
+
+
+# -- a fresh supervisor and its config ------------------------------------------------------------------------------
+def test_a_fresh_supervisor_knows_nothing_and_is_not_safe():
+    sup = Supervisor()
+    assert (sup.mode, sup.safe, sup.safe_reason, sup.commanded_rpm, sup.target_rpm, sup.manual_rpm) == (
+        Mode.OFF, False, "", None, None, None)
+    assert sup.events.maxlen == 10000 and len(sup.events) == 0
+    d = sup.set_mode(Mode.MANUAL, 0.0)  # before any step: the record has no inputs
+    assert d.inputs is None and d.as_dict()["inputs"] is None
+
+
+def test_manual_from_the_start_with_nothing_known_of_the_mill_jumps_to_the_operators_rpm():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=1.0), Mode.MANUAL)
+    sup.set_manual_rpm(20.0)
+    d, _ = sup.step(0.0, inp(rpm=None, mill_running=None))
+    assert d is not None and (d.kind, d.action, d.rpm, d.target_rpm) == ("manual", Action.SET_RPM, 20.0, 20.0)
+
+
+def test_a_refusal_reported_at_the_first_step_is_a_fault():
+    sup = Supervisor(cfg(), Mode.MANUAL)
+    d, _ = sup.step(0.0, inp(rpm=10.0, mill_refused=1))
+    assert d is not None and d.reason == "safe hold at 10.0 rpm: the mill refused a command"
+
+
+@pytest.mark.parametrize("bad", [1.5, -0.25, 1.0 + 1e-9, math.inf, math.nan])
+def test_target_mi_outside_zero_to_one_is_refused_with_its_value(bad):
+    with pytest.raises(ControlError) as exc:
+        SupervisorConfig(target_mi=bad)
+    assert str(exc.value) == f"target_mi must be in [0, 1], got {bad}"
+
+
+def test_target_mi_at_both_ends_is_allowed():
+    assert SupervisorConfig(target_mi=0.0).target_mi == 0.0
+    assert SupervisorConfig(objective="time", target_mi=1.0).target_mi == 1.0
