@@ -18,6 +18,7 @@ import math
 import numpy as np
 import pytest
 
+from control.errors import ControlError
 from control.trend import MAD_SD, SETTLE_HYSTERESIS, Z95, MITrend, TrendConfig, TrendEstimate
 
 
@@ -274,3 +275,33 @@ def test_without_an_rpm_the_drum_is_at_rest():
         for f in FIELDS:
             assert getattr(a, f) == pytest.approx(getattr(b, f), rel=0, abs=0, nan_ok=True), (t, f)
     assert c.level != b.level  # a turning drum's ripple enters the measurement: the test can tell
+
+
+def test_update_edges_by_hand():
+    tr = MITrend()
+    assert not tr.update(0.0, None).valid  # None is a missing frame, like NaN
+    assert tr.update(0.5, 0.4).reinit
+    assert not tr.estimate(0.5).accepted and not tr.estimate(0.5).reinit  # a look, not a sample
+    with pytest.raises(ControlError) as exc:
+        tr.update(0.25, 0.4)
+    assert str(exc.value) == "trend time went backwards (0.25 < 0.5)"
+    # a gap of exactly max_dt_s is predicted over, not restarted
+    tr2 = MITrend(TrendConfig(max_dt_s=30.0))
+    tr2.update(0.0, 0.4)
+    assert not tr2.update(30.0, 0.41).reinit
+    assert tr2.update(60.0 + 2**-10, 0.41).reinit
+    # the gate at exactly gate_d2 accepts: y = 1, S = r + r = 0.125 (binary fractions), NIS = 8
+    tr3 = MITrend(TrendConfig(meas_sd=0.25, gate_d2=8.0))
+    tr3.update(0.0, 0.0)
+    e = tr3.update(0.0, 1.0)
+    assert e.nis == 8.0 and e.accepted
+
+
+def test_a_slowly_turning_drum_has_its_ripple_in_the_measurement():
+    w = 2 * math.pi * 0.5 / 60
+    seq = [(i / 30, 0.5 + 0.05 * math.cos(w * i / 30) + 0.01 * math.sin(i), 0.5) for i in range(200)]
+    tr, ref = MITrend(), Reference(TrendConfig())
+    for t, mi, rpm in seq:
+        got, want = tr.update(t, mi, rpm), ref.update(t, mi, rpm)
+        for f in FIELDS:
+            assert getattr(got, f) == pytest.approx(getattr(want, f), rel=1e-9, abs=1e-12, nan_ok=True), (t, f)
