@@ -308,3 +308,9 @@ def test_a_slowly_turning_drum_has_its_ripple_in_the_measurement():
         got, want = tr.update(t, mi, rpm), ref.update(t, mi, rpm)
         for f in FIELDS:
             assert getattr(got, f) == pytest.approx(getattr(want, f), rel=1e-9, abs=1e-12, nan_ok=True), (t, f)
+
+
+def test_a_band_exactly_as_wide_as_settle_band_is_settled():
+    """A band clipped to the whole of [0, 1] is exactly 1.0 wide: settled at settle_band 1.0."""
+    e = MITrend(TrendConfig(meas_sd=0.5, settle_frames=0, settle_band=1.0)).update(0.0, 0.5)
+    assert (e.lo95, e.hi95) == (0.0, 1.0) and e.settled
