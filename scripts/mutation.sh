@@ -15,6 +15,9 @@
 # (t + 5 s) x MUTATION_TIMEOUT_MULTIPLIER (default 10) of wall time, t its tests' time in the stats run, and
 # twice that of CPU time: a "timeout", counted as a kill but listed apart. The wall-clock limit is why the
 # multiplier is large: at nice 19 on a loaded machine a test takes many times its stats-run time.
+# The whole script is one block that bash parses before running it: an edit of this file during a run (bash
+# otherwise reads a script as it goes) cannot change the run or lose its results.
+{
 set -euo pipefail
 cd "$(dirname "$0")/.."
 declare -A TESTS=(
@@ -126,3 +129,5 @@ for m in $survived; do
   echo "--- $m"
   "$venv/bin/mutmut" show "$m" 2>/dev/null | grep -E '^[-+][^-+]' || true
 done
+exit 0
+}
