@@ -258,6 +258,9 @@ def calibrate_cmd(
     spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
+    end_friction: float | None = typer.Option(None, "--end-friction",
+                                              help="friction of the drum's end plates in the twin runs, kept "
+                                                   "fixed (default: the wall's; 0: none, e.g. a monolayer rig)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
@@ -279,6 +282,8 @@ def calibrate_cmd(
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     sim_kw: dict[str, Any] = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
+    if end_friction is not None:
+        sim_kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
@@ -300,7 +305,7 @@ def calibrate_cmd(
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
            "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source,
-           "engine": engine_for(mixer, engine)}
+           "engine": engine_for(mixer, engine), "end_friction": end_friction}
     if as_json:
         print_json(out)
     else:
