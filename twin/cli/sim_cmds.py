@@ -488,6 +488,11 @@ def bench_twin(
         twin = make_twin(mixer, "pymunk", case="C", seed=0, rpm=rpm, settle_s=0.3)
         out[name] = _cpu_rtf(twin, duration)
         out[name.replace("rtf_", "n_")] = len(twin.particles())
+    # where the cut-disc rig's step goes: shapes, contacts, iterations, Chipmunk against the post-step pass
+    from sim.pymunk_twin import PymunkDrumSim
+
+    assert isinstance(twin, PymunkDrumSim)
+    out["profile_cutdisc_pymunk"] = twin.cost_profile(duration / 3)
     out["dt_ms_pymunk"] = PYMUNK_DT_S * 1e3
     out["clock"] = "process cpu time, best of 3 chunks"
     # total cost per simulated second grows as N^k from the paper bed to the 16x bed
