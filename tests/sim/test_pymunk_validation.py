@@ -13,9 +13,9 @@ from sim.validation_pymunk import difference_in_se, sd_from_one, segregates, win
 # measured (docs/validation.md section 10; pymunk, 10 rpm, case C, late third, one value per seed)
 CUT_DISC_8S = (1.0427, 0.9631, 1.0431, 1.0142)  # 2 ms step, 8 s windows after 2 s: the convergence runs
 CUT_DISC_8S_1MS = (0.9994, 1.0212, 1.0416, 1.0190)
-# 150 s runs (``long_runs``), the mean over t >= 30 s (the last 120 s), seeds 0, 1, 2, 4, 5 / 0-4
-CUT_DISC_150S = (1.0298, 1.0109, 1.0173, 1.0310, 1.0300)
-DISC_DISC_150S = (1.0015, 1.0004, 1.0095, 1.0259, 0.9994)
+# 150 s runs (``long_runs``), the mean over t >= 30 s (the last 120 s), seeds 0-2, 4-7 / 0-5
+CUT_DISC_150S = (1.0298, 1.0109, 1.0173, 1.0310, 1.0300, 1.0454, 1.0177)
+DISC_DISC_150S = (1.0015, 1.0004, 1.0095, 1.0259, 0.9994, 1.0113)
 
 
 def test_the_criterion_counts_seed_standard_deviations_not_standard_errors():
@@ -94,8 +94,8 @@ def test_window_mean_takes_the_samples_from_its_start_on():
 
 
 def test_the_long_cut_disc_runs_stay_under_three_sd_and_the_disc_control_does_not_segregate():
-    # four times the window of the 90 s runs and the seed scatter hardly moves (0.009 against 0.012):
+    # four times the window of the 90 s runs and the seed scatter does not shrink (0.012 against 0.012):
     # it is each seed's own lasting arrangement, not noise that a longer mean averages away
-    assert 2.4 < sd_from_one(CUT_DISC_150S) < 2.8 and not segregates(CUT_DISC_150S)
+    assert 2.0 < sd_from_one(CUT_DISC_150S) < 2.5 and not segregates(CUT_DISC_150S)
     assert sd_from_one(DISC_DISC_150S) < 1.0
-    assert 2.4 < difference_in_se(CUT_DISC_150S, DISC_DISC_150S) < 2.8  # cut against disc control
+    assert 2.8 < difference_in_se(CUT_DISC_150S, DISC_DISC_150S) < 3.2  # cut against disc control
