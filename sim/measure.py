@@ -5,12 +5,12 @@ area-weighted disk moments, so it is what the pixel meter would see on a perfect
 frame: each disk counts with its area ``pi r^2`` at its centre plus its own second
 moment ``r^2 / 2`` (polar) about it.
 
-The slope is the angle of the bed's **free surface** (DESIGN.md), the definition the
-camera's meter uses: the upper boundary of the disks, sampled in columns half a small
-radius apart, and a robust straight-line fit over the central chord -- the columns
-within ``CHORD_HALF_R * R`` of the surface's midpoint (the foot of the perpendicular
-from the drum axis onto the surface line). A cubic fit over the same chord gives the
-surface's S-shape (``curvature``). The principal axis of the bed's area moments is a
+The slope is the angle of the bed's **free surface** (DESIGN.md), measured with the
+camera meter's own fit (``vision.slope.fit_surface_points``: one fit for the camera and
+the twin's calibration target) on the upper boundary of the disks, sampled in columns
+half a small radius apart: a robust straight-line fit over the central chord (the points
+within ``CHORD_HALF_R * R`` of the surface's midpoint along it), and a cubic through all
+the points for the surface's S-shape (``curvature``). The principal axis of the bed's area moments is a
 different, flatter number (``particle_axis_deg``).
 """
 
@@ -25,15 +25,14 @@ from sim.drum import Particles
 from sim.recipe import DrumSpec
 from vision.meter import Meter
 from vision.mixing import MixingIndices, mixing_indices
-from vision.slope import slope_from_moments
+from vision.slope import CENTRAL_HALF_CHORD, fit_surface_points, slope_from_moments
 
 __all__ = [
     "CHORD_HALF_R", "FreeSurface", "class_moments", "free_surface", "particle_axis_deg", "particle_mi",
     "particle_slope_deg", "surface_profile", "twin_meter",
 ]
 
-CHORD_HALF_R = 0.5  # half-width of the central chord, in drum radii
-_TUKEY_C = 4.685  # Tukey biweight tuning constant (in robust sd of the residuals)
+CHORD_HALF_R = CENTRAL_HALF_CHORD  # half-width of the central chord, in drum radii (the meter's)
 
 
 @dataclass(frozen=True)
@@ -99,40 +98,14 @@ def surface_profile(particles: Particles, drum: DrumSpec, step_m: float | None =
     return xs, np.where(np.isfinite(top), top, np.nan)
 
 
-def _tukey_line(
-    px: np.ndarray, py: np.ndarray, base: np.ndarray, floor: float
-) -> tuple[float, float, float, float, np.ndarray]:
-    """Robust (Tukey-weighted) orthogonal line through the ``base`` points: (mx, my, ux, uy, weights)."""
-    w = base.astype(float)
-    mx = my = 0.0
-    ux, uy = 1.0, 0.0
-    for _ in range(6):
-        sw = float(w.sum())
-        if sw <= 0:
-            break
-        mx = float(np.dot(w, px) / sw)
-        my = float(np.dot(w, py) / sw)
-        dx, dy = px - mx, py - my
-        th = 0.5 * math.atan2(2.0 * float(np.dot(w, dx * dy)), float(np.dot(w, dx * dx) - np.dot(w, dy * dy)))
-        ux, uy = math.cos(th), math.sin(th)
-        resid = -dx * uy + dy * ux
-        scale = 1.4826 * float(np.median(np.abs(resid[base])))
-        t = resid / (_TUKEY_C * max(scale, floor))
-        w = np.where(base & (np.abs(t) < 1.0), (1.0 - t * t) ** 2, 0.0)
-    return mx, my, ux, uy, w
-
-
 def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     """Slope and S-shape of the bed's free surface (module doc); NaN if there is no free surface.
 
-    The same construction as the camera's meter (``vision.slope``), on the disks' upper
-    boundary instead of an occupancy grid: columns whose bed reaches the drum wall above
-    have no free surface; a robust orthogonal line through all surface points, then
-    through those within ``CHORD_HALF_R * R`` (along the line) of the midpoint of their
-    extent, gives the angle; a cubic ``v(u)`` through the surface points that the robust
-    line over all of them kept (``u`` uphill,
-    ``v`` out of the bed, in units of R, centred on that midpoint) gives
-    ``curvature = -c3``.
+    The surface points are the disks' upper boundary (``surface_profile``), less the columns whose
+    bed reaches the drum wall above (no free surface there); the fit is the camera meter's own
+    (``vision.slope.fit_surface_points``: a robust orthogonal line over the central chord, the
+    cubic S-shape), on those points in metres (y flipped to the image's down), with half the
+    smallest radius as the least residual scale.
     """
     nan = FreeSurface(float("nan"), float("nan"), float("nan"), 0, float("nan"))
     xs, top = surface_profile(particles, drum)
@@ -144,29 +117,10 @@ def free_surface(particles: Particles, drum: DrumSpec) -> FreeSurface:
     ok = np.isfinite(top) & (top < wall_top - 4.0 * r_min)  # the bed reaches the wall above: no surface
     if ok.sum() < 5:
         return nan
-    px, py = xs[ok], top[ok]
-    floor = 0.5 * r_min
-    mx, my, ux, uy, w_all = _tukey_line(px, py, np.ones(px.size, dtype=bool), floor)
-    u = (px - mx) * ux + (py - my) * uy
-    mid = 0.5 * (float(u.min()) + float(u.max()))
-    chord = np.abs(u - mid) <= CHORD_HALF_R * big_r
-    if chord.sum() < 4:
+    fit = fit_surface_points(xs[ok], -top[ok], big_r, 0.5 * r_min)
+    if not math.isfinite(fit.slope_deg):
         return nan
-    mx, my, ux, uy, _ = _tukey_line(px, py, chord, floor)
-    if ux < 0:
-        ux, uy = -ux, -uy
-    ang = math.degrees(math.atan2(uy, ux))  # y up: positive rises to the right
-    sgn = 1.0 if ang >= 0 else -1.0
-    u = sgn * ((px - mx) * ux + (py - my) * uy) / big_r
-    v = (-(px - mx) * uy + (py - my) * ux) / big_r
-    u = u - 0.5 * (float(u.min()) + float(u.max()))
-    x_mid = float(mx)  # centre of the chord fit
-    curv = float("nan")
-    inl = w_all > 0  # the cubic skips what the robust line over all points rejected
-    if inl.sum() >= 6:
-        c3 = np.polyfit(u[inl], v[inl], 3)[0]  # highest power first
-        curv = float(-c3)
-    return FreeSurface(ang, curv, x_mid, int(px.size), float(my))
+    return FreeSurface(fit.slope_deg, fit.curvature, fit.mid_px[0], int(ok.sum()), -fit.mid_px[1])
 
 
 def particle_slope_deg(particles: Particles, drum: DrumSpec) -> float:

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import pickle
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -564,7 +565,8 @@ class PymunkDrumSim(FixedStepTwin):
     def _params_changed(self) -> None:
         self._set_coefficients()
 
-    def _run(self, n_steps: int, count: bool = True) -> None:
+    def _run(self, n_steps: int, count: bool = True, clock: np.ndarray | None = None) -> None:
+        """``n_steps`` steps; ``clock`` (2,): CPU seconds of Chipmunk's steps and of the post-step pass added."""
         p = self.params
         h = self.substep_s()
         dv_max = p.accel_rpm_s * h
@@ -575,8 +577,15 @@ class PymunkDrumSim(FixedStepTwin):
                 self._rpm_actual += max(-dv_max, min(dv_max, d))
             w = self.mixer.direction * rpm_to_rad_s(self._rpm_actual) if count else 0.0
             self._drum.angular_velocity = w
-            self._space.step(h)
-            self._after_step(h, w, end_k if count else 0.0, p.rolling if count else 0.0)
+            if clock is None:
+                self._space.step(h)
+                self._after_step(h, w, end_k if count else 0.0, p.rolling if count else 0.0)
+            else:
+                t0 = time.process_time()
+                self._space.step(h)
+                t1 = time.process_time()
+                self._after_step(h, w, end_k if count else 0.0, p.rolling if count else 0.0)
+                clock += (t1 - t0, time.process_time() - t1)
             if count:
                 self.n_steps += 1
 
@@ -607,6 +616,24 @@ class PymunkDrumSim(FixedStepTwin):
         self._airborne = float(acc[3])
         if write and friction:
             pbatch.set_space_bodies(self._space, _VEL, self._sbuf)
+
+    def cost_profile(self, duration_s: float) -> dict[str, float]:
+        """Advance ``duration_s`` (whole steps) and say what a step costs: shapes and bodies in the space,
+        solver iterations, contacts per step, and the shares of this process's CPU time in Chipmunk's
+        step and in the post-step pass (rolling and end-plate friction, statistics). Counts do not depend
+        on the machine's load; the shares are of one run."""
+        n = max(1, int(round(duration_s / self.substep_s())))
+        clock = np.zeros(2)
+        c0, s0 = self._contacts, self._stat_steps
+        self._run(n, clock=clock)
+        self.t_s += n * self.substep_s()
+        total = float(clock.sum())
+        return {"shapes": float(len(self._space.shapes)), "bodies": float(len(self._space.bodies)),
+                "iterations": float(self.iterations), "steps": float(n),
+                "contacts_per_step": (self._contacts - c0) / max(1, self._stat_steps - s0),
+                "chipmunk_share": float(clock[0]) / total if total > 0 else math.nan,
+                "post_share": float(clock[1]) / total if total > 0 else math.nan,
+                "cpu_ms_per_step": 1e3 * total / n}
 
     # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:

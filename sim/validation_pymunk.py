@@ -231,6 +231,28 @@ def segregation(out_dir: Path, seeds=(0, 1, 2, 3), rpms=(5.0, 10.0, 20.0), durat
     return out
 
 
+def long_runs(cut: bool, seeds, duration_s: float, path: Path, rpm: float = 10.0) -> list[dict]:
+    """Long seeded runs of one bed (``cut``: the cut-disc/disc bed, else disc/disc; case C, ``CONTACT``):
+    each seed's time series (t, spread ratio, MI, slope every 0.5 s) appended to ``path`` (JSON lines)
+    as it finishes, so a run cut short keeps its finished seeds."""
+    m = rig(cut)
+    out = []
+    for s in seeds:
+        r = series(m, rpm, s, duration_s, engine="pymunk", **CONTACT)
+        row = {"bed": "cut/disc" if cut else "disc/disc", "rpm": rpm, "seed": int(s), "duration_s": duration_s,
+               **{k: [float(x) for x in r[k]] for k in ("t", "ratio", "mi", "slope")}, "rtf": r["rtf"]}
+        with path.open("a") as fh:
+            fh.write(json.dumps(row) + "\n")
+        out.append(row)
+    return out
+
+
+def window_mean(row: dict, key: str, from_s: float) -> float:
+    """The mean of one run's ``key`` series (``long_runs``' rows) over ``t >= from_s``."""
+    t, v = np.asarray(row["t"], float), np.asarray(row[key], float)
+    return float(np.nanmean(v[t >= from_s]))
+
+
 def _t_plateau(t: np.ndarray, mi: np.ndarray, frac: float = 0.9) -> float:
     """First time the MI reaches ``frac`` of its late-third level (s)."""
     level = _late(mi)
@@ -364,5 +386,5 @@ if __name__ == "__main__":
 
 
 __all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "SEGREGATION_SD", "baffles",
-           "calibration", "convergence", "dem", "difference_in_se", "main", "pymunk_slope_deg", "rig", "sd_from_one",
-           "segregates", "segregation", "series"]
+           "calibration", "convergence", "dem", "difference_in_se", "long_runs", "main", "pymunk_slope_deg", "rig",
+           "sd_from_one", "segregates", "segregation", "series", "window_mean"]

@@ -241,6 +241,11 @@ STRING_VALUES: dict[str, list[str]] = {
     "title": [],  # free text: no value is bad
     "objective": ["fastest", ""],
 }
+# Bad values of number options beyond FLOATS / INTS: finite numbers outside the option's range.
+RANGE_VALUES: dict[tuple[str, str], list[str]] = {
+    ("calibrate", "end_friction"): ["-0.5", "5.5"],  # friction of the end plates: [0, 5]
+    ("sim", "end_friction"): ["-0.5", "5.5"],
+}
 # Parameters whose values are read as images/videos or configs.
 IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames")}
 
@@ -267,7 +272,7 @@ def _values(p: Param) -> list[str]:
     if p.kind == "flag":
         return []
     if p.kind == "float":
-        return FLOATS
+        return FLOATS + RANGE_VALUES.get(where, [])
     if p.kind == "choice":
         return ["zzz", ""]
     if p.kind == "int":

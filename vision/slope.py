@@ -36,6 +36,7 @@ __all__ = [
     "bed_slope_deg",
     "bed_surface",
     "cell_areas",
+    "fit_surface_points",
     "occupancy_shift",
     "slope_from_moments",
     "surface_from_occupancy",
@@ -197,8 +198,13 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
         npts += 1
     if npts < 5:
         return
-    px = pts_x[:npts]
-    py = pts_y[:npts]
+    _fit_points(pts_x[:npts], pts_y[:npts], 0.25 * cs, r_px, res)
+
+
+def _fit_points_py(px, py, floor, r_px, res):  # pragma: no cover - compiled
+    """The free surface through its points (image px, y down; 5 or more): robust line over the central chord,
+    cubic S-shape; fills res as ``_surface_py`` (``floor``: least residual scale, px)."""
+    npts = px.shape[0]
     w = np.ones(npts)
     base = np.empty(npts)
     ar = np.empty(npts)
@@ -261,7 +267,7 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
                     ar[na] = abs(-(px[k] - mx) * uy + (py[k] - my) * ux)
                     na += 1
             scale = 1.4826 * np.median(ar[:na])
-            lim = 4.685 * max(scale, 0.25 * cs)
+            lim = 4.685 * max(scale, floor)
             for k in range(npts):
                 if base[k] > 0:
                     t = (-(px[k] - mx) * uy + (py[k] - my) * ux) / lim
@@ -313,16 +319,30 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
 
 _surface_kernel = None
 _col_fill = _col_fill_py  # replaced by its compiled form before _surface_py is compiled
+_fit_points = _fit_points_py  # likewise
 
 
 def _surface_fn():
-    global _surface_kernel, _col_fill
+    global _surface_kernel, _col_fill, _fit_points
     if _surface_kernel is None:
         import numba
 
         _col_fill = numba.njit(nogil=True, cache=True, inline="always")(_col_fill_py)
+        _fit_points = numba.njit(nogil=True, cache=True)(_fit_points_py)
         _surface_kernel = numba.njit(nogil=True, cache=True)(_surface_py)
     return _surface_kernel
+
+
+def fit_surface_points(x: np.ndarray, y: np.ndarray, r: float, floor: float) -> SurfaceFit:
+    """The free surface through surface points ``x``, ``y`` (any length unit, y down as in an image) of a drum
+    of radius ``r``: the meter's robust line over the central chord and its cubic S-shape (module doc);
+    ``floor`` = least residual scale of the robust weights. ``mid_px`` in the points' unit."""
+    res = np.full(5, np.nan)
+    if len(x) >= 5:
+        _surface_fn()
+        _fit_points(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64), float(floor),
+                    float(r), res)
+    return SurfaceFit(float(res[0]), float(res[1]), int(np.nan_to_num(res[2])), (float(res[3]), float(res[4])))
 
 
 def surface_from_occupancy(

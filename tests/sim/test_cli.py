@@ -183,3 +183,8 @@ def test_bench_twin_prints_the_real_time_factors_and_the_step():
     assert out["rtf_paper_5rpm_pymunk"] > 0 and out["n_paper_5rpm_pymunk"] == out["n_paper_5rpm"]
     assert out["rtf_cutdisc_10rpm_pymunk"] > 0 and out["n_cutdisc_10rpm_pymunk"] == 250
     assert out["dt_ms_pymunk"] > 0
+    # where its step goes: 125 discs, 125 cut discs of 2 convex pieces each, a wall of 180 segments
+    prof = out["profile_cutdisc_pymunk"]
+    assert prof["shapes"] == 125 + 2 * 125 + 180 and prof["bodies"] == 251 and prof["iterations"] == 10
+    assert prof["contacts_per_step"] > 250  # a settled bed: every particle touches something
+    assert prof["chipmunk_share"] + prof["post_share"] == pytest.approx(1.0)

@@ -101,7 +101,9 @@ def test_free_surface_slope_of_beds_with_known_surfaces(angle_deg):
     t = math.tan(math.radians(angle_deg))
     fs = free_surface(_bed(lambda x: t * x - 0.01), PAPER_DRUM)
     assert fs.slope_deg == pytest.approx(angle_deg, abs=1.5)  # a lattice bed: a jagged surface
-    assert abs(fs.curvature) < 0.06  # a straight surface (up to the lattice cut by the wall)
+    # a straight surface, up to the lattice's steps where it meets the wall: the meter's cubic runs through
+    # every surface point (vision.slope.fit_surface_points; an S-shaped bed reads 0.13-2, below)
+    assert abs(fs.curvature) < 0.1
     assert fs.n_columns > 40
     assert abs(fs.x_mid_m) < 0.3 * PAPER_DRUM.radius_m
 
@@ -122,3 +124,23 @@ def test_free_surface_sees_the_s_shape_and_ignores_a_flying_disk():
     assert particle_axis_deg(_bed(lambda x: t * x - 0.02 * (x / half) ** 3), PAPER_DRUM) < s_shaped.slope_deg
     empty = Particles(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=int))
     assert math.isnan(free_surface(empty, PAPER_DRUM).slope_deg)
+
+
+@pytest.mark.parametrize("angle_deg", [-40.0, 0.0, 25.0])
+def test_the_one_surface_fit_reads_exact_surface_points(angle_deg):
+    """vision.slope.fit_surface_points, the fit the camera and the twin share: points on a straight line
+    (image y down) give its angle and no S-shape, a point far off it does not move the angle, and a
+    profile steeper in the middle reads a positive S-shape."""
+    from vision.slope import fit_surface_points
+
+    t = math.tan(math.radians(angle_deg))
+    x = np.linspace(-0.1, 0.1, 60)
+    flat = fit_surface_points(x, -(t * x), 0.15, 1e-4)
+    assert flat.slope_deg == pytest.approx(angle_deg, abs=1e-6) and abs(flat.curvature) < 1e-9
+    assert flat.n_points == 60 and flat.mid_px[0] == pytest.approx(0.0, abs=1e-12)
+    y_out = -(t * x)
+    y_out[30] -= 0.05  # one flying particle above the surface
+    assert fit_surface_points(x, y_out, 0.15, 1e-4).slope_deg == pytest.approx(angle_deg, abs=0.01)
+    s = fit_surface_points(x, -(np.tan(np.radians(30.0)) * x - 0.5 * x ** 3 / 0.15 ** 2), 0.15, 1e-4)
+    assert s.curvature > 0.1
+    assert math.isnan(fit_surface_points(x[:4], -(t * x[:4]), 0.15, 1e-4).slope_deg)  # too few points

@@ -37,3 +37,27 @@ def test_calibrate_runs_the_cut_disc_rig_on_pymunk_says_its_range_and_exits_2_ou
     assert out["range_deg"] == pytest.approx([lo, hi], abs=0.051)  # the message prints one decimal
     assert lo - 1.0 <= abs(out["twin_slope_deg"]) <= hi + 1.0 and out["twin_slope_deg"] < 0
     assert 0.05 <= out["friction"] <= 1.0 and 0.0 <= out["rolling"] <= 1.0
+
+
+def _range(err: str) -> tuple[float, float]:
+    m = re.search(r"range (\d+\.\d)-(\d+\.\d) deg", err)
+    assert m, err
+    return float(m.group(1)), float(m.group(2))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_calibrate_end_friction_sets_the_plates_of_the_twin_runs():
+    # the monolayer rig with the default (Taberlet) plates stands steep over the whole search; without
+    # plate friction (--end-friction 0) the whole range lies below that: the option reaches the twin runs
+    plates = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
+    assert_one_line_error(plates, "outside the twin's reachable range")
+    none = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", "--end-friction", "0",
+               *SHORT)
+    assert_one_line_error(none, "outside the twin's reachable range")
+    (lo_p, hi_p), (lo_0, hi_0) = _range(plates.err), _range(none.err)
+    assert hi_0 < lo_p, (lo_0, hi_0, lo_p, hi_p)
+    assert lo_0 < 25.0 < hi_0  # the low end of issue 20's 25-45 deg is inside it
+    # a value out of [0, 5] is refused before any twin runs
+    assert_one_line_error(cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "30",
+                              "--end-friction", "-0.1"), "--end-friction")

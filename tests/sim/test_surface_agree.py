@@ -1,9 +1,8 @@
-"""The twin's free-surface fit (sim.measure.free_surface, on the disks' exact upper boundary) and the camera's
-(vision.slope via the Meter, on occupancy cells of a frame) are two fits of one definition; calibration is
-only valid while they agree. They must differ in how they find the surface points (exact disk tops in
-columns; a fill threshold in partly filled cells of pixels) and the S-shape's flow-regime threshold was set
-on the particle curvature (docs/validation.md, "Drive power and time to mix"), so this test holds them
-together on the twin's own frames."""
+"""The twin's free surface (sim.measure.free_surface: the disks' exact upper boundary) and the camera's
+(vision.slope via the Meter, on occupancy cells of a frame) are one fit (vision.slope.fit_surface_points)
+on two sets of surface points (exact disk tops in columns; a fill threshold in partly filled cells of
+pixels); calibration is only valid while they agree, so this test holds the points together on the
+twin's own frames."""
 
 from __future__ import annotations
 

@@ -257,6 +257,9 @@ def calibrate_cmd(
     spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
+    end_friction: float | None = typer.Option(None, "--end-friction",
+                                              help="friction of the drum's end plates in the twin runs, kept "
+                                                   "fixed (default: the wall's; 0: none, e.g. a monolayer rig)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
@@ -278,6 +281,8 @@ def calibrate_cmd(
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     sim_kw: dict[str, Any] = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
+    if end_friction is not None:
+        sim_kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0
@@ -299,7 +304,7 @@ def calibrate_cmd(
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
            "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source,
-           "engine": engine_for(mixer, engine)}
+           "engine": engine_for(mixer, engine), "end_friction": end_friction}
     if as_json:
         print_json(out)
     else:
@@ -479,6 +484,11 @@ def bench_twin(
         twin = make_twin(mixer, "pymunk", case="C", seed=0, rpm=rpm, settle_s=0.3)
         out[name] = _cpu_rtf(twin, duration)
         out[name.replace("rtf_", "n_")] = len(twin.particles())
+    # where the cut-disc rig's step goes: shapes, contacts, iterations, Chipmunk against the post-step pass
+    from sim.pymunk_twin import PymunkDrumSim
+
+    assert isinstance(twin, PymunkDrumSim)
+    out["profile_cutdisc_pymunk"] = twin.cost_profile(duration / 3)
     out["dt_ms_pymunk"] = PYMUNK_DT_S * 1e3
     out["clock"] = "process cpu time, best of 3 chunks"
     # total cost per simulated second grows as N^k from the paper bed to the 16x bed
