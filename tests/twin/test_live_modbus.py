@@ -27,8 +27,9 @@ from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.runlog import read_events
 
-# the whole-loop tests share one worker (the option check and the worker-on-a-pty test run anywhere)
-LIVE = pytest.mark.xdist_group("live")
+# the whole-loop tests share one worker, group "live-b" (the loops of test_live.py are "live", on
+# the other worker: never more than two loops at once; the option check and the worker-on-a-pty test run anywhere)
+LIVE = pytest.mark.xdist_group("live-b")
 
 DELTA = load_profile("delta-ms300")
 
