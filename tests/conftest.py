@@ -22,6 +22,32 @@ def real_drum_dir() -> Path:
     return path
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Under xdist, the controller compiles the numba kernels once before the workers start
+    (tests/numba_warm.py); one process (``-n 0``) compiles them as it goes, once anyway."""
+    config = session.config
+    if (not hasattr(config, "workerinput") and getattr(config.option, "numprocesses", None)
+            and not config.option.collectonly):
+        from tests import numba_warm
+
+        numba_warm.start()
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    if not hasattr(config, "workerinput"):
+        from tests import numba_warm
+
+        numba_warm.stop()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def numba_warm_up() -> None:
+    """A worker's first test waits for the controller's numba warm-up (none: at once)."""
+    from tests import numba_warm
+
+    numba_warm.wait()
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir."""
     from tests import learned
