@@ -35,7 +35,7 @@ from vision.synthetic import drum_frame
 
 # The whole-loop runs are heavy (a demo with its plant twin, vision and twin workers): under
 # pytest-xdist they share one worker, one after another, while the other worker runs the other
-# group of loops ("live-b": test_live_modbus.py, ...) and the rest: never more than two loops at once.
+# group of loops ("live-b": see test_live_modbus.py) and the rest: never more than two loops at once.
 # (the option checks run anywhere: only the tests marked @LIVE share the worker)
 LIVE = pytest.mark.xdist_group("live")
 

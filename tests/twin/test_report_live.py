@@ -27,7 +27,7 @@ from twin.config import RunConfig
 from twin.report.build import SECTIONS
 from twin.runlog import read_events, read_frames
 
-pytestmark = [pytest.mark.xdist_group("live-b"), pytest.mark.slow]  # (live-b: see test_live_modbus.py)
+pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]
 
 SPEED = 4.0
 MIXED_RPM = 45.0  # the demo plant's bed stays mixed at 45 rpm (MI ~0.95); at 5 rpm it segregates
