@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import socket
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -54,6 +58,25 @@ def pytest_configure(config: pytest.Config) -> None:
 
     cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
     learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
+
+
+# `drumtwin bench dashboard` (a demo in its own process, chromium on its dashboard) once per
+# session: the bad-input sweep's base of that command and test_live.py's bench test read it.
+BENCH_DASHBOARD_ARGS = ["--seconds", "2", "--warmup", "0", "--speed", "2"]
+
+
+@pytest.fixture(scope="session")
+def bench_dashboard_run() -> subprocess.CompletedProcess:
+    """``drumtwin bench dashboard BENCH_DASHBOARD_ARGS --port FREE --json`` through the real
+    console script; its users are in xdist group "live" (one worker: one run)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH", str(REPO)), "COLUMNS": "400"}
+    env.pop("DRUMTWIN_DEBUG", None)
+    return subprocess.run([str(Path(sys.executable).with_name("drumtwin")), "bench", "dashboard",
+                           *BENCH_DASHBOARD_ARGS, "--port", str(port), "--json"],
+                          capture_output=True, text=True, timeout=380, env=env)
 
 
 @pytest.fixture

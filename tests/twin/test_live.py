@@ -489,13 +489,10 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
 @LIVE
 @pytest.mark.browser
 @pytest.mark.timeout(400)
-def test_bench_dashboard_counts_image_updates_in_chromium() -> None:
-    """`drumtwin bench dashboard` runs the demo, opens it in chromium and reports rates."""
-    p = subprocess.run(
-        [*DRUMTWIN, "bench", "dashboard", "--seconds", "2", "--warmup", "0", "--speed", "2",
-         "--port", str(_free_port()), "--json"],
-        capture_output=True, text=True, timeout=380,
-    )
+def test_bench_dashboard_counts_image_updates_in_chromium(bench_dashboard_run) -> None:
+    """`drumtwin bench dashboard` runs the demo, opens it in chromium and reports rates
+    (``--seconds 2 --warmup 0 --speed 2 --json``: tests/conftest.py, shared with the bad-input sweep)."""
+    p = bench_dashboard_run
     assert p.returncode == 0, p.stderr[-2000:]
     rate = json.loads(p.stdout)
     assert rate["seconds"] == 2.0
