@@ -99,6 +99,7 @@ def env(tmp_path_factory):
     live mill emulator (``{mill}``), a port in use (``{busy}``), a closed one (``{closed}``)."""
     d = tmp_path_factory.mktemp("sweep")
     (d / "dir").mkdir()
+    (d / "out").mkdir()  # the bases' outputs ({out}/...): report and compare write no missing folder
     (d / "empty.bin").write_bytes(b"")
     (d / "garbage.bin").write_bytes(os.urandom(4096))
     jpg = Path(IMG).read_bytes()
