@@ -321,6 +321,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
     def body(loop, plant) -> None:
         mill = loop.mill_box.get
         _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
+        _wait(lambda: plant.emulator.motor.running, 40, "the demo operator's start")  # (late on a loaded machine)
         plant.emulator.disconnect()
         _wait(lambda: not mill().connected, 10, "the loop to see the link down")
         _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
