@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import socket
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,12 +26,57 @@ def real_drum_dir() -> Path:
     return path
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Under xdist, the controller compiles the numba kernels once before the workers start
+    (tests/numba_warm.py); one process (``-n 0``) compiles them as it goes, once anyway."""
+    config = session.config
+    if (not hasattr(config, "workerinput") and getattr(config.option, "numprocesses", None)
+            and not config.option.collectonly):
+        from tests import numba_warm
+
+        numba_warm.start()
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    if not hasattr(config, "workerinput"):
+        from tests import numba_warm
+
+        numba_warm.stop()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def numba_warm_up() -> None:
+    """A worker's first test waits for the controller's numba warm-up (none: at once)."""
+    from tests import numba_warm
+
+    numba_warm.wait()
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir."""
     from tests import learned
 
     cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
     learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
+
+
+# `drumtwin bench dashboard` (a demo in its own process, chromium on its dashboard) once per
+# session: the bad-input sweep's base of that command and test_live.py's bench test read it.
+BENCH_DASHBOARD_ARGS = ["--seconds", "2", "--warmup", "0", "--speed", "2"]
+
+
+@pytest.fixture(scope="session")
+def bench_dashboard_run() -> subprocess.CompletedProcess:
+    """``drumtwin bench dashboard BENCH_DASHBOARD_ARGS --port FREE --json`` through the real
+    console script; its users are in xdist group "live" (one worker: one run)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH", str(REPO)), "COLUMNS": "400"}
+    env.pop("DRUMTWIN_DEBUG", None)
+    return subprocess.run([str(Path(sys.executable).with_name("drumtwin")), "bench", "dashboard",
+                           *BENCH_DASHBOARD_ARGS, "--port", str(port), "--json"],
+                          capture_output=True, text=True, timeout=380, env=env)
 
 
 @pytest.fixture

@@ -31,6 +31,7 @@ from control.emulator import MillEmulator
 from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
+from tests.conftest import BENCH_DASHBOARD_ARGS
 from twin.cli import app
 from twin.membench import write_video
 from twin.runlog import RunLog
@@ -98,6 +99,7 @@ def env(tmp_path_factory):
     live mill emulator (``{mill}``), a port in use (``{busy}``), a closed one (``{closed}``)."""
     d = tmp_path_factory.mktemp("sweep")
     (d / "dir").mkdir()
+    (d / "out").mkdir()  # the bases' outputs ({out}/...): report and compare write no missing folder
     (d / "empty.bin").write_bytes(b"")
     (d / "garbage.bin").write_bytes(os.urandom(4096))
     jpg = Path(IMG).read_bytes()
@@ -170,7 +172,7 @@ BASE: dict[tuple[str, ...], list[str]] = {
                      "--window-s", "0.5"],
     ("whatif",): ["--rpm", "5", "--duration", "0.5", "--workers", "1"],
     ("mill-emulator",): ["--tcp", "0", "--duration", "0.2"],
-    ("bench", "dashboard"): ["--seconds", "1", "--warmup", "0"],
+    ("bench", "dashboard"): BENCH_DASHBOARD_ARGS,  # its base run is shared with test_live.py's bench test
     ("bench", "memory"): ["--seconds", "5"],
     ("bench", "vision"): ["--seconds", "0.1"],
     ("bench", "twin"): ["--duration", "0.2"],
@@ -200,7 +202,8 @@ BASE_FOR: dict[tuple[tuple[str, ...], str], list[str]] = {
     (("mill-emulator",), "link"): ["--pty", "--duration", "0.2"],
     (("bench", "trend"), "frames"): ["--sequences", "1", "--real-seeds", "1"],
     (("bench", "trend"), "config"): ["--sequences", "1", "--real-seeds", "1"],
-    (("run",), "port"): ["--duration", "1", "--speed", "10", "--log", "{out}/run-{case}"],  # with the dashboard
+    (("run",), "port"): ["--duration", "1", "--speed", "10", "--log", "{out}/run-{case}",  # with the dashboard,
+                         "--port", "{port}"],  # on a free port (a case's --port comes last: it wins)
 }
 # Parameters that name a file the command writes (bad values: a path under a regular file,
 # a directory); every other path is read (bad values: missing, a directory, empty, garbage).
@@ -319,7 +322,9 @@ CASES = sweep_cases()
 
 
 def _expand(argv: tuple[str, ...], env: dict[str, str], n: int) -> list[str]:
-    return [a.format(case=n, **env) for a in argv]
+    """The case's arguments with ``env``'s names, ``{case}`` its number, ``{port}`` a free port."""
+    port = str(_free_port()) if any("{port}" in a for a in argv) else ""
+    return [a.format(case=n, port=port, **env) for a in argv]
 
 
 def test_every_command_and_option_is_swept() -> None:
@@ -357,13 +362,23 @@ SLOW_BASES = ("bench dashboard", "bench memory", "run")
 BASES = base_runs()
 
 
-@pytest.mark.timeout(300)
+BENCH_DASHBOARD_BASE = " ".join(("bench", "dashboard", *BENCH_DASHBOARD_ARGS))
+
+
+@pytest.mark.timeout(400)
 @pytest.mark.parametrize("key", [
+    pytest.param(k, marks=[pytest.mark.slow, pytest.mark.xdist_group("live")])  # beside test_live.py's bench test
+    if k == BENCH_DASHBOARD_BASE else
     pytest.param(k, marks=pytest.mark.slow) if k.startswith(SLOW_BASES) else k
     for k in BASES])
-def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env) -> None:
+def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env, request) -> None:
     """The negative control: a command with its base arguments (and a case's context) is
-    exit 0, so a case's exit 2 is its swept value's, not the base's (a masked sweep)."""
+    exit 0, so a case's exit 2 is its swept value's, not the base's (a masked sweep).
+    ``bench dashboard``'s base is the session's run of it (tests/conftest.py, a free ``--port``)."""
+    if key == BENCH_DASHBOARD_BASE:
+        p = request.getfixturevalue("bench_dashboard_run")
+        assert p.returncode == 0 and "Traceback" not in p.stderr, (p.returncode, p.stderr[-2000:])
+        return
     r = cli(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))
     assert r.code == 0 and "Traceback" not in r.err, (r.code, r.err[-2000:])
 
