@@ -51,7 +51,7 @@ def due(
     sup = Supervisor(config or cfg(), Mode.AUTO)
     i = i or inp()
     d, req = sup.step(0.0, i)
-    assert d is None and req == PredictionRequest(0.0, sup.config.candidates(i.actual_rpm), 60.0, None)
+    assert d is None and req == PredictionRequest(0.0, sup.config.candidates(i.actual_rpm), 60.0, None, RAMP)
     return sup, i
 
 
@@ -64,6 +64,7 @@ def answer(preds: dict, config: SupervisorConfig | None = None, i: SupervisorInp
 
 
 WHY = "MI 0.300 < 0.5"
+RAMP = 100.0  # cfg()'s max_rate_rpm_per_s: the twin ramps as the mill will (PredictionRequest.ramp_rpm_s)
 
 
 # -- the plateau choice ---------------------------------------------------------------------------
@@ -186,7 +187,7 @@ def test_a_plateau_choice_under_another_objective_says_it_had_no_rows():
     sup = Supervisor(c, Mode.AUTO)
     i = inp()
     _, req = sup.step(0.0, i)
-    assert req == PredictionRequest(0.0, c.candidates(10.0), 60.0, 0.9)
+    assert req == PredictionRequest(0.0, c.candidates(10.0), 60.0, 0.9, RAMP)
     d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.3, 30.0: 0.6}))
     assert d is not None and d.reason == (
         f"segregation (objective time: no time/energy rows -> plateau; {WHY}); twin predicts MI 0.600 at 30 rpm "
@@ -227,7 +228,7 @@ def test_the_fallback_at_the_upper_limit_steps_down():
 def test_with_nothing_known_of_the_mill_the_fallback_starts_from_the_safe_rpm_and_jumps():
     sup = Supervisor(cfg(prediction_wait_s=0.0, max_rate_rpm_per_s=1.0), Mode.AUTO)
     i = inp(rpm=None, mill_running=None)
-    assert sup.step(0.0, i) == (None, PredictionRequest(0.0, sup.config.candidates(5.0), 60.0, None))
+    assert sup.step(0.0, i) == (None, PredictionRequest(0.0, sup.config.candidates(5.0), 60.0, None, 1.0))
     d, _ = sup.step(0.0, i)
     assert d is not None and (d.action, d.rpm, d.target_rpm) == (Action.SET_RPM, 10.0, 10.0)
     assert d.reason.endswith("fallback rule 5 -> 10 rpm") and sup.commanded_rpm == 10.0
@@ -253,7 +254,7 @@ def test_evaluations_are_min_change_interval_apart():
     assert d is not None and d.rpm == 15.0
     assert sup.step(29.5, inp(rpm=15.0, t=29.5)) == (None, None)
     _, req = sup.step(30.0, inp(rpm=15.0, t=30.0))
-    assert req == PredictionRequest(30.0, c.candidates(15.0), 60.0, None)
+    assert req == PredictionRequest(30.0, c.candidates(15.0), 60.0, None, RAMP)
 
 
 def test_old_predictions_are_not_used_and_older_ones_never_replace_newer():
@@ -516,7 +517,7 @@ def test_auto_faults_join_into_one_reason_and_the_safe_state_drops_a_pending_req
     d, _ = sup.step(205.0, inp(t=205.0))
     assert d is not None and d.kind == "recover"
     _, req = sup.step(205.0, inp(t=205.0))
-    assert req == PredictionRequest(205.0, sup.config.candidates(10.0), 60.0, None)
+    assert req == PredictionRequest(205.0, sup.config.candidates(10.0), 60.0, None, RAMP)
 
 
 def test_recovery_resets_the_detector_and_retargets_at_the_commanded_rpm():
@@ -558,6 +559,7 @@ def test_a_decision_as_a_log_record_has_every_input():
     assert d.as_dict() == {
         "t_s": 1.0, "mode": "auto", "action": "set_rpm", "kind": "move", "reason": "why", "rpm": 12.0,
         "target_rpm": 15.0, "safe": False, "level": 0.42, "rate": -0.01, "predictions": {"5.0": 0.3, "12.0": 0.6},
+        "predicted_time_to_target_s": None, "predicted_energy_j": None, "prediction_t_s": None,
         "inputs": {
             "level": 0.42, "rate": -0.01, "level_sd": 0.02, "trend_settled": True, "actual_rpm": 9.5,
             "setpoint_rpm": 10.0, "mill_connected": True, "mill_running": True, "mill_epoch": 3, "mill_refused": 1,
@@ -591,7 +593,7 @@ def objective_decision(objective: str, rows: dict, **kw) -> tuple[Supervisor, De
     sup = Supervisor(c, Mode.AUTO)
     i = inp(rpm=15.0)
     _, req = sup.step(0.0, i)
-    assert req == PredictionRequest(0.0, c.candidates(15.0), 60.0, 0.9)
+    assert req == PredictionRequest(0.0, c.candidates(15.0), 60.0, 0.9, RAMP)
     preds = {r: v.plateau_mi for r, v in rows.items()}
     d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, preds, rows=rows))
     return sup, d, i
@@ -604,7 +606,7 @@ def test_an_objective_move_is_the_choice_of_control_objective_with_the_superviso
     assert ch.move and ch.rpm is not None
     assert d == Decision(0.0, Mode.AUTO, Action.SET_RPM, "move", f"{WHY}; {ch.reason}", rpm=ch.rpm,
                          target_rpm=ch.rpm, inputs=i, predictions={5.0: 0.95, 25.0: 0.95, 45.0: 0.95},
-                         scores={r: -v for r, v in ch.values.items()})
+                         scores={r: -v for r, v in ch.values.items()}, chosen=ROWS[ch.rpm], prediction_t_s=0.0)
     assert sup.step(1.0, inp(rpm=15.0, t=1.0)) == (None, None)  # evaluated: the next one 30 s on
 
 
@@ -616,7 +618,8 @@ def test_an_objective_hold_uses_the_configured_relative_gain():
     ch = choose(rows.values(), "time", 15.0, (5.0, 45.0), 0.9, min_rel_gain=0.5)
     assert not ch.move
     assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold", f"{WHY}; {ch.reason}", inputs=i,
-                         predictions={15.0: 0.95, 25.0: 0.95}, scores={r: -v for r, v in ch.values.items()})
+                         predictions={15.0: 0.95, 25.0: 0.95}, scores={r: -v for r, v in ch.values.items()},
+                         chosen=None if ch.rpm is None else rows[ch.rpm], prediction_t_s=0.0)
 
 
 def test_an_objective_with_no_row_inside_the_limits_holds():
@@ -624,7 +627,7 @@ def test_an_objective_with_no_row_inside_the_limits_holds():
     sup, d, i = objective_decision("time", rows)
     assert d == Decision(0.0, Mode.AUTO, Action.NONE, "hold",
                          f"{WHY}; objective time: no prediction inside 5..45 rpm", inputs=i,
-                         predictions={60.0: 0.95}, scores={})
+                         predictions={60.0: 0.95}, scores={}, prediction_t_s=0.0)
     assert sup.step(1.0, inp(rpm=15.0, t=1.0)) == (None, None)
 
 
@@ -677,7 +680,7 @@ def test_set_mode_auto_on_a_segregated_bed_asks_for_predictions_at_the_next_step
     sup = Supervisor(cfg(), Mode.OFF)
     sup.step(0.0, inp())
     sup.set_mode(Mode.AUTO, 0.5)
-    assert sup.step(1.0, inp(t=1.0)) == (None, PredictionRequest(1.0, sup.config.candidates(10.0), 60.0, None))
+    assert sup.step(1.0, inp(t=1.0)) == (None, PredictionRequest(1.0, sup.config.candidates(10.0), 60.0, None, RAMP))
 
 
 def test_an_operator_rpm_within_a_micro_rpm_of_the_target_is_the_same_rpm():
