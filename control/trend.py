@@ -346,7 +346,7 @@ class MITrend:
         c = self.config
         acc = self._accepted
         acc.append((t_s, z))
-        while len(acc) > 2 and acc[1][0] <= t_s - c.noise_lag_s:
+        while len(acc) > 2 and t_s - acc[1][0] >= c.noise_lag_s:
             acc.popleft()
         if len(acc) < 2:
             return
