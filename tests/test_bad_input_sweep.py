@@ -93,6 +93,16 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _truncated(text: str) -> str:
+    """``text`` cut inside a value at about 60 %: at the last ``=`` of a line that is no comment
+    (a cut inside a comment would leave valid TOML), the value left as an open array."""
+    lines = text[: int(len(text) * 0.6)].splitlines()
+    while lines and ("=" not in lines[-1] or lines[-1].lstrip().startswith("#")):
+        lines.pop()
+    assert lines, "the example config has no key before 60 %"
+    return "\n".join([*lines[:-1], lines[-1].split("=", 1)[0] + "= [["])
+
+
 @pytest.fixture(scope="module")
 def env(tmp_path_factory):
     """Names used in case templates: files (``{missing}``, ``{dir}``, ``{empty}``, ...), a
@@ -121,7 +131,7 @@ def env(tmp_path_factory):
         "negative": "[meter]\nmin_pixels = -5\n",
         "drum_bad": "[drum]\ndiameter_mm = -300\n",
         "drum_huge": "[drum]\ndiameter_mm = 1e308\n",
-        "truncated": example[: int(len(example) * 0.6)].rsplit("=", 1)[0] + "= [[",
+        "truncated": _truncated(example),
         "classes_bad": "[[classes]]\nname = \"red\"\nhsv = [[[0, 0], [1, 2, 3]]]\n",
         "garbage": "\x00\x01\x02 binary \xff",
     }
