@@ -128,7 +128,7 @@ def _truncated_jpeg(real_drum_dir: Path, tmp_path: Path) -> Path:
         (("whatif", "--rpm", "5,90"), ("77.2",)),
         (("whatif", "--seeds", "100000000"), ("--seeds", "1000")),
         (("whatif", "--rpm", "5", "--seeds", "0"), ("--seeds",)),
-        (("whatif", "--rpm", "5", "--duration", "inf"), ("--duration",)),
+        (("whatif", "--rpm", "5", "--duration", "inf"), ("what-if duration", "3600")),  # the limits' one check
         (("whatif", "--rpm", "5", "--duration", "1", "--sample-s", "0"), ("--sample-s",)),
         (("whatif", "--rpm", "5", "--duration", "1", "--workers", "0"), ("--workers",)),
         (("whatif", "--rpm", "5", "--duration", "1", "--fill", "2"), ("--fill",)),

@@ -343,7 +343,6 @@ def whatif_cmd(
     check_outputs(csv_out, plot)  # before the study: a directory as --plot is no PNG
     mixer, _ = load_mixer(config, engine)
     check_number("--seeds", seeds, 1, MAX_SEEDS, integer=True)
-    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)  # named as the option
     # the dashboard's and the loop's check (control.limits): rpm in (0, critical], study size, duration
     rpms, duration = Limits(critical_rpm=mixer.drum.critical_rpm).check_whatif(_parse_list(rpm, "--rpm"), duration,
                                                                               seeds)
