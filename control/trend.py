@@ -22,8 +22,7 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       Mahalanobis distance ``d2 = y^2 / S`` (``d2 > gate_d2``: rejected, predict only), so
       a single glitch never moves the level (a soft Huber/Student-t weight still would,
       by a bounded amount, on every glitch). Re-initialisation is decided on the *share* of
-      rejected samples among the valid ones of the last ``reinit_window_s`` (never fewer
-      than the last ``reinit_min`` valid samples: a 10 fps camera has 6 in 0.6 s): at least
+      rejected samples among the valid ones of the last ``reinit_window_s``: at least
       ``reinit_share`` of at least ``reinit_min`` samples rejected means the process
       moved; the level restarts at the *median* of the rejected samples of the window
       (robust to the glitches in between) with rate 0. A burst shorter than
@@ -32,9 +31,8 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       ``reinit_share * reinit_window_s``.
     - **Honest band.** The measurement noise is not a constant (camera MI of a mixed bed
       varies by ~0.01, of a segregated bed by less, a synthetic model by 0.04): it is
-      estimated on line from pairs of accepted samples ``noise_lag_s`` apart (half the mean
-      squared difference: the level cancels; a lag, because the bed's own MI fluctuation is
-      correlated over a few hundred ms, see ``_learn_noise``; and there is no feedback from the filter's own
+      estimated on line from consecutive accepted samples (half the mean squared
+      difference: the level cancels, and there is no feedback from the filter's own
       covariance; time constant ``noise_tau_s``, floored at ``min_meas_sd``), and after a
       re-init from the robust spread (MAD) of the samples it restarted on. ``rate_q`` and
       ``ripple_q`` are given at the reference noise ``meas_sd`` and scale with the
@@ -82,9 +80,7 @@ class TrendConfig:
     """Noise model, gating, re-initialisation and settling of :class:`MITrend`.
 
     ``meas_sd``: initial measurement noise sd (MI; estimated on line from there, never
-    below ``min_meas_sd``, time constant ``noise_tau_s`` s, from pairs of accepted samples
-    ``noise_lag_s`` s apart: longer than the correlation time of the bed's own MI
-    fluctuation); ``rate_q``: spectral density of
+    below ``min_meas_sd``, time constant ``noise_tau_s`` s); ``rate_q``: spectral density of
     the rate random walk (MI^2/s^3); ``ripple_q``: ripple random walk (MI^2/s);
     ``ripple_harmonic``: ripple frequency in multiples of the rotation frequency;
     ``gate_d2``: rejection threshold on the squared Mahalanobis distance (9 = 3 sigma);
@@ -101,7 +97,6 @@ class TrendConfig:
     meas_sd: float = 0.05
     min_meas_sd: float = 0.002
     noise_tau_s: float = 20.0
-    noise_lag_s: float = 1.0
     rate_q: float = 4.7e-4
     ripple_q: float = 1e-5
     ripple_harmonic: float = 1.0
@@ -122,8 +117,6 @@ class TrendConfig:
                 and self.gate_d2 > 0 and self.noise_tau_s > 0 and self.max_rate_per_s > 0):
             raise ControlError("trend noise levels must be positive (meas_sd, min_meas_sd, rate_q, gate_d2, "
                                "noise_tau_s, max_rate_per_s)")
-        if not (math.isfinite(self.noise_lag_s) and 0 <= self.noise_lag_s <= 10):
-            raise ControlError(f"trend noise_lag_s must be in [0, 10] s, got {self.noise_lag_s}")
         if not (self.reinit_window_s > 0 and 0 < self.unsettle_share <= self.reinit_share <= 1):
             raise ControlError("trend re-init needs reinit_window_s > 0 and 0 < unsettle_share <= reinit_share <= 1")
         if self.reinit_min < 1 or self.settle_frames < 0 or not self.settle_band > 0:
@@ -262,8 +255,7 @@ class MITrend:
         self.kf.R = np.array([[self._r]])
         self._window: deque[tuple[float, float, bool]] = deque()  # (t_s, mi, rejected) of valid samples
         self._n_since_init = 0
-        self._accepted: deque[tuple[float, float]] = deque()  # (t_s, mi) of the last noise_lag_s, for the noise
-        self._n_pairs = 0  # noise pairs since the last (re)initialisation
+        self._last_accepted: tuple[float, float] | None = None  # (t_s, mi) for the noise estimate
         self._settled = False
 
     def reset(self) -> None:
@@ -274,8 +266,7 @@ class MITrend:
         self._r = self.config.meas_sd**2
         self._window.clear()
         self._n_since_init = 0
-        self._accepted.clear()
-        self._n_pairs = 0
+        self._last_accepted = None
         self._settled = False
 
     def _set_r(self, r: float) -> None:
@@ -293,10 +284,7 @@ class MITrend:
         self.rejections = 0
         self._window.clear()
         self._n_since_init = 1
-        self._accepted.clear()
-        self._n_pairs = 0
-        if self._t is not None:
-            self._accepted.append((self._t, z))
+        self._last_accepted = (self._t, z) if self._t is not None else None
         self.n_reinit += 1
 
     def _project(self) -> None:
@@ -328,46 +316,21 @@ class MITrend:
         )
 
     def _learn_noise(self, t_s: float, z: float) -> None:
-        """Measurement variance from pairs of accepted samples ``noise_lag_s`` apart:
-        ``E[(z_t - z_{t-lag})^2] / 2`` (the level cancels; no feedback from the filter's own P),
-        an exponential mean with time constant ``noise_tau_s``, a running mean of the pairs
-        since the last (re)initialisation at first (the configured value counting once).
-
-        Why a lag and not consecutive samples: a drum's MI is not white noise about its
-        level. The bed's configuration changes continuously, so the MI of frames a few
-        hundred ms apart is strongly correlated (the demo's plant at 10 fps: lag-1
-        autocorrelation 0.85-0.92, about zero after 1 s). Consecutive differences then see
-        a third of the real spread (0.02 against 0.05-0.07), the filter trusts each frame
-        far too much, follows the wander with its rate state and gates the rest out.
-        Pairs a second apart see the whole spread; on white noise they estimate the same
-        variance as consecutive ones. The partner is the newest accepted sample at least
-        the lag old, at most ``lag + 1`` s old (across a longer gap no pair is taken);
-        ``noise_lag_s = 0`` pairs consecutive samples."""
+        """Measurement variance from consecutive accepted samples: ``E[(z_i - z_{i-1})^2] / 2``
+        (the level and the slow ripple cancel; no feedback from the filter's own P), an
+        exponential mean with time constant ``noise_tau_s``, a running mean at first."""
+        last = self._last_accepted
+        self._last_accepted = (t_s, z)
+        if last is None or not 0.0 < t_s - last[0] <= 1.0:
+            return
         c = self.config
-        acc = self._accepted
-        acc.append((t_s, z))
-        while len(acc) > 2 and t_s - acc[1][0] >= c.noise_lag_s:
-            acc.popleft()
-        if len(acc) < 2:
-            return
-        t0, z0 = acc[0]
-        lag = t_s - t0
-        if lag > c.noise_lag_s + 1.0:  # a gap: this sample starts the next pair
-            while len(acc) > 1:
-                acc.popleft()
-            return
-        if not (lag >= c.noise_lag_s and lag > 0):
-            return
-        self._n_pairs += 1
-        a = max(min(1.0, (t_s - acc[-2][0]) / c.noise_tau_s), 1.0 / (self._n_pairs + 1))
-        self._set_r((1.0 - a) * self._r + a * 0.5 * (z - z0) ** 2)
+        a = max(min(1.0, (t_s - last[0]) / c.noise_tau_s), 1.0 / (self._n_since_init + 1))
+        self._set_r((1.0 - a) * self._r + a * 0.5 * (z - last[1]) ** 2)
 
     def _window_at(self, t_s: float) -> tuple[int, list[float]]:
         """Valid samples in the re-init window ending at ``t_s`` and the rejected values."""
-        w, c = self._window, self.config
-        # the window: the last reinit_window_s, but never fewer than reinit_min samples (a slow
-        # camera: 10 fps has 6 samples in 0.6 s and could never re-initialise), within max_dt_s
-        while w and w[0][0] < t_s - c.reinit_window_s and (len(w) > c.reinit_min or w[0][0] < t_s - c.max_dt_s):
+        w = self._window
+        while w and w[0][0] < t_s - self.config.reinit_window_s:
             w.popleft()
         return len(w), [z for _, z, rej in w if rej]
 

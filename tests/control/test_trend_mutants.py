@@ -6,7 +6,7 @@
 by ``omega dt`` (``omega = 2 pi rpm / 60 * harmonic``, rpm < 0 or NaN: no rotation), the white-noise
 densities scaled by ``r / meas_sd^2``, ``MI = level + ripple_c`` while the drum turns, the gate on
 ``y^2 / S``, the windowed share of rejections and the median/MAD re-initialisation, the noise learnt
-from pairs of accepted samples ``noise_lag_s`` apart, the projection into ``[0, 1]`` and ``+-max_rate_per_s``, the band
+from consecutive accepted samples, the projection into ``[0, 1]`` and ``+-max_rate_per_s``, the band
 widened by the rejections' median and the settle rule with its hysteresis. Every field of every
 ``TrendEstimate`` must agree with it, step by step, on sequences made to pass every branch.
 """
@@ -34,8 +34,7 @@ class Reference:
         self.r = c.meas_sd**2
         self.window: list[tuple[float, float, bool]] = []
         self.n = 0
-        self.pairs = 0
-        self.accepted: list[tuple[float, float]] = []
+        self.last: tuple[float, float] | None = None
         self.settled = False
         self.x = np.zeros(4)
         self.P = np.zeros((4, 4))
@@ -50,8 +49,8 @@ class Reference:
         k = self.r / c.meas_sd**2
         self.x = np.array([float(np.clip(z, 0.0, 1.0)), 0.0, 0.0, 0.0])
         self.P = np.diag([self.r, k * c.init_rate_sd**2, k * c.init_ripple_sd**2, k * c.init_ripple_sd**2])
-        self.on, self.rejections, self.window, self.n, self.pairs = True, 0, [], 1, 0
-        self.accepted = [] if self.t is None else [(self.t, z)]
+        self.on, self.rejections, self.window, self.n = True, 0, [], 1
+        self.last = None if self.t is None else (self.t, z)
         self.n_reinit += 1
 
     def project(self) -> None:
@@ -79,22 +78,15 @@ class Reference:
         self.project()
 
     def learn(self, t: float, z: float) -> None:
-        """The partner: the newest accepted sample at least ``noise_lag_s`` older, at most 1 s more."""
-        c = self.c
-        before, self.accepted = self.accepted, [*self.accepted, (t, z)]
-        old = [p for p in before if t - p[0] >= c.noise_lag_s and t - p[0] > 0]
-        if not old or t - old[-1][0] > c.noise_lag_s + 1.0:
+        last, self.last = self.last, (t, z)
+        if last is None or not 0.0 < t - last[0] <= 1.0:
             return
-        self.pairs += 1
-        a = max(min(1.0, (t - before[-1][0]) / c.noise_tau_s), 1.0 / (self.pairs + 1))
-        self.set_r((1.0 - a) * self.r + a * 0.5 * (z - old[-1][1]) ** 2)
+        a = max(min(1.0, (t - last[0]) / self.c.noise_tau_s), 1.0 / (self.n + 1))
+        self.set_r((1.0 - a) * self.r + a * 0.5 * (z - last[1]) ** 2)
 
     def in_window(self, t: float) -> tuple[int, list[float]]:
-        """The last ``reinit_window_s``, and never fewer than the last ``reinit_min`` samples (within max_dt_s)."""
-        c, w = self.c, self.window
-        self.window = [s for k, s in enumerate(w) if s[0] >= t - c.reinit_window_s
-                       or (k >= len(w) - c.reinit_min and s[0] >= t - c.max_dt_s)]
-        return len(self.window), [s[1] for s in self.window if s[2]]
+        self.window = [w for w in self.window if w[0] >= t - self.c.reinit_window_s]
+        return len(self.window), [w[1] for w in self.window if w[2]]
 
     def update(self, t: float, mi: float, rpm: float) -> TrendEstimate:
         c = self.c
