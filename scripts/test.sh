@@ -9,5 +9,5 @@ echo "== ruff check" >&2
 echo "== mypy" >&2
 .venv/bin/mypy
 echo "== pytest" >&2
-# two workers on the two cores; the whole-loop tests are two xdist groups ("live", "live-b"), one per worker
+# two workers on the two cores; the whole-loop tests share one xdist group ("live"): one loop at a time
 exec .venv/bin/python -m pytest -n 2 --dist loadgroup "$@"

@@ -34,8 +34,8 @@ from twin.runlog import read_events, read_frames, read_metadata
 from vision.synthetic import drum_frame
 
 # The whole-loop runs are heavy (a demo with its plant twin, vision and twin workers): under
-# pytest-xdist they share one worker, one after another, while the other worker runs the other
-# group of loops ("live-b": see test_live_modbus.py) and the rest: never more than two loops at once.
+# pytest-xdist they share one worker, one after another, while the other worker runs the rest
+# (two groups of loops at once on the two cores made the loops' timing flaky in CI: one loop at a time).
 # (the option checks run anywhere: only the tests marked @LIVE share the worker)
 LIVE = pytest.mark.xdist_group("live")
 

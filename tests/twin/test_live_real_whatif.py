@@ -17,7 +17,7 @@ from twin.config import RunConfig
 from twin.loop import Seams
 from twin.runlog import read_events
 
-pytestmark = pytest.mark.xdist_group("live-b")  # (live-b: see test_live_modbus.py)
+pytestmark = pytest.mark.xdist_group("live")  # (see test_live.py)
 
 REAL_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
