@@ -637,10 +637,11 @@ class Supervisor:
         return self._emit(now_s, action, kind, reason, rpm=nxt, target_rpm=target, **kw)
 
     def _manual(self, now_s: float) -> Decision | None:
-        """Follow the operator's rpm; a new one re-targets a ramp in progress at once."""
+        """Follow the operator's rpm; a new one re-targets a ramp in progress at once. No
+        operator rpm yet: only the ramp of a board found above the limits (brought down)."""
         m = self.manual_rpm
         if m is None:
-            return None
+            return self._ramp_step(now_s, "ramp")
         if self.target_rpm is None or abs(m - self.target_rpm) > 1e-6:
             return self._start_move(now_s, m, "manual", f"operator rpm {m:g}")
         return self._ramp_step(now_s, "ramp")

@@ -341,29 +341,34 @@ def test_a_refused_command_is_a_fault_of_its_own(action):
 
 @pytest.mark.parametrize("board_rpm", [60.0, 0.5])
 def test_a_ramp_from_a_board_outside_the_limits_commands_only_rpm_inside_them(board_rpm):
-    """The board runs outside [min_rpm, max_rpm] when the run starts (front panel): a ramp
-    that the operator then asks for starts inside the limits at once (a step towards
-    them), never at an intermediate rpm outside them."""
+    """The board runs outside [min_rpm, max_rpm] when the run starts (front panel): one above
+    them is brought down to the upper limit at once, one below is held until the operator
+    asks for an rpm; the ramp then starts inside the limits (a step towards them), never at
+    an intermediate rpm outside them."""
     sup = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
     lo, hi = sup.config.rpm_limits
-    run(sup, 0, 1, level=0.9, setpoint_rpm=board_rpm, actual_rpm=board_rpm, mill_running=True, mill_epoch=1)
-    assert sup.commanded_rpm == board_rpm  # taken over from the board: nothing sent yet
+    ds = run(sup, 0, 1, level=0.9, setpoint_rpm=board_rpm, actual_rpm=board_rpm, mill_running=True, mill_epoch=1)
+    assert [d.rpm for d in ds if d.rpm is not None] == ([hi] if board_rpm > hi else [])
     sup.set_manual_rpm(20.0)
-    ds = run(sup, 1, 10, level=0.9, setpoint_rpm=board_rpm, actual_rpm=board_rpm, mill_running=True, mill_epoch=1)
+    ds += run(sup, 1, 10, level=0.9, setpoint_rpm=board_rpm, actual_rpm=board_rpm, mill_running=True, mill_epoch=1)
     rpms = [d.rpm for d in ds if d.rpm is not None]
     assert rpms and all(lo <= r <= hi for r in rpms), rpms
     assert rpms[0] == (hi if board_rpm > hi else lo)
     assert all(abs(b - a) <= 1.0 + 1e-9 for a, b in itertools.pairwise(rpms))  # then rate-limited
 
 
-def test_manual_does_not_adopt_a_board_rpm_outside_the_limits_and_sends_nothing():
+def test_manual_does_not_adopt_a_board_rpm_outside_the_limits():
     """MANUAL takes a board found inside the limits as the operator's rpm; one outside them
-    is held as it is (nothing sent, even after the board is read again) until the operator
-    gives an rpm."""
+    is not the operator's: above them it is brought down to the upper limit (again after the
+    board is read again), below them it is held as it is until the operator gives an rpm."""
     sup = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
     ds = run(sup, 0, 3, level=0.9, setpoint_rpm=60.0, actual_rpm=60.0, mill_running=True, mill_epoch=1)
     ds += run(sup, 3, 8, level=0.9, setpoint_rpm=55.0, actual_rpm=55.0, mill_running=True, mill_epoch=2)
-    assert sup.manual_rpm is None and [d.rpm for d in ds if d.rpm is not None] == []
+    hi = sup.config.rpm_limits[1]
+    assert sup.manual_rpm is None and [(d.kind, d.rpm) for d in ds if d.rpm is not None] == [("ramp", hi)] * 2
+    below = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
+    ds = run(below, 0, 5, level=0.9, setpoint_rpm=0.5, actual_rpm=0.5, mill_running=True, mill_epoch=1)
+    assert below.manual_rpm is None and [d.rpm for d in ds if d.rpm is not None] == []
     inside = Supervisor(cfg(), mode=Mode.MANUAL)
     run(inside, 0, 1, level=0.9, setpoint_rpm=12.0, actual_rpm=12.0, mill_running=True, mill_epoch=1)
     assert inside.manual_rpm == 12.0

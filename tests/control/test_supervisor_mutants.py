@@ -322,16 +322,18 @@ def test_a_ramp_down_keeps_its_sign():
     assert rpms == [17.0, 14.0, 11.0, 10.0]
 
 
-def test_manual_without_an_operator_rpm_does_nothing_and_a_repeat_of_it_sends_nothing_new():
-    sup = Supervisor(cfg(), Mode.MANUAL)
+def test_manual_without_an_operator_rpm_only_brings_a_board_above_the_limits_down():
+    sup = Supervisor(cfg(max_rate_rpm_per_s=0.0), Mode.MANUAL)
     board_above = inp(rpm=60.0)
-    d, _ = sup.step(0.0, board_above)  # a board above the limits: no operator rpm taken, nothing sent
-    assert d is None and sup.manual_rpm is None and sup.target_rpm == 45.0
-    assert sup.step(1.0, board_above) == (None, None)
+    d, _ = sup.step(0.0, board_above)  # a board above the limits: no operator rpm taken, brought down to 45
+    assert sup.manual_rpm is None and sup.target_rpm == 45.0
+    assert d is not None and (d.kind, d.action, d.rpm) == ("ramp", Action.SET_RPM, 45.0)
+    assert sup.step(1.0, inp(rpm=45.0)) == (None, None)  # inside now, and still no operator rpm: nothing
     sup.set_manual_rpm(20.0)
-    d, _ = sup.step(2.0, board_above)
+    d, _ = sup.step(2.0, inp(rpm=45.0))
     assert d is not None and (d.kind, d.rpm) == ("manual", 20.0)
-    assert sup.step(3.0, board_above) == (None, None)
+    assert sup.step(3.0, inp(rpm=20.0)) == (None, None)
+
 
 
 # -- board resync -------------------------------------------------------------------------------------
