@@ -687,7 +687,7 @@ class Supervisor:
             if now_s - self._due_since < c.prediction_wait_s:
                 return None
         self._due_since = None
-        why = self.detector.why or ("segregation" if self.detector.segregated else f"below target MI {c.target_mi}")
+        why = self.detector.why if self.detector.segregated else f"below target MI {c.target_mi}"
         if preds is not None and c.objective != "plateau" and preds.rows:
             stale = stale_start(preds.rows.values(), inputs.trend.level, c.target_mi, self.detector.segregated)
             if stale and (self._restudy_t is None or preds.t_s < self._restudy_t):  # ask once more, then use it
