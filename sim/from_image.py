@@ -4,8 +4,14 @@ Each particle class of the mixer (or 2D disk class of the recipe) is matched to 
 colour class by name (else by order); a shaped particle is placed as its circumscribed
 disc. The disks are placed, largest first, at pixels of that class inside the drum ROI
 (mapped to the drum frame: metres, origin at the axis, y up), by random sequential
-addition at 80 % size with no overlaps; a disk that finds no free pixel of its class
-falls back to any particle pixel, then to anywhere in the drum. The disks are then
+addition at 80 % size with no overlaps. Of ``_CANDIDATES`` random pixels of its class, a
+disk takes the free one deepest inside the class's region (its distance to the region's
+edge, capped at the disk's radius): a disk centred on the edge of a blob of its colour
+half covers the other class, and the seeded bed came out more mixed than the camera's
+(the paper bed's camera MI against the seeded twin's, 3 seeds x 10/30/60 s at 5 rpm:
+bias +0.07, rms 0.08 with the first free pixel; +0.01, 0.03 this way). A disk that finds
+no free pixel of its class is placed near its class (a wider and wider jitter about its
+pixels), then anywhere in the drum. The disks are then
 inflated and settled exactly as a fresh ``DrumSim`` is, so the twin starts from the
 bed the camera shows (a what-if from "now" starts from the live state). A mixer that needs
 the pymunk engine is seeded through ``PymunkDrumSim.from_placement`` (the mixer, centres,
@@ -18,6 +24,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import cv2
 import numpy as np
 
 from sim.drum import _SHRINK, DrumSim, SimParams, SimState, _check_params, check_rpm
@@ -26,7 +33,9 @@ from sim.errors import SimError
 from sim.mixer import Mixer, resolve
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
-_TRIES_PER_DISK = 400
+_TRIES_PER_DISK = 400  # random candidates per try of the fallbacks
+_CANDIDATES = 2000  # random class pixels a disk chooses the deepest free one of
+_CHUNK = 200  # candidates checked for overlaps at once, deepest first
 
 
 def pixels_to_drum_m(xs_px: np.ndarray, ys_px: np.ndarray, roi, drum: DrumSpec) -> np.ndarray:
@@ -51,13 +60,17 @@ def place_from_labels(
         raise SimError(f"label map must be 2D, got shape {labels.shape}")
     names = list(label_names)
     radius_m = drum.radius_m
+    m_per_px = radius_m / float(roi.r_px)
     any_ys, any_xs = np.nonzero(labels)
     any_pts = pixels_to_drum_m(any_xs.astype(float), any_ys.astype(float), roi, drum)
     per_class: list[np.ndarray] = []
+    depth_m: list[np.ndarray] = []  # each class pixel's distance to its region's edge (m)
     for k, c in enumerate(classes):
         j = names.index(c.name) + 1 if c.name in names else k + 1
-        ys, xs = np.nonzero(labels == j)
+        mask = (labels == j).astype(np.uint8)
+        ys, xs = np.nonzero(mask)
         per_class.append(pixels_to_drum_m(xs.astype(float), ys.astype(float), roi, drum))
+        depth_m.append(cv2.distanceTransform(mask, cv2.DIST_L2, 3)[ys, xs] * m_per_px)
     radii = np.concatenate([np.full(c.count, c.radius_m) for c in classes])
     cls = np.concatenate([np.full(c.count, k, dtype=np.int64) for k, c in enumerate(classes)])
     order = np.argsort(-radii, kind="stable")
@@ -75,19 +88,34 @@ def place_from_labels(
             ok &= ~np.any(d2 < (placed_r[None, :] + r + gap) ** 2, axis=1)
         return ok
 
+    def deepest_free(k: int, i: int, r: float, lim: float) -> np.ndarray | None:
+        """The free candidate deepest inside class ``k``'s region (depth capped at the radius)."""
+        pool = per_class[k]
+        if len(pool) == 0:
+            return None
+        idx = rng.integers(0, len(pool), size=_CANDIDATES)
+        cand = pool[idx] + rng.normal(0.0, 0.1 * radii[i], size=(_CANDIDATES, 2))  # sub-pixel jitter
+        by_depth = np.argsort(-np.minimum(depth_m[k][idx], radii[i]), kind="stable")
+        for s in range(0, _CANDIDATES, _CHUNK):
+            chunk = cand[by_depth[s:s + _CHUNK]]
+            ok = free(chunk, r, lim)
+            if ok.any():
+                return chunk[int(np.argmax(ok))]
+        return None
+
     for i in order:
         r = small_r[i]
         lim = radius_m - radii[i] - gap
-        found = None
-        for pool in (per_class[cls[i]], any_pts):
-            if len(pool) == 0:
-                continue
+        found = deepest_free(int(cls[i]), int(i), r, lim)
+        pool = per_class[cls[i]] if len(per_class[cls[i]]) else any_pts
+        for spread in (0.5, 1.0, 2.0, 4.0, 8.0):  # near its class: a wider and wider jitter
+            if found is not None or len(pool) == 0:
+                break
             cand = pool[rng.integers(0, len(pool), size=_TRIES_PER_DISK)]
-            cand = cand + rng.normal(0.0, 0.25 * radii[i], size=cand.shape)  # sub-pixel jitter
+            cand = cand + rng.normal(0.0, spread * radii[i], size=cand.shape)
             ok = free(cand, r, lim)
             if ok.any():
                 found = cand[int(np.argmax(ok))]
-                break
         if found is None:  # anywhere in the drum (random sequential addition)
             for _ in range(50):
                 cand = rng.uniform(-lim, lim, size=(_TRIES_PER_DISK, 2))
