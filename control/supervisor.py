@@ -237,13 +237,17 @@ class SupervisorInputs:
 class PredictionRequest:
     """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``
     (``target_mi``: also the time and energy to reach it, for the "time"/"energy" objectives;
-    ``ramp_rpm_s``: the rate the rpm will be ramped at, so the twin ramps as the mill will)."""
+    ``ramp_rpm_s``: the rate the rpm will be ramped at, so the twin ramps as the mill will;
+    ``from_bed``: start from the bed the camera shows now, not from the running twin's state:
+    a time to the target counts from the start state, and a twin that drifted from the plant
+    predicts the time from another bed)."""
 
     t_s: float
     rpms: tuple[float, ...]
     horizon_s: float
     target_mi: float | None = None
     ramp_rpm_s: float | None = None
+    from_bed: bool = False
 
 
 @dataclass(frozen=True)
@@ -708,7 +712,8 @@ class Supervisor:
     def _prediction_request(self, now_s: float, current: float) -> PredictionRequest:
         c = self.config
         return PredictionRequest(now_s, c.candidates(current), c.horizon_s, c.target_mi,
-                                 c.max_rate_rpm_per_s if c.max_rate_rpm_per_s > 0 else None)
+                                 c.max_rate_rpm_per_s if c.max_rate_rpm_per_s > 0 else None,
+                                 from_bed=c.objective != "plateau")
 
     def _choose_objective(self, now_s: float, current: float, preds: PredictionResult, why: str) -> Decision:
         """"time"/"energy" (``control.objective.choose``) on the per-rpm rows."""

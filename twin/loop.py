@@ -229,6 +229,7 @@ class LiveLoop:
         self.whatif = WhatIfWorker(
             self.view, self.events, self.state, scheduler=config.scheduler, workers=config.whatif_workers,
             study=seams.whatif_study, target_mi=endpoint_config(config, seams).target_mi,
+            reseed_twin=lambda: self.twin.request("reseed"),
         )
         self.supervisor = SupervisorWorker(
             Supervisor(sup_config, mode=Mode(config.mode)), self.view, self.events, self.mill.submit,

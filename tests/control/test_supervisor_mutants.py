@@ -187,7 +187,7 @@ def test_a_plateau_choice_under_another_objective_says_it_had_no_rows():
     sup = Supervisor(c, Mode.AUTO)
     i = inp()
     _, req = sup.step(0.0, i)
-    assert req == PredictionRequest(0.0, c.candidates(10.0), 60.0, 0.9, RAMP)
+    assert req == PredictionRequest(0.0, c.candidates(10.0), 60.0, 0.9, RAMP, from_bed=True)
     d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, {10.0: 0.3, 30.0: 0.6}))
     assert d is not None and d.reason == (
         f"segregation (objective time: no time/energy rows -> plateau; {WHY}); twin predicts MI 0.600 at 30 rpm "
@@ -595,7 +595,7 @@ def objective_decision(objective: str, rows: dict, **kw) -> tuple[Supervisor, De
     sup = Supervisor(c, Mode.AUTO)
     i = inp(rpm=15.0)
     _, req = sup.step(0.0, i)
-    assert req == PredictionRequest(0.0, c.candidates(15.0), 60.0, 0.9, RAMP)
+    assert req == PredictionRequest(0.0, c.candidates(15.0), 60.0, 0.9, RAMP, from_bed=objective != "plateau")
     preds = {r: v.plateau_mi for r, v in rows.items()}
     d, _ = sup.step(0.0, i, PredictionResult(0.0, 60.0, preds, rows=rows))
     return sup, d, i

@@ -490,3 +490,36 @@ def test_the_whatif_pool_starts_under_a_long_tmpdir(tmp_path) -> None:
 
     assert float(fr) == pytest.approx(froude(5.0, PAPER_DRUM), abs=1e-6)
     assert list(long_tmp.iterdir()) == []  # nothing left behind
+
+
+def test_an_auto_study_from_the_bed_waits_for_the_twin_seeded_from_the_camera(monkeypatch) -> None:
+    """``PredictionRequest.from_bed`` (objective time/energy): the what-if worker asks the twin to
+    seed itself from the camera's bed and starts the study from that new state, not from the
+    running twin's (which may have drifted from the plant); a plain request does not re-seed,
+    and a twin that never seeds itself leaves the study to the running twin's state."""
+    import twin.live.whatif as whatif_mod
+
+    b = Boxes()
+    drifted, from_bed = object(), object()
+    b.twin.set(TwinInfo(updated_s=1.0, state=drifted, seeds=1))
+    asked: list[int] = []
+    states: list = []
+
+    def reseed() -> None:
+        asked.append(1)
+        b.twin.set(TwinInfo(updated_s=1.0, state=from_bed, seeds=2))
+
+    def study(jobs):
+        states.append({id(j.start) for j in jobs})
+        return [_Result(j.rpm) for j in jobs]
+
+    w = WhatIfWorker(b.view, Sink(), LiveState(), study=study, reseed_twin=reseed)
+    w.request(PredictionRequest(1.0, (5.0, 25.0), 40.0))
+    assert w.serve_once() and asked == [] and states[-1] == {id(drifted)}
+    w.request(PredictionRequest(2.0, (5.0, 25.0), 40.0, 0.9, from_bed=True))
+    assert w.serve_once() and asked == [1] and states[-1] == {id(from_bed)}
+    monkeypatch.setattr(whatif_mod, "RESEED_WAIT_S", 0.2)
+    mute = WhatIfWorker(b.view, Sink(), LiveState(), study=study, reseed_twin=lambda: asked.append(2))
+    w2_state = b.twin.get().state
+    mute.request(PredictionRequest(3.0, (5.0,), 40.0, 0.9, from_bed=True))
+    assert mute.serve_once() and asked == [1, 2] and states[-1] == {id(w2_state)} and mute.poll() is not None

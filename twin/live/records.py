@@ -138,13 +138,14 @@ class FrameInfo:
 @dataclass(frozen=True)
 class TwinInfo:
     """The twin worker's newest state: run time it last stepped to (None: no twin yet),
-    its measured MI and slope, and a ``SimState`` no older than a few seconds for
-    what-if studies."""
+    its measured MI and slope, a ``SimState`` no older than a few seconds for
+    what-if studies, and ``seeds``: how many times it was seeded (from the camera's bed)."""
 
     updated_s: float | None = None
     mi: float = math.nan
     slope_deg: float = math.nan
     state: Any = None
+    seeds: int = 0
 
 
 # -- commands ---------------------------------------------------------------------------------

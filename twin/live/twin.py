@@ -98,6 +98,7 @@ class TwinWorker:
         self._requests: queue.SimpleQueue[str] = queue.SimpleQueue()
         self._slopes: deque[tuple[float, float]] = deque(maxlen=4000)
         self._state: Any = None
+        self._seeds = 0  # times seeded (TwinInfo.seeds: a what-if "from the bed" waits for the next)
         self._mi = math.nan
         self._slope = math.nan
         self._pool: Executor | None = None
@@ -122,7 +123,7 @@ class TwinWorker:
         return self.t0_run + (self.sim.t_s if self.sim is not None else 0.0)
 
     def _publish(self, updated_s: float | None) -> None:
-        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state))
+        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds))
 
     def _drain_slopes(self) -> None:
         self._slopes.extend(drain(self.slopes))
@@ -313,6 +314,7 @@ class TwinWorker:
         self.sim = sim
         self.t0_run = t - sim.t_s
         self._state = sim.snapshot()
+        self._seeds += 1
         self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))
         self._render_and_measure()
         self._publish(t)

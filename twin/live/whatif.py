@@ -42,6 +42,7 @@ POOL_TMP_MAX = 60
 """Longest temp directory (characters) the process pools' fork server may put its socket under:
 an AF_UNIX path is at most 107 bytes, and multiprocessing adds ``/pymp-XXXXXXXX/listener-XXXXXXXX``."""
 
+RESEED_WAIT_S = 10.0  # wall seconds an AUTO study "from the bed" waits for the twin to seed itself
 SHORT_TMP_BASES = ("/tmp", "/var/tmp", "/dev/shm")
 
 
@@ -73,7 +74,9 @@ def short_pool_tempdir(limit: int = POOL_TMP_MAX) -> str:
 
 class WhatIfWorker:
     """See module doc. ``study`` replaces the process pool (tests). ``target_mi``: the MI every study reports
-    the time and energy to (the config's endpoint target; None: none)."""
+    the time and energy to (the config's endpoint target; None: none). ``reseed_twin``: asks the twin
+    worker to seed itself from the camera's bed; an AUTO request ``from_bed`` waits (at most
+    ``RESEED_WAIT_S`` s) for the twin's next seed and starts from it (None: from the running twin)."""
 
     def __init__(
         self,
@@ -85,8 +88,10 @@ class WhatIfWorker:
         workers: int = 1,
         study: Study | None = None,
         target_mi: float | None = None,
+        reseed_twin: Callable[[], None] | None = None,
     ) -> None:
         self.view = view
+        self.reseed_twin = reseed_twin  # asks the twin to seed itself from the camera's bed (a request)
         self.target_mi = target_mi
         self.sink = sink
         self.state = state
@@ -187,6 +192,8 @@ class WhatIfWorker:
             self._cancelled = False
         try:
             if pred is not None:
+                if pred.from_bed:
+                    self._seed_from_bed()
                 try:
                     preds, rows = self._study(pred.rpms, pred.horizon_s, "AUTO", pred.target_mi, pred.ramp_rpm_s)
                 except Exception as exc:
@@ -205,6 +212,22 @@ class WhatIfWorker:
             with self._lock:
                 self._busy = False
                 self._running_reason = None
+
+    def _seed_from_bed(self) -> bool:
+        """Ask the twin to seed itself from the camera's bed and wait for its new state (wall
+        clock, at most ``RESEED_WAIT_S``); False when it did not come (the study then starts
+        from the running twin's state)."""
+        if self.reseed_twin is None:
+            return False
+        seeds = self.view.twin().seeds
+        self.reseed_twin()
+        end = time.monotonic() + RESEED_WAIT_S
+        while not self._closed and time.monotonic() < end:
+            tw = self.view.twin()
+            if tw.seeds > seeds and tw.state is not None:
+                return True
+            time.sleep(0.02)
+        return False
 
     def _report_auto(self, error: str | None) -> None:
         if self._closed:  # the run is ending: its pool was shut down under the study
