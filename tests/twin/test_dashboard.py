@@ -43,7 +43,7 @@ from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
 from twin.loop import supervisor_config
-from twin.records import FrameReading, MillState, ModeSet
+from twin.records import FrameReading, MillState, ModeSet, event_fields
 from twin.state import LiveState, Panel, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
@@ -240,7 +240,7 @@ def remote_viewer_without_token_is_read_only(page) -> None:
     events: list[str] = []
     dash = Dashboard(state, controls, host="127.0.0.1", port=0, control_token="s3cret",
                      unlock_policy=UnlockPolicy(per_client_s=0.05, max_failures=5, window_s=60.0),
-                     on_event=lambda kind, fields: events.append(kind)).start()
+                     on_event=lambda rec: events.append(rec.kind)).start()
     try:
         page.goto(dash.url)
         manual = mode_selector(page)
@@ -349,7 +349,7 @@ def local_dash() -> Iterator[tuple[Dashboard, RecordingControls, list]]:
     controls = RecordingControls()
     events: list = []
     dash = Dashboard(state, controls, port=0, update_hz=4,
-                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+                     on_event=lambda rec: events.append((rec.kind, event_fields(rec)))).start()
     try:
         yield dash, controls, events
     finally:
@@ -493,7 +493,7 @@ def test_scene_draws_shaped_particles_as_turned_outlines_and_the_baffles() -> No
 def fresh_dash() -> Iterator[tuple[Dashboard, list]]:
     events: list = []
     dash = Dashboard(LiveState(), RecordingControls(), port=0, update_hz=4,
-                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+                     on_event=lambda rec: events.append((rec.kind, event_fields(rec)))).start()
     try:
         yield dash, events
     finally:
@@ -582,9 +582,15 @@ def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
 
     now = [100.0]
     events: list[tuple[str, dict]] = []
-    gate = Gatekeeper("s3cret", on_event=lambda k, f: events.append((k, f)), estop_needs_token=True,
+    records: list = []
+
+    def on_event(rec) -> None:
+        records.append(rec)
+        events.append((rec.kind, event_fields(rec)))
+
+    gate = Gatekeeper("s3cret", on_event=on_event, estop_needs_token=True,
                       unlock_policy=UnlockPolicy(per_client_s=0.0, max_failures=5, window_s=60.0),
-                      monotonic=lambda: now[0])
+                      monotonic=lambda: now[0], now_s=lambda: now[0] - 100.0)
     assert gate.token_required and not gate.estop_allowed(False) and gate.estop_allowed(True)
     assert gate.try_unlock(1, "wrong", "10.0.0.1") == (False, "**wrong token: read-only**")
     assert gate.try_unlock(1, "s3cret", "10.0.0.1")[0] and gate.failed_unlocks == 1
@@ -595,6 +601,7 @@ def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
     now[0] += EVENT_THROTTLE_S
     gate.flush_throttled()
     assert events[-1] == ("dashboard_refused", {"suppressed": 2, "summary": True})
+    assert [r.t_s for r in records] == [0.0, 0.0, 0.0, EVENT_THROTTLE_S]  # stamped with the run clock
     assert not Gatekeeper(None).token_required and Gatekeeper(None).estop_allowed(False)
 
 

@@ -22,13 +22,19 @@ from twin.records import (
     KINDS,
     SERIES,
     ActiveFaults,
+    FaultCleared,
+    FaultRaised,
     FrameReading,
+    Mixed,
+    OperatorAction,
     TrendUnsettled,
+    Unmixed,
     UntypedEvent,
+    event_fields,
     record_of,
     records_table,
 )
-from twin.runlog import RunLog, read_events, read_frames
+from twin.runlog import RunLog, read_events, read_frames, read_records, to_jsonable
 from twin.state import LiveState
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,43 +58,57 @@ def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
         assert all(f.metadata.get("unit") is not None for f in fields(cls)), kind
 
 
-def _literal_kinds() -> list[tuple[str, str, int]]:
-    """(kind, file, line) of every event kind a twin/ module names as a string literal: the
-    first argument of ``.event(...)`` / ``._event(...)`` / ``._event_throttled(...)`` /
-    ``.on_error(...)``."""
-    out = []
-    for path, tree in _modules():
-        for node in ast.walk(tree):
-            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
-                continue
-            if node.func.attr not in ("event", "_event", "_event_throttled", "on_error") or not node.args:
-                continue
-            arg = node.args[0]
-            values = [arg] if not isinstance(arg, ast.IfExp) else [arg.body, arg.orelse]
-            for v in values:
-                if isinstance(v, ast.Constant) and isinstance(v.value, str):
-                    out.append((v.value, str(path.relative_to(ROOT)), node.lineno))
-    return out
+SINK_METHODS = {"publish", "metadata"}
+"""What ``twin.live.records.EventSink`` offers: typed records and the run's metadata."""
 
 
-def test_every_event_kind_named_in_twin_is_a_registered_record_kind() -> None:
-    """An event kind written as a string in a worker, the loop or the dashboard must be a
-    record class in twin/records.py (the one place: its fields and units). A new kind added
-    elsewhere only (e.g. ``sink.event("mixed", ...)``) fails here until its class exists."""
-    named = _literal_kinds()
-    assert len(named) >= 10  # the scan sees the call sites (a broken scan would pass vacuously; the loop and
-    missing = [(k, f, n) for k, f, n in named if k not in KINDS]  # the workers publish typed records now)
-    assert missing == []
+def _calls(tree: ast.Module) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+
+
+def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> None:
+    """Issue 25: every worker, the loop and the dashboard publish a record they construct
+    (``MillRefused(t_s=..., reason=...)``), so mypy catches a misspelt kind or field. In twin/
+    no call passes a string kind (``.event("mill_refused", ...)``, ``record_of("...")`` outside
+    the JSONL reader), no ``.fault``/``.clear_fault`` by key, and no record is built from a
+    spread dict (``**st.as_dict()``). The old code had each of these (mill worker, relearn,
+    dashboard, ``RunEvents.fault``); a new one fails here."""
     import inspect
+
+    from twin.live.records import EventSink
+
+    record_classes = {cls.__name__ for cls in KINDS.values()} | {"MillRefusedRecord", "MillMismatchRecord", "change"}
+    bad, built = [], 0
+    for path, tree in _modules():
+        where = str(path.relative_to(ROOT))
+        for node in _calls(tree):
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            first = node.args[0] if node.args else None
+            if name in ("event", "_event", "event_throttled", "on_error") and isinstance(first, ast.Constant) \
+                    and isinstance(first.value, str):
+                bad.append((where, node.lineno, f"{name}({first.value!r})"))
+            if name in ("fault", "clear_fault") and isinstance(node.func, ast.Attribute):
+                bad.append((where, node.lineno, name))
+            if name == "record_of" and where not in ("twin/records.py", "twin/runlog.py"):
+                bad.append((where, node.lineno, "record_of"))
+            if name in record_classes:
+                built += 1
+                if any(k.arg is None for k in node.keywords):
+                    bad.append((where, node.lineno, f"{name}(**...)"))
+    assert bad == []
+    assert built >= 60  # the scan sees the producers (a broken scan would pass vacuously)
+    methods = {n for n, _ in inspect.getmembers(EventSink, inspect.isfunction) if not n.startswith("_")}
+    assert methods == SINK_METHODS  # no event(kind, **fields), fault(key, ...) by name
     import re
 
     from control.endpoint import EndpointDetector  # the kinds it hands the process worker by name
 
     changes = set(re.findall(r"\"(mixed|unmixed)\"", inspect.getsource(EndpointDetector)))
     assert changes == {"mixed", "unmixed"} and changes <= set(KINDS)
+    assert (Mixed.kind, Unmixed.kind) == ("mixed", "unmixed")  # the process worker maps the names to these
 
 
-def test_an_unregistered_kind_is_still_logged_whole_and_warned(tmp_path: Path, caplog) -> None:
+def test_an_unregistered_kind_is_read_back_whole_and_warned(tmp_path: Path, caplog) -> None:
     with caplog.at_level(logging.WARNING, logger="drumtwin.records"):
         rec = record_of("no_such_kind", 2.0, a=1, b="x")
         bad = record_of("operator", 2.0, action="stop", colour="red")  # a field the kind does not declare
@@ -96,12 +116,40 @@ def test_an_unregistered_kind_is_still_logged_whole_and_warned(tmp_path: Path, c
     assert "no_such_kind" in caplog.text and "operator" in caplog.text
     with RunLog(tmp_path / "run") as log:
         events = RunEvents(log, LiveState())
-        events.event("no_such_kind", 2.0, a=1, b="x")
-        events.event("operator", 3.0, action="stop")
+        events.publish(rec)  # written back whole
+        events.publish(OperatorAction(t_s=3.0, action="stop"))
     got = read_events(tmp_path / "run")
     assert [(e["kind"], e["t_s"]) for e in got] == [("no_such_kind", 2.0), ("operator", 3.0)]
     assert got[0]["a"] == 1 and got[0]["b"] == "x"
     assert set(got[1]) == {"t_s", "wall_s", "kind", "action"}  # unset optional fields are left out, as before
+    back = read_records(tmp_path / "run")
+    assert isinstance(back[0], UntypedEvent) and back[0].data == {"a": 1, "b": "x"}
+    assert back[1] == OperatorAction(t_s=3.0, action="stop")
+
+
+PREVIOUS = ROOT / "tests" / "data" / "runlog-previous"
+"""A run log written by the previous release's code (main of 2026-12-02 02:00 UTC, before the
+typed producers: the demo in AUTO without the dashboard; frames.csv cut to its first 120 rows)."""
+
+
+def test_a_run_log_of_the_previous_release_reads_back_as_typed_records(caplog) -> None:
+    """The JSONL keys are unchanged: every line of a log written by main's code before this
+    change is a record of its kind with the same fields (no ``UntypedEvent``), and it is the
+    same JSON when written again."""
+    with caplog.at_level(logging.WARNING, logger="drumtwin.records"):
+        recs = read_records(PREVIOUS)
+    assert caplog.text == ""
+    lines = read_events(PREVIOUS)
+    assert len(recs) == len(lines) >= 30
+    assert not any(isinstance(r, UntypedEvent) for r in recs)
+    assert {r.kind for r in recs} >= {"start", "decision", "mill_command", "mill_synced", "trend_settled", "stop"}
+    for rec, line in zip(recs, lines, strict=True):
+        payload = {k: v for k, v in line.items() if k not in ("t_s", "wall_s", "kind")}
+        written = to_jsonable(event_fields(rec))
+        assert {k: written[k] for k in payload} == payload, rec.kind  # every old key, the same value
+        assert all(written[k] is None for k in set(written) - set(payload)), rec.kind  # fields added since: null
+    rows = read_frames(PREVIOUS)
+    assert rows and list(rows[0]) == list(FRAME_COLUMNS)
 
 
 OTHER_CSVS = ("vision_cmds.py", "sim_cmds.py")
@@ -162,11 +210,11 @@ def test_a_fault_is_raised_once_and_the_dashboard_shows_the_same_set(tmp_path: P
     with RunLog(tmp_path / "run") as log:
         events = RunEvents(log, state)
         assert events.faults is state.faults and isinstance(events.faults, ActiveFaults)
-        events.fault("mill_link", "mill link lost", 1.0, url="loop://")
-        events.fault("mill_link", "mill link lost again", 1.5, url="loop://")
+        events.publish(FaultRaised(t_s=1.0, fault="mill_link", message="mill link lost", url="loop://"))
+        events.publish(FaultRaised(t_s=1.5, fault="mill_link", message="mill link lost again", url="loop://"))
         assert state.alarms == ("mill link lost",) and events.active() == {"mill_link"}
-        events.clear_fault("mill_link", "restored", 2.0)
-        events.clear_fault("mill_link", "restored", 2.5)
+        events.publish(FaultCleared(t_s=2.0, fault="mill_link", message="restored"))
+        events.publish(FaultCleared(t_s=2.5, fault="mill_link", message="restored"))
     got = [(e["kind"], e["t_s"], e.get("url")) for e in read_events(tmp_path / "run")]
     assert got == [("fault", 1.0, "loop://"), ("recovered", 2.0, None)]
     assert state.alarms == () and events.n_faults == 1

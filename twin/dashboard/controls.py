@@ -18,7 +18,7 @@ from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
 from twin.dashboard.guard import Gatekeeper, client_address
 from twin.dashboard.layout import MODE_LABELS, Layout, parse_rpm_list
-from twin.records import ModeSet
+from twin.records import ModeSet, OperatorClamped, OperatorRejected
 from twin.state import Controls, LiveState
 
 
@@ -130,7 +130,7 @@ class Viewers:
         def _(event: viser.GuiEvent) -> None:
             mode = str(cc.mode.value).lower()
             self.controls.set_mode(mode)
-            self.state.record(ModeSet(t_s=self.state.panel.t_s or 0.0, mode=mode))
+            self.state.record(ModeSet(t_s=self.gate.now_s(), mode=mode))
             self.sync_mode(mode)
 
         @cc.rpm.on_update
@@ -143,7 +143,8 @@ class Viewers:
                 return
             if check.clamped:  # the person who asked is told (the supervisor clamps the same way)
                 cc.status.content = f"**{check.message}**"
-                self.gate.event("operator_clamped", client=client.client_id, requested=check.requested, rpm=check.rpm)
+                self.gate.event(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
+                                                requested=check.requested, rpm=check.rpm))
             self.controls.set_manual_rpm(check.rpm)
 
         @estop.on_click
@@ -170,7 +171,8 @@ class Viewers:
                 rpm_list, duration = self.limits.check_whatif(rpm_list, dur.value)
             except (ValueError, ControlError) as exc:  # refused, with the limit, to the person who asked
                 cc.status.content = f"**what-if refused: {exc}**"
-                self.gate.event("operator_rejected", client=client.client_id, action="whatif", error=str(exc))
+                self.gate.event(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
+                                                 error=str(exc)))
                 return
             cc.status.content = f"what-if queued: {len(rpm_list)} rpm x {duration:g} s"
             self.controls.run_whatif(rpm_list, duration)

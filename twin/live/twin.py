@@ -30,6 +30,8 @@ from twin.records import (
     Calibrated,
     CalibrationStarted,
     CalibrationWaiting,
+    FaultCleared,
+    FaultRaised,
     TwinLag,
     TwinReading,
     TwinSeeded,
@@ -253,12 +255,12 @@ class TwinWorker:
         ))
         self.sink.metadata(calibration=cal)
         self.sink.publish(TwinStatus(t_s=t, state="running"))
-        self.sink.clear_fault("calibration", "calibrated", t)
+        self.sink.publish(FaultCleared(t_s=t, fault="calibration", message="calibrated"))
         if self.sim is not None:
             self.sim.set_friction(cal.friction, cal.rolling)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
-        self.sink.fault("calibration", f"calibration failed: {exc}", t)
+        self.sink.publish(FaultRaised(t_s=t, fault="calibration", message=f"calibration failed: {exc}"))
         self.sink.publish(TwinStatus(t_s=t, state="running (uncalibrated)"))
 
     def _get_pool(self) -> Executor:
