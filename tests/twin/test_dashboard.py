@@ -17,9 +17,9 @@ import pytest
 import viser
 import websockets
 
+from control.limits import Limits
 from control.supervisor import Supervisor
 from sim.drum import Particles
-from sim.recipe import PAPER_DRUM
 from tests.twin.dashboard_helpers import (
     IMG,
     button,
@@ -168,7 +168,9 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     state.record(ModeSet(t_s=0.0, mode="auto"))
     state.record(MillState(t_s=0.0, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
     controls = RecordingControls()
-    limits = supervisor_config().limits  # what the run's supervisor enforces
+    sup = supervisor_config(critical_rpm=70.0)  # a drum of another size: 0.6 x 70 rpm = 42 rpm, not the default 45
+    limits = sup.limits  # what the run's supervisor enforces
+    assert limits.rpm_range[1] == pytest.approx(42.0) and Limits().rpm_range[1] == 45.0  # a hard-coded 45 fails
     dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
     try:
         with Feeder(state):
@@ -182,10 +184,10 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             wait_until(lambda: plot_pixels(page)["Mixing index"] != mi_plot, 10, "the MI plot to redraw")
 
             assert not slider_enabled(page)  # AUTO: the operator rpm is inactive
-            lo, hi = limits.rpm_range  # the slider shows what is allowed: the supervisor's limits
-            assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=0.5)
-            assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo)
-            assert hi == Supervisor(supervisor_config()).config.rpm_limits[1]
+            lo, hi = Supervisor(sup).config.rpm_limits  # the slider shows what the supervisor enforces
+            assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=1e-9)
+            assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo, abs=1e-9)
+            assert Supervisor(sup).config.clamp(1000.0) == hi  # the supervisor's enforced maximum
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")
@@ -204,7 +206,7 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             input_by_label(page, "What-if rpm list").fill("5, 10000")  # refused, the limit shown
             button(page, "Run what-if").click()
             page.get_by_text("what-if refused").wait_for()
-            assert page.get_by_text(f"outside (0, {PAPER_DRUM.critical_rpm:.4g}] rpm").count() >= 1
+            assert page.get_by_text(f"outside (0, {limits.critical_rpm:.4g}] rpm").count() >= 1
             assert controls.args_of("run_whatif") == []
 
             button(page, "EMERGENCY STOP").click()

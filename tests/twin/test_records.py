@@ -299,3 +299,25 @@ def test_run_config_has_no_untyped_bag() -> None:
         from twin.loop import supervisor_config
 
         supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
+
+
+@pytest.mark.slow
+def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
+    """What the typed producers buy: a misspelt field, a wrong type or a kind that does not
+    exist is a mypy error at the call (with ``sink.event("mill_refused", reasn=...)`` it was a
+    runtime ``UntypedEvent``). The correct record passes."""
+    from mypy import api
+
+    snippet = tmp_path / "producer.py"
+    snippet.write_text(
+        "from twin.records import FaultRaised, MillRefused\n"
+        "MillRefused(t_s=0.0, command='stop', source='operator', reason='NAK')\n"
+        "MillRefused(t_s=0.0, command='stop', source='operator', reasn='NAK')\n"
+        "FaultRaised(t_s='soon', fault='mill_link', message='lost')\n"
+        "from twin.records import MillRefussed\n",
+        encoding="utf-8",
+    )
+    out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
+                              "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
+    errors = sorted({int(line.split(":")[1]) for line in out.splitlines() if ": error:" in line})
+    assert status == 1 and errors == [3, 4, 5], out
