@@ -13,7 +13,7 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -22,9 +22,9 @@ import numpy as np
 from control.protocol import MillStatus
 from control.trend import TrendEstimate
 from twin.records import Bus, DecisionMade, FaultCleared, FaultRaised, Record
-from twin.runlog import write_record
+from twin.runlog import RecordWriter, write_record
 from twin.state import LiveState
-from vision.meter import Reading
+from vision.meter import Meter, Reading
 from vision.roi import DrumROI
 
 T = TypeVar("T")
@@ -138,13 +138,13 @@ class FrameInfo:
 @dataclass(frozen=True)
 class TwinInfo:
     """The twin worker's newest state: run time it last stepped to (None: no twin yet),
-    its measured MI and slope, and a ``SimState`` no older than a few seconds for
-    what-if studies."""
+    its measured MI and slope, and the engine's snapshot (``Twin.snapshot()``: opaque, picklable;
+    a ``sim.drum.SimState`` or a pymunk state) no older than a few seconds for what-if studies."""
 
     updated_s: float | None = None
     mi: float = math.nan
     slope_deg: float = math.nan
-    state: Any = None
+    state: Any = None  # as sim.engine.Twin.snapshot() (Any there: each engine its own state class)
 
 
 # -- commands ---------------------------------------------------------------------------------
@@ -195,7 +195,7 @@ class SwapClasses:
     (1-3 s) from ``vision.suggest.relearn_classes``' config (the classes re-learned from the
     live bed after ``lighting_changed:``; names and order kept)."""
 
-    meter: Any
+    meter: Meter
     source: str = "operator"
 
 
@@ -262,11 +262,9 @@ class EventSink(Protocol):
     def metadata(self, **data: object) -> None: ...
 
 
-class RunLogLike(Protocol):
-    """The run log as the sink uses it (``twin.runlog.RunLog``)."""
+class RunLogLike(RecordWriter, Protocol):
+    """The run log as the sink uses it (``twin.runlog.RunLog``): a record writer with metadata."""
 
-    def frame(self, row: Mapping[str, Any]) -> None: ...
-    def event(self, kind: str, t_s: float, **data: Any) -> object: ...
     def set_metadata(self, **data: Any) -> None: ...
 
 
