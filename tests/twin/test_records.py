@@ -22,6 +22,7 @@ from twin.records import (
     KINDS,
     SERIES,
     ActiveFaults,
+    DecisionMade,
     FaultCleared,
     FaultRaised,
     FrameReading,
@@ -321,3 +322,26 @@ def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
                               "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
     errors = sorted({int(line.split(":")[1]) for line in out.splitlines() if ": error:" in line})
     assert status == 1 and errors == [3, 4, 5], out
+
+
+def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
+    """``DecisionMade.of`` is the one record built from a dict: control cannot import twin, so
+    a decision's JSON form is ``control.supervisor.Decision.as_dict`` (pinned by control's tests).
+    The record declares exactly its keys (``kind`` as ``decision``) and its JSONL line is that
+    dict, so a key added in control fails here instead of crashing the supervisor worker."""
+    from control.objective import RpmPrediction
+    from control.supervisor import Action, Decision, Mode, SupervisorInputs
+
+    full = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0,
+                    inputs=SupervisorInputs(mill_connected=True), predictions={5.0: 0.3},
+                    chosen=RpmPrediction(12.0, 0.9, 60.0, 700.0, 0.5), prediction_t_s=0.5)
+    bare = Decision(3.0, Mode.MANUAL, Action.STOP, "safe", "y")
+    declared = {f.name for f in fields(DecisionMade)} - {"t_s"}
+    for d in (full, bare):
+        data = d.as_dict()
+        assert {("decision" if k == "kind" else k) for k in data} - {"t_s"} == declared
+        rec = DecisionMade.of(d)
+        line = to_jsonable(event_fields(rec))
+        want = to_jsonable({("decision" if k == "kind" else k): v for k, v in data.items() if k != "t_s"})
+        assert {k: v for k, v in want.items() if k in line} == line and rec.t_s == d.t_s
+        assert set(want) - set(line) <= {f.name for f in fields(DecisionMade) if f.metadata.get("optional")}
