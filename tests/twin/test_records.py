@@ -154,6 +154,21 @@ def test_a_run_log_of_the_previous_release_reads_back_as_typed_records(caplog) -
     assert rows and list(rows[0]) == list(FRAME_COLUMNS)
 
 
+def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Path) -> None:
+    """``drumtwin report`` and ``drumtwin compare`` (their functions) on the previous release's
+    log: the report lists its decisions and commands, the plot is written."""
+    from twin.plots import plot_runs
+    from twin.report import build_report, load_run
+
+    run = load_run(PREVIOUS)
+    assert len(run.frames) == 120 and {e["kind"] for e in run.events} >= {"decision", "mill_command"}
+    out = build_report([PREVIOUS], tmp_path / "report.html")
+    html = out.read_text(encoding="utf-8")
+    assert "runlog-previous" in html and "decision" in html
+    png = plot_runs({"previous": PREVIOUS}, tmp_path / "cmp.png")
+    assert png.stat().st_size > 10_000
+
+
 OTHER_CSVS = ("twin/cli/vision_cmds.py", "twin/cli/sim_cmds.py", "tests/vision/test_cli.py")
 """The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv,
 and the test of ``drumtwin mi``'s CSV header."""
