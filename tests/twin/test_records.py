@@ -362,3 +362,16 @@ def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
         want = to_jsonable({("decision" if k == "kind" else k): v for k, v in data.items() if k != "t_s"})
         assert {k: v for k, v in want.items() if k in line} == line and rec.t_s == d.t_s
         assert set(want) - set(line) <= {f.name for f in fields(DecisionMade) if f.metadata.get("optional")}
+
+
+def test_the_dashboard_plots_read_exactly_the_plot_series_of_the_frame_record() -> None:
+    """The plots' history (``Snapshot.history``) is keyed by ``SERIES``, the ``FrameReading`` fields
+    marked ``plot`` (derived, not declared again). Every key the layout reads from it is one of
+    them, and it draws them all: a renamed field or a misspelt key fails here, not at run time."""
+    tree = ast.parse((TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8"))
+    read = {n.slice.value for n in ast.walk(tree) if isinstance(n, ast.Subscript) and isinstance(n.value, ast.Name)
+            and n.value.id == "h" and isinstance(n.slice, ast.Constant)}
+    assert "snap.history.items()" in (TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8")
+    assert read == set(SERIES)
+    state = LiveState()
+    assert set(state.snapshot().history) == set(SERIES)
