@@ -86,8 +86,8 @@ def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> No
         for node in _calls(tree):
             name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
             first = node.args[0] if node.args else None
-            if name in ("event", "_event", "event_throttled", "on_error") and isinstance(first, ast.Constant) \
-                    and isinstance(first.value, str):
+            by_name = name in ("event", "_event", "publish", "publish_throttled", "on_error")
+            if by_name and isinstance(first, ast.Constant) and isinstance(first.value, str):
                 bad.append((where, node.lineno, f"{name}({first.value!r})"))
             if name in ("fault", "clear_fault") and isinstance(node.func, ast.Attribute):
                 bad.append((where, node.lineno, name))

@@ -154,7 +154,7 @@ class Viewers:
                 return
             if check.clamped:  # the person who asked is told (the supervisor clamps the same way)
                 cc.say(f"**{check.message}**")
-                self.gate.event(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
+                self.gate.publish(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
                                                 requested=check.requested, rpm=check.rpm))
             self.controls.set_manual_rpm(check.rpm)
 
@@ -182,7 +182,7 @@ class Viewers:
                 rpm_list, duration = self.limits.check_whatif(rpm_list, dur.value)
             except (ValueError, ControlError) as exc:  # refused, with the limit, to the person who asked
                 cc.say(f"**what-if refused: {exc}**")
-                self.gate.event(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
+                self.gate.publish(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
                                                  error=str(exc)))
                 return
             cc.say(f"what-if queued: {len(rpm_list)} rpm x {duration:g} s")

@@ -326,7 +326,7 @@ class Gatekeeper:
         self.failed_unlocks = 0
         self.bad_messages = 0
 
-    def event(self, rec: Record) -> None:
+    def publish(self, rec: Record) -> None:
         """Report a record to ``on_event`` (default: the ``drumtwin.dashboard`` log)."""
         if self._on_event is not None:
             try:
@@ -336,8 +336,8 @@ class Gatekeeper:
                 _log.exception("dashboard event sink failed")
         _log.warning("%s %s", kind_of(rec), event_fields(rec))
 
-    def event_throttled(self, rec: DashboardEvent) -> None:
-        """Like :meth:`event`, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
+    def publish_throttled(self, rec: DashboardEvent) -> None:
+        """Like :meth:`publish`, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
         can retry a refused handshake in a loop); ``suppressed`` counts the ones not sent."""
         now = self._monotonic()
         kind = type(rec)
@@ -347,7 +347,7 @@ class Gatekeeper:
                 self._throttle[kind] = (last, suppressed + 1)
                 return
             self._throttle[kind] = (now, 0)
-        self.event(replace(rec, suppressed=suppressed))
+        self.publish(replace(rec, suppressed=suppressed))
 
     def flush_throttled(self, force: bool = False) -> None:
         """Write the counts of throttled events suppressed since their last report once
@@ -361,15 +361,15 @@ class Gatekeeper:
                     due.append((kind, suppressed))
                     self._throttle[kind] = (now, 0)
         for kind, suppressed in due:
-            self.event(kind(t_s=self.now_s(), suppressed=suppressed, summary=True))
+            self.publish(kind(t_s=self.now_s(), suppressed=suppressed, summary=True))
 
     def bad_message(self, detail: str) -> None:
         self.bad_messages += 1
-        self.event_throttled(DashboardBadMessage(t_s=self.now_s(), error=detail))
+        self.publish_throttled(DashboardBadMessage(t_s=self.now_s(), error=detail))
 
     def refused(self, origin: str | None, host: str | None) -> None:
         self.refused_handshakes += 1
-        self.event_throttled(DashboardRefused(t_s=self.now_s(), origin=origin, host=host))
+        self.publish_throttled(DashboardRefused(t_s=self.now_s(), origin=origin, host=host))
 
     def try_unlock(self, client_id: int, given: object, address: str = "") -> tuple[bool, str]:
         """Check a token attempt under the per-viewer and per-address rate limits;
@@ -381,14 +381,14 @@ class Gatekeeper:
             if wait <= 0:
                 self._limiter.attempt(client_id, now, ok, address)
         if wait > 0:
-            self.event_throttled(DashboardUnlockLimited(t_s=self.now_s(), client=client_id, address=address,
+            self.publish_throttled(DashboardUnlockLimited(t_s=self.now_s(), client=client_id, address=address,
                                                         wait_s=round(wait, 1)))
             return False, f"**too many attempts: wait {math.ceil(wait)} s**"
         if not ok:
             self.failed_unlocks += 1
-            self.event(DashboardUnlockFailed(t_s=self.now_s(), client=client_id, address=address))
+            self.publish(DashboardUnlockFailed(t_s=self.now_s(), client=client_id, address=address))
             return False, "**wrong token: read-only**"
-        self.event(DashboardUnlocked(t_s=self.now_s(), client=client_id))
+        self.publish(DashboardUnlocked(t_s=self.now_s(), client=client_id))
         return True, "controls unlocked"
 
     def estop_allowed(self, authorised: bool) -> bool:

@@ -133,7 +133,8 @@ class Dashboard:
         if ok is None:  # the viewer left before its controls were built: not a refusal
             return
         if not ok:
-            self.gate.event(DashboardRefused(t_s=self.gate.now_s(), client=client.client_id, origin="(after connect)"))
+            self.gate.publish(DashboardRefused(t_s=self.gate.now_s(), client=client.client_id,
+                                               origin="(after connect)"))
             close_client(self._server, client.client_id)
             return
         with self._build_lock:  # viser's shared folder context admits one builder at a time
