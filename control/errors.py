@@ -20,7 +20,7 @@ class MillRefused(ControlError):
 
 
 def check_number(
-    name: str, value: float, *, above: float | None = None, at_least: float | None = None,
+    name: str, value: float | str, *, above: float | None = None, at_least: float | None = None,
     at_most: float | None = None,
 ) -> float:
     """``value`` as a finite float inside the given bounds, else a one-line ControlError

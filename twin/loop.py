@@ -69,6 +69,8 @@ from twin.live.supervise import SupervisorWorker
 from twin.live.twin import TwinSettings, TwinWorker
 from twin.live.whatif import Study, WhatIfWorker
 from twin.records import (
+    FaultCleared,
+    FaultRaised,
     MillCommandDropped,
     MillCommandSent,
     MillState,
@@ -269,7 +271,8 @@ class LiveLoop:
         ))
         override = getattr(self.mill_link, "safety_override", None)  # a drive run against its check
         if override:
-            self.events.fault("mill_safety_override", f"operator override: {override}", 0.0)
+            self.events.publish(FaultRaised(t_s=0.0, fault="mill_safety_override",
+                                            message=f"operator override: {override}"))
         if self.config.mode == "auto":
             self.whatif.warm_up()
         for name, worker in (
@@ -297,7 +300,7 @@ class LiveLoop:
             quiet = time.monotonic() - self.supervisor_alive.get()
             if quiet > limit:
                 reason = f"the supervisor worker has not run for {quiet:.1f} s"
-                self.events.fault("supervisor_stalled", reason, self.view.now_s())
+                self.events.publish(FaultRaised(t_s=self.view.now_s(), fault="supervisor_stalled", message=reason))
                 self._fail(reason, crashed=True)
                 return
 
@@ -310,11 +313,12 @@ class LiveLoop:
                 if not isinstance(exc, EXPECTED_ERRORS):  # a bug: the run ends (exit 3), the traceback in the log
                     what = crash_summary(exc)
                     log.debug("worker %s crashed", name, exc_info=True)
-                    self.events.fault("worker_crashed", f"the {name} worker crashed: {what}", t, worker=name,
-                                      error=what, traceback=tb.format_exc())
+                    self.events.publish(FaultRaised(t_s=t, fault="worker_crashed",
+                                                    message=f"the {name} worker crashed: {what}", worker=name,
+                                                    error=what, traceback=tb.format_exc()))
                     self._fail(f"the {name} worker crashed: {what}", crashed=True)
                     return
-                self.events.fault(f"thread_{name}", f"{name} worker crashed: {exc}", t)
+                self.events.publish(FaultRaised(t_s=t, fault=f"thread_{name}", message=f"{name} worker crashed: {exc}"))
                 if name in ESSENTIAL_WORKERS:
                     self._fail(f"the {name} worker crashed: {exc}")
                 elif name == "camera" and isinstance(exc, VisionError):  # e.g. no drum in the frames
@@ -431,7 +435,7 @@ class LiveLoop:
     def start_mill(self) -> None:
         t = self.now_s()
         self.events.publish(OperatorAction(t_s=t, action="start"))
-        self.events.clear_fault("emergency_stop", "mill started again", t)
+        self.events.publish(FaultCleared(t_s=t, fault="emergency_stop", message="mill started again"))
         self.mill.submit(StartMill(self.mill_box.get().epoch))
 
     def stop_mill(self) -> None:
@@ -443,7 +447,8 @@ class LiveLoop:
         self.mill.submit(StopMill(source="emergency_stop", urgent=True))  # first: jumps every queue
         self.events.publish(OperatorAction(t_s=t, action="emergency_stop"))
         self.supervisor.submit(SetMode("off"))
-        self.events.fault("emergency_stop", "EMERGENCY STOP pressed: mill stopped, mode OFF", t)
+        self.events.publish(FaultRaised(t_s=t, fault="emergency_stop",
+                                        message="EMERGENCY STOP pressed: mill stopped, mode OFF"))
 
     def recalibrate(self) -> None:
         self.events.publish(OperatorAction(t_s=self.now_s(), action="recalibrate"))
@@ -461,9 +466,9 @@ class LiveLoop:
         ``operator_rejected``. Returns what the dashboard tells the operator."""
         t, image = self.now_s(), self.camera_box.get().image
         if image is None:
-            self.events.event("operator_rejected", t, action="relearn_classes", error="no camera frame yet")
+            self.events.publish(OperatorRejected(t_s=t, action="relearn_classes", error="no camera frame yet"))
             return "**re-learn refused: no camera frame yet**"
-        self.events.event("operator", t, action="relearn_classes")
+        self.events.publish(OperatorAction(t_s=t, action="relearn_classes"))
         th = threading.Thread(target=self._relearn, args=(image.copy(),), name="relearn", daemon=True)
         self._threads.append(th)
         th.start()
@@ -477,11 +482,11 @@ class LiveLoop:
             cfg = relearn_classes(self._meter_config or MeterConfig(self._classes), [image])
             meter = cfg.make_meter(roi=self._roi)
         except VisionError as exc:
-            self.events.event("operator_rejected", self.now_s(), action="relearn_classes", error=str(exc))
+            self.events.publish(OperatorRejected(t_s=self.now_s(), action="relearn_classes", error=str(exc)))
             return
         self._meter_config = cfg
         self._camera_commands.put(SwapClasses(meter))
-        self.events.event("operator", self.now_s(), action="relearn_classes_swapped")
+        self.events.publish(OperatorAction(t_s=self.now_s(), action="relearn_classes_swapped"))
 
     def run_whatif(self, rpms: Sequence[float], duration_s: float) -> None:
         """Queue an operator study (bad input is an ``operator_rejected`` event, never an
@@ -501,11 +506,12 @@ class LiveLoop:
         in doubt) until a study succeeds or the operator sets a mode again."""
         t = self.now_s()
         if error is not None:
-            self.events.fault("whatif_failed", f"AUTO's what-if study failed: {error}", t)
+            self.events.publish(FaultRaised(t_s=t, fault="whatif_failed",
+                                            message=f"AUTO's what-if study failed: {error}"))
             self.supervisor.doubt_twin("whatif", f"what-if study failed ({error})")
         else:
             self.supervisor.trust_twin("whatif")
-            self.events.clear_fault("whatif_failed", "an AUTO what-if study succeeded", t)
+            self.events.publish(FaultCleared(t_s=t, fault="whatif_failed", message="an AUTO what-if study succeeded"))
 
     def cancel_whatif(self) -> bool:
         """Abandon the operator's running or waiting what-if study; True when there was one."""
@@ -791,10 +797,9 @@ def run_live(
         if cfg.dashboard:
             from twin.dashboard import Dashboard
 
-            events, now_s = loop.events, loop.now_s
             dash = Dashboard(
                 state, loop, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
-                update_hz=cfg.dashboard_hz, on_event=lambda kind, fields: events.event(kind, now_s(), **fields),
+                update_hz=cfg.dashboard_hz, on_event=loop.events.publish, now_s=loop.now_s,
                 limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
             ).start()
             if on_dashboard is not None:

@@ -10,16 +10,19 @@ its fields and their units once, here; everything else is derived from these cla
 * the dashboard's numbers panel (``twin.state.Panel``), which folds the records it sees;
 * the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test).
 
-Producers (the live workers) ``publish`` records on a :class:`Bus`; consumers subscribe: the run
-log (``twin.runlog.RunLog.record``: CSV rows and JSONL lines), the dashboard's state
+Producers (the live workers, the loop, the dashboard) construct these classes and ``publish``
+them (``twin.live.records.EventSink``; no producer names a kind by string, so a misspelt kind
+or field is a mypy error) onto a :class:`Bus`; consumers subscribe: the run log
+(``twin.runlog.RunLog.record``: CSV rows and JSONL lines), the dashboard's state
 (``twin.state.LiveState.record``: plots, numbers panel). The one set of active faults is
-:class:`ActiveFaults` (the event sink raises and clears through it). ``compare``, ``report`` and
-the tests read the same records back with ``twin.runlog.read_frames`` / ``read_events``.
+:class:`ActiveFaults` (the sink publishes a :class:`FaultRaised` only when its fault is not
+active). ``compare``, ``report`` and the tests read the same records back with
+``twin.runlog.read_frames`` / ``read_events`` (dicts, the JSONL keys) or ``read_records``
+(typed: the one name -> class lookup, :func:`record_of`).
 
 Adding a record kind is a one-place change: a frozen dataclass here, derived from :class:`Record`
 (or a group base), with a ``kind`` ClassVar, its fields with :func:`unit` / :func:`opt`, and
-``@register``. ``sink.event("kind", t_s, **fields)`` then builds it; the docs table is
-regenerated with ``python -m twin.records``.
+``@register``; the docs table is regenerated with ``python -m twin.records``.
 """
 
 from __future__ import annotations
@@ -439,7 +442,10 @@ class WhatIfCancelled(Record):
 
 # -- dashboard security -----------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
-class _DashboardRecord(Record):
+class DashboardEvent(Record):
+    """A dashboard security event (the fields each kind may carry)."""
+
+
     client: int | None = opt("", "viser client id")
     address: str | None = opt("", "client address")
     origin: str | None = opt("", "Origin header")
@@ -452,35 +458,35 @@ class _DashboardRecord(Record):
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class DashboardRefused(_DashboardRecord):
+class DashboardRefused(DashboardEvent):
     kind: ClassVar[str] = "dashboard_refused"
     doc: ClassVar[str] = "a connection refused (origin or host)"
 
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class DashboardUnlockLimited(_DashboardRecord):
+class DashboardUnlockLimited(DashboardEvent):
     kind: ClassVar[str] = "dashboard_unlock_limited"
     doc: ClassVar[str] = "too many unlock attempts"
 
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class DashboardUnlockFailed(_DashboardRecord):
+class DashboardUnlockFailed(DashboardEvent):
     kind: ClassVar[str] = "dashboard_unlock_failed"
     doc: ClassVar[str] = "a wrong control token"
 
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class DashboardUnlocked(_DashboardRecord):
+class DashboardUnlocked(DashboardEvent):
     kind: ClassVar[str] = "dashboard_unlocked"
     doc: ClassVar[str] = "a viewer unlocked the controls"
 
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class DashboardBadMessage(_DashboardRecord):
+class DashboardBadMessage(DashboardEvent):
     kind: ClassVar[str] = "dashboard_bad_message"
     doc: ClassVar[str] = "a malformed or oversized client message"
 
@@ -539,17 +545,18 @@ class TwinReading(_Status):
 # -- building, encoding -----------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class UntypedEvent(Record):
-    """An event of a kind not registered here (a bug to fix: add its class). It is logged as
-    it came, so no data is lost."""
+    """A JSONL event read back whose kind or fields no class here declares (a log of another
+    release). It holds the line as it came, so no data is lost (and is written back whole)."""
 
     name: str = unit("", "the unregistered kind")
     data: Mapping[str, object] = unit("", "its fields")
 
 
 def record_of(kind: str, t_s: float, **data: object) -> Record:
-    """The record of ``kind`` built from ``data`` (the sink's ``event(kind, t_s, **data)``).
-    A kind not registered, or fields its class does not declare, give an :class:`UntypedEvent`
-    and a warning: logging never crashes a worker and never loses data."""
+    """The record of ``kind`` built from ``data``: the name -> class lookup of the JSONL reader
+    (``twin.runlog.read_records``; producers construct their record classes, so a misspelt kind
+    or field is a type error). A kind not registered, or fields its class does not declare,
+    give an :class:`UntypedEvent` and a warning: reading never crashes and never loses data."""
     cls = KINDS.get(kind)
     if cls is not None:
         try:

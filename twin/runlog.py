@@ -36,9 +36,9 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from twin.errors import TwinError
-from twin.records import FRAME_COLUMNS, FrameReading, Record, event_fields, kind_of
+from twin.records import FRAME_COLUMNS, FrameReading, Record, event_fields, kind_of, record_of
 
-__all__ = ["FRAME_COLUMNS", "RunLog", "read_events", "read_frames", "read_metadata", "write_record"]
+__all__ = ["FRAME_COLUMNS", "RunLog", "read_events", "read_frames", "read_metadata", "read_records", "write_record"]
 
 FRAMES_FILE = "frames.csv"
 EVENTS_FILE = "events.jsonl"
@@ -312,6 +312,20 @@ def read_events(path: Path | str) -> list[dict[str, Any]]:
             except json.JSONDecodeError:
                 continue
     return out
+
+
+_LINE_KEYS = ("t_s", "wall_s", "kind")  # the JSONL line's own keys beside the record's fields
+
+
+def read_records(path: Path | str) -> list[Record]:
+    """The events of an ``events.jsonl`` (a run dir or the file) as typed records: the one
+    place a kind's name is looked up (``twin.records.record_of``). A line of a kind or with a
+    field this release does not declare is an ``UntypedEvent`` holding it whole (and a
+    warning); JSON ``null`` stays None (a NaN when it was written)."""
+    return [
+        record_of(str(e["kind"]), float(e["t_s"]), **{k: v for k, v in e.items() if k not in _LINE_KEYS})
+        for e in read_events(path)
+    ]
 
 
 def read_metadata(path: Path | str) -> dict[str, Any]:

@@ -93,13 +93,7 @@ def parse_modbus_url(url: str) -> ModbusUrl:
         return v
 
     def number(key: str, default: float | None, **bounds: float) -> float | None:
-        if key not in q:
-            return default
-        try:
-            v = float(q[key])
-        except ValueError:
-            raise ControlError(f"modbus URL: {key} must be a number (got {q[key]!r})") from None
-        return check_number(key, v, **bounds)
+        return default if key not in q else check_number(f"modbus URL: {key}", q[key], **bounds)
 
     parity = q.get("parity", "E").upper()
     if parity not in ("N", "E", "O"):

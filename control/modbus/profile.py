@@ -12,14 +12,13 @@ addresses (0-based: holding register 40001 is address 0).
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from control.errors import ControlError
+from control.errors import ControlError, check_number
 
 SHIPPED = ("delta-ms300", "abb-acs", "siemens-v20", "invertek-e3", "generic")
 """The profiles shipped in the package (``control/modbus/profiles/NAME.toml``)."""
@@ -250,15 +249,9 @@ def _reg(v: Any, what: str) -> int:
     return v
 
 
-def _pos(v: Any, what: str) -> float:
-    f = float(v)
-    if not (math.isfinite(f) and f > 0):
-        raise ValueError(f"{what} must be > 0 (got {v!r})")
-    return f
-
-
 def _scale(d: dict[str, Any], what: str) -> Scale:
-    return Scale(_pos(d["counts"], f"{what}.counts"), _pos(d["hz"], f"{what}.hz"))
+    return Scale(check_number(f"{what}.counts", d["counts"], above=0.0),
+                 check_number(f"{what}.hz", d["hz"], above=0.0))
 
 
 def _int_keys(d: dict[str, Any]) -> dict[int, Any]:
@@ -282,7 +275,7 @@ def _build(d: dict[str, Any]) -> DriveProfile:
             time_parameter=str(cl["time_parameter"]),
             action_parameter=str(cl.get("action_parameter", "")),
             time_register=_reg(cl["time_register"], "comm_loss.time_register"),
-            time_counts_per_s=_pos(cl.get("time_counts_per_s", 1), "comm_loss.time_counts_per_s"),
+            time_counts_per_s=check_number("comm_loss.time_counts_per_s", cl.get("time_counts_per_s", 1), above=0.0),
             action_register=None if "action_register" not in cl else _reg(cl["action_register"], "action_register"),
             safe_actions=tuple(int(a) for a in cl.get("safe_actions", ())),
             recommended_action=cl.get("recommended_action"),
@@ -298,8 +291,8 @@ def _build(d: dict[str, Any]) -> DriveProfile:
     return DriveProfile(
         name=str(d["name"]),
         title=str(d.get("title", d["name"])),
-        max_hz=_pos(d["max_hz"], "max_hz"),
-        hz_per_rpm=_pos(d.get("hz_per_rpm", 1.0), "hz_per_rpm"),
+        max_hz=check_number("max_hz", d["max_hz"], above=0.0),
+        hz_per_rpm=check_number("hz_per_rpm", d.get("hz_per_rpm", 1.0), above=0.0),
         control_register=_reg(c["register"], "control.register"),
         run_words=run_words,
         stop_word=_reg(c["stop_word"], "control.stop_word"),
@@ -331,7 +324,7 @@ def _build(d: dict[str, Any]) -> DriveProfile:
         comm_loss=comm,
         identity={str(k): _reg(v, f"identity.{k}") for k, v in d.get("identity", {}).items()},
         emulator_identity={_reg(ident[i], "emulator.identity"): int(ident[i + 1]) for i in range(0, len(ident), 2)},
-        accel_hz_per_s=_pos(emu.get("accel_hz_per_s", 10.0), "emulator.accel_hz_per_s"),
+        accel_hz_per_s=check_number("emulator.accel_hz_per_s", emu.get("accel_hz_per_s", 10.0), above=0.0),
     )
 
 

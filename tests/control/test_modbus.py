@@ -5,6 +5,7 @@ decoding), the comm-loss check at connect, refusals, lost replies; the pure part
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Iterator
 
@@ -59,6 +60,11 @@ def test_bad_profiles_are_one_line_errors(tmp_path) -> None:
     text.write_text(src.replace("register = 1             # frequency setpoint", "register = 70000 #"))
     with pytest.raises(ControlError, match=r"setpoint\.register must be a register address"):
         load_profile(str(text))
+    for value, got in (("0", "0"), ('"fast"', "fast"), ("nan", "nan")):  # the one range check (check_number)
+        text.write_text(src.replace("max_hz = ", f"max_hz = {value} #", 1))
+        needle = rf"drive profile {re.escape(str(text))}: max_hz must be a finite number > 0 \(got {got}\)"
+        with pytest.raises(ControlError, match=needle):
+            load_profile(str(text))
 
 
 def test_read_blocks_groups_near_registers() -> None:
@@ -80,6 +86,10 @@ def test_modbus_urls_parse_and_bad_ones_name_the_key() -> None:
     ]:
         with pytest.raises(ControlError, match=key):
             parse_modbus_url(url)
+    for value in ("fast", "nan", "0", "601"):  # parsed and range-checked in one place (check_number)
+        needle = rf"modbus URL: max_hz must be a finite number > 0 and <= 600 \(got {value}\)"
+        with pytest.raises(ControlError, match=needle):
+            parse_modbus_url(f"modbus:/dev/x?profile=abb-acs&max_hz={value}")
 
 
 def test_the_configs_drive_hz_per_rpm_goes_into_the_modbus_url_and_a_disagreeing_url_is_refused() -> None:

@@ -17,9 +17,9 @@ import pytest
 import viser
 import websockets
 
+from control.limits import Limits
 from control.supervisor import Supervisor
 from sim.drum import Particles
-from sim.recipe import PAPER_DRUM
 from tests.twin.dashboard_helpers import (
     IMG,
     button,
@@ -43,7 +43,7 @@ from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
 from twin.loop import supervisor_config
-from twin.records import FrameReading, MillState, ModeSet
+from twin.records import FrameReading, MillState, ModeSet, event_fields
 from twin.state import LiveState, Panel, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
@@ -168,7 +168,9 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     state.record(ModeSet(t_s=0.0, mode="auto"))
     state.record(MillState(t_s=0.0, state="running", connected=True, setpoint_rpm=5.0, actual_rpm=5.0))
     controls = RecordingControls()
-    limits = supervisor_config().limits  # what the run's supervisor enforces
+    sup = supervisor_config(critical_rpm=70.0)  # a drum of another size: 0.6 x 70 rpm = 42 rpm, not the default 45
+    limits = sup.limits  # what the run's supervisor enforces
+    assert limits.rpm_range[1] == pytest.approx(42.0) and Limits().rpm_range[1] == 45.0  # a hard-coded 45 fails
     dash = Dashboard(state, controls, port=0, update_hz=12, limits=limits).start()
     try:
         with Feeder(state):
@@ -182,10 +184,10 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             wait_until(lambda: plot_pixels(page)["Mixing index"] != mi_plot, 10, "the MI plot to redraw")
 
             assert not slider_enabled(page)  # AUTO: the operator rpm is inactive
-            lo, hi = limits.rpm_range  # the slider shows what is allowed: the supervisor's limits
-            assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=0.5)
-            assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo)
-            assert hi == Supervisor(supervisor_config()).config.rpm_limits[1]
+            lo, hi = Supervisor(sup).config.rpm_limits  # the slider shows what the supervisor enforces
+            assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=1e-9)
+            assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo, abs=1e-9)
+            assert Supervisor(sup).config.clamp(1000.0) == hi  # the supervisor's enforced maximum
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")
@@ -204,7 +206,7 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             input_by_label(page, "What-if rpm list").fill("5, 10000")  # refused, the limit shown
             button(page, "Run what-if").click()
             page.get_by_text("what-if refused").wait_for()
-            assert page.get_by_text(f"outside (0, {PAPER_DRUM.critical_rpm:.4g}] rpm").count() >= 1
+            assert page.get_by_text(f"outside (0, {limits.critical_rpm:.4g}] rpm").count() >= 1
             assert controls.args_of("run_whatif") == []
 
             button(page, "EMERGENCY STOP").click()
@@ -240,7 +242,7 @@ def remote_viewer_without_token_is_read_only(page) -> None:
     events: list[str] = []
     dash = Dashboard(state, controls, host="127.0.0.1", port=0, control_token="s3cret",
                      unlock_policy=UnlockPolicy(per_client_s=0.05, max_failures=5, window_s=60.0),
-                     on_event=lambda kind, fields: events.append(kind)).start()
+                     on_event=lambda rec: events.append(rec.kind)).start()
     try:
         page.goto(dash.url)
         manual = mode_selector(page)
@@ -349,7 +351,7 @@ def local_dash() -> Iterator[tuple[Dashboard, RecordingControls, list]]:
     controls = RecordingControls()
     events: list = []
     dash = Dashboard(state, controls, port=0, update_hz=4,
-                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+                     on_event=lambda rec: events.append((rec.kind, event_fields(rec)))).start()
     try:
         yield dash, controls, events
     finally:
@@ -493,7 +495,7 @@ def test_scene_draws_shaped_particles_as_turned_outlines_and_the_baffles() -> No
 def fresh_dash() -> Iterator[tuple[Dashboard, list]]:
     events: list = []
     dash = Dashboard(LiveState(), RecordingControls(), port=0, update_hz=4,
-                     on_event=lambda kind, fields: events.append((kind, fields))).start()
+                     on_event=lambda rec: events.append((rec.kind, event_fields(rec)))).start()
     try:
         yield dash, events
     finally:
@@ -582,9 +584,15 @@ def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
 
     now = [100.0]
     events: list[tuple[str, dict]] = []
-    gate = Gatekeeper("s3cret", on_event=lambda k, f: events.append((k, f)), estop_needs_token=True,
+    records: list = []
+
+    def on_event(rec) -> None:
+        records.append(rec)
+        events.append((rec.kind, event_fields(rec)))
+
+    gate = Gatekeeper("s3cret", on_event=on_event, estop_needs_token=True,
                       unlock_policy=UnlockPolicy(per_client_s=0.0, max_failures=5, window_s=60.0),
-                      monotonic=lambda: now[0])
+                      monotonic=lambda: now[0], now_s=lambda: now[0] - 100.0)
     assert gate.token_required and not gate.estop_allowed(False) and gate.estop_allowed(True)
     assert gate.try_unlock(1, "wrong", "10.0.0.1") == (False, "**wrong token: read-only**")
     assert gate.try_unlock(1, "s3cret", "10.0.0.1")[0] and gate.failed_unlocks == 1
@@ -595,6 +603,7 @@ def test_the_gatekeeper_is_the_dashboards_policy_without_viser() -> None:
     now[0] += EVENT_THROTTLE_S
     gate.flush_throttled()
     assert events[-1] == ("dashboard_refused", {"suppressed": 2, "summary": True})
+    assert [r.t_s for r in records] == [0.0, 0.0, 0.0, EVENT_THROTTLE_S]  # stamped with the run clock
     assert not Gatekeeper(None).token_required and Gatekeeper(None).estop_allowed(False)
 
 

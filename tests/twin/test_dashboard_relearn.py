@@ -18,7 +18,7 @@ from tests.twin.dashboard_helpers import button, input_by_label, wait_until
 from twin.dashboard import Dashboard, numbers_markdown
 from twin.live.records import CameraInfo, Latest, SwapClasses
 from twin.loop import LiveLoop
-from twin.records import FrameReading, ModeSet
+from twin.records import FrameReading, ModeSet, Record, event_fields
 from twin.state import LiveState, Panel
 from vision.sources import read_image
 from vision.suggest import suggest_classes
@@ -75,7 +75,7 @@ def test_relearn_button_behind_the_token_in_chromium(page) -> None:
     controls = RelearnControls()
     events: list[str] = []
     dash = Dashboard(state, controls, host="127.0.0.1", port=0, control_token="s3cret", update_hz=12,
-                     on_event=lambda kind, fields: events.append(kind)).start()
+                     on_event=lambda rec: events.append(rec.kind)).start()
     try:
         page.goto(dash.url)
         page.get_by_text("The light moved too far").wait_for()  # the panel says so
@@ -100,8 +100,8 @@ class _Events:
     def __init__(self) -> None:
         self.got: list[tuple[str, dict]] = []
 
-    def event(self, kind: str, t_s: float, **data: object) -> None:
-        self.got.append((kind, data))
+    def publish(self, rec: Record) -> None:
+        self.got.append((rec.kind, event_fields(rec)))
 
 
 def _loop_stub(image: np.ndarray | None, cfg) -> SimpleNamespace:

@@ -430,6 +430,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         drag_slider_to,
         image_srcs,
         plot_pixels,
+        slider,
         slider_enabled,
         slider_value,
         wait_until,
@@ -466,6 +467,8 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         choose_mode(page, "MANUAL")
         wait_until(lambda: loop.mode_name == "manual", 10, "MANUAL mode in the loop")
         wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable")
+        enforced = loop.supervisor.supervisor.config.rpm_limits  # the run's supervisor, as the loop built it
+        assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(enforced[1], abs=1e-9)
         drag_slider_to(page, 0.2)
         wait_until(lambda: abs(slider_value(page) - 5.0) > 5, 10, "the slider to move")
         wanted = slider_value(page)

@@ -8,7 +8,7 @@ from control.errors import MillRefused
 from control.protocol import MillStatus
 from twin.live.mill import MillWorker
 from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
-from twin.records import FrameReading, Record, UntypedEvent, event_fields, kind_of, record_of
+from twin.records import FaultCleared, FaultRaised, FrameReading, Record, UntypedEvent, event_fields, kind_of
 from twin.state import LiveState
 
 
@@ -62,9 +62,8 @@ class FakeLink:
 
 class Sink:
     """A test's event sink: every record published (``records``), the logged ones as
-    (kind, fields) (``events``); events by kind are built as the run's sink builds them
-    (``twin.records.record_of``: a kind or field not declared there fails the test).
-    ``state``: a ``LiveState`` subscribed to the records, as in a run."""
+    (kind, fields) (``events``); faults as (kind, {fault, message}), a clear only of an active
+    fault (``faults``). ``state``: a ``LiveState`` subscribed to the records, as in a run."""
 
     def __init__(self, state: LiveState | None = None) -> None:
         self.events: list[tuple[str, dict]] = []
@@ -74,23 +73,20 @@ class Sink:
 
     def publish(self, rec: Record) -> None:
         assert not isinstance(rec, UntypedEvent), f"unregistered record: {rec}"
+        if isinstance(rec, FaultRaised):
+            self.faults.add(rec.fault)
+            self.events.append(("fault", {"fault": rec.fault, "message": rec.message}))
+            return
+        if isinstance(rec, FaultCleared):
+            if rec.fault in self.faults:
+                self.faults.discard(rec.fault)
+                self.events.append(("recovered", {"fault": rec.fault}))
+            return
         self.records.append(rec)
         if self.state is not None:
             self.state.record(rec)
         if rec.logged and not isinstance(rec, FrameReading):
             self.events.append((kind_of(rec), event_fields(rec)))
-
-    def event(self, kind: str, t_s: float, **data) -> None:
-        self.publish(record_of(kind, t_s, **data))
-
-    def fault(self, key: str, message: str, t_s: float, **data) -> None:
-        self.faults.add(key)
-        self.events.append(("fault", {"fault": key, "message": message}))
-
-    def clear_fault(self, key: str, message: str, t_s: float, **data) -> None:
-        if key in self.faults:
-            self.faults.discard(key)
-            self.events.append(("recovered", {"fault": key}))
 
     def metadata(self, **data) -> None:
         pass

@@ -22,21 +22,29 @@ from twin.records import (
     KINDS,
     SERIES,
     ActiveFaults,
+    DecisionMade,
+    FaultCleared,
+    FaultRaised,
     FrameReading,
+    Mixed,
+    OperatorAction,
     TrendUnsettled,
+    Unmixed,
     UntypedEvent,
+    event_fields,
     record_of,
     records_table,
 )
-from twin.runlog import RunLog, read_events, read_frames
+from twin.runlog import RunLog, read_events, read_frames, read_records, to_jsonable
 from twin.state import LiveState
 
 ROOT = Path(__file__).resolve().parents[2]
 TWIN = ROOT / "twin"
 
 
-def _modules() -> list[tuple[Path, ast.Module]]:
-    return [(p, ast.parse(p.read_text(encoding="utf-8"))) for p in sorted(TWIN.rglob("*.py"))]
+def _modules(*roots: Path) -> list[tuple[Path, ast.Module]]:
+    """Every module under ``roots`` (default twin/), parsed."""
+    return [(p, ast.parse(p.read_text(encoding="utf-8"))) for r in (roots or (TWIN,)) for p in sorted(r.rglob("*.py"))]
 
 
 def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
@@ -52,43 +60,57 @@ def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
         assert all(f.metadata.get("unit") is not None for f in fields(cls)), kind
 
 
-def _literal_kinds() -> list[tuple[str, str, int]]:
-    """(kind, file, line) of every event kind a twin/ module names as a string literal: the
-    first argument of ``.event(...)`` / ``._event(...)`` / ``._event_throttled(...)`` /
-    ``.on_error(...)``."""
-    out = []
-    for path, tree in _modules():
-        for node in ast.walk(tree):
-            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
-                continue
-            if node.func.attr not in ("event", "_event", "_event_throttled", "on_error") or not node.args:
-                continue
-            arg = node.args[0]
-            values = [arg] if not isinstance(arg, ast.IfExp) else [arg.body, arg.orelse]
-            for v in values:
-                if isinstance(v, ast.Constant) and isinstance(v.value, str):
-                    out.append((v.value, str(path.relative_to(ROOT)), node.lineno))
-    return out
+SINK_METHODS = {"publish", "metadata"}
+"""What ``twin.live.records.EventSink`` offers: typed records and the run's metadata."""
 
 
-def test_every_event_kind_named_in_twin_is_a_registered_record_kind() -> None:
-    """An event kind written as a string in a worker, the loop or the dashboard must be a
-    record class in twin/records.py (the one place: its fields and units). A new kind added
-    elsewhere only (e.g. ``sink.event("mixed", ...)``) fails here until its class exists."""
-    named = _literal_kinds()
-    assert len(named) >= 10  # the scan sees the call sites (a broken scan would pass vacuously; the loop and
-    missing = [(k, f, n) for k, f, n in named if k not in KINDS]  # the workers publish typed records now)
-    assert missing == []
+def _calls(tree: ast.Module) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+
+
+def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> None:
+    """Issue 25: every worker, the loop and the dashboard publish a record they construct
+    (``MillRefused(t_s=..., reason=...)``), so mypy catches a misspelt kind or field. In twin/
+    no call passes a string kind (``.event("mill_refused", ...)``, ``record_of("...")`` outside
+    the JSONL reader), no ``.fault``/``.clear_fault`` by key, and no record is built from a
+    spread dict (``**st.as_dict()``). The old code had each of these (mill worker, relearn,
+    dashboard, ``RunEvents.fault``); a new one fails here."""
     import inspect
+
+    from twin.live.records import EventSink
+
+    record_classes = {cls.__name__ for cls in KINDS.values()} | {"MillRefusedRecord", "MillMismatchRecord", "change"}
+    bad, built = [], 0
+    for path, tree in _modules():
+        where = str(path.relative_to(ROOT))
+        for node in _calls(tree):
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            first = node.args[0] if node.args else None
+            by_name = name in ("event", "_event", "publish", "publish_throttled", "on_error")
+            if by_name and isinstance(first, ast.Constant) and isinstance(first.value, str):
+                bad.append((where, node.lineno, f"{name}({first.value!r})"))
+            if name in ("fault", "clear_fault") and isinstance(node.func, ast.Attribute):
+                bad.append((where, node.lineno, name))
+            if name == "record_of" and where not in ("twin/records.py", "twin/runlog.py"):
+                bad.append((where, node.lineno, "record_of"))
+            if name in record_classes:
+                built += 1
+                if any(k.arg is None for k in node.keywords):
+                    bad.append((where, node.lineno, f"{name}(**...)"))
+    assert bad == []
+    assert built >= 60  # the scan sees the producers (a broken scan would pass vacuously)
+    methods = {n for n, _ in inspect.getmembers(EventSink, inspect.isfunction) if not n.startswith("_")}
+    assert methods == SINK_METHODS  # no event(kind, **fields), fault(key, ...) by name
     import re
 
     from control.endpoint import EndpointDetector  # the kinds it hands the process worker by name
 
     changes = set(re.findall(r"\"(mixed|unmixed)\"", inspect.getsource(EndpointDetector)))
     assert changes == {"mixed", "unmixed"} and changes <= set(KINDS)
+    assert (Mixed.kind, Unmixed.kind) == ("mixed", "unmixed")  # the process worker maps the names to these
 
 
-def test_an_unregistered_kind_is_still_logged_whole_and_warned(tmp_path: Path, caplog) -> None:
+def test_an_unregistered_kind_is_read_back_whole_and_warned(tmp_path: Path, caplog) -> None:
     with caplog.at_level(logging.WARNING, logger="drumtwin.records"):
         rec = record_of("no_such_kind", 2.0, a=1, b="x")
         bad = record_of("operator", 2.0, action="stop", colour="red")  # a field the kind does not declare
@@ -96,27 +118,71 @@ def test_an_unregistered_kind_is_still_logged_whole_and_warned(tmp_path: Path, c
     assert "no_such_kind" in caplog.text and "operator" in caplog.text
     with RunLog(tmp_path / "run") as log:
         events = RunEvents(log, LiveState())
-        events.event("no_such_kind", 2.0, a=1, b="x")
-        events.event("operator", 3.0, action="stop")
+        events.publish(rec)  # written back whole
+        events.publish(OperatorAction(t_s=3.0, action="stop"))
     got = read_events(tmp_path / "run")
     assert [(e["kind"], e["t_s"]) for e in got] == [("no_such_kind", 2.0), ("operator", 3.0)]
     assert got[0]["a"] == 1 and got[0]["b"] == "x"
     assert set(got[1]) == {"t_s", "wall_s", "kind", "action"}  # unset optional fields are left out, as before
+    back = read_records(tmp_path / "run")
+    assert isinstance(back[0], UntypedEvent) and back[0].data == {"a": 1, "b": "x"}
+    assert back[1] == OperatorAction(t_s=3.0, action="stop")
 
 
-OTHER_CSVS = ("vision_cmds.py", "sim_cmds.py")
-"""The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv."""
+PREVIOUS = ROOT / "tests" / "data" / "runlog-previous"
+"""A run log written by the previous release's code (main of 2026-12-02 02:00 UTC, before the
+typed producers: the demo in AUTO without the dashboard; frames.csv cut to its first 120 rows)."""
+
+
+def test_a_run_log_of_the_previous_release_reads_back_as_typed_records(caplog) -> None:
+    """The JSONL keys are unchanged: every line of a log written by main's code before this
+    change is a record of its kind with the same fields (no ``UntypedEvent``), and it is the
+    same JSON when written again."""
+    with caplog.at_level(logging.WARNING, logger="drumtwin.records"):
+        recs = read_records(PREVIOUS)
+    assert caplog.text == ""
+    lines = read_events(PREVIOUS)
+    assert len(recs) == len(lines) >= 30
+    assert not any(isinstance(r, UntypedEvent) for r in recs)
+    assert {r.kind for r in recs} >= {"start", "decision", "mill_command", "mill_synced", "trend_settled", "stop"}
+    for rec, line in zip(recs, lines, strict=True):
+        payload = {k: v for k, v in line.items() if k not in ("t_s", "wall_s", "kind")}
+        written = to_jsonable(event_fields(rec))
+        assert {k: written[k] for k in payload} == payload, rec.kind  # every old key, the same value
+        assert all(written[k] is None for k in set(written) - set(payload)), rec.kind  # fields added since: null
+    rows = read_frames(PREVIOUS)
+    assert rows and list(rows[0]) == list(FRAME_COLUMNS)
+
+
+def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Path) -> None:
+    """``drumtwin report`` and ``drumtwin compare`` (their functions) on the previous release's
+    log: the report lists its decisions and commands, the plot is written."""
+    from twin.plots import plot_runs
+    from twin.report import build_report, load_run
+
+    run = load_run(PREVIOUS)
+    assert len(run.frames) == 120 and {e["kind"] for e in run.events} >= {"decision", "mill_command"}
+    out = build_report([PREVIOUS], tmp_path / "report.html")
+    html = out.read_text(encoding="utf-8")
+    assert "runlog-previous" in html and "decision" in html
+    png = plot_runs({"previous": PREVIOUS}, tmp_path / "cmp.png")
+    assert png.stat().st_size > 10_000
+
+
+OTHER_CSVS = ("twin/cli/vision_cmds.py", "twin/cli/sim_cmds.py", "tests/vision/test_cli.py")
+"""The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv,
+and the test of ``drumtwin mi``'s CSV header."""
 
 
 def test_the_csv_schema_is_defined_once() -> None:
-    """Only ``FrameReading`` declares the frame columns: no other class in twin/ declares
-    frame fields and no tuple/list literal lists column names (the old code had both, in
-    twin/runlog.py and twin/state.py, kept equal only by a test). ``Panel`` is the dashboard's
+    """Only ``FrameReading`` declares the frame columns: no other class in twin/ or tests/
+    declares frame fields and no tuple/list literal lists column names (the old code had both,
+    in twin/runlog.py and twin/state.py, kept equal only by a test). ``Panel`` is the dashboard's
     numbers panel (values folded from several record kinds), not a row."""
     columns = set(FRAME_COLUMNS) - {"t_s", "frame", "mode", "flags", "valid", "mi"}  # names too common to tell
     second = []
-    for path, tree in _modules():
-        if path.name in OTHER_CSVS:
+    for path, tree in _modules(TWIN, ROOT / "tests"):
+        if str(path.relative_to(ROOT)) in OTHER_CSVS:
             continue
         for node in ast.walk(tree):
             if isinstance(node, ast.ClassDef) and node.name not in ("FrameReading", "Panel"):
@@ -162,11 +228,11 @@ def test_a_fault_is_raised_once_and_the_dashboard_shows_the_same_set(tmp_path: P
     with RunLog(tmp_path / "run") as log:
         events = RunEvents(log, state)
         assert events.faults is state.faults and isinstance(events.faults, ActiveFaults)
-        events.fault("mill_link", "mill link lost", 1.0, url="loop://")
-        events.fault("mill_link", "mill link lost again", 1.5, url="loop://")
+        events.publish(FaultRaised(t_s=1.0, fault="mill_link", message="mill link lost", url="loop://"))
+        events.publish(FaultRaised(t_s=1.5, fault="mill_link", message="mill link lost again", url="loop://"))
         assert state.alarms == ("mill link lost",) and events.active() == {"mill_link"}
-        events.clear_fault("mill_link", "restored", 2.0)
-        events.clear_fault("mill_link", "restored", 2.5)
+        events.publish(FaultCleared(t_s=2.0, fault="mill_link", message="restored"))
+        events.publish(FaultCleared(t_s=2.5, fault="mill_link", message="restored"))
     got = [(e["kind"], e["t_s"], e.get("url")) for e in read_events(tmp_path / "run")]
     assert got == [("fault", 1.0, "loop://"), ("recovered", 2.0, None)]
     assert state.alarms == () and events.n_faults == 1
@@ -251,3 +317,61 @@ def test_run_config_has_no_untyped_bag() -> None:
         from twin.loop import supervisor_config
 
         supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
+
+
+@pytest.mark.slow
+def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
+    """What the typed producers buy: a misspelt field, a wrong type or a kind that does not
+    exist is a mypy error at the call (with ``sink.event("mill_refused", reasn=...)`` it was a
+    runtime ``UntypedEvent``). The correct record passes."""
+    from mypy import api
+
+    snippet = tmp_path / "producer.py"
+    snippet.write_text(
+        "from twin.records import FaultRaised, MillRefused\n"
+        "MillRefused(t_s=0.0, command='stop', source='operator', reason='NAK')\n"
+        "MillRefused(t_s=0.0, command='stop', source='operator', reasn='NAK')\n"
+        "FaultRaised(t_s='soon', fault='mill_link', message='lost')\n"
+        "from twin.records import MillRefussed\n",
+        encoding="utf-8",
+    )
+    out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
+                              "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
+    errors = sorted({int(line.split(":")[1]) for line in out.splitlines() if ": error:" in line})
+    assert status == 1 and errors == [3, 4, 5], out
+
+
+def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
+    """``DecisionMade.of`` is the one record built from a dict: control cannot import twin, so
+    a decision's JSON form is ``control.supervisor.Decision.as_dict`` (pinned by control's tests).
+    The record declares exactly its keys (``kind`` as ``decision``) and its JSONL line is that
+    dict, so a key added in control fails here instead of crashing the supervisor worker."""
+    from control.objective import RpmPrediction
+    from control.supervisor import Action, Decision, Mode, SupervisorInputs
+
+    full = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0,
+                    inputs=SupervisorInputs(mill_connected=True), predictions={5.0: 0.3},
+                    chosen=RpmPrediction(12.0, 0.9, 60.0, 700.0, 0.5), prediction_t_s=0.5)
+    bare = Decision(3.0, Mode.MANUAL, Action.STOP, "safe", "y")
+    declared = {f.name for f in fields(DecisionMade)} - {"t_s"}
+    for d in (full, bare):
+        data = d.as_dict()
+        assert {("decision" if k == "kind" else k) for k in data} - {"t_s"} == declared
+        rec = DecisionMade.of(d)
+        line = to_jsonable(event_fields(rec))
+        want = to_jsonable({("decision" if k == "kind" else k): v for k, v in data.items() if k != "t_s"})
+        assert {k: v for k, v in want.items() if k in line} == line and rec.t_s == d.t_s
+        assert set(want) - set(line) <= {f.name for f in fields(DecisionMade) if f.metadata.get("optional")}
+
+
+def test_the_dashboard_plots_read_exactly_the_plot_series_of_the_frame_record() -> None:
+    """The plots' history (``Snapshot.history``) is keyed by ``SERIES``, the ``FrameReading`` fields
+    marked ``plot`` (derived, not declared again). Every key the layout reads from it is one of
+    them, and it draws them all: a renamed field or a misspelt key fails here, not at run time."""
+    tree = ast.parse((TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8"))
+    read = {n.slice.value for n in ast.walk(tree) if isinstance(n, ast.Subscript) and isinstance(n.value, ast.Name)
+            and n.value.id == "h" and isinstance(n.slice, ast.Constant)}
+    assert "snap.history.items()" in (TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8")
+    assert read == set(SERIES)
+    state = LiveState()
+    assert set(state.snapshot().history) == set(SERIES)

@@ -20,6 +20,7 @@ from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from twin.config import RunConfig
 from twin.loop import Seams, supervisor_config
+from twin.records import FaultRaised
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 REAL = Path(__file__).resolve().parents[1] / "data" / "real-drum-pmma" / "images"
@@ -392,7 +393,7 @@ def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_c
     assert results and results[0] is not None and "no Dask scheduler" in results[0]
     # the loop's wiring (LiveLoop._auto_study_result): fault + doubt
     w.doubt_twin("whatif", f"what-if study failed ({results[0]})")
-    sink.fault("whatif_failed", results[0], 1.0)
+    sink.publish(FaultRaised(t_s=1.0, fault="whatif_failed", message=results[0]))
     advance(b, w, 0.0, 3.0)
     assert w.safe and "what-if study failed" in w.supervisor.safe_reason
     w.handle(SetMode("auto"))  # the operator chooses again

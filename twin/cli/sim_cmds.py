@@ -103,10 +103,7 @@ def sim_cmd(
         kw["friction"] = check_number("--friction", friction, 0.0, 5.0)
     if rolling is not None:
         kw["rolling"] = check_number("--rolling", rolling, 0.0, 5.0)
-    if end_friction is not None:
-        kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
-    if dt_ms is not None:
-        kw["dt_s"] = check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3
+    kw.update(_step_options(dt_ms, end_friction))
     mixer, meter_cfg = load_mixer(config, engine)
     sim: Any = make_twin(mixer, engine, case=case, seed=seed, rpm=rpm, **kw)
     renderer = Renderer(sim.drum, size, realism=Realism(seed=seed) if realism else None)
@@ -204,6 +201,19 @@ def sim_cmd(
         )
 
 
+def _step_options(dt_ms: float | None, end_friction: float | None) -> dict[str, float]:
+    """The twin's keyword arguments of ``--dt-ms`` (ms, 0.01-20; as ``dt_s``) and
+    ``--end-friction`` (0-5), range-checked (one-line ``SimError``); the ones not given left out."""
+    from sim.errors import check_number
+
+    out: dict[str, float] = {}
+    if dt_ms is not None:
+        out["dt_s"] = check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3
+    if end_friction is not None:
+        out["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
+    return out
+
+
 def _default_dt_ms(sim: Any) -> float:
     """The engine's default step for this bed (ms): the DEM's from its contact time, else the twin's
     ``default_dt_s`` (or, lacking one, the step it runs)."""
@@ -280,9 +290,7 @@ def calibrate_cmd(
     check_number("--max-evals", max_evals, 1, 40, integer=True)
     check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
-    sim_kw: dict[str, Any] = {} if dt_ms is None else {"dt_s": check_number("--dt-ms", dt_ms, 0.01, 20.0) / 1e3}
-    if end_friction is not None:
-        sim_kw["end_friction"] = check_number("--end-friction", end_friction, 0.0, 5.0)
+    sim_kw: dict[str, Any] = _step_options(dt_ms, end_friction)  # spread into calibrate(...)
     if curvature is not None:
         check_number("--curvature", curvature, -1.0, 1.0)
     n_frames = 0

@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol
 
 import viser
 
@@ -18,20 +18,31 @@ from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
 from twin.dashboard.guard import Gatekeeper, client_address
 from twin.dashboard.layout import MODE_LABELS, Layout, parse_rpm_list
-from twin.records import ModeSet
+from twin.records import ModeSet, OperatorClamped, OperatorRejected
 from twin.state import Controls, LiveState
+
+
+class Disableable(Protocol):
+    """A viser control that can be disabled (every control handle)."""
+
+    disabled: bool
 
 
 @dataclass
 class ClientControls:
-    """One viewer's control handles."""
+    """One viewer's control handles (None until its controls are built)."""
 
     authorised: bool
-    handles: list[Any] = field(default_factory=list)
-    mode: Any = None
-    rpm: Any = None
-    status: Any = None
-    estop: Any = None
+    handles: list[Disableable] = field(default_factory=list)
+    mode: viser.GuiDropdownHandle[str] | None = None
+    rpm: viser.GuiSliderHandle[float] | None = None
+    status: viser.GuiMarkdownHandle | None = None
+    estop: viser.GuiButtonHandle | None = None
+
+    def say(self, text: str) -> None:
+        """Tell this viewer ``text`` (Markdown) in its status line."""
+        if self.status is not None:
+            self.status.content = text
 
 
 class Viewers:
@@ -74,15 +85,15 @@ class Viewers:
                     if cc.estop is not None:
                         cc.estop.disabled = not self.gate.estop_allowed(cc.authorised)
                     self._sync_rpm_enabled(cc, self.state.panel.mode or "off")
-                    cc.status.content = message
+                    cc.say(message)
 
             cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
-            cc.mode = gui.add_dropdown(
+            mode_select = cc.mode = gui.add_dropdown(
                 "Mode", MODE_LABELS, initial_value=mode_now if mode_now in MODE_LABELS else "OFF",
                 disabled=not cc.authorised,
             )
             lo, hi = self.limits.rpm_range  # the slider shows what the supervisor allows
-            cc.rpm = gui.add_slider(
+            rpm_slider = cc.rpm = gui.add_slider(
                 "rpm (MANUAL)",
                 min=lo,
                 max=hi,
@@ -111,7 +122,7 @@ class Viewers:
             )
             run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1.5)
             cancel = gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=not cc.authorised, order=-1)
-        cc.handles = [cc.mode, start, stop, recal, reseed, relearn, rpms, dur, run, cancel]
+        cc.handles = [mode_select, start, stop, recal, reseed, relearn, rpms, dur, run, cancel]
         cc.estop = estop
 
         def guarded(fn: Callable[[viser.GuiEvent], None]) -> Callable[[viser.GuiEvent], None]:
@@ -119,31 +130,32 @@ class Viewers:
                 if event.client is None:  # a server-side value sync, not an operator
                     return
                 if not cc.authorised:
-                    cc.status.content = "*read-only viewer: action refused*"
+                    cc.say("*read-only viewer: action refused*")
                     return
                 fn(event)
 
             return cb
 
-        @cc.mode.on_update
+        @mode_select.on_update
         @guarded
         def _(event: viser.GuiEvent) -> None:
-            mode = str(cc.mode.value).lower()
+            mode = str(mode_select.value).lower()
             self.controls.set_mode(mode)
-            self.state.record(ModeSet(t_s=self.state.panel.t_s or 0.0, mode=mode))
+            self.state.record(ModeSet(t_s=self.gate.now_s(), mode=mode))
             self.sync_mode(mode)
 
-        @cc.rpm.on_update
+        @rpm_slider.on_update
         @guarded
         def _(event: viser.GuiEvent) -> None:
             try:
-                check = self.limits.check_rpm(cc.rpm.value)
+                check = self.limits.check_rpm(rpm_slider.value)
             except ControlError as exc:
-                cc.status.content = f"**rpm refused: {exc}**"
+                cc.say(f"**rpm refused: {exc}**")
                 return
             if check.clamped:  # the person who asked is told (the supervisor clamps the same way)
-                cc.status.content = f"**{check.message}**"
-                self.gate.event("operator_clamped", client=client.client_id, requested=check.requested, rpm=check.rpm)
+                cc.say(f"**{check.message}**")
+                self.gate.publish(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
+                                                requested=check.requested, rpm=check.rpm))
             self.controls.set_manual_rpm(check.rpm)
 
         @estop.on_click
@@ -151,7 +163,7 @@ class Viewers:
             if event.client is None:
                 return
             if not self.gate.estop_allowed(cc.authorised):
-                cc.status.content = "*read-only viewer: action refused*"
+                cc.say("*read-only viewer: action refused*")
                 return
             self.controls.emergency_stop()
 
@@ -169,33 +181,34 @@ class Viewers:
                 rpm_list = parse_rpm_list(str(rpms.value), self.limits)
                 rpm_list, duration = self.limits.check_whatif(rpm_list, dur.value)
             except (ValueError, ControlError) as exc:  # refused, with the limit, to the person who asked
-                cc.status.content = f"**what-if refused: {exc}**"
-                self.gate.event("operator_rejected", client=client.client_id, action="whatif", error=str(exc))
+                cc.say(f"**what-if refused: {exc}**")
+                self.gate.publish(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
+                                                 error=str(exc)))
                 return
-            cc.status.content = f"what-if queued: {len(rpm_list)} rpm x {duration:g} s"
+            cc.say(f"what-if queued: {len(rpm_list)} rpm x {duration:g} s")
             self.controls.run_whatif(rpm_list, duration)
 
     def _cancel_whatif(self, cc: ClientControls) -> None:
         cancel = getattr(self.controls, "cancel_whatif", None)
         if cancel is None:
-            cc.status.content = "**cancel: not supported by this loop**"
+            cc.say("**cancel: not supported by this loop**")
             return
-        cc.status.content = "what-if cancelled" if cancel() else "no what-if to cancel"
+        cc.say("what-if cancelled" if cancel() else "no what-if to cancel")
 
     def _relearn(self, cc: ClientControls) -> None:
         """The loop's typed relearn command (``relearn_classes``: a ``SwapClasses`` for the camera
         worker, logged as an operator action); what it answered goes to the viewer who asked."""
         relearn = getattr(self.controls, "relearn_classes", None)
         if relearn is None:
-            cc.status.content = "**re-learn: not supported by this loop**"
+            cc.say("**re-learn: not supported by this loop**")
             return
         answer = relearn()
-        cc.status.content = answer if isinstance(answer, str) else "re-learning the classes from the live bed ..."
+        cc.say(answer if isinstance(answer, str) else "re-learning the classes from the live bed ...")
 
     def _sync_rpm_enabled(self, cc: ClientControls, mode: str) -> None:
         """Show ``mode`` in the viewer's selector; the rpm slider is live only in MANUAL."""
         if cc.mode is not None and mode.upper() in MODE_LABELS:
-            cc.mode.value = mode.upper()
+            cc.mode.value = mode.upper()  # type: ignore[misc]  # viser 1.1 declares the setter on its generic base
         if cc.rpm is not None:
             cc.rpm.disabled = not (cc.authorised and mode.lower() == "manual")
 

@@ -39,12 +39,23 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from twin.config import LOCAL_HOSTS
 from twin.errors import TwinError
+from twin.records import (
+    DashboardBadMessage,
+    DashboardEvent,
+    DashboardRefused,
+    DashboardUnlocked,
+    DashboardUnlockFailed,
+    DashboardUnlockLimited,
+    Record,
+    event_fields,
+    kind_of,
+)
 
 if TYPE_CHECKING:
     from viser import ViserServer
@@ -238,10 +249,10 @@ _HANDLER_FAILURES = ("connection handler failed", "opening handshake failed")
 class OneLineConnectionErrors(logging.Filter):
     """Turns the ``websockets`` server's traceback for a connection whose handler failed
     (viser raises on a malformed message from a viewer: msgpack junk, a wrong field) into
-    one log line, and reports it to ``on_error(kind, detail)``. Only records of the
+    one log line, and reports it to ``on_error(detail)``. Only records of the
     connections on ``port`` are touched (the logger is shared by every server)."""
 
-    def __init__(self, port: int, on_error: Callable[[str, str], None] | None = None) -> None:
+    def __init__(self, port: int, on_error: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
         self.on_error = on_error
@@ -262,14 +273,14 @@ class OneLineConnectionErrors(logging.Filter):
         record.exc_info, record.exc_text, record.levelno, record.levelname = None, None, logging.WARNING, "WARNING"
         if self.on_error is not None:
             try:
-                self.on_error("dashboard_bad_message", detail)
+                self.on_error(detail)
             except Exception:
                 pass
         return True
 
 
 def install_connection_error_filter(
-    port: int, on_error: Callable[[str, str], None] | None = None
+    port: int, on_error: Callable[[str], None] | None = None
 ) -> Callable[[], None]:
     """Install :class:`OneLineConnectionErrors` on the ``websockets.server`` logger; returns
     the function that removes it again (the dashboard calls it when it stops)."""
@@ -281,25 +292,26 @@ def install_connection_error_filter(
 
 # -- the policy: token, unlock limits, security events ----------------------------------------
 EVENT_THROTTLE_S = 5.0  # noisy security events (refused handshakes, limited unlocks): at most one per 5 s
-EventSink = Callable[[str, dict[str, Any]], None]
-"""``on_event(kind, fields)``: where the dashboard reports security events (e.g. the run log)."""
+RecordSink = Callable[[Record], None]
+"""``on_event(record)``: where the dashboard reports its records (the run's ``EventSink.publish``)."""
 _log = logging.getLogger("drumtwin.dashboard")
 
 
 class Gatekeeper:
     """The dashboard's security policy, without viser: whether a token is needed, token
     attempts under :class:`UnlockLimiter`, who may press EMERGENCY STOP, and the security
-    events (to ``on_event``, noisy ones throttled to one per ``EVENT_THROTTLE_S`` per kind
-    with a count of the ones suppressed). Thread-safe."""
+    events (typed records to ``on_event`` at run time ``now_s()``, noisy ones throttled to one
+    per ``EVENT_THROTTLE_S`` per kind with a count of the ones suppressed). Thread-safe."""
 
     def __init__(
         self,
         control_token: str | None,
         *,
-        on_event: EventSink | None = None,
+        on_event: RecordSink | None = None,
         unlock_policy: UnlockPolicy | None = None,
         estop_needs_token: bool = False,
         monotonic: Callable[[], float] = time.monotonic,
+        now_s: Callable[[], float] = lambda: 0.0,
     ) -> None:
         self._token = control_token
         self.token_required = bool(control_token)  # on any host, loopback too
@@ -307,55 +319,57 @@ class Gatekeeper:
         self._on_event = on_event
         self._limiter = UnlockLimiter(unlock_policy)
         self._lock = threading.Lock()
-        self._throttle: dict[str, tuple[float, int]] = {}  # kind -> (last reported, suppressed since)
+        self._throttle: dict[type[DashboardEvent], tuple[float, int]] = {}  # kind -> (last reported, suppressed)
         self._monotonic = monotonic
+        self.now_s = now_s
         self.refused_handshakes = 0
         self.failed_unlocks = 0
         self.bad_messages = 0
 
-    def event(self, kind: str, **fields: Any) -> None:
-        """Report a security event to ``on_event`` (default: the ``drumtwin.dashboard`` log)."""
+    def publish(self, rec: Record) -> None:
+        """Report a record to ``on_event`` (default: the ``drumtwin.dashboard`` log)."""
         if self._on_event is not None:
             try:
-                self._on_event(kind, fields)
+                self._on_event(rec)
                 return
             except Exception:
                 _log.exception("dashboard event sink failed")
-        _log.warning("%s %s", kind, fields)
+        _log.warning("%s %s", kind_of(rec), event_fields(rec))
 
-    def event_throttled(self, kind: str, **fields: Any) -> None:
-        """Like :meth:`event`, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
+    def publish_throttled(self, rec: DashboardEvent) -> None:
+        """Like :meth:`publish`, at most once per ``EVENT_THROTTLE_S`` per kind (a hostile page
         can retry a refused handshake in a loop); ``suppressed`` counts the ones not sent."""
         now = self._monotonic()
+        kind = type(rec)
         with self._lock:
             last, suppressed = self._throttle.get(kind, (-math.inf, 0))
             if now - last < EVENT_THROTTLE_S:
                 self._throttle[kind] = (last, suppressed + 1)
                 return
             self._throttle[kind] = (now, 0)
-        self.event(kind, suppressed=suppressed, **fields)
+        self.publish(replace(rec, suppressed=suppressed))
 
     def flush_throttled(self, force: bool = False) -> None:
         """Write the counts of throttled events suppressed since their last report once
         their window has passed (``force``: now, e.g. when the dashboard stops), so the
         log says how many refused handshakes or limited unlocks there were."""
         now = self._monotonic()
-        due: list[tuple[str, int]] = []
+        due: list[tuple[type[DashboardEvent], int]] = []
         with self._lock:
             for kind, (last, suppressed) in self._throttle.items():
                 if suppressed and (force or now - last >= EVENT_THROTTLE_S):
                     due.append((kind, suppressed))
                     self._throttle[kind] = (now, 0)
         for kind, suppressed in due:
-            self.event(kind, suppressed=suppressed, summary=True)
+            self.publish(kind(t_s=self.now_s(), suppressed=suppressed, summary=True))
 
-    def bad_message(self, kind: str, detail: str) -> None:
+    def bad_message(self, detail: str) -> None:
         self.bad_messages += 1
-        self.event_throttled(kind, error=detail)
+        self.publish_throttled(DashboardBadMessage(t_s=self.now_s(), error=detail))
 
     def refused(self, origin: str | None, host: str | None) -> None:
         self.refused_handshakes += 1
-        self.event_throttled("dashboard_refused", origin=origin, host=host)
+        self.publish_throttled(DashboardRefused(t_s=self.now_s(), origin=origin, host=host))
 
     def try_unlock(self, client_id: int, given: object, address: str = "") -> tuple[bool, str]:
         """Check a token attempt under the per-viewer and per-address rate limits;
@@ -367,14 +381,14 @@ class Gatekeeper:
             if wait <= 0:
                 self._limiter.attempt(client_id, now, ok, address)
         if wait > 0:
-            self.event_throttled("dashboard_unlock_limited", client=client_id, address=address,
-                                 wait_s=round(wait, 1))
+            self.publish_throttled(DashboardUnlockLimited(t_s=self.now_s(), client=client_id, address=address,
+                                                        wait_s=round(wait, 1)))
             return False, f"**too many attempts: wait {math.ceil(wait)} s**"
         if not ok:
             self.failed_unlocks += 1
-            self.event("dashboard_unlock_failed", client=client_id, address=address)
+            self.publish(DashboardUnlockFailed(t_s=self.now_s(), client=client_id, address=address))
             return False, "**wrong token: read-only**"
-        self.event("dashboard_unlocked", client=client_id)
+        self.publish(DashboardUnlocked(t_s=self.now_s(), client=client_id))
         return True, "controls unlocked"
 
     def estop_allowed(self, authorised: bool) -> bool:

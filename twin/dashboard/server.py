@@ -21,14 +21,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import viser
 
 from control.limits import Limits
 from twin.dashboard.controls import Viewers
 from twin.dashboard.guard import (
-    EventSink,
     Gatekeeper,
+    RecordSink,
     UnlockPolicy,
     client_address,
     client_headers,
@@ -40,6 +41,7 @@ from twin.dashboard.guard import (
     origin_allowed,
 )
 from twin.dashboard.layout import Layout, alarms_html, axis_range, numbers_markdown, parse_rpm_list
+from twin.records import DashboardRefused
 from twin.state import Controls, LiveState
 
 _log = logging.getLogger("drumtwin.dashboard")
@@ -60,16 +62,18 @@ class Dashboard:
         control_token: str | None = None,
         update_hz: float = 12.0,
         title: str = "drumtwin",
-        on_event: EventSink | None = None,
+        on_event: RecordSink | None = None,
         unlock_policy: UnlockPolicy | None = None,
         limits: Limits | None = None,
         estop_needs_token: bool = False,
+        now_s: Callable[[], float] | None = None,
     ) -> None:
         if not is_loopback(host) and not control_token:
             raise ValueError(f"binding the dashboard to {host} needs a control token")
         self.limits = limits or Limits()
         self.gate = Gatekeeper(control_token, on_event=on_event, unlock_policy=unlock_policy,
-                               estop_needs_token=estop_needs_token)
+                               estop_needs_token=estop_needs_token,
+                               now_s=now_s if now_s is not None else lambda: state.panel.t_s or 0.0)
         self._build_lock = threading.Lock()  # one viewer's controls built at a time
         self.state = state
         self.controls = controls
@@ -129,7 +133,8 @@ class Dashboard:
         if ok is None:  # the viewer left before its controls were built: not a refusal
             return
         if not ok:
-            self.gate.event("dashboard_refused", client=client.client_id, origin="(after connect)")
+            self.gate.publish(DashboardRefused(t_s=self.gate.now_s(), client=client.client_id,
+                                               origin="(after connect)"))
             close_client(self._server, client.client_id)
             return
         with self._build_lock:  # viser's shared folder context admits one builder at a time

@@ -18,7 +18,16 @@ from control.endpoint import EndpointDetector
 from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
 from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView, SwapClasses
-from twin.records import CameraRate, FrameReading, TrendSettled, TrendUnsettled
+from twin.records import (
+    CameraRate,
+    FaultCleared,
+    FaultRaised,
+    FrameReading,
+    Mixed,
+    TrendSettled,
+    TrendUnsettled,
+    Unmixed,
+)
 from twin.state import LiveState
 from vision.errors import VisionError
 from vision.meter import Meter, Reading
@@ -237,10 +246,11 @@ class ProcessWorker:
         if not math.isfinite(item.t_s) or (prev.n_frames and item.t_s < prev.t_s):
             why = (f"went back from {prev.t_s:g} to {item.t_s:g} s" if math.isfinite(item.t_s)
                    else f"is {item.t_s}")
-            self.sink.fault("camera_clock", f"camera frame time {why}: frames dropped until it runs forward again",
-                            self.view.now_s(), frame=item.frame)
+            self.sink.publish(FaultRaised(
+                t_s=self.view.now_s(), fault="camera_clock", frame=item.frame,
+                message=f"camera frame time {why}: frames dropped until it runs forward again"))
             return None
-        self.sink.clear_fault("camera_clock", "frame times in order again", item.t_s)
+        self.sink.publish(FaultCleared(t_s=item.t_s, fault="camera_clock", message="frame times in order again"))
         r = item.reading
         valid = is_valid_mi(r)
         mi = r.mi if valid else math.nan
@@ -251,8 +261,9 @@ class ProcessWorker:
         ma = self.ma.update(mi)
         end = self.endpoint.update(item.t_s, mi, est.level, est.valid and est.settled)
         if end.changed:  # issue 24: the endpoint, live (the frame record carries it to the panel)
-            self.sink.event(end.changed, item.t_s, mixing_time_s=end.mixing_time_s, plateau_mi=end.plateau_mi,
-                            block_sd=end.block_sd, reason=end.reason)
+            change = Mixed if end.changed == "mixed" else Unmixed  # control.endpoint: "mixed" | "unmixed"
+            self.sink.publish(change(t_s=item.t_s, mixing_time_s=end.mixing_time_s, plateau_mi=end.plateau_mi,
+                                     block_sd=end.block_sd, reason=end.reason))
         last_valid = item.t_s if valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est, end.mixed, end.mixing_time_s))
         if valid and self.slopes is not None and math.isfinite(r.slope_deg):

@@ -38,7 +38,19 @@ from typing import Protocol
 from control.errors import ControlError, MillRefused
 from control.protocol import MillStatus
 from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill, drain
-from twin.records import MillState
+from twin.records import (
+    FaultCleared,
+    FaultRaised,
+    MillChangedElsewhere,
+    MillCommandDropped,
+    MillCommandSent,
+    MillState,
+    MillSynced,
+)
+from twin.records import MillMismatch as MillMismatchRecord
+from twin.records import (
+    MillRefused as MillRefusedRecord,
+)
 
 MILL_POLL_S = 0.1  # wall seconds between polls
 
@@ -56,12 +68,11 @@ class MillLink(Protocol):
     def close(self) -> None: ...
 
 
-def _describe(cmd: MillCommand) -> dict[str, object]:
+def _command(cmd: MillCommand) -> tuple[str, float | None]:
+    """The command's name in the records and its setpoint (rpm; None but for a set-rpm)."""
     if isinstance(cmd, SetRpm):
-        return {"command": "set_rpm", "rpm": cmd.rpm, "source": cmd.source}
-    if isinstance(cmd, StartMill):
-        return {"command": "start", "source": cmd.source}
-    return {"command": "stop", "source": cmd.source}
+        return "set_rpm", cmd.rpm
+    return ("start" if isinstance(cmd, StartMill) else "stop"), None
 
 
 class MillWorker:
@@ -115,7 +126,9 @@ class MillWorker:
                     self._send(cmd)
                 except MillRefused as exc:
                     self._refused += 1
-                    self.sink.event("mill_refused", self.now_s(), reason=exc.reason, **_describe(cmd))
+                    name, rpm = _command(cmd)
+                    self.sink.publish(MillRefusedRecord(t_s=self.now_s(), command=name, source=cmd.source, rpm=rpm,
+                                                        reason=exc.reason))
                     for rest in due[i + 1 :]:
                         self._drop(rest, "an earlier command was refused: the board is read again first")
                     return self._poll(snap, new_epoch=True)
@@ -126,7 +139,8 @@ class MillWorker:
                         else:
                             self._drop(failed, f"link lost: {exc}")
                     return self._lost(snap, exc)
-                self.sink.event("mill_command", self.now_s(), **_describe(cmd))
+                name, rpm = _command(cmd)
+                self.sink.publish(MillCommandSent(t_s=self.now_s(), command=name, source=cmd.source, rpm=rpm))
                 self._controlling = True
         return self._poll(snap, new_epoch=not snap.connected)
 
@@ -169,7 +183,8 @@ class MillWorker:
             self._sent_run = True
 
     def _drop(self, cmd: MillCommand, why: str) -> None:
-        self.sink.event("mill_command_dropped", self.now_s(), reason=why, **_describe(cmd))
+        name, rpm = _command(cmd)
+        self.sink.publish(MillCommandDropped(t_s=self.now_s(), command=name, source=cmd.source, rpm=rpm, reason=why))
 
     def _poll(self, snap: MillSnapshot, new_epoch: bool) -> MillSnapshot:
         try:
@@ -182,25 +197,30 @@ class MillWorker:
         if expect is not None and abs(st.setpoint_rpm - round(expect, 2)) > 0.011:
             self._refused += 1
             new_epoch = True
-            self.sink.event("mill_mismatch", t, rpm=expect, **st.as_dict())
+            self.sink.publish(MillMismatchRecord(t_s=t, rpm=expect, setpoint_rpm=st.setpoint_rpm,
+                                                 actual_rpm=st.actual_rpm, running=st.running, fault=st.fault))
         elif expect is None and snap.connected and snap.status is not None and (
             abs(st.setpoint_rpm - snap.status.setpoint_rpm) > 0.011
             or (not sent_run and st.running != snap.status.running)
         ):  # the board changed without us (another host, its front panel): read it again, as after a loss
             new_epoch = True
-            self.sink.event("mill_changed_elsewhere", t, was=snap.status.as_dict(), **st.as_dict())
+            self.sink.publish(MillChangedElsewhere(t_s=t, was=snap.status.as_dict(), setpoint_rpm=st.setpoint_rpm,
+                                                   actual_rpm=st.actual_rpm, running=st.running, fault=st.fault))
         epoch = snap.epoch + 1 if new_epoch else snap.epoch
         new = MillSnapshot(status=st, connected=True, epoch=epoch, polled=True, refused=self._refused)
         self.box.set(new)
         if not snap.connected:
-            self.sink.clear_fault("mill_link", "mill link restored", t, url=self.link.url)
-            self.sink.event("mill_synced", t, epoch=epoch, **st.as_dict())
+            self.sink.publish(FaultCleared(t_s=t, fault="mill_link", message="mill link restored", url=self.link.url))
+            self.sink.publish(MillSynced(t_s=t, epoch=epoch, setpoint_rpm=st.setpoint_rpm, actual_rpm=st.actual_rpm,
+                                         running=st.running, fault=st.fault))
         if st.fault:
             if snap.fault and snap.fault != st.fault:  # another fault: an event of its own
-                self.sink.clear_fault("mill_fault", f"mill fault {snap.fault} replaced by {st.fault}", t)
-            self.sink.fault("mill_fault", f"mill reports fault {st.fault}", t, mill_fault=st.fault)
+                self.sink.publish(FaultCleared(t_s=t, fault="mill_fault",
+                                               message=f"mill fault {snap.fault} replaced by {st.fault}"))
+            self.sink.publish(FaultRaised(t_s=t, fault="mill_fault", message=f"mill reports fault {st.fault}",
+                                          mill_fault=st.fault))
         else:
-            self.sink.clear_fault("mill_fault", "mill fault cleared", t)
+            self.sink.publish(FaultCleared(t_s=t, fault="mill_fault", message="mill fault cleared"))
         self._publish(new)
         return new
 
@@ -214,7 +234,8 @@ class MillWorker:
         if isinstance(self._run, StartMill):
             self._drop(self._run, f"link lost: {exc}")
             self._run = None
-        self.sink.fault("mill_link", f"mill link lost: {exc}", self.now_s(), url=self.link.url)
+        self.sink.publish(FaultRaised(t_s=self.now_s(), fault="mill_link", message=f"mill link lost: {exc}",
+                                      url=self.link.url))
         self._publish(new)
         return new
 

@@ -13,7 +13,7 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -21,10 +21,10 @@ import numpy as np
 
 from control.protocol import MillStatus
 from control.trend import TrendEstimate
-from twin.records import Bus, DecisionMade, Record, record_of
-from twin.runlog import write_record
+from twin.records import Bus, DecisionMade, FaultCleared, FaultRaised, Record
+from twin.runlog import RecordWriter, write_record
 from twin.state import LiveState
-from vision.meter import Reading
+from vision.meter import Meter, Reading
 from vision.roi import DrumROI
 
 T = TypeVar("T")
@@ -138,13 +138,14 @@ class FrameInfo:
 @dataclass(frozen=True)
 class TwinInfo:
     """The twin worker's newest state: run time it last stepped to (None: no twin yet),
-    its measured MI and slope, a ``SimState`` no older than a few seconds for
-    what-if studies, and ``seeds``: how many times it was seeded (from the camera's bed)."""
+    its measured MI and slope, the engine's snapshot (``Twin.snapshot()``: opaque, picklable;
+    a ``sim.drum.SimState`` or a pymunk state) no older than a few seconds for what-if studies,
+    and ``seeds``: how many times it was seeded (from the camera's bed)."""
 
     updated_s: float | None = None
     mi: float = math.nan
     slope_deg: float = math.nan
-    state: Any = None
+    state: Any = None  # as sim.engine.Twin.snapshot() (Any there: each engine its own state class)
     seeds: int = 0
 
 
@@ -196,7 +197,7 @@ class SwapClasses:
     (1-3 s) from ``vision.suggest.relearn_classes``' config (the classes re-learned from the
     live bed after ``lighting_changed:``; names and order kept)."""
 
-    meter: Any
+    meter: Meter
     source: str = "operator"
 
 
@@ -255,22 +256,17 @@ class RunView:
 
 # -- events ---------------------------------------------------------------------------------
 class EventSink(Protocol):
-    """Where workers report: typed run records (``publish``, see ``twin.records``), events by
-    kind (``event``: builds the kind's record), named faults raised once until cleared, and
-    metadata for the run log's ``metadata.json``."""
+    """Where workers report: typed run records (``publish``, see ``twin.records``; a
+    ``FaultRaised`` goes out once until its ``FaultCleared``) and metadata for the run log's
+    ``metadata.json``."""
 
     def publish(self, rec: Record) -> None: ...
-    def event(self, kind: str, t_s: float, **data: object) -> None: ...
-    def fault(self, key: str, message: str, t_s: float, **data: object) -> None: ...
-    def clear_fault(self, key: str, message: str, t_s: float, **data: object) -> None: ...
     def metadata(self, **data: object) -> None: ...
 
 
-class RunLogLike(Protocol):
-    """The run log as the sink uses it (``twin.runlog.RunLog``)."""
+class RunLogLike(RecordWriter, Protocol):
+    """The run log as the sink uses it (``twin.runlog.RunLog``): a record writer with metadata."""
 
-    def frame(self, row: Mapping[str, Any]) -> None: ...
-    def event(self, kind: str, t_s: float, **data: Any) -> object: ...
     def set_metadata(self, **data: Any) -> None: ...
 
 
@@ -278,10 +274,10 @@ class RunEvents:
     """The run's :class:`EventSink`: records go on the run's :class:`Bus` (``bus``), to which the
     run log (``twin.runlog.write_record``: CSV rows, JSONL events) and the dashboard's state
     (``LiveState.record``) subscribe. Faults go through the run's one ``ActiveFaults``
-    (``state.faults``): a fault is published once until it is cleared. Thread-safe; counts
-    faults and decisions. A run-log write that fails (disk full, read-only) never raises into
-    a worker: the first one is a ``run_log`` alarm and goes to ``on_failure`` (the loop ends the
-    run)."""
+    (``state.faults``): a ``FaultRaised`` is published only when its fault is not active, a
+    ``FaultCleared`` only when it is. Thread-safe; counts faults and decisions. A run-log write
+    that fails (disk full, read-only) never raises into a worker: the first one is a ``run_log``
+    alarm and goes to ``on_failure`` (the loop ends the run)."""
 
     def __init__(
         self, runlog: RunLogLike, state: LiveState, on_failure: Callable[[str], None] | None = None,
@@ -315,25 +311,20 @@ class RunEvents:
                 self.on_failure(reason)
 
     def publish(self, rec: Record) -> None:
+        if isinstance(rec, FaultRaised):
+            if not self.faults.raise_fault(rec.fault, rec.message, shown=False):
+                return
+            with self._lock:
+                self.n_faults += 1
+            self.bus.publish(rec)
+            self.faults.show(rec.fault)  # the alarm once its event is logged
+            return
+        if isinstance(rec, FaultCleared) and not self.faults.clear(rec.fault):
+            return
         if isinstance(rec, DecisionMade):
             with self._lock:
                 self.n_decisions += 1
         self.bus.publish(rec)
-
-    def event(self, kind: str, t_s: float, **data: object) -> None:
-        self.publish(record_of(kind, t_s, **data))
-
-    def fault(self, key: str, message: str, t_s: float, **data: object) -> None:
-        if not self.faults.raise_fault(key, message, shown=False):
-            return
-        with self._lock:
-            self.n_faults += 1
-        self.event("fault", t_s, fault=key, message=message, **data)
-        self.faults.show(key)  # the alarm once its event is logged
-
-    def clear_fault(self, key: str, message: str, t_s: float, **data: object) -> None:
-        if self.faults.clear(key):
-            self.event("recovered", t_s, fault=key, message=message, **data)
 
     def metadata(self, **data: object) -> None:
         self._write(self.runlog.set_metadata, **data)

@@ -34,7 +34,7 @@ from twin.live.records import (
     StopMill,
     SupervisorCommand,
 )
-from twin.records import DecisionMade, ModeSet, OperatorAction, OperatorRejected
+from twin.records import DecisionMade, FaultCleared, FaultRaised, ModeSet, OperatorAction, OperatorRejected
 
 RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
 
@@ -155,7 +155,7 @@ class SupervisorWorker:
             self.sink.publish(ModeSet(t_s=now, mode=sup.mode.value))
             if "whatif" in self._doubts:  # the operator chose again: a failed study is acknowledged
                 self.trust_twin("whatif")
-                self.sink.clear_fault("whatif_failed", "mode set by the operator", now)
+                self.sink.publish(FaultCleared(t_s=now, fault="whatif_failed", message="mode set by the operator"))
             self._apply(d)
         elif isinstance(cmd, SetManualRpm):
             try:
@@ -202,28 +202,30 @@ class SupervisorWorker:
         )
         if change == "raise":
             reason = f"twin disagrees with the camera: {self.mismatch.reason}"
-            self.sink.fault("twin_mismatch", reason, now)
+            self.sink.publish(FaultRaised(t_s=now, fault="twin_mismatch", message=reason))
             self.doubt_twin("mismatch", reason)
             if self.on_twin_mismatch is not None:
                 self.on_twin_mismatch()
         elif change == "clear":
             self.trust_twin("mismatch")
-            self.sink.clear_fault("twin_mismatch", "twin and camera agree again", now)
+            self.sink.publish(FaultCleared(t_s=now, fault="twin_mismatch", message="twin and camera agree again"))
 
     def _alarms(self, now: float) -> None:
         c = self.supervisor.config
         cam, frames = self.view.camera(), self.view.frames()
         if cam.ended:
-            self.sink.fault("camera_ended", "the camera source ended", now)
+            self.sink.publish(FaultRaised(t_s=now, fault="camera_ended", message="the camera source ended"))
         if cam.t_s is None:
             if now > c.vision_timeout_s:
-                self.sink.fault("camera_stopped", f"camera stopped: no frame yet after {now:.0f} s", now)
+                self.sink.publish(FaultRaised(t_s=now, fault="camera_stopped",
+                                              message=f"camera stopped: no frame yet after {now:.0f} s"))
         else:
             silent = now - cam.t_s
             if c.vision_lost(now, cam.t_s):
-                self.sink.fault("camera_stopped", f"camera stopped: no frame for {silent:.0f} s", now)
+                self.sink.publish(FaultRaised(t_s=now, fault="camera_stopped",
+                                              message=f"camera stopped: no frame for {silent:.0f} s"))
             else:
-                self.sink.clear_fault("camera_stopped", "camera frames again", now)
+                self.sink.publish(FaultCleared(t_s=now, fault="camera_stopped", message="camera frames again"))
         mill = self.view.mill()
         if mill.connected:  # fresh reads only (unknown values are NaN)
             hi = c.rpm_limits[1]
@@ -231,16 +233,19 @@ class SupervisorWorker:
                     if math.isfinite(v) and v > hi + RPM_LIMIT_SLACK]
             if over:
                 acting = "; it is brought inside" if self.supervisor.mode.value != "off" else " (mode OFF: hands off)"
-                self.sink.fault("mill_above_limits", f"the mill runs above the limits ({', '.join(over)} rpm > "
-                                f"{hi:g} rpm){acting}", now)
+                self.sink.publish(FaultRaised(t_s=now, fault="mill_above_limits",
+                                              message=f"the mill runs above the limits ({', '.join(over)} rpm > "
+                                f"{hi:g} rpm){acting}"))
             else:
-                self.sink.clear_fault("mill_above_limits", "the mill is inside the limits", now)
+                self.sink.publish(FaultCleared(t_s=now, fault="mill_above_limits",
+                                               message="the mill is inside the limits"))
         last = frames.last_valid_t_s
         if last is not None:
             if c.vision_lost(now, last):
-                self.sink.fault("vision_lost", f"no valid MI for {now - last:.0f} s", now)
+                self.sink.publish(FaultRaised(t_s=now, fault="vision_lost",
+                                              message=f"no valid MI for {now - last:.0f} s"))
             else:
-                self.sink.clear_fault("vision_lost", "valid MI again", now)
+                self.sink.publish(FaultCleared(t_s=now, fault="vision_lost", message="valid MI again"))
 
     def _apply(self, d: Decision) -> None:
         self.sink.publish(DecisionMade.of(d))

@@ -30,6 +30,8 @@ from twin.records import (
     Calibrated,
     CalibrationStarted,
     CalibrationWaiting,
+    FaultCleared,
+    FaultRaised,
     TwinLag,
     TwinReading,
     TwinSeeded,
@@ -38,8 +40,12 @@ from twin.records import (
 from twin.state import LiveState
 
 if TYPE_CHECKING:
+    from sim.calibrate import Calibration
+    from sim.engine import Twin
     from sim.mixer import Mixer
+    from sim.render import Renderer
     from vision.colours import ColourClass
+    from vision.meter import Meter
 
 CALIBRATION_WINDOW_S = 3.0  # run seconds of camera slope angles for a calibration
 TWIN_FPS = 10.0  # twin renders per run second (the dashboard's 10 Hz)
@@ -89,10 +95,10 @@ class TwinWorker:
         self.state = state
         self.box = box
         self.slopes = slopes
-        self.sim: Any = None
-        self.renderer: Any = None
-        self.meter: Any = None
-        self.calibration: Any = None
+        self.sim: Twin | None = None
+        self.renderer: Renderer | None = None
+        self.meter: Meter | None = None
+        self.calibration: Calibration | None = None
         self.fps = Rate()
         self.t0_run = 0.0  # run time at which the twin's own clock read 0
         self._requests: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -151,15 +157,18 @@ class TwinWorker:
             if lag <= 1e-6:
                 stop.wait(0.005)
                 continue
+            sim = self.sim  # set by _reseed (a reseed request replaces it between passes)
+            if sim is None:  # cannot happen: _reseed sets it or raises (a crash, as before)
+                raise RuntimeError("the twin worker has no twin after seeding")
             rpm = view.mill().actual_rpm
             if math.isfinite(rpm):
-                self.sim.set_rpm(min(max(rpm, 0.0), 0.95 * self.sim.critical_rpm))
-            self.sim.step(min(lag, 1.0 / TWIN_FPS))
+                sim.set_rpm(min(max(rpm, 0.0), 0.95 * sim.critical_rpm))
+            sim.step(min(lag, 1.0 / TWIN_FPS))
             if render.due(self.now_s):
                 self._render_and_measure()
             if self.now_s >= next_snap:
                 next_snap = self.now_s + SNAPSHOT_EVERY_S
-                self._state = self.sim.snapshot()
+                self._state = sim.snapshot()
             self._publish(self.now_s)
 
     def _serve_requests(self) -> None:
@@ -254,12 +263,12 @@ class TwinWorker:
         ))
         self.sink.metadata(calibration=cal)
         self.sink.publish(TwinStatus(t_s=t, state="running"))
-        self.sink.clear_fault("calibration", "calibrated", t)
+        self.sink.publish(FaultCleared(t_s=t, fault="calibration", message="calibrated"))
         if self.sim is not None:
             self.sim.set_friction(cal.friction, cal.rolling)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
-        self.sink.fault("calibration", f"calibration failed: {exc}", t)
+        self.sink.publish(FaultRaised(t_s=t, fault="calibration", message=f"calibration failed: {exc}"))
         self.sink.publish(TwinStatus(t_s=t, state="running (uncalibrated)"))
 
     def _get_pool(self) -> Executor:
@@ -320,11 +329,16 @@ class TwinWorker:
         self._publish(t)
 
     def _render_and_measure(self) -> None:
-        parts = self.sim.particles()
-        image = self.renderer.render(parts)
-        r = self.meter.measure(image)
+        sim, renderer, meter = self.sim, self.renderer, self.meter
+        if sim is None or renderer is None or meter is None:  # not seeded yet
+            return
+        parts = sim.particles()
+        image = renderer.render(parts)
+        if image is None:  # only a renderer with realism drops frames (the twin's has none)
+            return
+        r = meter.measure(image)
         self.fps.tick()
         self._mi, self._slope = float(r.mi), float(r.slope_deg)
-        self.state.publish_twin(image, parts, self.sim.drum.radius_m)
+        self.state.publish_twin(image, parts, sim.drum.radius_m)
         self.sink.publish(TwinReading(t_s=self.now_s, mi=r.mi, slope_deg=r.slope_deg, fps=self.fps.rate()))
 

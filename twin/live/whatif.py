@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,7 +27,11 @@ from twin.live.records import EventSink, RunView
 from twin.records import WhatIfCancelled, WhatIfError, WhatIfResult
 from twin.state import LiveState, WhatIfView
 
-Study = Callable[[Sequence[Any]], Sequence[Any]]
+if TYPE_CHECKING:
+    from sim.whatif import WhatIfJob
+    from sim.whatif import WhatIfResult as StudyResult
+
+Study = Callable[[Sequence["WhatIfJob"]], Sequence["StudyResult"]]
 """``study(jobs) -> results`` (``sim.whatif.WhatIfJob`` -> ``WhatIfResult``, in order)."""
 
 
@@ -248,7 +252,7 @@ class WhatIfWorker:
             self._pool = make_pool(self.workers)
         return self._pool
 
-    def _run_jobs(self, jobs: Sequence[Any]) -> Sequence[Any]:
+    def _run_jobs(self, jobs: Sequence[WhatIfJob]) -> Sequence[StudyResult]:
         if self._study_fn is not None:
             return self._study_fn(jobs)
         from sim.whatif import run_study
