@@ -8,8 +8,9 @@ noise ``e`` decaying by ``phi = exp(-dt / tau_e)`` with ``var(w) = R (1 - phi^2)
 densities scaled by the frame-to-frame variance over ``meas_sd^2``, ``MI = level + ripple_c + e`` (+ the
 white floor ``min_meas_sd^2``) while the drum turns, the gate on ``y^2 / S``, the windowed share of
 rejections (never fewer than ``reinit_min`` samples) and the median re-initialisation that keeps the
-learnt noise, the stationary variance from pairs ``noise_lag_s`` apart and the frame-to-frame one from
-consecutive accepted samples, the projection into ``[0, 1]`` and ``+-max_rate_per_s``, the band
+learnt noise, the stationary variance from pairs ``noise_lag_s`` apart ending on an accepted sample and
+the frame-to-frame one from consecutive valid samples (each pair capped at ``gate_d2`` times the variance
+in use, ``max`` of the two), the projection into ``[0, 1]`` and ``+-max_rate_per_s``, the band
 widened by the rejections' median and the settle rule (seconds of accepted data, the settle width
 and its hysteresis). Every field of every ``TrendEstimate`` must agree with it, step by step, on
 sequences made to pass every branch.
@@ -37,7 +38,7 @@ class Reference:
         self.n_reinit = 0
         self.r, self.d1, self.dt1, self.n_lag, self.n_one = c.meas_sd**2, c.meas_sd**2, 0.0, 0, 0
         self.valid: list[tuple[float, float, bool]] = []  # valid samples since (re)init
-        self.acc: list[tuple[float, float]] = []  # accepted samples since (re)init or a gap
+        self.acc: list[tuple[float, float]] = []  # valid samples since (re)init or a gap
         self.n = 0
         self.acc_s = 0.0
         self.settled = False
@@ -45,7 +46,7 @@ class Reference:
         self.P = np.zeros((5, 5))
 
     def var(self) -> float:
-        return float(np.clip(self.r, self.c.min_meas_sd**2, 0.25))
+        return float(np.clip(max(self.r, self.d1), self.c.min_meas_sd**2, 0.25))
 
     def tau_e(self) -> float:
         if self.n_one == 0 or self.dt1 <= 0:
@@ -93,24 +94,25 @@ class Reference:
         self.P = F @ self.P @ F.T + Q
         self.project()
 
-    def learn(self, t: float, z: float) -> None:
+    def learn(self, t: float, z: float, accepted: bool) -> None:
         c = self.c
         lag = c.noise_lag_s
+        cap = c.gate_d2 * self.var()
         prev = self.acc[-1] if self.acc else None
         if prev is not None and 0.0 < t - prev[0] <= lag:
             dt = t - prev[0]
             self.n_one += 1
             a = max(min(1.0, dt / c.noise_tau_s), 1.0 / (self.n_one + 1))
-            self.d1 = (1 - a) * self.d1 + a * (z - prev[1]) ** 2 / 2
+            self.d1 = (1 - a) * self.d1 + a * min((z - prev[1]) ** 2 / 2, cap)
             self.dt1 = dt if self.n_one == 1 else (1 - a) * self.dt1 + a * dt
         partners = [p for p in self.acc if t - p[0] >= lag]  # the newest is the pair's partner
         if partners and t - partners[-1][0] > lag + 1.0:
             self.acc = [(t, z)]  # a gap: no pair across it, this sample starts the next one
             return
-        if partners and prev is not None:
+        if partners and prev is not None and accepted:
             self.n_lag += 1
             a = max(min(1.0, (t - prev[0]) / c.noise_tau_s), 1.0 / (self.n_lag + 1))
-            self.r = (1 - a) * self.r + a * (z - partners[-1][1]) ** 2 / 2
+            self.r = (1 - a) * self.r + a * min((z - partners[-1][1]) ** 2 / 2, cap)
         self.acc.append((t, z))
 
     def in_window(self, t: float) -> tuple[int, list[float]]:
@@ -148,8 +150,8 @@ class Reference:
                 rejected = nis > c.gate_d2
                 self.valid.append((t, z, rejected))
                 n, rej = self.in_window(t)
+                self.learn(t, z, not rejected)  # every valid sample: D1 from all, R from pairs ending accepted
                 if not rejected:
-                    self.learn(t, z)
                     s = h @ self.P @ h + rw
                     gain = self.P @ h / s
                     self.x = self.x + gain * y
@@ -269,7 +271,10 @@ def test_every_estimate_is_the_reference_models(name, seed):
         seen["widened"] += want.valid and want.hi95 - want.lo95 > 2 * Z95 * want.level_sd + 1e-9
         seen["coloured"] += ref.tau_e() > 0
     # the sequence passed through the branches it is made for
-    assert seen["reinit"] >= 3 and seen["rejected"] >= 5 and seen["settled"] >= 10 and seen["widened"] >= 1, seen
+    # ("loose": its noise, learnt up to sd 0.17 on the ramps' 2 s pairs, opens the 4-sigma gate before 80 %
+    # of a 1 s window is rejected: it re-initialises at the start and after the 40 s gap only)
+    assert seen["reinit"] >= (2 if name == "loose" else 3), seen
+    assert seen["rejected"] >= 5 and seen["settled"] >= 10 and seen["widened"] >= 1, seen
     assert seen["coloured"] >= 30, seen  # the AR(1) stretch made the noise coloured
 
 

@@ -97,7 +97,7 @@ def test_real_bench_band_is_honest_and_the_check_can_fail(real_bench, frames_mi,
     import control.trend as trend_mod
 
     seqs = [s for seed in range(2) for s in real_sequences(frames_mi, seed)]
-    for factor in (0.3, 4.0):
+    for factor in (0.3, 3.0):
         monkeypatch.setattr(trend_mod, "Z95", trend_mod.Z95 * factor)
         assert not coverage_ok(run_trend_bench(seqs)), factor
         monkeypatch.undo()

@@ -242,20 +242,22 @@ def test_both_noise_estimates_are_running_means_at_first():
     """With a long time constant the weight of each new pair is 1 / (pairs + 1), the configured
     meas_sd^2 counting once. Alternating +-0.01 at 32 frames/s: after k consecutive pairs the
     frame variance is (meas_sd^2 + k 0.02^2 / 2) / (k + 1); the pairs 1 s (32 frames, an even
-    number) apart differ by 0, so after j of them the stationary variance is meas_sd^2 / (j + 1)."""
+    number) apart differ by 0, so after j of them the pairs' variance is meas_sd^2 / (j + 1); the one in
+    use is the larger of the two."""
     tr = MITrend(TrendConfig(noise_tau_s=1e9))
     for i in range(80):
         e = tr.update(i / 32, 0.5 + (0.01 if i % 2 else -0.01), 0.0)
         assert e.accepted
         assert tr.frame_sd**2 == pytest.approx((0.05**2 + i * 0.02**2 / 2) / (i + 1), rel=1e-9)
         j = max(0, i - 31)
-        assert e.meas_sd**2 == pytest.approx(max(0.05**2 / (j + 1), 0.002**2), rel=1e-9)
+        d1 = (0.05**2 + i * 0.02**2 / 2) / (i + 1)
+        assert e.meas_sd**2 == pytest.approx(max(0.05**2 / (j + 1), d1, 0.002**2), rel=1e-9)  # never below D1
 
 
 def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pairs():
     """``noise_tau_s`` 0.25 s, frames 0.5 s apart: the weight is capped at 1, so the frame variance is
-    half the last consecutive pair's squared difference and the stationary one half that of the
-    last pair 1 s (two frames) apart, whatever came before."""
+    half the last consecutive pair's squared difference and the pairs' one half that of the last
+    pair 1 s (two frames) apart, whatever came before; the variance in use is the larger."""
     tr = MITrend(TrendConfig(noise_tau_s=0.25))
     z = [0.5 + 0.01 * (i % 3) for i in range(30)]  # steps +0.01, +0.01, -0.02
     for i, v in enumerate(z):
@@ -264,7 +266,8 @@ def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pairs():
         if i:
             assert tr.frame_sd == pytest.approx(abs(v - z[i - 1]) / math.sqrt(2.0), rel=1e-9)
         if i >= 2:
-            assert e.meas_sd == pytest.approx(max(abs(v - z[i - 2]) / math.sqrt(2.0), 0.002), rel=1e-9)
+            want = max(abs(v - z[i - 2]), abs(v - z[i - 1])) / math.sqrt(2.0)  # max(R, D1)
+            assert e.meas_sd == pytest.approx(max(want, 0.002), rel=1e-9)
 
 
 def test_a_fresh_trend_has_no_rejections_and_counts_its_initialisations():
@@ -314,3 +317,84 @@ def test_the_reinit_window_holds_the_samples_at_its_start():
     step = [tr.update(t + k / 32, 0.9, 0.0) for k in range(1, 20)]
     first = next(k for k, e in enumerate(step, start=1) if e.reinit)
     assert first == 11 and not any(e.accepted for e in step[:10])
+
+
+@pytest.mark.parametrize("fps", [10.0, 30.0])
+def test_a_trend_settles_after_settle_s_of_accepted_frames_at_any_frame_rate(fps):
+    """With the band criterion out of the way (settle_band 1) a trend settles on the first sample
+    that completes settle_s = 1 s of accepted frames (and reinit_min = 8 of them), at 10 fps as at
+    30 fps. (A count of 30 frames, as before, was 2.9 s at 10 fps and 0.97 s at 30 fps.)"""
+    tr = MITrend(TrendConfig(settle_band=1.0, settle_band_max=1.0))
+    out = [tr.update(i / fps, 0.6 + 0.01 * (i % 3), 5.0) for i in range(int(3 * fps))]
+    assert all(e.accepted for e in out)
+    first = next(e.t_s for e in out if e.settled)
+    assert 1.0 - 1e-9 <= first <= 1.0 + 1 / fps + 1e-9, first
+    assert all(e.settled for e in out if e.t_s >= first)
+
+
+def test_a_trend_needs_reinit_min_accepted_samples_to_settle():
+    """One sample, then one more 2 s later: 2 s of data, but 2 < reinit_min samples: not settled."""
+    tr = MITrend(TrendConfig(settle_band=1.0, settle_band_max=1.0))
+    tr.update(0.0, 0.5)
+    e = tr.update(2.0, 0.5)
+    assert e.accepted and tr.accepted_s == 2.0 and not e.settled
+
+
+def test_at_10_fps_the_reinit_window_holds_reinit_min_samples():
+    """0.6 s at 10 fps holds 6 valid samples < reinit_min = 8: the window is the last 8, so after
+    a step the 5th rejected sample re-initialises (5 >= 0.6 * 8). (A window of 0.6 s only could
+    never reach 8 samples: the old trend never re-initialised at 10 fps.)"""
+    tr = MITrend()
+    for i in range(100):
+        assert tr.update(i / 10, 0.5 + 0.01 * (i % 3 - 1), 5.0).accepted
+    step = [tr.update(10.0 + k / 10, 0.9, 5.0) for k in range(10)]
+    first = next(k for k, e in enumerate(step, start=1) if e.reinit)
+    assert first == 5 and not any(e.accepted for e in step[:4])
+    assert step[4].level == 0.9
+
+
+def test_a_reinit_keeps_the_learnt_noise():
+    """The noise belongs to the camera and the bed, not to the level: after a step to a constant
+    0.9 (a MAD of 0, as the old re-init took it) the trend keeps the bed's noise (sd ~0.01)."""
+    tr = MITrend()
+    rng = np.random.default_rng(2)
+    for i in range(300):
+        tr.update(i / 30, 0.5 + rng.normal(0, 0.01), 5.0)
+    before = tr.estimate(10.0).meas_sd
+    assert 0.007 < before < 0.014
+    step = [tr.update(10.0 + k / 30, 0.9, 5.0) for k in range(30)]
+    re = next(e for e in step if e.reinit)
+    assert re.meas_sd == pytest.approx(before, rel=0.25) and re.level == 0.9
+
+
+def test_gated_samples_feed_the_frame_noise_so_its_gate_cannot_trap_it():
+    """The real frames' drift pool (0.359, 0.414, 0.422, 0.453, drawn i.i.d.) after 10 s of its two
+    middle values: learnt from accepted samples only, the noise stayed at the quiet part's 0.005,
+    the gate rejected 0.359 and 0.453 for good (accepted 48 % of the last 10 s, 65 re-inits onto
+    them, never settled). Consecutive valid pairs, gated or not (each capped at the gate), see the
+    pool's spread (sd 0.034) within the noise time constant: the last 10 s of 40 all accepted,
+    settled, the level within 0.035 of the pool's mean 0.412."""
+    rng = np.random.default_rng(4)
+    tr = MITrend()
+    quiet = rng.choice([0.414, 0.422], 300)
+    pool = rng.choice([0.359, 0.414, 0.422, 0.453], 1200)
+    out = [tr.update(i / 30, float(v), 5.0) for i, v in enumerate(np.concatenate([quiet, pool]))]
+    late = out[-300:]
+    assert late[-1].meas_sd > 0.028
+    assert np.mean([e.accepted for e in late]) >= 0.95 and all(e.settled for e in late)
+    assert max(abs(e.level - 0.412) for e in late) <= 0.035
+    assert tr.n_reinit <= 3
+
+
+def test_a_pair_farther_apart_than_the_gate_counts_as_at_the_gate():
+    """noise_tau_s 0.25 s and frames 0.5 s apart: each pair's weight is 1, so after a glitch the
+    frame variance is exactly gate_d2 times the variance in use before it, not the glitch's."""
+    tr = MITrend(TrendConfig(noise_tau_s=0.25))
+    z = [0.5 + 0.01 * (i % 3) for i in range(20)]
+    for i, v in enumerate(z):
+        tr.update(i / 2, v, 0.0)
+    var = tr.estimate(9.5).meas_sd ** 2
+    e = tr.update(10.0, 0.99, 0.0)
+    assert not e.accepted
+    assert tr.frame_sd**2 == pytest.approx(9.0 * var, rel=1e-12)
+    assert 9.0 * var < 0.5 * (0.99 - z[-1]) ** 2  # the glitch's own half square is larger
