@@ -51,8 +51,9 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       of a sample at the gate, and a real step (rejected samples close to each other) barely
       moves ``D1``. Their ratio is the lag-1 correlation ``rho = 1 - D1/max(R, D1)``,
       hence ``tau_e = -dt1 / ln(rho)`` (``dt1`` the mean frame gap; ``rho <= 0``: white,
-      ``phi = 0``; ``tau_e`` at most ``noise_lag_s``). On i.i.d. MI ``D1 ~ R`` and ``phi ~ 0``: the filter is
-      the white-noise one (``R`` from consecutive pairs, as before). Learned only from
+      ``phi = 0``; ``tau_e`` at most ``noise_lag_s``). On i.i.d. MI ``D1 ~ R`` and
+      ``phi ~ 0``: the filter is the white-noise one (the variance that of consecutive pairs,
+      as before). Learned only from
       consecutive pairs, ``R`` saw a third of the demo's spread (sd 0.02 against 0.06): the
       3-sigma gate rejected the real wander, the rate state followed the rest and the trend
       ran to 1.0 and 0.35 on camera MI 0.85-0.92. ``rate_q`` and ``ripple_q`` are given at
@@ -72,8 +73,8 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
       removes information, never adds it).
     - **Settled.** ``TrendEstimate.settled``: at least ``settle_s`` seconds of accepted data
       (the sum of the frame gaps of accepted samples) and ``reinit_min`` accepted samples
-      since the start or the last re-initialisation (so 10 fps and 30 fps cameras settle in
-      the same time; 30 frames were 3 s at 10 fps), and a band no wider than the settle
+      since the start or the last re-initialisation (the same minimum at 10 fps and 30 fps;
+      30 frames were 3 s at 10 fps; the band then takes what the data need), and a band no wider than the settle
       width: ``settle_band``, or the 95 % spread of one MI reading ``2 * 1.96 * meas_sd``
       when that is wider (the level is then known better than any frame tells; an honest
       band on correlated MI cannot be as narrow as on white MI), never above
@@ -86,7 +87,7 @@ Why it is built this way (issue 21: real camera MI, not twin MI)
     89-100 % (on a band far too narrow); new RMSE 0.029-0.043, max 0.18-0.33, settled 94-97 %.
     The reverted first fix (1 s pairs, white noise, MAD at re-init, 30 frames to settle) was
     settled 10 % of a loaded demo run. ``drumtwin bench trend``: real frames RMSE 0.038,
-    lock-out 1.10 -> 1.00 s, coverage 98.4 -> 97.9 %; synthetic lock-out 1.17 -> 1.53 s.
+    lock-out 1.10 -> 1.00 s, coverage 98.3 -> 97.9 %; synthetic lock-out 1.17 -> 1.53 s.
 
 - NaN MI (missing or invalid frame): predict only; a gap longer than ``max_dt_s``
   re-initialises on the next valid sample.
