@@ -359,3 +359,32 @@ def test_a_band_exactly_as_wide_as_settle_band_is_settled():
     cfg = TrendConfig(meas_sd=0.5, settle_s=0.0, reinit_min=1, settle_band=1.0, settle_band_max=1.0)
     e = MITrend(cfg).update(0.0, 0.5)
     assert (e.lo95, e.hi95) == (0.0, 1.0) and e.settled
+
+
+def test_the_correlation_time_is_the_reference_models_on_uneven_frame_gaps():
+    """An AR(1) wander sampled at jittered times (0.02-0.06 s, the first two different): the mean
+    frame gap ``dt1`` is the
+    pairs' running mean (the first pair's gap, then weights 1 / (pairs + 1)), so the correlation
+    time ``tau_e`` of every step is the reference model's."""
+    rng = np.random.default_rng(5)
+    tr, ref = MITrend(), Reference(TrendConfig())
+    t, e, coloured = 0.0, 0.0, 0
+    for i in range(200):
+        e = 0.9 * e + rng.normal(0.0, 0.02)
+        t = round(t + (0.02, 0.06)[i] if i < 2 else t + float(rng.choice([0.02, 0.04, 0.06])), 9)  # two gaps differ
+        tr.update(t, 0.6 + e, 5.0)
+        ref.update(t, 0.6 + e, 5.0)
+        assert tr.noise_tau_e_s == pytest.approx(ref.tau_e(), rel=1e-9, abs=1e-12), t
+        coloured += ref.tau_e() > 0
+    assert coloured >= 50
+
+
+def test_a_pair_exactly_noise_lag_s_plus_1_s_apart_is_still_a_pair():
+    """The gap rule drops a pair only past ``noise_lag_s + 1`` s: two samples exactly 2.0 s apart
+    (binary-exact, an open gate) are a pair, R = (meas_sd^2 + 0.2^2 / 2) / 2; 2 s is past the
+    consecutive pairs' ``noise_lag_s``, so D1 keeps its prior."""
+    tr = MITrend(TrendConfig(gate_d2=1e9))
+    tr.update(0.0, 0.5)
+    e = tr.update(2.0, 0.7)
+    assert e.accepted and tr.frame_sd == 0.05
+    assert e.meas_sd**2 == pytest.approx((0.05**2 + 0.2**2 / 2) / 2, rel=1e-9)
