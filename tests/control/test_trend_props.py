@@ -42,7 +42,9 @@ def test_level_band_and_rate_stay_in_their_ranges(seq):
         assert abs(e.rate) <= m + 1e-12
         assert math.isfinite(e.level_sd) and e.level_sd >= 0.0
         assert tr.config.min_meas_sd - 1e-12 <= e.meas_sd <= 0.5
-        assert not e.settled or (e.hi95 - e.lo95 <= tr.config.settle_band and e.n_since_init >= 30)
+        c = tr.config
+        assert not e.settled or (e.hi95 - e.lo95 <= c.settle_band_max and e.n_since_init >= c.reinit_min
+                                 and tr.accepted_s >= c.settle_s)
 
 
 @settings(max_examples=60, deadline=None)

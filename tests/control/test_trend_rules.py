@@ -55,7 +55,8 @@ def test_config_from_window_scales_both_noise_densities_by_the_variance_ratio():
      ({"max_rate_per_s": 0.0}, "positive"), ({"reinit_window_s": 0.0}, "reinit_window_s"),
      ({"unsettle_share": 0.0}, "unsettle_share"), ({"unsettle_share": 0.7, "reinit_share": 0.6}, "unsettle_share"),
      ({"reinit_share": 1.01}, "reinit_share"), ({"reinit_min": 0}, "reinit_min"),
-     ({"settle_frames": -1}, "settle_frames"), ({"settle_band": 0.0}, "settle_band"),
+     ({"settle_s": -0.1}, "settle_s"), ({"settle_band": 0.0}, "settle_band"), ({"settle_s": math.nan}, "settle_s"),
+     ({"noise_lag_s": 0.0}, "noise_lag_s"), ({"noise_lag_s": 10.5}, "noise_lag_s"),
      ({"meas_sd": math.nan}, "positive"), ({"settle_band": math.nan}, "settle_band")],
 )
 def test_trend_config_refuses_each_bad_value(kw, match):
@@ -64,16 +65,18 @@ def test_trend_config_refuses_each_bad_value(kw, match):
     full = {"positive": "trend noise levels must be positive (meas_sd, min_meas_sd, rate_q, gate_d2, "
                         "noise_tau_s, max_rate_per_s)",
             "reinit_window_s": "trend re-init needs reinit_window_s > 0 and 0 < unsettle_share <= reinit_share <= 1",
-            "reinit_min": "reinit_min must be >= 1, settle_frames >= 0 and settle_band > 0"}
+            "reinit_min": "reinit_min must be >= 1, settle_s >= 0 and settle_band > 0",
+            "noise_lag_s": f"trend noise_lag_s must be in (0, 10] s, got {kw.get('noise_lag_s')}"}
     full["unsettle_share"] = full["reinit_share"] = full["reinit_window_s"]
-    full["settle_frames"] = full["settle_band"] = full["reinit_min"]
+    full["settle_s"] = full["settle_band"] = full["reinit_min"]
     assert str(exc.value) == full[match]
 
 
 @pytest.mark.parametrize(
     "kw",
     [{"ripple_q": 0.0}, {"unsettle_share": 0.6, "reinit_share": 0.6}, {"reinit_share": 1.0, "unsettle_share": 1.0},
-     {"reinit_min": 1}, {"settle_frames": 0}, {"min_meas_sd": 1e-9, "meas_sd": 1e-9}, {"gate_d2": 0.5},
+     {"reinit_min": 1}, {"settle_s": 0.0}, {"noise_lag_s": 10.0}, {"min_meas_sd": 1e-9, "meas_sd": 1e-9},
+     {"gate_d2": 0.5},
      {"noise_tau_s": 0.5}, {"max_rate_per_s": 0.5}, {"reinit_window_s": 0.1}],
 )
 def test_trend_config_accepts_the_edges(kw):
@@ -166,11 +169,12 @@ def test_a_rate_at_its_bound_loses_its_covariance_with_the_level_once():
     The update that pushes the rate past its bound projects it back and zeroes P01, so the first
     prediction after it has no 2 dt P01 term; the rate, now exactly at the bound, is not projected
     again, so the second has it."""
-    cfg = TrendConfig(max_rate_per_s=0.01, meas_sd=0.01, min_meas_sd=0.01)  # R fixed at 1e-4: q = rate_q
+    # R fixed at its floor 4e-4 (the ramp's pairs 1 s apart differ by 0.02: half the square is 2e-4): q = rate_q
+    cfg = TrendConfig(max_rate_per_s=0.01, meas_sd=0.02, min_meas_sd=0.02)
     tr = MITrend(cfg)
     est = [tr.update(i / 10, 0.9 - 0.02 * i / 10, 0.0) for i in range(200)]
     e0 = est[-1]
-    assert e0.rate == -0.01 and e0.meas_sd == pytest.approx(0.01, rel=1e-12)
+    assert e0.rate == -0.01 and e0.meas_sd == pytest.approx(0.02, rel=1e-12)
     dt, q = 0.1, cfg.rate_q
     e1 = tr.update(e0.t_s + dt, math.nan, 0.0)
     e2 = tr.update(e0.t_s + 2 * dt, math.nan, 0.0)
@@ -186,9 +190,9 @@ def test_a_rate_at_its_bound_loses_its_covariance_with_the_level_once():
 def test_reset_forgets_everything():
     """After ``reset`` the next valid MI starts the filter as at first: time may start again,
     the noise estimate is the configured one, and a trend that had settled is judged afresh
-    (with ``settle_frames = 1`` the first band, 2 * 1.96 * 0.05 = 0.196, is too wide for a
-    settle band of 0.14; a stale 'settled' would allow 1.5 * 0.14 = 0.21)."""
-    cfg = TrendConfig(settle_frames=1, settle_band=0.14)
+    (with ``settle_s = 0`` and ``reinit_min = 1`` the first band, 2 * 1.96 * 0.05 = 0.196, is too
+    wide for a settle band of 0.14 capped at 0.14; a stale 'settled' would allow 1.5 * 0.14 = 0.21)."""
+    cfg = TrendConfig(settle_s=0.0, reinit_min=1, settle_band=0.14, settle_band_max=0.14)
     tr = MITrend(cfg)
     rng = np.random.default_rng(3)
     est = [tr.update(i / 30, 0.6 + rng.normal(0, 0.01), 10.0) for i in range(300)]
@@ -211,48 +215,59 @@ def test_after_reset_missing_frames_report_nothing():
 
 
 def _noisy_bed(tr: MITrend, n: int = 96) -> float:
-    """0.5 +- 0.02 alternating at 32 frames/s (binary-exact times); returns the last time."""
+    """0.48, 0.5, 0.52 repeated at 32 frames/s (binary-exact times; 32 frames is no multiple of the
+    period, so the pairs 1 s apart see the spread too); returns the last time."""
     for i in range(n):
-        e = tr.update(i / 32, 0.5 + (0.02 if i % 2 else -0.02), 0.0)
+        e = tr.update(i / 32, 0.5 + 0.02 * (i % 3 - 1), 0.0)
         assert e.accepted
     return (n - 1) / 32
 
 
 @pytest.mark.parametrize(("gap_s", "learns"), [(0.0, False), (1.0, True), (1.5, False), (3.0, False)])
-def test_the_noise_is_learned_only_from_accepted_pairs_at_most_1_s_apart(gap_s, learns):
-    """Consecutive accepted samples feed the noise estimate when 0 < dt <= 1 s: a pair at the same
-    time or across a longer gap (NaN frames in between) says nothing about the frame-to-frame noise."""
+def test_the_frame_noise_is_learned_only_from_accepted_pairs_at_most_noise_lag_s_apart(gap_s, learns):
+    """Consecutive accepted samples feed the frame-to-frame estimate when 0 < dt <= noise_lag_s (1 s):
+    a pair at the same time or across a longer gap (NaN frames in between) says nothing about it."""
     tr = MITrend()
     t = _noisy_bed(tr)
-    before = tr.estimate(t).meas_sd
+    before = tr.frame_sd
     for k in range(1, 4):
         if k / 4 * gap_s > 0 and k / 4 * gap_s < gap_s:
             assert not tr.update(t + k / 4 * gap_s, math.nan, 0.0).accepted
     e = tr.update(t + gap_s, 0.52, 0.0)
     assert e.accepted
-    assert (e.meas_sd != before) is learns, (e.meas_sd, before)
+    assert (tr.frame_sd != before) is learns, (tr.frame_sd, before)
 
 
-def test_the_noise_estimate_is_a_running_mean_at_first():
-    """With a long time constant the weight of each new pair is 1 / (pairs + 1): after k pairs of
-    difference d the variance is (meas_sd^2 + k d^2 / 2) / (k + 1), the configured value counting once."""
+def test_both_noise_estimates_are_running_means_at_first():
+    """With a long time constant the weight of each new pair is 1 / (pairs + 1), the configured
+    meas_sd^2 counting once. Alternating +-0.01 at 32 frames/s: after k consecutive pairs the
+    frame variance is (meas_sd^2 + k 0.02^2 / 2) / (k + 1); the pairs 1 s (32 frames, an even
+    number) apart differ by 0, so after j of them the pairs' variance is meas_sd^2 / (j + 1); the one in
+    use is the larger of the two."""
     tr = MITrend(TrendConfig(noise_tau_s=1e9))
-    for i in range(40):
+    for i in range(80):
         e = tr.update(i / 32, 0.5 + (0.01 if i % 2 else -0.01), 0.0)
         assert e.accepted
-        assert e.meas_sd**2 == pytest.approx((0.05**2 + i * 0.02**2 / 2) / (i + 1), rel=1e-9)
+        assert tr.frame_sd**2 == pytest.approx((0.05**2 + i * 0.02**2 / 2) / (i + 1), rel=1e-9)
+        j = max(0, i - 31)
+        d1 = (0.05**2 + i * 0.02**2 / 2) / (i + 1)
+        assert e.meas_sd**2 == pytest.approx(max(0.05**2 / (j + 1), d1, 0.002**2), rel=1e-9)  # never below D1
 
 
-def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pair():
-    """``noise_tau_s`` 0.25 s, frames 0.5 s apart: the weight is capped at 1, so the variance is
-    half the last pair's squared difference, whatever came before."""
+def test_a_time_constant_shorter_than_the_frame_gap_keeps_only_the_last_pairs():
+    """``noise_tau_s`` 0.25 s, frames 0.5 s apart: the weight is capped at 1, so the frame variance is
+    half the last consecutive pair's squared difference and the pairs' one half that of the last
+    pair 1 s (two frames) apart, whatever came before; the variance in use is the larger."""
     tr = MITrend(TrendConfig(noise_tau_s=0.25))
     z = [0.5 + 0.01 * (i % 3) for i in range(30)]  # steps +0.01, +0.01, -0.02
     for i, v in enumerate(z):
         e = tr.update(i / 2, v, 0.0)
         assert e.accepted
         if i:
-            assert e.meas_sd == pytest.approx(max(abs(v - z[i - 1]) / math.sqrt(2.0), 0.002), rel=1e-9)
+            assert tr.frame_sd == pytest.approx(abs(v - z[i - 1]) / math.sqrt(2.0), rel=1e-9)
+        if i >= 2:
+            want = max(abs(v - z[i - 2]), abs(v - z[i - 1])) / math.sqrt(2.0)  # max(R, D1)
+            assert e.meas_sd == pytest.approx(max(want, 0.002), rel=1e-9)
 
 
 def test_a_fresh_trend_has_no_rejections_and_counts_its_initialisations():
@@ -270,15 +285,16 @@ def test_a_fresh_trend_has_no_rejections_and_counts_its_initialisations():
 def test_a_fresh_trend_is_judged_by_the_settle_band_itself():
     """(As after ``reset``:) the first band, 0.196, is too wide for a settle band of 0.14; only a
     trend that had settled may keep 1.5 times it."""
-    e = MITrend(TrendConfig(settle_frames=1, settle_band=0.14)).update(0.0, 0.3, 10.0)
+    e = MITrend(TrendConfig(settle_s=0.0, reinit_min=1, settle_band=0.14, settle_band_max=0.14)).update(0.0, 0.3, 10.0)
     assert e.hi95 - e.lo95 == pytest.approx(0.196, abs=1e-3) and not e.settled
 
 
 def test_the_first_prediction_uses_the_documented_initial_uncertainty():
-    """At the first sample P = diag(R, init_rate_sd^2, init_ripple_sd^2, init_ripple_sd^2) (R = meas_sd^2);
-    the ripple pair is isotropic, so turning it by w dt leaves its variance. The second sample's
-    squared Mahalanobis distance is then y^2 / (P00' + P22' + R) with P00' = R + dt^2 init_rate_sd^2 +
-    rate_q dt^3 / 3 and P22' = init_ripple_sd^2 + ripple_q dt."""
+    """At the first sample P = diag(R, init_rate_sd^2, init_ripple_sd^2, init_ripple_sd^2, R) (R = meas_sd^2,
+    the last the coloured noise e); the ripple pair is isotropic, so turning it by w dt leaves its
+    variance. No consecutive pair yet: e is white (phi 0), its prediction is the stationary R. The
+    second sample's squared Mahalanobis distance is then y^2 / (P00' + P22' + R + min_meas_sd^2) with
+    P00' = R + dt^2 init_rate_sd^2 + rate_q dt^3 / 3 and P22' = init_ripple_sd^2 + ripple_q dt."""
     cfg = TrendConfig()
     tr = MITrend(cfg)
     e0 = tr.update(0.0, 0.5, 15.0)
@@ -289,7 +305,7 @@ def test_the_first_prediction_uses_the_documented_initial_uncertainty():
     e1 = tr.update(dt, 0.6, 15.0)
     p00 = r + dt**2 * cfg.init_rate_sd**2 + cfg.rate_q * dt**3 / 3
     p22 = cfg.init_ripple_sd**2 + cfg.ripple_q * dt
-    assert e1.nis == pytest.approx(0.1**2 / (p00 + p22 + r), rel=1e-9)
+    assert e1.nis == pytest.approx(0.1**2 / (p00 + p22 + r + cfg.min_meas_sd**2), rel=1e-9)
 
 
 def test_the_reinit_window_holds_the_samples_at_its_start():
@@ -301,3 +317,84 @@ def test_the_reinit_window_holds_the_samples_at_its_start():
     step = [tr.update(t + k / 32, 0.9, 0.0) for k in range(1, 20)]
     first = next(k for k, e in enumerate(step, start=1) if e.reinit)
     assert first == 11 and not any(e.accepted for e in step[:10])
+
+
+@pytest.mark.parametrize("fps", [10.0, 30.0])
+def test_a_trend_settles_after_settle_s_of_accepted_frames_at_any_frame_rate(fps):
+    """With the band criterion out of the way (settle_band 1) a trend settles on the first sample
+    that completes settle_s = 1 s of accepted frames (and reinit_min = 8 of them), at 10 fps as at
+    30 fps. (A count of 30 frames, as before, was 2.9 s at 10 fps and 0.97 s at 30 fps.)"""
+    tr = MITrend(TrendConfig(settle_band=1.0, settle_band_max=1.0))
+    out = [tr.update(i / fps, 0.6 + 0.01 * (i % 3), 5.0) for i in range(int(3 * fps))]
+    assert all(e.accepted for e in out)
+    first = next(e.t_s for e in out if e.settled)
+    assert 1.0 - 1e-9 <= first <= 1.0 + 1 / fps + 1e-9, first
+    assert all(e.settled for e in out if e.t_s >= first)
+
+
+def test_a_trend_needs_reinit_min_accepted_samples_to_settle():
+    """One sample, then one more 2 s later: 2 s of data, but 2 < reinit_min samples: not settled."""
+    tr = MITrend(TrendConfig(settle_band=1.0, settle_band_max=1.0))
+    tr.update(0.0, 0.5)
+    e = tr.update(2.0, 0.5)
+    assert e.accepted and tr.accepted_s == 2.0 and not e.settled
+
+
+def test_at_10_fps_the_reinit_window_holds_reinit_min_samples():
+    """0.6 s at 10 fps holds 6 valid samples < reinit_min = 8: the window is the last 8, so after
+    a step the 5th rejected sample re-initialises (5 >= 0.6 * 8). (A window of 0.6 s only could
+    never reach 8 samples: the old trend never re-initialised at 10 fps.)"""
+    tr = MITrend()
+    for i in range(100):
+        assert tr.update(i / 10, 0.5 + 0.01 * (i % 3 - 1), 5.0).accepted
+    step = [tr.update(10.0 + k / 10, 0.9, 5.0) for k in range(10)]
+    first = next(k for k, e in enumerate(step, start=1) if e.reinit)
+    assert first == 5 and not any(e.accepted for e in step[:4])
+    assert step[4].level == 0.9
+
+
+def test_a_reinit_keeps_the_learnt_noise():
+    """The noise belongs to the camera and the bed, not to the level: after a step to a constant
+    0.9 (a MAD of 0, as the old re-init took it) the trend keeps the bed's noise (sd ~0.01)."""
+    tr = MITrend()
+    rng = np.random.default_rng(2)
+    for i in range(300):
+        tr.update(i / 30, 0.5 + rng.normal(0, 0.01), 5.0)
+    before = tr.estimate(10.0).meas_sd
+    assert 0.007 < before < 0.014
+    step = [tr.update(10.0 + k / 30, 0.9, 5.0) for k in range(30)]
+    re = next(e for e in step if e.reinit)
+    assert re.meas_sd == pytest.approx(before, rel=0.25) and re.level == 0.9
+
+
+def test_gated_samples_feed_the_frame_noise_so_its_gate_cannot_trap_it():
+    """The real frames' drift pool (0.359, 0.414, 0.422, 0.453, drawn i.i.d.) after 10 s of its two
+    middle values: learnt from accepted samples only, the noise stayed at the quiet part's 0.005,
+    the gate rejected 0.359 and 0.453 for good (accepted 48 % of the last 10 s, 65 re-inits onto
+    them, never settled). Consecutive valid pairs, gated or not (each capped at the gate), see the
+    pool's spread (sd 0.034) within the noise time constant: the last 10 s of 40 all accepted,
+    settled, the level within 0.035 of the pool's mean 0.412."""
+    rng = np.random.default_rng(4)
+    tr = MITrend()
+    quiet = rng.choice([0.414, 0.422], 300)
+    pool = rng.choice([0.359, 0.414, 0.422, 0.453], 1200)
+    out = [tr.update(i / 30, float(v), 5.0) for i, v in enumerate(np.concatenate([quiet, pool]))]
+    late = out[-300:]
+    assert late[-1].meas_sd > 0.028
+    assert np.mean([e.accepted for e in late]) >= 0.95 and all(e.settled for e in late)
+    assert max(abs(e.level - 0.412) for e in late) <= 0.035
+    assert tr.n_reinit <= 3
+
+
+def test_a_pair_farther_apart_than_the_gate_counts_as_at_the_gate():
+    """noise_tau_s 0.25 s and frames 0.5 s apart: each pair's weight is 1, so after a glitch the
+    frame variance is exactly gate_d2 times the variance in use before it, not the glitch's."""
+    tr = MITrend(TrendConfig(noise_tau_s=0.25))
+    z = [0.5 + 0.01 * (i % 3) for i in range(20)]
+    for i, v in enumerate(z):
+        tr.update(i / 2, v, 0.0)
+    var = tr.estimate(9.5).meas_sd ** 2
+    e = tr.update(10.0, 0.99, 0.0)
+    assert not e.accepted
+    assert tr.frame_sd**2 == pytest.approx(9.0 * var, rel=1e-12)
+    assert 9.0 * var < 0.5 * (0.99 - z[-1]) ** 2  # the glitch's own half square is larger

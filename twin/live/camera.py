@@ -292,13 +292,14 @@ class ProcessWorker:
         self._settled = est.settled
         c = self.trend.config
         band = est.hi95 - est.lo95
+        width, acc_s = self.trend.settle_width(), self.trend.accepted_s
         if est.settled:
-            why = f"band {band:.3f} <= {c.settle_band:g} after {est.n_since_init} accepted frames"
-        elif est.n_since_init < c.settle_frames:
-            why = f"{est.n_since_init} accepted frames since {'a re-init' if self.trend.n_reinit > 1 else 'start'}" \
-                  f" < {c.settle_frames}"
+            why = f"band {band:.3f} <= {width:.3g} after {acc_s:.1f} s of accepted frames"
+        elif acc_s < c.settle_s or est.n_since_init < c.reinit_min:
+            why = f"{acc_s:.1f} s ({est.n_since_init} frames) accepted since " \
+                  f"{'a re-init' if self.trend.n_reinit > 1 else 'start'} < {c.settle_s:g} s ({c.reinit_min} frames)"
         else:
-            why = f"band {band:.3f} > {c.settle_band:g}"
+            why = f"band {band:.3f} > {width:.3g}"
         change = TrendSettled if est.settled else TrendUnsettled
         self.sink.publish(change(t_s=est.t_s, level=est.level, lo95=est.lo95, hi95=est.hi95,
                                  n_since_init=est.n_since_init, reason=why))
