@@ -53,8 +53,11 @@ def numba_warm_up() -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir."""
+    """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir;
+    ``--dist loadgroup`` groups on this pytest (tests/xdist_groups.py)."""
     from tests import learned
+
+    config.pluginmanager.import_plugin("tests.xdist_groups")
 
     cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
     learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
