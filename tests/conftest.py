@@ -6,10 +6,14 @@ import os
 import socket
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    from tests.cli import CliResult
 
 TESTS = Path(__file__).resolve().parent
 REPO = TESTS.parent
@@ -53,8 +57,11 @@ def numba_warm_up() -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir."""
+    """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir;
+    ``--dist loadgroup`` groups on this pytest (tests/xdist_groups.py)."""
     from tests import learned
+
+    config.pluginmanager.import_plugin("tests.xdist_groups")
 
     cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
     learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
@@ -87,3 +94,32 @@ def memo_learning() -> Iterator[None]:
 
     with memoised_learning():
         yield
+
+
+# Benches that the bad-input sweep's base check and a bench test both need, with the same
+# arguments: run once per session (``cli_once``), both tests assert on the one result. Their
+# users share xdist group "benches" (one worker: one run).
+BENCH_TREND_ARGS = ["--json", "--sequences", "2", "--real-seeds", "1"]  # control/test_cli.py's bench test
+BENCH_MEMORY_ARGS = ["--seconds", "8", "--json"]  # twin/test_safety.py's bench test
+BENCH_TWIN_ARGS = ["--duration", "0.02", "--json"]  # sim/test_cli.py's bench test
+BENCHES = pytest.mark.xdist_group("benches")
+
+
+@pytest.fixture(scope="session")
+def cli_once() -> Callable[..., CliResult]:
+    """``tests.cli.cli`` memoised for the session: ``cli_once("bench", "trend", ...)`` runs the
+    command in this process the first time and returns the same ``CliResult`` after that. The
+    classes it learns come from the learned-classes memo (tests/learned.py), as ``memo_learning``'s."""
+    from tests.cli import cli
+    from tests.learned import memoised_learning
+
+    runs: dict[tuple[str, ...], CliResult] = {}
+
+    def run(*args: object) -> CliResult:
+        key = tuple(str(a) for a in args)
+        if key not in runs:
+            with memoised_learning():
+                runs[key] = cli(*key)
+        return runs[key]
+
+    return run

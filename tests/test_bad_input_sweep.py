@@ -31,7 +31,7 @@ from control.emulator import MillEmulator
 from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
-from tests.conftest import BENCH_DASHBOARD_ARGS
+from tests.conftest import BENCH_DASHBOARD_ARGS, BENCH_MEMORY_ARGS, BENCH_TREND_ARGS, BENCH_TWIN_ARGS, BENCHES
 from twin.cli import app
 from twin.membench import write_video
 from twin.runlog import RunLog
@@ -183,9 +183,9 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("whatif",): ["--rpm", "5", "--duration", "0.5", "--workers", "1"],
     ("mill-emulator",): ["--tcp", "0", "--duration", "0.2"],
     ("bench", "dashboard"): BENCH_DASHBOARD_ARGS,  # its base run is shared with test_live.py's bench test
-    ("bench", "memory"): ["--seconds", "5"],
+    ("bench", "memory"): BENCH_MEMORY_ARGS,  # its base run is shared with test_safety.py's bench test
     ("bench", "vision"): ["--seconds", "0.1"],
-    ("bench", "twin"): ["--duration", "0.2"],
+    ("bench", "twin"): BENCH_TWIN_ARGS,  # ... with sim/test_cli.py's
     ("bench", "trend"): ["--sequences", "1", "--real-seeds", "0"],
     ("bench", "link"): ["--requests", "5"],
     ("classes", "suggest"): ["{synth}", "--frames", "1"],
@@ -210,8 +210,8 @@ BASE_FOR: dict[tuple[tuple[str, ...], str], list[str]] = {
     (("run",), "video"): REAL_RUN,
     (("run",), "mill"): REAL_RUN,
     (("mill-emulator",), "link"): ["--pty", "--duration", "0.2"],
-    (("bench", "trend"), "frames"): ["--sequences", "1", "--real-seeds", "1"],
-    (("bench", "trend"), "config"): ["--sequences", "1", "--real-seeds", "1"],
+    (("bench", "trend"), "frames"): BENCH_TREND_ARGS,  # ... with control/test_cli.py's
+    (("bench", "trend"), "config"): BENCH_TREND_ARGS,
     (("run",), "port"): ["--duration", "1", "--speed", "10", "--log", "{out}/run-{case}",  # with the dashboard,
                          "--port", "{port}"],  # on a free port (a case's --port comes last: it wins)
 }
@@ -373,23 +373,34 @@ BASES = base_runs()
 
 
 BENCH_DASHBOARD_BASE = " ".join(("bench", "dashboard", *BENCH_DASHBOARD_ARGS))
+# bases whose run is the session's one (tests/conftest.py::cli_once), shared with a bench test
+SHARED_BASES = {" ".join((*cmd, *args)) for cmd, args in (
+    (("bench", "trend"), BENCH_TREND_ARGS), (("bench", "memory"), BENCH_MEMORY_ARGS),
+    (("bench", "twin"), BENCH_TWIN_ARGS))}
+
+
+def _base_marks(k: str) -> list[pytest.MarkDecorator]:
+    marks = [pytest.mark.slow] if k.startswith(SLOW_BASES) else []
+    if k == BENCH_DASHBOARD_BASE:
+        marks.append(pytest.mark.xdist_group("live"))  # beside test_live.py's bench test
+    elif k in SHARED_BASES:
+        marks.append(BENCHES)  # beside the bench test that shares its run
+    return marks
 
 
 @pytest.mark.timeout(400)
-@pytest.mark.parametrize("key", [
-    pytest.param(k, marks=[pytest.mark.slow, pytest.mark.xdist_group("live")])  # beside test_live.py's bench test
-    if k == BENCH_DASHBOARD_BASE else
-    pytest.param(k, marks=pytest.mark.slow) if k.startswith(SLOW_BASES) else k
-    for k in BASES])
-def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env, request) -> None:
+@pytest.mark.parametrize("key", [pytest.param(k, marks=_base_marks(k)) for k in BASES])
+def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env, request, cli_once) -> None:
     """The negative control: a command with its base arguments (and a case's context) is
     exit 0, so a case's exit 2 is its swept value's, not the base's (a masked sweep).
-    ``bench dashboard``'s base is the session's run of it (tests/conftest.py, a free ``--port``)."""
+    ``bench dashboard``'s base is the session's run of it (tests/conftest.py, a free ``--port``);
+    ``bench trend``'s, ``memory``'s and ``twin``'s are the session's in-process runs (``cli_once``)."""
     if key == BENCH_DASHBOARD_BASE:
         p = request.getfixturevalue("bench_dashboard_run")
         assert p.returncode == 0 and "Traceback" not in p.stderr, (p.returncode, p.stderr[-2000:])
         return
-    r = cli(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))
+    run = cli_once if key in SHARED_BASES else cli
+    r = run(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))
     assert r.code == 0 and "Traceback" not in r.err, (r.code, r.err[-2000:])
 
 

@@ -14,6 +14,7 @@ from control.driver import MillClient
 from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error
 from tests.cli import cli as run_cli
+from tests.conftest import BENCH_TREND_ARGS, BENCHES
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 
@@ -23,10 +24,14 @@ def cli(capsys, *args: str) -> tuple[int, str, str]:
     return r.code, r.out, r.err
 
 
+@BENCHES
 @pytest.mark.timeout(300)  # a hang guard, not a speed check: it learns classes on 27 real frames
-def test_bench_trend_json(capsys, memo_learning):  # (the 27 frames' classes: tests/learned.py)
-    code, out, _ = cli(capsys, "bench", "trend", "--json", "--sequences", "2", "--real-seeds", "1")
-    assert code == 0
+def test_bench_trend_json(cli_once):  # (the 27 frames' classes: tests/learned.py)
+    """``bench trend --json --sequences 2 --real-seeds 1``: the session's run (tests/conftest.py,
+    shared with the bad-input sweep's base of ``bench trend``)."""
+    r = cli_once("bench", "trend", *BENCH_TREND_ARGS)
+    code, out = r.code, r.out
+    assert code == 0, r.err[-2000:]
     d = json.loads(out)
     assert set(d) == {"synthetic", "real"}  # both benches, each both filters
     for bench in d.values():

@@ -13,6 +13,7 @@ import pytest
 
 from sim.drum import DEFAULT_DT_S
 from tests.cli import assert_one_line_error, cli
+from tests.conftest import BENCH_TWIN_ARGS, BENCHES
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 
@@ -170,9 +171,12 @@ def test_bad_input_through_the_console_script():
     assert r.returncode == 2 and "77.2" in " ".join(r.stderr.split()) and "Traceback" not in r.stderr
 
 
+@BENCHES
 @pytest.mark.timeout(240)
-def test_bench_twin_prints_the_real_time_factors_and_the_step():
-    r = cli("bench", "twin", "--duration", "0.02", "--json")
+def test_bench_twin_prints_the_real_time_factors_and_the_step(cli_once):
+    """``bench twin --duration 0.02 --json`` (the session's run, tests/conftest.py: shared with the
+    bad-input sweep's base of ``bench twin``)."""
+    r = cli_once("bench", "twin", *BENCH_TWIN_ARGS)
     assert r.code == 0, r.err
     out = json.loads(r.out)
     for k in ("rtf_paper_5rpm", "rtf_paper_30rpm", "rtf_4x", "rtf_16x"):

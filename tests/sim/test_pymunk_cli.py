@@ -13,15 +13,19 @@ from tests.cli import assert_one_line_error, cli
 REPO = Path(__file__).resolve().parents[2]
 CUTDISC_RIG = REPO / "configs" / "pmma-cutdisc.toml"
 SHORT = ("--spin-up-s", "0.5", "--window-s", "0.5", "--dt-ms", "2")  # short twin runs: the range, not its value
+# 89 deg is outside the rig's range: the command runs the range's twin runs and says the range. Both
+# tests read the one run of it (``cli_once``, tests/conftest.py; one xdist group: one worker, one run).
+OUTSIDE = ("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
+pytestmark = pytest.mark.xdist_group("pymunk-cli")
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_calibrate_runs_the_cut_disc_rig_on_pymunk_says_its_range_and_exits_2_outside_it():
+def test_calibrate_runs_the_cut_disc_rig_on_pymunk_says_its_range_and_exits_2_outside_it(cli_once):
     # the DEM cannot hold cut discs: asking for it is refused before anything runs
     assert_one_line_error(cli("calibrate", "--config", CUTDISC_RIG, "--engine", "dem", "--rpm", "10",
                               "--slope-deg", "30"), "compiled DEM", "pymunk")
-    r = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
+    r = cli_once(*OUTSIDE)
     assert_one_line_error(r, "outside the twin's reachable range", "at 10 rpm")
     m = re.search(r"range (\d+\.\d)-(\d+\.\d) deg", r.err)
     assert m, r.err
@@ -47,10 +51,10 @@ def _range(err: str) -> tuple[float, float]:
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_calibrate_end_friction_sets_the_plates_of_the_twin_runs():
+def test_calibrate_end_friction_sets_the_plates_of_the_twin_runs(cli_once):
     # the monolayer rig with the default (Taberlet) plates stands steep over the whole search; without
     # plate friction (--end-friction 0) the whole range lies below that: the option reaches the twin runs
-    plates = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
+    plates = cli_once(*OUTSIDE)
     assert_one_line_error(plates, "outside the twin's reachable range")
     none = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", "--end-friction", "0",
                *SHORT)

@@ -17,6 +17,7 @@ from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from control.motor import MotorConfig
 from tests.cli import assert_one_line_error, cli
+from tests.conftest import BENCH_MEMORY_ARGS, BENCHES
 from tests.twin.live_script import run_scripted
 from twin.config import RunConfig
 from twin.loop import Seams, supervisor_config
@@ -480,14 +481,16 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
             link.close()
 
 
+@BENCHES
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-def test_bench_memory_measures_the_run_and_its_process_tree() -> None:
-    """``drumtwin bench memory``: a real run on a 640x640 video; the tree includes the
-    what-if and calibration pool processes, so it is at least the run process itself."""
+def test_bench_memory_measures_the_run_and_its_process_tree(cli_once) -> None:
+    """``drumtwin bench memory --seconds 8 --json``: a real run on a 640x640 video; the tree includes
+    the what-if and calibration pool processes, so it is at least the run process itself (the
+    session's run, tests/conftest.py: shared with the bad-input sweep's base of ``bench memory``)."""
     import json
 
-    r = cli("bench", "memory", "--seconds", "8", "--json")
+    r = cli_once("bench", "memory", *BENCH_MEMORY_ARGS)
     assert r.code == 0, r.err
     d = json.loads(r.out)
     assert d["processes"] >= 2 and 50 < d["main_hwm_mb"] < 2000

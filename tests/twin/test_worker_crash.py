@@ -46,14 +46,22 @@ def _start_mill(loop: LiveLoop, plant: object, dash: object) -> None:
     loop.start_mill()
 
 
+@pytest.fixture(scope="module")
+def drum_video(tmp_path_factory) -> Path:
+    """30 s of drum (the run ends by the crash, not by the video), written once for the module:
+    each run only reads it."""
+    return _video(tmp_path_factory.mktemp("crash") / "drum.avi", n=300)
+
+
 @LIVE
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("worker", WORKERS)
-def test_a_crashed_worker_stops_the_mill_logs_it_and_exits_3(tmp_path: Path, worker: str, monkeypatch) -> None:
+def test_a_crashed_worker_stops_the_mill_logs_it_and_exits_3(tmp_path: Path, worker: str, monkeypatch,
+                                                             drum_video: Path) -> None:
     emu = MillEmulator(DeviceConfig(watchdog_s=2.0), seed=1)
     url = emu.open_pty()
     emu.set_motor(setpoint_rpm=10.0, actual_rpm=0.0, running=False)
-    video = _video(tmp_path / "drum.avi", n=300)  # 30 s: the run ends by the crash, not by the video
+    video = drum_video
     real = run_cmd.run_live
     seams = Seams(crash=WorkerCrash(worker, at_s=CRASH_AT_S, message=f"bug in {worker}\nsecond line"))
     monkeypatch.setattr(run_cmd, "run_live", lambda cfg, **kw: real(cfg, **kw, seams=seams, on_started=_start_mill))

@@ -27,8 +27,10 @@ from vision.config import config_to_toml, parse_config
 from vision.errors import VisionError
 from vision.photometric import GAMMA, channel_maps, estimate_light, light_quantiles
 from vision.sources import open_source
-from vision.suggest import suggest_classes
 from vision.synthetic import LIGHT_CHANGES, colour_temperature_gains, light_change, particle_drum, perturb
+
+# one worker for the module (xdist group): its pairs' set-up (``setups``, ~12-14 s busy) once per run
+pytestmark = pytest.mark.xdist_group("lighting")
 
 LIGHT_PAIRS = {
     "blue-white": ((200, 70, 10), (235, 235, 235)),
@@ -58,7 +60,7 @@ def setups():
         scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
                   for i, (m, sl) in enumerate(SCENES)]
         images = [jpeg(s.image) for s in scenes]
-        cfg = suggest_classes([images[SETUP]], per_frame=2500)
+        cfg = learn([images[SETUP]], per_frame=2500)  # suggest_classes, memoised (tests/learned.py)
         r0 = cfg.make_meter().measure(images[SETUP])
         c0 = scenes[SETUP].centroids[0]
         known = min((0, 1), key=lambda k: math.hypot(r0.classes[k].cx_px - c0[0], r0.classes[k].cy_px - c0[1]))

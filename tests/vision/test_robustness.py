@@ -10,6 +10,10 @@ Issue 22 adds time and mounting: one meter over a stream whose light drifts (exp
 colour temperature ramps) and jumps (auto-exposure), classes learned at set-up -- within 3%
 on >= 90% of the frames and every other frame flagged ``lighting_changed:`` -- and cameras
 turned by quarter turns and mirrored (see also test_lighting.py and test_rotation.py).
+
+The classes come from the tests' memo of ``suggest_classes`` (``tests.learned.learn``: the same
+result, learned once per frames, arguments and code version; the upright classes of the turned-
+camera test are learned once, not once per turn).
 """
 
 import math
@@ -19,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.learned import learn
 from tests.vision.helpers import jpeg, paired_errors
 from vision.colours import classify
 from vision.sources import read_image
-from vision.suggest import suggest_classes
 from vision.synthetic import PERTURBATIONS, particle_drum, perturb
 
 PAIRS = {
@@ -50,7 +54,7 @@ def scenes():
 @pytest.mark.parametrize("pair", list(PAIRS))
 def test_synthetic_pairs_under_perturbations(scenes, pair, kind):
     pert = [perturb(s.image, kind, seed=i) for i, s in enumerate(scenes[pair])]
-    cfg = suggest_classes([p[0] for p in pert], per_frame=2500)
+    cfg = learn([p[0] for p in pert], per_frame=2500)
     assert len(cfg.counted) == 2
     readings = [cfg.make_meter().measure(img) for img, _ in pert]
     truths = [[tuple(a @ np.array([x, y, 1.0])) for x, y in s.centroids]
@@ -65,7 +69,7 @@ def test_glare_is_no_class_of_its_own(scenes):
     """Glare spots (small, largely clipped) on a pair without white particles give no
     white class: both classes stay green, and the glare is no class."""
     pert = [perturb(s.image, "glare", seed=i)[0] for i, s in enumerate(scenes["darkgreen-lightgreen"])]
-    cfg = suggest_classes(pert, per_frame=2500)
+    cfg = learn(pert, per_frame=2500)
     assert [c.name for c in cfg.counted] == ["green-dark", "green-light"]
     for img in pert:
         r = cfg.make_meter().measure(img)
@@ -89,7 +93,7 @@ def real_frames(real_drum_dir):
 @pytest.mark.parametrize("kind", PERTURBATIONS)
 def test_real_pmma_frames_under_perturbations(real_frames, kind):
     pert = [(perturb(img, kind, seed=i), lab) for i, (img, lab) in enumerate(real_frames)]
-    cfg = suggest_classes([p[0][0] for p in pert], per_frame=4000)
+    cfg = learn([p[0][0] for p in pert], per_frame=4000)
     assert cfg.counted[0].name == "blue"
     errs = []
     for (img, a), lab in pert:
@@ -157,7 +161,7 @@ def test_synthetic_stream_under_drift_and_auto_exposure_jumps(pair):
     scenes = [particle_drum((400, 300), cols, mix=m, slope_deg=sl, seed=i, particle_r_frac=0.045)
               for i, (m, sl) in enumerate([(0.4, 30.0), (0.1, 28.0), (0.7, 33.0), (1.0, 25.0)])]
     images = [jpeg(s.image) for s in scenes]  # a camera's JPEG, as in test_lighting
-    cfg = suggest_classes([images[0]], per_frame=2500)
+    cfg = learn([images[0]], per_frame=2500)
     r0 = cfg.make_meter().measure(images[0])
     c0 = scenes[0].centroids[0]
     known = min((0, 1), key=lambda k: math.hypot(r0.classes[k].cx_px - c0[0], r0.classes[k].cy_px - c0[1]))
@@ -177,7 +181,7 @@ def test_real_stream_under_drift_and_auto_exposure_jumps(real_frames, real_drum_
         if lab is not None:
             frames.append(fr.image)
             truths.append(lab)
-    cfg = suggest_classes(frames[:1], per_frame=4000)
+    cfg = learn(frames[:1], per_frame=4000)
     assert cfg.counted[0].name == "blue"
     check_stream(cfg.make_meter(), frames, truths, light_schedule(len(frames)), 0)
 
@@ -193,8 +197,8 @@ def test_turned_cameras_learn_and_measure_as_the_upright_one(scenes, real_frames
 
     for pair in ("blue-white", "paleteal-white"):
         imgs = [s.image for s in scenes[pair]]
-        up = suggest_classes(imgs, per_frame=2500)
-        cfg = suggest_classes([turn(i) for i in imgs], per_frame=2500, mirror=mirror)
+        up = learn(imgs, per_frame=2500)
+        cfg = learn([turn(i) for i in imgs], per_frame=2500, mirror=mirror)
         assert cfg.camera_rotation_deg == rot
         assert [c.name for c in cfg.counted] == [c.name for c in up.counted]
         for img in imgs:
@@ -202,7 +206,7 @@ def test_turned_cameras_learn_and_measure_as_the_upright_one(scenes, real_frames
             assert abs(a.slope_deg - b.slope_deg) < 1.0
             assert abs(a.mi - b.mi) < 0.03
     img, lab = real_frames[1]
-    cfg = suggest_classes([turn(img)], per_frame=4000, mirror=mirror)
+    cfg = learn([turn(img)], per_frame=4000, mirror=mirror)
     assert cfg.camera_rotation_deg == rot and cfg.counted[0].name == "blue"
     r = cfg.make_meter().measure(turn(img))
     h, w = img.shape[:2]
