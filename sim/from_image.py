@@ -9,7 +9,9 @@ disk takes the free one deepest inside the class's region (its distance to the r
 edge, capped at the disk's radius): a disk centred on the edge of a blob of its colour
 half covers the other class, and the seeded bed came out more mixed than the camera's
 (the paper bed's camera MI against the seeded twin's, 3 seeds x 10/30/60 s at 5 rpm:
-bias +0.07, rms 0.08 with the first free pixel; +0.01, 0.03 this way). A disk that finds
+bias +0.07, rms 0.08 with the first free pixel; +0.01, 0.03 this way; the real PMMA frames
+of tests/data seeded into configs/pmma-rig.toml, every 3rd frame: rms 0.011 -> 0.003, largest
+0.028 -> 0.006). A disk that finds
 no free pixel of its class is placed near its class (a wider and wider jitter about its
 pixels), then anywhere in the drum. The disks are then
 inflated and settled exactly as a fresh ``DrumSim`` is, so the twin starts from the

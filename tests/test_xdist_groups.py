@@ -1,5 +1,5 @@
 """``--dist loadgroup`` groups (tests/xdist_groups.py): the whole-loop tests of group "live" run on
-one worker, one after another, and a session fixture shared inside a group runs once."""
+one worker, one after another, and a session fixture (``group_fixture``) used inside a group runs once."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def pytest_configure(config):
     config.pluginmanager.import_plugin("tests.xdist_groups")
 
 @pytest.fixture(scope="session")
-def shared():
+def group_fixture():
     with open(os.environ["RUNS_FILE"], "a") as f:
         f.write(os.environ.get("PYTEST_XDIST_WORKER", "-") + "\\n")
     return 1
@@ -31,8 +31,8 @@ TEST_A = '''
 import pytest
 pytestmark = pytest.mark.xdist_group("live")
 @pytest.mark.parametrize("i", range(3))
-def test_module_group(i, shared):
-    assert shared == 1
+def test_module_group(i, group_fixture):
+    assert group_fixture == 1
 '''
 TEST_B = '''
 import pytest
@@ -41,12 +41,12 @@ LIVE = pytest.mark.xdist_group("live")
 def test_free(i):
     pass
 @LIVE
-def test_marked(shared):
-    assert shared == 1
+def test_marked(group_fixture):
+    assert group_fixture == 1
 @pytest.mark.parametrize("k", [pytest.param(k, marks=LIVE) if k == "b" else k for k in "abcdef"])
 def test_param(k, request):
     if k == "b":
-        assert request.getfixturevalue("shared") == 1
+        assert request.getfixturevalue("group_fixture") == 1
 '''
 
 
