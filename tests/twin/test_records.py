@@ -8,6 +8,7 @@ import ast
 import logging
 import math
 import queue
+import sys
 from dataclasses import fields
 from pathlib import Path
 
@@ -335,8 +336,12 @@ def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
         "from twin.records import MillRefussed\n",
         encoding="utf-8",
     )
-    out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
-                              "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
+    limit = sys.getrecursionlimit()  # mypy's main raises it to 2**14 for the whole process, which let
+    try:  # a 5000-deep TOML parse in later tests of the worker (test_safety's "nested too deeply")
+        out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
+                                  "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
+    finally:
+        sys.setrecursionlimit(limit)
     errors = sorted({int(line.split(":")[1]) for line in out.splitlines() if ": error:" in line})
     assert status == 1 and errors == [3, 4, 5], out
 
