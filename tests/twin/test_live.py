@@ -371,9 +371,12 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
 
 @LIVE
 @pytest.mark.timeout(120)
-def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path) -> None:
+@pytest.mark.parametrize("presses", [1, 2])
+def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path, presses: int) -> None:
     """Ctrl-C in a terminal signals the whole process group, the calibration and what-if
-    worker processes included: the run stops cleanly and nobody prints a traceback."""
+    worker processes included: the run stops cleanly and nobody prints a traceback; a second
+    Ctrl-C while it stops does not cut the stop short (it ended with 130, no "run ended" and
+    no stop record)."""
     proc = subprocess.Popen(
         [*DRUMTWIN, "run", "--no-dashboard", "--mode", "auto", "--speed", "2", "--log", str(tmp_path / "run")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
@@ -382,6 +385,9 @@ def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: 
         csv = tmp_path / "run" / "frames.csv"
         _wait(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
         os.killpg(proc.pid, signal.SIGINT)
+        if presses == 2:
+            time.sleep(0.3)
+            os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

@@ -41,9 +41,22 @@ def run_live(
     seams = seams or Seams()
     if on_started is not None:
         seams = replace(seams, on_started=on_started)
-    return run(cfg, seams, wait=lambda loop: _wait(loop, cfg, progress),
-               on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
-                                                          highlight=False))
+    main = threading.current_thread() is threading.main_thread()
+    saved = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) if main else None
+    try:
+        return run(cfg, seams, wait=lambda loop: _wait(loop, cfg, progress),
+                   on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
+                                                              highlight=False))
+    finally:
+        if saved is not None:  # _wait's SIGTERM handler ends with the run; after a Ctrl-C the process is
+            signal.signal(signal.SIGTERM, saved[1])  # on its way out: a repeated one stays harmless to the end
+            if signal.getsignal(signal.SIGINT) is not _still_stopping:
+                signal.signal(signal.SIGINT, saved[0])
+
+
+def _still_stopping(signum: int, frame: object) -> None:
+    """SIGINT after the first Ctrl-C: the run log's stop record and the mill's stop come first."""
+    console_err.print("still stopping…")
 
 
 def _wait(loop: LiveLoop, cfg: RunConfig, progress: bool) -> None:
@@ -71,6 +84,8 @@ def _wait(loop: LiveLoop, cfg: RunConfig, progress: bool) -> None:
                 stop.wait(0.2)
     except KeyboardInterrupt:
         console_err.print("stopping…")
+        if threading.current_thread() is threading.main_thread():  # a second Ctrl-C must not cut the
+            signal.signal(signal.SIGINT, _still_stopping)  # stop short
 
 
 @contextlib.contextmanager
