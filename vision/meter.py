@@ -217,6 +217,7 @@ class Meter:
         self.rebake_threshold = float(rebake_threshold)
         self._baked_gains = (1.0, 1.0, 1.0)
         self._light: LightEstimate | None = None
+        self._accepted: LightEstimate | None = None  # the last estimate that mapped back
         self._n_frames = 0
         self._means_now = np.zeros(3)
         self._means_then = np.full(3, -1e9)  # no estimate yet
@@ -242,8 +243,12 @@ class Meter:
 
     def _track_light(self, flat: np.ndarray, g: _Geometry) -> None:
         assert self._light_ref is not None and g.sample is not None
-        est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine)
+        last = self._accepted
+        est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine,
+                          None if last is None else last.gains_bgr)
         self._light = est
+        if est.cause is None:
+            self._accepted = est
         self.estimates += 1
         if est.cause is not None:
             return
