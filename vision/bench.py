@@ -55,7 +55,12 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
     ``glcm_cpu_ratio`` their ratio. ``tracked_estimate_share``: the share of frames of the
     tracked CPU row that ran a full light estimate (the four bench scenes differ in their
     colour shares, so the meter's jump check starts one on nearly every frame: the worst case,
-    not the every-4th-frame default of a steady video). ``centroid_cpu_fps_light_moved``: the
+    not the every-4th-frame default of a steady video). ``centroid_fps_steady`` and
+    ``centroid_fps_tracked_steady`` (``centroid_cpu_fps_tracked_steady`` in CPU time): plain and
+    tracked on a steady video -- eight frames of one bed (mix 0.3) under a webcam's sensor noise
+    (sigma 8, a new draw each frame), so the meter runs its default schedule;
+    ``tracked_steady_ratio`` their ratio, ``tracked_steady_estimate_share`` the share of its
+    frames fully estimated (0.25 when no jump check fires). ``centroid_cpu_fps_light_moved``: the
     light-moved row in CPU time (a re-bake per frame). ``centroid_cpu_fps_islands``: the island
     filter on (``[meter] island_px``, ``vision.islands``; 30 px), ``islands_cost_ratio`` its
     CPU frames/s over the plain path's."""
@@ -104,6 +109,23 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         for i in range(40):
             counted.measure(vga[i % len(vga)])
         res["tracked_estimate_share"] = counted.estimates / 40
+        # a steady video: one bed under the sensor noise of a webcam (a new draw each frame), as
+        # consecutive frames of a turning drum -- the meter's default schedule (a full estimate
+        # every 4th frame, the jump check on the others)
+        steady = [perturb(vga[1], "noise", seed=10 + i)[0] for i in range(8)]
+        ref_s = reference_from_frames(steady[:1], [roi])
+        ref_cls_s = class_reference_from_frames(steady[:1], [roi], plain._base_tables.fine, len(plain.classes) + 1)
+        res["centroid_fps_steady"] = frames_per_second(Meter(roi=roi).measure, steady, seconds)
+        res["centroid_fps_tracked_steady"] = frames_per_second(
+            Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s).measure, steady, seconds)
+        res["tracked_steady_ratio"] = res["centroid_fps_tracked_steady"] / res["centroid_fps_steady"]
+        res["centroid_cpu_fps_tracked_steady"] = frames_per_second(
+            Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s).measure, steady, seconds,
+            clock=cpu)
+        counted = Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s)
+        for i in range(40):
+            counted.measure(steady[i % len(steady)])
+        res["tracked_steady_estimate_share"] = counted.estimates / 40
         moved_cpu = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls, track_every=1)
         res["centroid_cpu_fps_light_moved"] = frames_per_second(moved_cpu.measure, moved, seconds, clock=cpu)
         say("centroid 640x480, island filter ...")

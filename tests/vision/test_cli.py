@@ -221,6 +221,10 @@ def test_bench_vision_json():
     assert res["glcm_cpu_ratio"] == pytest.approx(res["centroid_cpu_fps"] / res["glcm_cpu_fps"])
     assert res["islands_cost_ratio"] == pytest.approx(res["centroid_cpu_fps_islands"] / res["centroid_cpu_fps"])
     assert 0.0 < res["tracked_estimate_share"] <= 1.0
+    # the steady video runs the default schedule: every 4th frame, no jump check firing
+    assert res["tracked_steady_estimate_share"] == pytest.approx(0.25)
+    assert res["tracked_steady_ratio"] == pytest.approx(res["centroid_fps_tracked_steady"] / res["centroid_fps_steady"])
+    assert res["centroid_cpu_fps_tracked_steady"] > 0
 
 
 def test_help_lists_commands():
