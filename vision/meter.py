@@ -323,6 +323,17 @@ class Meter:
         shape_hw = (int(img.shape[0]), int(img.shape[1]))
         g = self._geometry(img, shape_hw)
         self._roi = g.roi
+        dark = self.dark_v_max if self.bed == "dark" else -1
+
+        def moments() -> np.ndarray:
+            return frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
+                                 occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc,
+                                 cell_offset_xy=g.cell_off)
+
+        # the pass first, then the light: the light's scattered samples then read a frame the
+        # pass has brought into the cache (before the pass, they cost 2-3x as much); when the
+        # estimate re-bakes the table, the pass runs again in the new table's terms
+        sums = moments()
         if self._light_ref is not None:
             if g.sample is None:
                 g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
@@ -330,13 +341,12 @@ class Meter:
             means = sample_means(flat, g.sample, self._means_now)
             if self._n_frames % self.track_every == 0 or np.any(
                     np.abs(means - self._means_then) > np.maximum(3.0, JUMP * self._means_then)):
+                tables = self._tables
                 self._track_light(flat, g)
                 self._means_then[:] = means
+                if self._tables is not tables:
+                    sums = moments()
         self._n_frames += 1
-        dark = self.dark_v_max if self.bed == "dark" else -1
-        sums = frame_moments(img, self._tables, g.box[:2], g.first, g.last, self.stride, dark, out=self._sums,
-                             occupancy=g.occ, occ_shift=g.shift, opening=self.opening, glare_cells=g.gocc,
-                             cell_offset_xy=g.cell_off)
         k = len(self.classes)
         rows = sums.tolist()  # Python ints: one conversion, not one per element
         deltas = []
