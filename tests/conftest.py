@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -56,15 +57,31 @@ def numba_warm_up() -> None:
     numba_warm.wait()
 
 
+LEARNED_SESSION_DIR = "DRUMTWIN_LEARNED_SESSION_DIR"  # the controller's memo dir without a cache dir
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """The learned-classes memo (tests/learned.py) keeps its results in pytest's cache dir;
-    ``--dist loadgroup`` groups on this pytest (tests/xdist_groups.py)."""
+    with ``-p no:cacheprovider`` under xdist, in a temp dir of this session that the controller
+    makes for its workers (they inherit its environment) and removes at its end: the workers
+    still learn each key once between them, and nothing outlives the run. One process without
+    a cache dir: the memo is in the process only. ``--dist loadgroup`` groups on this pytest
+    (tests/xdist_groups.py)."""
+    import tempfile
+
     from tests import learned
 
     config.pluginmanager.import_plugin("tests.xdist_groups")
 
-    cache = getattr(config, "cache", None)  # None with -p no:cacheprovider: memo in this process only
-    learned.cache_dir = cache.mkdir("drumtwin-learned") if cache is not None else None
+    cache = getattr(config, "cache", None)  # None with -p no:cacheprovider
+    if cache is not None:
+        learned.cache_dir = cache.mkdir("drumtwin-learned")
+        return
+    if not hasattr(config, "workerinput") and getattr(config.option, "numprocesses", None):
+        os.environ[LEARNED_SESSION_DIR] = tempfile.mkdtemp(prefix="drumtwin-learned-")
+        config.add_cleanup(lambda: shutil.rmtree(os.environ.pop(LEARNED_SESSION_DIR), ignore_errors=True))
+    session_dir = os.environ.get(LEARNED_SESSION_DIR) if hasattr(config, "workerinput") else None
+    learned.cache_dir = Path(session_dir) if session_dir else None
 
 
 # `drumtwin bench dashboard` (a demo in its own process, chromium on its dashboard) once per

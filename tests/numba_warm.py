@@ -4,7 +4,8 @@ Every kernel is ``cache=True``: once compiled, its machine code is on disk (``__
 next to the source, or ``NUMBA_CACHE_DIR``) and every later process loads it. In a fresh
 clone nothing is on disk yet, and the two workers' first whole-loop runs start at the same
 moment, each with its own plant, twin and vision processes: each of them compiled the same
-kernels at once (about 14 s CPU for the DEM's, 17 s for vision's, busy machine). Here the
+kernels at once (about 14 s CPU for the DEM's, 17 s for vision's, busy machine; and each
+worker its first learned classes' light-tracking kernels, ~22 s CPU). Here the
 xdist controller compiles them once, the sim and the vision kernels in two processes side by
 side, while the workers collect; the workers' first test waits for it (``wait``). With a warm
 cache the two processes only load the kernels. A failed warm-up is one line on stderr and no
@@ -102,7 +103,8 @@ def warm_sim() -> None:
 
 
 def warm_vision() -> None:
-    """The meter's kernels (moments, bed surface), through ``drumtwin mi`` of a synthetic drum."""
+    """The meter's kernels (moments, bed surface), through ``drumtwin mi`` of a synthetic drum,
+    then the light tracking's (``warm_light``)."""
     import cv2
 
     from tests.cli import cli
@@ -114,6 +116,22 @@ def warm_vision() -> None:
         r = cli("mi", img)
         if r.code != 0:
             raise SystemExit(f"drumtwin mi: exit {r.code}: {r.err.strip()[-300:]}")
+    warm_light()
+
+
+def warm_light() -> None:
+    """The colour table's and the light tracking's kernels (vision.colours, vision.photometric,
+    vision.moments.remapped_tables): classes learned on a synthetic drum (``suggest_classes``
+    stores a light reference), frames measured with them (the meter tracks the light), the last
+    in brighter light (the class table re-baked for it). ``drumtwin mi`` with its default
+    classes has no light reference."""
+    from vision.suggest import suggest_classes
+    from vision.synthetic import light_change, particle_drum
+
+    scenes = [particle_drum((400, 300), mix=m, seed=i, particle_r_frac=0.045) for i, m in enumerate((0.2, 0.8))]
+    meter = suggest_classes([scenes[0].image], per_frame=2500).make_meter()
+    for img in (scenes[0].image, scenes[1].image, light_change(scenes[1].image, 1.3)):
+        meter.measure(img)
 
 
 if __name__ == "__main__":

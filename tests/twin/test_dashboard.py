@@ -158,8 +158,7 @@ def test_scene_geometry() -> None:
     assert np.allclose(seg[1:, 0], seg[:-1, 1])  # a connected ring
 
 
-@pytest.mark.browser
-@pytest.mark.xdist_group("live")  # beside the live runs, not in parallel with them
+@pytest.mark.browser  # no loop (a scripted LiveState): not in the "live" group, whose one worker it held up 30-40 s
 @pytest.mark.timeout(120)
 def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
     """One chromium for the whole browser check: the local dashboard (updates and

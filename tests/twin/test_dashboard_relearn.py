@@ -65,8 +65,7 @@ def test_panel_says_the_light_moved_and_where_to_relearn() -> None:
     assert "Re-learn" not in numbers_markdown(Panel(light_state="ok"))
 
 
-@pytest.mark.browser
-@pytest.mark.xdist_group("live")
+@pytest.mark.browser  # a dashboard without a loop: not in the "live" group
 @pytest.mark.timeout(120)
 def test_relearn_button_behind_the_token_in_chromium(page) -> None:
     state = LiveState()

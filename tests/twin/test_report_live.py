@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -42,12 +43,31 @@ run_live(cfg, progress=False)
 """
 
 
+AFTER_STOP_S = 12.0  # run time logged after the endpoint's stop (the test reads the board's rpm from 10 s on)
+
+
 @pytest.fixture(scope="module")
 def auto_run(tmp_path_factory) -> Path:
+    """AUTO until ``AFTER_STOP_S`` after its endpoint decision (the stop came at ~13.5 s of run
+    time), at most 40 s (a run that never stops ends there, and the tests fail on it)."""
     d = tmp_path_factory.mktemp("endpoint") / "auto"
+
+    def end_after_the_stop(loop, plant, dash) -> None:
+        def watch() -> None:
+            stop_t: float | None = None
+            while not loop.stop_event.is_set():
+                if stop_t is None and (d / "events.jsonl").exists():
+                    stop_t = next((e["t_s"] for e in read_events(d)
+                                   if e["kind"] == "decision" and e["decision"] == "endpoint"), None)
+                if stop_t is not None and loop.now_s() >= stop_t + AFTER_STOP_S:
+                    loop.stop_event.set()
+                loop.stop_event.wait(0.2)
+
+        threading.Thread(target=watch, daemon=True).start()
+
     cfg = RunConfig(dashboard=False, duration_s=40.0, speed=SPEED, case="C", seed=0, mode="auto",
                     start_rpm=MIXED_RPM, stop_at_endpoint=True, log_dir=d).resolved()
-    run_live(cfg, progress=False)
+    run_live(cfg, progress=False, on_started=end_after_the_stop)
     return d
 
 
