@@ -192,7 +192,7 @@ def _em(x: np.ndarray, n: int, seed: int, iters: int = 60) -> tuple[np.ndarray, 
     Returns weights (n,), means (n, 3), covariances (n, 3, 3), hard labels (N,)."""
     cv2.setRNGSeed(seed)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.1)
-    _, lbl, _ = cv2.kmeans(x.astype(np.float32), n, None, crit, 3, cv2.KMEANS_PP_CENTERS)  # type: ignore[call-overload]
+    _, lbl, _ = cv2.kmeans(x.astype(np.float32), n, None, crit, 3, cv2.KMEANS_PP_CENTERS)  # type: ignore[call-overload, unused-ignore]  # stubs differ by opencv version
     resp = np.zeros((x.shape[0], n))
     resp[np.arange(x.shape[0]), lbl.ravel()] = 1.0
     floor = np.diag([1e-2, 1e-2, 1e-2])
