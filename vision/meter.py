@@ -26,6 +26,7 @@ from vision.mixing import mixing_indices
 from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables, row_spans
 from vision.photometric import (
     JUMP,
+    REBAKE_AT_ONCE,
     LightEstimate,
     channel_maps,
     check_class_reference,
@@ -216,6 +217,7 @@ class Meter:
         self.track_every = int(track_every)
         self.rebake_threshold = float(rebake_threshold)
         self._baked_gains = (1.0, 1.0, 1.0)
+        self._confirm = False  # a small light move seen once: the next frame is estimated to confirm it
         self._light: LightEstimate | None = None
         self._accepted: LightEstimate | None = None  # the last estimate that mapped back
         self._n_frames = 0
@@ -252,11 +254,19 @@ class Meter:
         self.estimates += 1
         if est.cause is not None:
             return
-        if max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True)) \
-                > math.log1p(self.rebake_threshold):
-            self._tables = remapped_tables(self.colour_classes, channel_maps(est.gains_bgr))
-            self._baked_gains = est.gains_bgr
-            self.rebakes += 1
+        moved = max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True))
+        if moved <= math.log1p(self.rebake_threshold):
+            self._confirm = False
+            return
+        if moved <= math.log1p(REBAKE_AT_ONCE) and not self._confirm:
+            # a small move seen once may be the estimate's own scatter (a noisy frame): estimate
+            # the next frame too, and re-bake when it sees the move as well
+            self._confirm = True
+            return
+        self._confirm = False
+        self._tables = remapped_tables(self.colour_classes, channel_maps(est.gains_bgr))
+        self._baked_gains = est.gains_bgr
+        self.rebakes += 1
 
     @property
     def d0_px(self) -> float | None:
@@ -339,7 +349,7 @@ class Meter:
                 g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
             flat = np.ascontiguousarray(img).reshape(-1, 3)
             means = sample_means(flat, g.sample, self._means_now)
-            if self._n_frames % self.track_every == 0 or np.any(
+            if self._n_frames % self.track_every == 0 or self._confirm or np.any(
                     np.abs(means - self._means_then) > np.maximum(3.0, JUMP * self._means_then)):
                 tables = self._tables
                 self._track_light(flat, g)
