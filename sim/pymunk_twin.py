@@ -162,6 +162,23 @@ def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:
     return float(mass_kg * j / area)
 
 
+@njit(cache=True)
+def _counting_sort(keys: np.ndarray, items: np.ndarray, n: int) -> np.ndarray:
+    """``items`` (indices into ``keys``, values 0..n) stably reordered by ``keys[item]``: one
+    counting-sort pass, O(len(items) + n)."""
+    cnt = np.zeros(n + 2, np.int64)
+    for t in range(items.size):
+        cnt[keys[items[t]] + 1] += 1
+    for p in range(n + 1):
+        cnt[p + 1] += cnt[p]
+    out = np.empty(items.size, np.int64)
+    for t in range(items.size):
+        o = items[t]
+        out[cnt[keys[o]]] = o
+        cnt[keys[o]] += 1
+    return out
+
+
 @njit(cache=True, error_model="numpy")
 def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_sorted: np.ndarray,
                batch_of: np.ndarray, rows: np.ndarray, vel_rows: np.ndarray, round_x: np.ndarray,
@@ -190,25 +207,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_
             m += 1
     # stable order by (a, b) in O(m + n): two counting-sort passes (by b, then by a), the order a stable
     # sort of a * (n + 1) + b gives
-    cnt = np.zeros(n + 2, np.int64)
-    for t in range(m):
-        cnt[b_[t] + 1] += 1
-    for p in range(n + 1):
-        cnt[p + 1] += cnt[p]
-    by_b = np.empty(m, np.int64)
-    for t in range(m):
-        by_b[cnt[b_[t]]] = t
-        cnt[b_[t]] += 1
-    cnt[:] = 0
-    for t in range(m):
-        cnt[a_[t] + 1] += 1
-    for p in range(n + 1):
-        cnt[p + 1] += cnt[p]
-    order = np.empty(m, np.int64)
-    for t in range(m):
-        o = by_b[t]
-        order[cnt[a_[o]]] = o
-        cnt[a_[o]] += 1
+    order = _counting_sort(a_, _counting_sort(b_, np.arange(m), n), n)
     key = a_[:m] * (n + 1) + b_[:m]
     # ties (one particle pair, several convex pieces): by the normal, insertion sort within each run
     i = 0

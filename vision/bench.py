@@ -105,10 +105,14 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
             Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls).measure, vga, seconds, clock=cpu)
         res["glcm_cpu_fps"] = frames_per_second(GLCMMeter(roi).measure, vga, seconds, clock=cpu)
         res["glcm_cpu_ratio"] = res["centroid_cpu_fps"] / res["glcm_cpu_fps"]
-        counted = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls)
-        for i in range(40):
-            counted.measure(vga[i % len(vga)])
-        res["tracked_estimate_share"] = counted.estimates / 40
+        def estimate_share(meter: Meter, frames: list) -> float:
+            """The share of 40 frames (``frames`` looped) on which ``meter`` ran a full light estimate."""
+            for i in range(40):
+                meter.measure(frames[i % len(frames)])
+            return meter.estimates / 40
+
+        res["tracked_estimate_share"] = estimate_share(
+            Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls), vga)
         # a steady video: one bed under the sensor noise of a webcam (a new draw each frame), as
         # consecutive frames of a turning drum -- the meter's default schedule (a full estimate
         # every 4th frame, the jump check on the others)
@@ -122,10 +126,8 @@ def run_vision_bench(seconds: float = 1.5, log: Callable[[str], None] | None = N
         res["centroid_cpu_fps_tracked_steady"] = frames_per_second(
             Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s).measure, steady, seconds,
             clock=cpu)
-        counted = Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s)
-        for i in range(40):
-            counted.measure(steady[i % len(steady)])
-        res["tracked_steady_estimate_share"] = counted.estimates / 40
+        res["tracked_steady_estimate_share"] = estimate_share(
+            Meter(roi=roi, light_reference=ref_s, light_reference_classes=ref_cls_s), steady)
         moved_cpu = Meter(roi=roi, light_reference=ref, light_reference_classes=ref_cls, track_every=1)
         res["centroid_cpu_fps_light_moved"] = frames_per_second(moved_cpu.measure, moved, seconds, clock=cpu)
         say("centroid 640x480, island filter ...")

@@ -249,11 +249,10 @@ class Meter:
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine,
                           None if last is None else last.gains_bgr)
         self._light = est
-        if est.cause is None:
-            self._accepted = est
         self.estimates += 1
         if est.cause is not None:
             return
+        self._accepted = est
         moved = max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True))
         if moved <= math.log1p(self.rebake_threshold):
             self._confirm = False

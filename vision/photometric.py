@@ -418,21 +418,20 @@ def _maps_py(gains, lin, bounds, out):  # pragma: no cover - compiled
             out[c, 255] = (out[c, 255] + 256) // 2
 
 
-def _means_py(flat, sample, step, out):  # pragma: no cover - compiled
-    """out = mean B, G, R of every ``step``-th sampled pixel."""
+def _means_py(flat, sample, out):  # pragma: no cover - compiled
+    """out = mean B, G, R of the sampled pixels."""
     s0 = 0
     s1 = 0
     s2 = 0
-    n = 0
-    for i in range(0, sample.shape[0], step):
+    for i in range(sample.shape[0]):
         k = sample[i]
         s0 += flat[k, 0]
         s1 += flat[k, 1]
         s2 += flat[k, 2]
-        n += 1
-    out[0] = s0 / max(n, 1)
-    out[1] = s1 / max(n, 1)
-    out[2] = s2 / max(n, 1)
+    n = max(sample.shape[0], 1)
+    out[0] = s0 / n
+    out[1] = s1 / n
+    out[2] = s2 / n
 
 
 def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -444,7 +443,7 @@ def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | Non
     and 3% jump checks)."""
     if out is None:
         out = np.empty(3)
-    _kernels()[4](flat_bgr, sample, 1, out)
+    _kernels()[4](flat_bgr, sample, out)
     return out
 
 

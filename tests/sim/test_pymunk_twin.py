@@ -253,3 +253,16 @@ def test_from_placement_rejects_a_bad_placement_in_one_line() -> None:
         with pytest.raises(SimError) as exc:
             PymunkDrumSim.from_placement(m, rpm=5.0, **bad)
         assert "\n" not in str(exc.value)
+
+
+def test_post_step_contact_order_is_the_stable_sort_by_particle_pair() -> None:
+    """The post-step pass orders contacts by (a, b) with two counting-sort passes: the same order
+    as a stable sort of a * (n + 1) + b (the canonical order bit-exact branches rely on)."""
+    from sim.pymunk_twin import _counting_sort
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        n, m = int(rng.integers(1, 300)), int(rng.integers(0, 800))
+        a, b = rng.integers(0, n + 1, m), rng.integers(0, n + 1, m)
+        order = _counting_sort(a, _counting_sort(b, np.arange(m), n), n)
+        assert np.array_equal(order, np.argsort(a * (n + 1) + b, kind="mergesort"))
