@@ -140,10 +140,12 @@ def particle_drum(
     gv = np.linspace(-R, R, 241)
     GU, GV = np.meshgrid(gu, gv)
     disc = GU * GU + GV * GV <= R * R
+    drop = s_shape * R * (GU / R) ** 3  # the profile's S-shape below t, the same in every step
+    n_disc = disc.sum()
     for _ in range(40):
         t = 0.5 * (lo + hi)
-        below = disc & (GV <= t - s_shape * R * (GU / R) ** 3)
-        if below.sum() / disc.sum() < fill:
+        below = disc & (GV <= t - drop)
+        if below.sum() / n_disc < fill:
             lo = t
         else:
             hi = t
