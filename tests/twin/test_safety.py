@@ -485,7 +485,7 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_bench_memory_measures_the_run_and_its_process_tree(cli_once) -> None:
-    """``drumtwin bench memory --seconds 8 --json``: a real run on a 640x640 video; the tree includes
+    """``drumtwin bench memory --seconds 5 --json``: a real run on a 640x640 video; the tree includes
     the what-if and calibration pool processes, so it is at least the run process itself (the
     session's run, tests/conftest.py: shared with the bad-input sweep's base of ``bench memory``)."""
     import json
