@@ -68,12 +68,13 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     """Issue 21: `drumtwin run --video` of the 27 frames looped, classes from `classes
     suggest`, the mill emulator at 5 rpm, AUTO. The old trend locked at 0.43, AUTO called
     it segregated and stepped the setpoint to 45 rpm. Now: the trend within 0.05 of the
-    raw median after 3 s, settled, and not one rpm command."""
+    raw median after 3 s, settled, and not one rpm command in an 8 s run (AUTO's 5 s
+    detection dwell on a bed it took for segregated would ask for a what-if within it)."""
     r = cli("classes", "suggest", real_drum_dir / "images")
     assert r.code == 0, r.err
     classes = tmp_path / "classes.toml"
     classes.write_text(r.out)
-    video = _looped_video(real_drum_dir / "images", tmp_path / "looped.mp4", seconds=12.0)
+    video = _looped_video(real_drum_dir / "images", tmp_path / "looped.mp4", seconds=8.0)
     studies: list[Any] = []
 
     def study(jobs):  # a what-if would be a request to move: there must be none
@@ -85,7 +86,7 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     emu.set_motor(setpoint_rpm=5.0, actual_rpm=5.0, running=True)  # the operator runs it at 5 rpm
     try:
         cfg = RunConfig(video=video, mill=f"socket://127.0.0.1:{port}", meter_config=classes, dashboard=False,
-                        duration_s=12.0, mode="auto", log_dir=tmp_path / "run").resolved()
+                        duration_s=8.0, mode="auto", log_dir=tmp_path / "run").resolved()
         run_live(cfg, progress=False, seams=Seams(calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
                                                   whatif_study=study))
     finally:
@@ -94,7 +95,7 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     t = np.array([float(row["t_s"]) for row in rows])
     mi = np.array([float(row["mi"]) if row["mi"] not in ("", None) else math.nan for row in rows])
     trend = np.array([float(row["trend_mi"]) for row in rows])
-    assert t.size >= 300 and t.max() >= 9.0  # the loop went round ~12 times
+    assert t.size >= 200 and t.max() >= 6.0  # the loop went round ~8 times
     med = float(np.nanmedian(mi))
     assert med > 0.93
     late = t >= 3.0
