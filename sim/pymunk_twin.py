@@ -10,9 +10,11 @@ camera sees it); ``rpm_actual`` follows ``set_rpm`` at the acceleration limit.
 
 Model:
 
-* **Drum**: one KINEMATIC body turning about the axis; the wall is a ring of ``WALL_SEGMENTS``
-  segments whose inner surface is the circle of radius ``R`` (to ``R * (1 - cos(pi/N)) / cos``,
-  0.02 mm on a 250 mm drum); baffles are rounded boxes on the same body, from the wall inwards.
+* **Drum**: the wall is a ring of ``WALL_SEGMENTS`` static segments whose inner surface is the
+  circle of radius ``R`` (to ``R * (1 - cos(pi/N)) / cos``, 0.02 mm on a 250 mm drum), its surface
+  moving at the drum's ``w x p`` (Chipmunk's ``surface_velocity``: a round wall turning about its
+  centre is the same surface; a static one is not re-indexed by the broad phase every step); baffles
+  are boxes on one KINEMATIC body turning about the axis, from the wall inwards.
 * **Particles**: one DYNAMIC body each; discs are ``Circle``; convex outlines (regular polygon,
   pellet) one ``Poly`` with a corner radius ``CORNER_R`` of the particle's radius (the vertices
   pulled in by it, so the outer size stays); non-convex outlines one body of several convex
@@ -26,16 +28,21 @@ Model:
   Coulomb friction: a shape's coefficient is ``sqrt(friction)`` so the
   particle-particle product is ``friction``, the wall's ``wall_mu / sqrt(friction)``; restitution
   the same way (``sqrt(e)`` on every shape).
-* **Rolling friction** (contacts between round shapes: disc-disc, disc-wall): after each step a
-  torque ``mu_r r_eff F_n`` against the contact's relative spin, capped per contact so it cannot
-  reverse it (the DEM's "constant directional torque"); ``F_n`` the contact's normal impulse / dt.
+* **Rolling friction** (contacts between round shapes: disc-disc, disc-wall): after each step, a
+  velocity constraint per contact solved like Chipmunk's own (projected Gauss-Seidel, ``ROLL_SWEEPS``
+  sweeps): an angular-impulse couple against the pair's relative spin, at most ``mu_r r_eff F_n dt``
+  (the DEM's "constant directional torque"; ``F_n`` the contact's normal impulse / dt), with the
+  tangential impulse at the contact that keeps the contact from slipping. So it stops the rolling
+  mode (spin and the translation rolling with it): a disc holds on a slope up to ``tan = mu_r`` and
+  does not creep (a couple on the spin alone let a held disc creep at a speed proportional to dt).
 * **End plates** (monolayer and thin drums; Taberlet et al. 2003, as ``sim.dem``): after each step
   every particle's velocity relative to the plates (turning with the drum) loses
   ``mu_end r sum(F_n) / depth * dt / m``, capped so it cannot reverse. ``depth`` is the drum's
   depth (``sim.mixer.parse_mixer`` makes a monolayer drum's its thickest particle's thickness).
-* **Time step**: one fixed internal step ``dt_s`` (``DEFAULT_DT_S``; the study in
-  docs/validation.md section 10), independent of how the caller slices time: ``advance`` runs
-  every whole step that fits and carries the remainder.
+* **Time step**: one fixed internal step ``dt_s`` (``default_dt_s``: 2 ms for a bed at least half
+  not round, 0.5 ms for a bed mostly of discs; the study in docs/validation.md section 10),
+  independent of how the caller slices time: ``advance`` runs every whole step that fits and
+  carries the remainder.
 
 Snapshots: pymunk pickles a Space without its contact cache (the warm-start impulses), so a
 restored copy does not continue bit-identically to the space it was taken from, but two copies of
@@ -79,13 +86,15 @@ from sim.errors import SimError
 from sim.mixer import Mixer, Shape, resolve, shape_outline_m
 from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
-DEFAULT_DT_S = 0.002  # cut-disc rig: 0.5-2 ms agree, 2.5-3 ms read the slope 0.6 deg low, 3.3 ms 1.2 (validation.md 10)
+DEFAULT_DT_S = 0.002  # a bed at least half not round (the cut-disc rig): 0.7 deg below 0.25-1 ms (validation.md 10)
+ROUND_BED_DT_S = 0.0005  # a bed mostly of discs: 2 ms reads the slope 3.6 deg low, 0.5 ms 0.9 (validation.md 10)
 DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
 WALL_SEGMENTS = 180
 CORNER_R = 0.02  # corner radius of polygon shapes, in the particle's radius
 PIECE_SEGMENTS = 16  # round parts of a polygon piece: vertices per full turn (cost of Chipmunk's poly contacts)
 OVERLAP_LEFT_PER_S = 0.9 ** (1 / 0.004)  # Chipmunk collision_bias: 10 % of an overlap corrected per 4 ms
 SLOP_R = 0.01  # collision slop, in the smallest radius
+ROLL_SWEEPS = 10  # Gauss-Seidel sweeps of the rolling-friction constraints per step (as Chipmunk's iterations)
 _INFLATE_S = 0.1
 _SETTLE_DAMPING = 0.1  # velocity kept after one second while settling (pymunk Space.damping)
 
@@ -116,6 +125,16 @@ class PymunkState:
     @property
     def drum(self) -> DrumSpec:
         return self.mixer.drum
+
+
+def default_dt_s(mixer: Mixer) -> float:
+    """The pymunk engine's converged step for ``mixer`` (s): ``DEFAULT_DT_S`` when at least half its
+    particles are not round, ``ROUND_BED_DT_S`` otherwise (a bed of discs needs the shorter step:
+    its slope rests on rolling contacts, whose overlaps grow with the step; docs/validation.md 10)."""
+    res = resolve(mixer)
+    n = sum(k.count for k in res)
+    n_round = sum(k.count for k, kind in zip(res, mixer.particles, strict=True) if kind.shape.is_round)
+    return ROUND_BED_DT_S if n_round > 0.5 * n else DEFAULT_DT_S
 
 
 def _check_iterations(iterations: int) -> int:
@@ -179,15 +198,46 @@ def _counting_sort(keys: np.ndarray, items: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def _id_table(ids: np.ndarray, parts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An open-addressing table from body ids (Chipmunk's addresses) to particle indices: keys and values
+    (``_lookup``), a power of two at least 4 times the ids."""
+    size = 1 << max(4, int(4 * ids.size - 1).bit_length())
+    keys = np.full(size, -1, np.int64)
+    vals = np.zeros(size, np.int64)
+    for v, p in zip(ids.tolist(), parts.tolist(), strict=True):
+        h = _slot(int(v), size - 1)
+        while keys[h] != -1:
+            h = (h + 1) & (size - 1)
+        keys[h], vals[h] = v, p
+    return keys, vals
+
+
+def _slot(v: int, mask: int) -> int:
+    return ((v >> 4) ^ (v >> 13)) & mask
+
+
+@njit(cache=True)
+def _lookup(keys: np.ndarray, vals: np.ndarray, v: int) -> int:
+    """The value of key ``v`` in an ``_id_table`` (every looked-up id is in it)."""
+    mask = keys.size - 1
+    h = ((v >> 4) ^ (v >> 13)) & mask
+    while keys[h] != v:
+        h = (h + 1) & mask
+    return vals[h]
+
+
 @njit(cache=True, error_model="numpy")
-def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_sorted: np.ndarray,
+def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: np.ndarray,
                batch_of: np.ndarray, rows: np.ndarray, vel_rows: np.ndarray, round_x: np.ndarray,
-               inv_i_x: np.ndarray, r_x: np.ndarray, r_over_m: np.ndarray, h: float, w_drum: float,
-               end_k: float, mu_r: float, inv_r_min: float, hist: np.ndarray, acc: np.ndarray) -> bool:
+               inv_m_x: np.ndarray, inv_i_x: np.ndarray, r_x: np.ndarray, r_over_m: np.ndarray, h: float,
+               w_drum: float, end_k: float, mu_r: float, inv_r_min: float, hist: np.ndarray,
+               acc: np.ndarray) -> bool:
     """One step's contacts (the batch rows of ``pymunk.batch.get_space_arbiters``: body ids ``ints``
     (m, 3), impulse, normal, distance ``fl`` (m, 5)) -> overlap statistics into ``hist``/``acc``, and
     the bodies' new velocities (``rows``: x, y, vx, vy, omega per batch row) into ``vel_rows`` after
-    rolling friction (``mu_r``) and end-plate friction (``end_k``, s). True if ``vel_rows`` was written.
+    rolling friction (``mu_r``; ``_rolling_impulse``) and end-plate friction (``end_k``, s). True if
+    ``vel_rows`` was written. ``inv_m_x``, ``inv_i_x``, ``r_x``: 1 / mass, 1 / moment, radius per
+    particle and the drum (index n: 0, 0, 0).
 
     The contacts are taken in a canonical order (particle pair, then normal): Chipmunk's contact
     cache is a hash set keyed by memory addresses, and the sums must not depend on where a restored
@@ -201,8 +251,8 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_
     m = 0
     for k in range(m_all):
         if fl[k, 4] < 0.0:  # touching
-            a_[m] = part_of_sorted[np.searchsorted(id_sorted, ints[k, 0])]
-            b_[m] = part_of_sorted[np.searchsorted(id_sorted, ints[k, 1])]
+            a_[m] = _lookup(id_keys, id_part, ints[k, 0])
+            b_[m] = _lookup(id_keys, id_part, ints[k, 1])
             keep[m] = k
             m += 1
     # stable order by (a, b) in O(m + n): two counting-sort passes (by b, then by a), the order a stable
@@ -251,32 +301,79 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_
     acc[1] = ov_max
     acc[2] = wall_max
     acc[3] = 1.0 - n_touched / n if n else np.nan
+    acc[4] = 0.0
     if m == 0 or rows.shape[0] == 0 or (end_k <= 0.0 and mu_r <= 0.0):
         return False
     vel_rows[:, :] = rows[:, 2:5]
     if mu_r > 0.0:
-        dom = np.zeros(n + 1)
+        # rolling friction as a velocity constraint per round-round contact, solved like Chipmunk's contacts
+        # (projected Gauss-Seidel, ``ROLL_SWEEPS``): an angular impulse couple stops the pair's relative spin,
+        # up to mu_r r_eff F_n dt in all, with the tangential impulse at the contact that keeps it from slipping
+        ca = np.empty(m, np.int64)
+        cb = np.empty(m, np.int64)
+        cf = np.empty((m, 6))  # tx, ty, rolling-mode inverse moment, couple limit, tangential impulse per couple
+        nr = 0
         for t in range(m):
             o = order[t]
             a, b = a_[o], b_[o]
             if not (round_x[a] and round_x[b]):
                 continue
+            k = keep[o]
+            nx, ny = fl[k, 2], fl[k, 3]
+            # the normal from a to b (the drum's wall lies outside the particle touching it)
             if b == n:
-                r_eff = r_x[a]
+                d = nx * rows[batch_of[a], 0] + ny * rows[batch_of[a], 1]
             elif a == n:
-                r_eff = r_x[b]
+                d = -(nx * rows[batch_of[b], 0] + ny * rows[batch_of[b], 1])
             else:
-                r_eff = r_x[a] * r_x[b] / (r_x[a] + r_x[b] + 1e-300)
-            wa = w_drum if a == n else rows[batch_of[a], 4]
-            wb = w_drum if b == n else rows[batch_of[b], 4]
-            w_rel = wa - wb
-            k_inv = inv_i_x[a] + inv_i_x[b]
-            dw = min(mu_r * h * r_eff * fn[t] * k_inv, abs(w_rel))  # change of w_rel, rad/s
-            tq = np.sign(w_rel) * dw / k_inv  # angular impulse on b (on a: minus), N m s
-            dom[b] += tq * inv_i_x[b]
-            dom[a] -= tq * inv_i_x[a]
-        for p in range(n):
-            vel_rows[batch_of[p], 2] += dom[p]
+                d = (nx * (rows[batch_of[b], 0] - rows[batch_of[a], 0])
+                     + ny * (rows[batch_of[b], 1] - rows[batch_of[a], 1]))
+            if d < 0.0:
+                nx, ny = -nx, -ny
+            pa, pb = r_x[a], r_x[b]
+            r_eff = pa if b == n else (pb if a == n else pa * pb / (pa + pb + 1e-300))
+            # the contact's tangential inverse mass and the rolling mode's inverse moment (no slip kept)
+            k_t = inv_m_x[a] + pa * pa * inv_i_x[a] + inv_m_x[b] + pb * pb * inv_i_x[b]
+            c = pa * inv_i_x[a] - pb * inv_i_x[b]
+            k_roll = inv_i_x[a] + inv_i_x[b] - (c * c / k_t if k_t > 0.0 else 0.0)
+            if k_roll <= 0.0:
+                continue
+            ca[nr], cb[nr] = a, b
+            cf[nr, 0], cf[nr, 1], cf[nr, 2] = -ny, nx, k_roll
+            cf[nr, 3] = mu_r * h * r_eff * fn[t]
+            cf[nr, 4] = -c / k_t if k_t > 0.0 else 0.0
+            cf[nr, 5] = 0.0  # the couple so far (N m s, on b; on a: minus)
+            nr += 1
+        for _ in range(ROLL_SWEEPS):
+            for q in range(nr):
+                a, b = ca[q], cb[q]
+                wa = w_drum if a == n else vel_rows[batch_of[a], 2]
+                wb = w_drum if b == n else vel_rows[batch_of[b], 2]
+                acc_l = cf[q, 5]
+                new_l = min(cf[q, 3], max(-cf[q, 3], acc_l + (wa - wb) / cf[q, 2]))
+                lb = new_l - acc_l
+                if lb == 0.0:
+                    continue
+                cf[q, 5] = new_l
+                pt = lb * cf[q, 4]
+                tx, ty = cf[q, 0], cf[q, 1]
+                if a == n or b == n:  # the reaction on the drum: the couple and the impulse's moment at the wall
+                    q_p = b if a == n else a
+                    sgn = -1.0 if a == n else 1.0
+                    x, y = rows[batch_of[q_p], 0], rows[batch_of[q_p], 1]
+                    rr = math.hypot(x, y)
+                    f = (rr + r_x[q_p]) / rr if rr > 0.0 else 0.0
+                    acc[4] += sgn * (lb + pt * f * (x * ty - y * tx))
+                if b != n:
+                    row = batch_of[b]
+                    vel_rows[row, 0] += pt * tx * inv_m_x[b]
+                    vel_rows[row, 1] += pt * ty * inv_m_x[b]
+                    vel_rows[row, 2] += (lb - pt * r_x[b]) * inv_i_x[b]
+                if a != n:
+                    row = batch_of[a]
+                    vel_rows[row, 0] -= pt * tx * inv_m_x[a]
+                    vel_rows[row, 1] -= pt * ty * inv_m_x[a]
+                    vel_rows[row, 2] += (-lb - pt * r_x[a]) * inv_i_x[a]
     if end_k > 0.0:
         sfn = np.zeros(n + 1)
         for t in range(m):
@@ -293,6 +390,8 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_sorted: np.ndarray, part_of_
                 s = min(end_k * r_over_m[p] * sfn[p], u) / u
                 vel_rows[row, 0] -= s * ux
                 vel_rows[row, 1] -= s * uy
+                # the plates (the drum) take the opposite impulse at the particle's centre
+                acc[4] += s * (x * uy - y * ux) / inv_m_x[p]
     return True
 
 
@@ -342,7 +441,7 @@ class PymunkDrumSim(FixedStepTwin):
         """Check and keep the run's parameters (one-line SimErrors); the checked rpm."""
         params = SimParams(float(friction), float(rolling), float(restitution),
                            None if wall_friction is None else float(wall_friction), float(accel_rpm_s),
-                           DEFAULT_DT_S if dt_s is None else float(dt_s),
+                           default_dt_s(mixer) if dt_s is None else float(dt_s),
                            end_friction=None if end_friction is None else float(end_friction))
         _check_params(params)
         self.iterations = _check_iterations(iterations)
@@ -425,6 +524,7 @@ class PymunkDrumSim(FixedStepTwin):
         # per particle and one more entry for the drum (index n): round, 1 / moment, radius
         self._round_x = np.append(self._round, True)
         self._inv_i_x = np.append(1.0 / self._inertia, 0.0)
+        self._inv_m_x = np.append(1.0 / self._m, 0.0)
         self._r_x = np.append(self._r_cls[self._cls], 0.0)
         self._r_over_m = self._r_cls[self._cls] / self._m
         self._r_min = float(self._r_cls.min())
@@ -441,8 +541,9 @@ class PymunkDrumSim(FixedStepTwin):
         rv = (R + seg_r) / math.cos(math.pi / WALL_SEGMENTS)
         a = 2 * math.pi * np.arange(WALL_SEGMENTS) / WALL_SEGMENTS
         pts = [(rv * math.cos(t), rv * math.sin(t)) for t in a]
+        wall = space.static_body  # the round wall turns in place: static, its surface moving (``_turn_wall``)
         for i in range(WALL_SEGMENTS):
-            space.add(pymunk.Segment(drum, pts[i], pts[(i + 1) % WALL_SEGMENTS], seg_r))
+            space.add(pymunk.Segment(wall, pts[i], pts[(i + 1) % WALL_SEGMENTS], seg_r))
         for poly in self.baffle_polygons_m(0.0):
             space.add(pymunk.Poly(drum, [tuple(p) for p in poly], radius=0.0))
         bodies = []
@@ -485,18 +586,29 @@ class PymunkDrumSim(FixedStepTwin):
         n = len(bodies)
         # batch order -> particle index (the drum: n)
         self._batch_of = np.array([index[b.id] for b in bodies], dtype=np.int64)  # particle -> batch row
-        self._id_sorted = np.sort(ids.astype(np.int64))
         part_of_id = {b.id: i for i, b in enumerate(bodies)}
         part_of_id[drum.id] = n
-        self._part_of_sorted = np.array([part_of_id[int(v)] for v in self._id_sorted.tolist()], dtype=np.int64)
-        self._drum_row = index[drum.id]
+        part_of_id[space.static_body.id] = n  # the wall
+        all_ids = np.append(ids, space.static_body.id).astype(np.int64)
+        self._id_keys, self._id_part = _id_table(all_ids, np.array([part_of_id[int(v)] for v in all_ids.tolist()]))
+        # the wall's segments and their tangential speed per rad/s of the drum (m/rad): w x p at the midpoint
+        self._wall = tuple(space.static_body.shapes)
+        tang = []
+        for seg in self._wall:
+            assert isinstance(seg, pymunk.Segment)
+            mx, my = 0.5 * (seg.a.x + seg.b.x), 0.5 * (seg.a.y + seg.b.y)
+            k = self.drum.radius_m / math.hypot(mx, my)  # the contact surface: radius R
+            tang.append((-my * k, mx * k))
+        self._wall_tang = tuple(tang)
+        self._wall_w = math.nan  # the drum speed the wall's surface velocity is set for (rad/s)
         self._abuf = pbatch.Buffer()
         self._bbuf = pbatch.Buffer()
         self._vel_rows = np.zeros((ids.size, 3))  # vx, vy, omega per batch row, written back after a step
         self._sbuf = pbatch.Buffer()
         self._sbuf.set_float_buf(self._vel_rows)
         self._no_rows = np.zeros((0, 5))
-        self._acc_stats = np.zeros(4)  # one step's contacts, max overlap (small radii), max wall depth (m), airborne
+        self._acc_stats = np.zeros(5)  # one step's contacts, max overlap (small radii), max wall depth (m), airborne,
+        # and the angular impulse of rolling and end-plate friction on the drum (N m s, counter-clockwise)
         self._set_coefficients()
 
     def _set_coefficients(self) -> None:
@@ -504,7 +616,7 @@ class PymunkDrumSim(FixedStepTwin):
         su = math.sqrt(p.friction)
         wall_u = p.wall_mu / su if su > 0 else 0.0
         se = math.sqrt(p.restitution)
-        for s in self._drum.shapes:
+        for s in (*self._wall, *self._drum.shapes):
             s.friction, s.elasticity = wall_u, se
         for b in self._bodies:
             for s in b.shapes:
@@ -596,6 +708,8 @@ class PymunkDrumSim(FixedStepTwin):
                 self._rpm_actual += max(-dv_max, min(dv_max, d))
             w = self.mixer.direction * rpm_to_rad_s(self._rpm_actual) if count else 0.0
             self._drum.angular_velocity = w
+            if w != self._wall_w:
+                self._turn_wall(w)
             if clock is None:
                 self._space.step(h)
                 self._after_step(h, w, end_k if count else 0.0, p.rolling if count else 0.0)
@@ -607,6 +721,15 @@ class PymunkDrumSim(FixedStepTwin):
                 clock += (t1 - t0, time.process_time() - t1)
             if count:
                 self.n_steps += 1
+
+    def _turn_wall(self, w: float) -> None:
+        """Set the wall's surface velocity to the drum's ``w`` (rad/s): a round wall turning about its
+        centre is the same surface, moving at ``w x p`` (Chipmunk's ``surface_velocity``, used by friction;
+        the wall's normal velocity is zero either way). A static wall is not re-indexed by the broad phase
+        every step as shapes on the turning kinematic body are."""
+        for seg, (tx, ty) in zip(self._wall, self._wall_tang, strict=True):
+            seg.surface_velocity = (w * tx, w * ty)
+        self._wall_w = w
 
     def _after_step(self, h: float, w_drum: float, end_k: float, mu_r: float) -> None:
         """Contact statistics, rolling friction and end-plate friction of the step just taken
@@ -625,9 +748,9 @@ class PymunkDrumSim(FixedStepTwin):
         else:
             rows = self._no_rows
         acc = self._acc_stats
-        write = _post_step(ints, fl, self._id_sorted, self._part_of_sorted, self._batch_of, rows, self._vel_rows,
-                           self._round_x, self._inv_i_x, self._r_x, self._r_over_m, h, w_drum, end_k, mu_r,
-                           1.0 / self._r_min, self._hist, acc)
+        write = _post_step(ints, fl, self._id_keys, self._id_part, self._batch_of, rows, self._vel_rows,
+                           self._round_x, self._inv_m_x, self._inv_i_x, self._r_x, self._r_over_m, h, w_drum,
+                           end_k, mu_r, 1.0 / self._r_min, self._hist, acc)
         self._stat_steps += 1
         self._contacts += int(acc[0])
         self._ov_max = max(self._ov_max, float(acc[1]))
@@ -677,10 +800,11 @@ class PymunkDrumSim(FixedStepTwin):
 
     def drum_torque_nm(self) -> float:
         """Torque of the bed on the drum about its axis (N m, the 2D slice), positive in the sense the drum
-        turns at positive rpm: the drum body's contact impulses of the last step (``Body.each_arbiter``,
-        ``Arbiter.total_impulse`` at the mean of its contact points) over the step -- one step's sample,
-        not a mean (the space keeps only this step's contacts). Wall and baffles; not the end plates'
-        friction (applied outside the solver). NaN before the first step."""
+        turns at positive rpm: the wall's and baffles' contact impulses of the last step
+        (``Body.each_arbiter``, ``Arbiter.total_impulse`` at the mean of its contact points), the
+        reaction of rolling friction at the wall (its couples and contact impulses) and of the end
+        plates' friction at each particle's centre, over the step -- one step's sample, not a mean
+        (the space keeps only this step's contacts). NaN before the first step."""
         if self.n_steps == 0:
             return float("nan")
         tq = [0.0]
@@ -695,7 +819,8 @@ class PymunkDrumSim(FixedStepTwin):
             tq[0] += x * j.y - y * j.x
 
         self._drum.each_arbiter(one)
-        return self.mixer.direction * tq[0] / self.substep_s()
+        self._space.static_body.each_arbiter(one)
+        return self.mixer.direction * (tq[0] + float(self._acc_stats[4])) / self.substep_s()
 
     # ----------------------------------------------------------------- read
     def particles(self) -> Particles:
@@ -761,8 +886,10 @@ def radial_spread_m(particles: Particles, areas_m2: np.ndarray | None = None) ->
 __all__ = [
     "DEFAULT_DT_S",
     "DEFAULT_ITERATIONS",
+    "ROUND_BED_DT_S",
     "PymunkDrumSim",
     "PymunkState",
     "convex_pieces",
+    "default_dt_s",
     "radial_spread_m",
 ]

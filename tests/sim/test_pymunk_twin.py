@@ -155,6 +155,60 @@ def test_rolling_friction_slows_a_rolling_disc() -> None:
     assert spin(0.5) < 0.8 * spin(0.0)
 
 
+def _lone_disc(mu_r: float, dt_s: float, rpm: float = 0.0, direction: int = 1) -> PymunkDrumSim:
+    m = Mixer(DrumSpec(0.12, 0.005), (ParticleKind("blue", Shape("disc", 0.01), 1190.0, count=1,
+                                                    thickness_m=0.005),), fill=0.1, direction=direction,
+              monolayer=True)
+    return PymunkDrumSim(m, seed=0, rpm=rpm, settle_s=0.2, rolling=mu_r, end_friction=0.0, dt_s=dt_s)
+
+
+def _polar_deg(sim: PymunkDrumSim) -> float:
+    """The lone disc's angle about the axis from straight down (deg, positive: x > 0)."""
+    b = sim._bodies[0]
+    return math.degrees(math.atan2(b.position.x, -b.position.y))
+
+
+@pytest.mark.parametrize("dt_s", [0.0005, 0.002])
+def test_rolling_friction_holds_a_disc_below_its_angle_without_creep_and_rolls_it_above(dt_s: float) -> None:
+    """A lone disc at rest on the still drum's wall where the wall is tilted by theta: the couple
+    mu_r r F_n holds it for tan(theta) < mu_r (torque balance about the contact) and not above, at
+    any step. The rolling friction stops the rolling mode (spin and the translation that rolls with
+    it), so a held disc does not creep: a couple on the spin alone let it creep down at a speed
+    proportional to the step (0.1 deg in 0.5 s at 0.5 ms, 0.5 deg at 2 ms, at 3 deg)."""
+    mu_r = 0.1  # holds up to 5.71 deg
+    for tilt, held in ((3.0, True), (5.0, True), (8.0, False)):
+        sim = _lone_disc(mu_r, dt_s)
+        r_c = sim.drum.radius_m - 0.005
+        b = sim._bodies[0]
+        b.position = (r_c * math.sin(math.radians(tilt)), -r_c * math.cos(math.radians(tilt)))
+        b.velocity, b.angular_velocity = (0.0, 0.0), 0.0
+        sim.advance(0.05)
+        start = _polar_deg(sim)
+        sim.advance(0.5)
+        moved = start - _polar_deg(sim)
+        if held:
+            assert abs(moved) < 0.02, (tilt, dt_s, moved)
+        else:
+            assert moved > 1.0, (tilt, dt_s, moved)
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+def test_a_lone_disc_rides_the_turning_wall_up_to_the_rolling_friction_angle(direction: int) -> None:
+    """In the turning drum a lone disc rolls in place where gravity's moment about the contact equals the
+    rolling couple: tan(phi) = mu_r, on the side the wall rises (ccw: x > 0). The wall is a static ring
+    whose surface moves with the drum (``surface_velocity``): a wrong sign puts the disc on the other side."""
+    for mu_r in (0.2, 0.4):
+        for dt_s in (0.0005, 0.002):
+            sim = _lone_disc(mu_r, dt_s, rpm=10.0, direction=direction)
+            sim.advance(1.0)
+            phis = []
+            for _ in range(20):
+                sim.advance(0.1)
+                phis.append(_polar_deg(sim))
+            want = direction * math.degrees(math.atan(mu_r))
+            assert abs(float(np.mean(phis)) - want) < 1.0, (mu_r, dt_s, direction, np.mean(phis), want)
+
+
 def test_baffles_turn_with_the_drum() -> None:
     m = _small_rig(n=10, baffles=Baffles(4, 0.015, 0.004))
     sim = PymunkDrumSim(m, seed=0, rpm=10.0, settle_s=0.1)

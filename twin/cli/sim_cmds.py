@@ -215,14 +215,16 @@ def _step_options(dt_ms: float | None, end_friction: float | None) -> dict[str, 
 
 
 def _default_dt_ms(sim: Any) -> float:
-    """The engine's default step for this bed (ms): the DEM's from its contact time, else the twin's
-    ``default_dt_s`` (or, lacking one, the step it runs)."""
+    """The engine's default step for this bed (ms): the DEM's from its contact time, pymunk's from the
+    mixer's shapes (``sim.pymunk_twin.default_dt_s``)."""
     from sim.drum import DrumSim, default_dt_s
+    from sim.pymunk_twin import PymunkDrumSim
+    from sim.pymunk_twin import default_dt_s as pymunk_dt_s
 
     if isinstance(sim, DrumSim):
         return default_dt_s(sim.classes, sim.params.stiffness_n_m, sim.params.restitution) * 1e3
-    dflt = getattr(sim, "default_dt_s", None)
-    return float(dflt() if callable(dflt) else dflt if dflt is not None else sim.substep_s()) * 1e3
+    assert isinstance(sim, PymunkDrumSim)
+    return pymunk_dt_s(sim.mixer) * 1e3
 
 
 def _measure_source_surface(source: str, max_frames: int, bed: str | None = None,
@@ -484,7 +486,6 @@ def bench_twin(
     # the pymunk engine beside it, in the same run: the paper bed and the cut-disc rig at its default step
     from sim.engine import make_twin
     from sim.mixer import paper_mixer
-    from sim.pymunk_twin import DEFAULT_DT_S as PYMUNK_DT_S
     from sim.validation_pymunk import rig
 
     for name, mixer, rpm in (("rtf_paper_5rpm_pymunk", paper_mixer(), 5.0),
@@ -492,12 +493,12 @@ def bench_twin(
         twin = make_twin(mixer, "pymunk", case="C", seed=0, rpm=rpm, settle_s=0.3)
         out[name] = _cpu_rtf(twin, duration)
         out[name.replace("rtf_", "n_")] = len(twin.particles())
+        out[name.replace("rtf_", "dt_ms_")] = twin.substep_s() * 1e3  # each bed's own default step
     # where the cut-disc rig's step goes: shapes, contacts, iterations, Chipmunk against the post-step pass
     from sim.pymunk_twin import PymunkDrumSim
 
     assert isinstance(twin, PymunkDrumSim)
     out["profile_cutdisc_pymunk"] = twin.cost_profile(duration / 3)
-    out["dt_ms_pymunk"] = PYMUNK_DT_S * 1e3
     out["clock"] = "process cpu time, best of 3 chunks"
     # total cost per simulated second grows as N^k from the paper bed to the 16x bed
     out["cost_exponent_16x"] = math.log(out["rtf_paper_5rpm"] / out["rtf_16x"]) / math.log(
