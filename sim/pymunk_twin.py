@@ -39,7 +39,7 @@ Model:
   every particle's velocity relative to the plates (turning with the drum) loses
   ``mu_end r sum(F_n) / depth * dt / m``, capped so it cannot reverse. ``depth`` is the drum's
   depth (``sim.mixer.parse_mixer`` makes a monolayer drum's its thickest particle's thickness).
-* **Time step**: one fixed internal step ``dt_s`` (``default_dt_s``: 2 ms for a bed at least half
+* **Time step**: one fixed internal step ``dt_s`` (``default_dt_s``: 1 ms for a bed at least half
   not round, 0.5 ms for a bed mostly of discs; the study in docs/validation.md section 10),
   independent of how the caller slices time: ``advance`` runs every whole step that fits and
   carries the remainder.
@@ -86,8 +86,8 @@ from sim.errors import SimError
 from sim.mixer import Mixer, Shape, resolve, shape_outline_m
 from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
-DEFAULT_DT_S = 0.002  # a bed at least half not round (the cut-disc rig): 0.7 deg below 0.25-1 ms (validation.md 10)
-ROUND_BED_DT_S = 0.0005  # a bed mostly of discs: 2 ms reads the slope 3.6 deg low, 0.5 ms 0.9 (validation.md 10)
+DEFAULT_DT_S = 0.001  # a bed at least half not round (cut-disc rig): 1 ms = 0.5 ms, 2 ms 1.1 deg low (validation.md 10)
+ROUND_BED_DT_S = 0.0005  # a bed mostly of discs: 0.5 ms 0.8 deg below 0.25 ms, 2 ms 3.6 deg (validation.md 10)
 DEFAULT_ITERATIONS = 10  # Chipmunk solver iterations per step
 WALL_SEGMENTS = 180
 CORNER_R = 0.02  # corner radius of polygon shapes, in the particle's radius

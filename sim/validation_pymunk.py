@@ -36,9 +36,9 @@ RIG_TALL_BAFFLES = Baffles(count=4, height_m=0.050, thickness_m=0.004)  # 4 lift
 # Taberlet plate model at the monolayer's gap (3 mm, r / W = 1.7) the bed stands at 49-64 deg at
 # 10 rpm over the whole calibration search (against 32 deg in the real frames): a monolayer is not
 # the thick quasi-2D flow that model describes (docs/validation.md section 10).
-# The studies run at the 2 ms default step (0.5-2 ms agree within the seed scatter, section 10),
-# except ``convergence``, which sets its own.
-CONTACT: dict[str, Any] = {"end_friction": 0.0, "dt_s": 0.002}
+# The studies run each engine at its default step (pymunk's ``default_dt_s``: 1 ms for the cut-disc rig,
+# 0.5 ms for the disc/disc rig; section 10), except ``convergence``, which sets its own.
+CONTACT: dict[str, Any] = {"end_friction": 0.0}
 
 
 def rig(cut: bool = True, baffles: Baffles | None = None, wedge_deg: float | None = None) -> Mixer:

@@ -186,9 +186,9 @@ def test_bench_twin_prints_the_real_time_factors_and_the_step(cli_once):
     # the pymunk engine in the same run: the same paper bed, and the cut-disc rig's 250 particles
     assert out["rtf_paper_5rpm_pymunk"] > 0 and out["n_paper_5rpm_pymunk"] == out["n_paper_5rpm"]
     assert out["rtf_cutdisc_10rpm_pymunk"] > 0 and out["n_cutdisc_10rpm_pymunk"] == 250
-    # each at its own default step: the paper bed of discs 0.5 ms, the half-cut rig 2 ms
+    # each at its own default step: the paper bed of discs 0.5 ms, the half-cut rig 1 ms
     assert out["dt_ms_paper_5rpm_pymunk"] == pytest.approx(0.5)
-    assert out["dt_ms_cutdisc_10rpm_pymunk"] == pytest.approx(2.0)
+    assert out["dt_ms_cutdisc_10rpm_pymunk"] == pytest.approx(1.0)
     # where its step goes: 125 discs, 125 cut discs of 2 convex pieces each, a wall of 180 segments
     prof = out["profile_cutdisc_pymunk"]
     assert prof["shapes"] == 125 + 2 * 125 + 180 and prof["bodies"] == 251 and prof["iterations"] == 10
