@@ -98,8 +98,10 @@ ROLL_SWEEPS = 10  # Gauss-Seidel sweeps of the rolling-friction constraints per 
 _INFLATE_S = 0.1
 _SETTLE_DAMPING = 0.1  # velocity kept after one second while settling (pymunk Space.damping)
 
+# per contact: body ids and point count (ints); impulse, normal, point on shape a, depth (floats, in bit order)
 _ARB = (pbatch.ArbiterFields.BODY_A_ID | pbatch.ArbiterFields.BODY_B_ID | pbatch.ArbiterFields.TOTAL_IMPULSE
-        | pbatch.ArbiterFields.NORMAL | pbatch.ArbiterFields.CONTACT_COUNT | pbatch.ArbiterFields.DISTANCE_1)
+        | pbatch.ArbiterFields.NORMAL | pbatch.ArbiterFields.CONTACT_COUNT | pbatch.ArbiterFields.POINT_A_1
+        | pbatch.ArbiterFields.DISTANCE_1)
 _BOD = (pbatch.BodyFields.POSITION | pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY)
 _VEL = pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY
 
@@ -226,6 +228,14 @@ def _lookup(keys: np.ndarray, vals: np.ndarray, v: int) -> int:
     return vals[h]
 
 
+@njit(cache=True)
+def _later(fl: np.ndarray, u: int, v: int) -> bool:
+    """Contact row ``u`` after row ``v`` among equal normals: by the impulse's size, then the depth."""
+    ju = fl[u, 0] * fl[u, 0] + fl[u, 1] * fl[u, 1]
+    jv = fl[v, 0] * fl[v, 0] + fl[v, 1] * fl[v, 1]
+    return ju > jv or (ju == jv and fl[u, 6] > fl[v, 6])
+
+
 @njit(cache=True, error_model="numpy")
 def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: np.ndarray,
                batch_of: np.ndarray, rows: np.ndarray, vel_rows: np.ndarray, round_x: np.ndarray,
@@ -233,7 +243,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
                w_drum: float, end_k: float, mu_r: float, inv_r_min: float, hist: np.ndarray,
                acc: np.ndarray) -> bool:
     """One step's contacts (the batch rows of ``pymunk.batch.get_space_arbiters``: body ids ``ints``
-    (m, 3), impulse, normal, distance ``fl`` (m, 5)) -> overlap statistics into ``hist``/``acc``, and
+    (m, 3), impulse, normal, point on shape a, distance ``fl`` (m, 7)) -> overlap statistics into ``hist``/``acc``, and
     the bodies' new velocities (``rows``: x, y, vx, vy, omega per batch row) into ``vel_rows`` after
     rolling friction (``mu_r``; ``_rolling_impulse``) and end-plate friction (``end_k``, s). True if
     ``vel_rows`` was written. ``inv_m_x``, ``inv_i_x``, ``r_x``: 1 / mass, 1 / moment, radius per
@@ -250,9 +260,11 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
     keep = np.empty(m_all, np.int64)
     m = 0
     for k in range(m_all):
-        if fl[k, 4] < 0.0:  # touching
-            a_[m] = _lookup(id_keys, id_part, ints[k, 0])
-            b_[m] = _lookup(id_keys, id_part, ints[k, 1])
+        if fl[k, 6] < 0.0:  # touching
+            ia = _lookup(id_keys, id_part, ints[k, 0])
+            ib = _lookup(id_keys, id_part, ints[k, 1])
+            # the pair as (lower, higher) index: which body Chipmunk calls a depends on memory layout
+            a_[m], b_[m] = (ia, ib) if ia < ib else (ib, ia)
             keep[m] = k
             m += 1
     # stable order by (a, b) in O(m + n): two counting-sort passes (by b, then by a), the order a stable
@@ -269,7 +281,11 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
             q = p
             while q > i:
                 u, v = keep[order[q - 1]], keep[order[q]]
-                if fl[u, 2] > fl[v, 2] or (fl[u, 2] == fl[v, 2] and fl[u, 3] > fl[v, 3]):
+                # the normals up to their sign (the batch's sign follows Chipmunk's order of the pair)
+                su = 1.0 if fl[u, 2] > 0.0 or (fl[u, 2] == 0.0 and fl[u, 3] >= 0.0) else -1.0
+                sv = 1.0 if fl[v, 2] > 0.0 or (fl[v, 2] == 0.0 and fl[v, 3] >= 0.0) else -1.0
+                ux, uy, vx, vy = su * fl[u, 2], su * fl[u, 3], sv * fl[v, 2], sv * fl[v, 3]
+                if ux > vx or (ux == vx and (uy > vy or (uy == vy and _later(fl, u, v)))):
                     order[q - 1], order[q] = order[q], order[q - 1]
                     q -= 1
                 else:
@@ -284,7 +300,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
         k = keep[o]
         a, b = a_[o], b_[o]
         fn[t] = abs(fl[k, 0] * fl[k, 2] + fl[k, 1] * fl[k, 3]) / h  # normal force, N
-        depth = -fl[k, 4]
+        depth = -fl[k, 6]
         touched[a] = True
         touched[b] = True
         if a == n or b == n:
@@ -311,7 +327,8 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
         # up to mu_r r_eff F_n dt in all, with the tangential impulse at the contact that keeps it from slipping
         ca = np.empty(m, np.int64)
         cb = np.empty(m, np.int64)
-        cf = np.empty((m, 6))  # tx, ty, rolling-mode inverse moment, couple limit, tangential impulse per couple
+        cf = np.empty((m, 8))  # tx, ty, rolling-mode inverse moment, couple limit, tangential impulse per couple,
+        # the couple so far, the contact point (x, y)
         nr = 0
         for t in range(m):
             o = order[t]
@@ -320,14 +337,14 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
                 continue
             k = keep[o]
             nx, ny = fl[k, 2], fl[k, 3]
-            # the normal from a to b (the drum's wall lies outside the particle touching it)
-            if b == n:
-                d = nx * rows[batch_of[a], 0] + ny * rows[batch_of[a], 1]
-            elif a == n:
-                d = -(nx * rows[batch_of[b], 0] + ny * rows[batch_of[b], 1])
-            else:
+            # the normal from a to b (the batch's sign follows Chipmunk's order of the pair): between two
+            # particles by their centres; against the drum (b: wall or baffle) by the contact point, which lies
+            # towards the drum from a's centre whichever shape the batch took it on
+            if b != n:
                 d = (nx * (rows[batch_of[b], 0] - rows[batch_of[a], 0])
                      + ny * (rows[batch_of[b], 1] - rows[batch_of[a], 1]))
+            else:
+                d = nx * (fl[k, 4] - rows[batch_of[a], 0]) + ny * (fl[k, 5] - rows[batch_of[a], 1])
             if d < 0.0:
                 nx, ny = -nx, -ny
             pa, pb = r_x[a], r_x[b]
@@ -343,6 +360,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
             cf[nr, 3] = mu_r * h * r_eff * fn[t]
             cf[nr, 4] = -c / k_t if k_t > 0.0 else 0.0
             cf[nr, 5] = 0.0  # the couple so far (N m s, on b; on a: minus)
+            cf[nr, 6], cf[nr, 7] = fl[k, 4], fl[k, 5]
             nr += 1
         for _ in range(ROLL_SWEEPS):
             for q in range(nr):
@@ -357,13 +375,9 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
                 cf[q, 5] = new_l
                 pt = lb * cf[q, 4]
                 tx, ty = cf[q, 0], cf[q, 1]
-                if a == n or b == n:  # the reaction on the drum: the couple and the impulse's moment at the wall
-                    q_p = b if a == n else a
+                if a == n or b == n:  # the reaction on the drum: the couple, and the impulse's moment at the contact
                     sgn = -1.0 if a == n else 1.0
-                    x, y = rows[batch_of[q_p], 0], rows[batch_of[q_p], 1]
-                    rr = math.hypot(x, y)
-                    f = (rr + r_x[q_p]) / rr if rr > 0.0 else 0.0
-                    acc[4] += sgn * (lb + pt * f * (x * ty - y * tx))
+                    acc[4] += sgn * (lb + pt * (cf[q, 6] * ty - cf[q, 7] * tx))
                 if b != n:
                     row = batch_of[b]
                     vel_rows[row, 0] += pt * tx * inv_m_x[b]
@@ -738,7 +752,7 @@ class PymunkDrumSim(FixedStepTwin):
         ab.clear()
         pbatch.get_space_arbiters(self._space, _ARB, ab)
         ints = np.frombuffer(ab.int_buf(), dtype=np.int64).reshape(-1, 3)  # addresses: below 2**63
-        fl = np.frombuffer(ab.float_buf(), dtype=np.float64).reshape(-1, 5)
+        fl = np.frombuffer(ab.float_buf(), dtype=np.float64).reshape(-1, 7)
         friction = ints.shape[0] > 0 and (end_k > 0.0 or mu_r > 0.0)
         if friction:
             bb = self._bbuf
