@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from control.emulator import PTY_DIR_PREFIX
+from control.emulator import OWNER_FILE, PTY_DIR_PREFIX
 from twin.runlog import EVENTS_FILE, FRAMES_FILE, read_events, read_frames
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
@@ -31,15 +31,26 @@ MOMENTS: list[tuple[str, float]] = [
 ]
 
 
-def _reached(milestone: str, tmp: Path, log: Path) -> bool:
+def _reached(milestone: str, tmp: Path, log: Path, pid: int) -> bool:
+    """Whether run ``pid`` (logging to ``log``) has reached ``milestone``; its "pty" is the pty
+    directory whose owner file names ``pid``, not a killed run's leftover in the same temp dir."""
     if milestone == "spawn":
         return True
     if milestone == "pty":
-        return any(tmp.glob(PTY_DIR_PREFIX + "*"))
+        return any(_owner_pid(d) == pid for d in tmp.glob(PTY_DIR_PREFIX + "*"))
     what, arg = milestone.split()
     if what == "frames":
         return (log / FRAMES_FILE).exists() and len(read_frames(log)) >= int(arg)
     return (log / EVENTS_FILE).exists() and any(e["kind"] == arg for e in read_events(log))
+
+
+def _owner_pid(d: Path) -> int | None:
+    """The pid in a pty directory's owner file (None while it is not written yet)."""
+    try:
+        text = (d / OWNER_FILE).read_text(encoding="ascii").split()
+    except OSError:
+        return None
+    return int(text[0]) if text and text[0].isdigit() else None
 
 
 def _ours(marker: str) -> list[int]:
@@ -93,11 +104,11 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
         for i, proc, log in runs:
             milestone, extra = MOMENTS[i]
             end = time.monotonic() + 150
-            while time.monotonic() < end and proc.poll() is None and not _reached(milestone, tmp, log):
+            while time.monotonic() < end and proc.poll() is None and not _reached(milestone, tmp, log, proc.pid):
                 time.sleep(0.05)
             assert proc.poll() is None, (f"run {i} ended by itself (code {proc.returncode}) before {milestone}: "
                                        f"{(tmp_path / f'run{i}.err').read_text(errors='replace')[-800:]}")
-            assert _reached(milestone, tmp, log), f"run {i} never reached {milestone}"
+            assert _reached(milestone, tmp, log, proc.pid), f"run {i} never reached {milestone}"
             time.sleep(extra)
             proc.send_signal(signal.SIGKILL)
             killed.append((log, time.time(), f"{milestone} + {extra:g} s"))
