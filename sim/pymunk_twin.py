@@ -214,7 +214,9 @@ def _id_table(ids: np.ndarray, parts: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return keys, vals
 
 
+@njit(cache=True)
 def _slot(v: int, mask: int) -> int:
+    """The home slot of body id ``v`` in an ``_id_table`` of ``mask + 1`` slots."""
     return ((v >> 4) ^ (v >> 13)) & mask
 
 
@@ -222,7 +224,7 @@ def _slot(v: int, mask: int) -> int:
 def _lookup(keys: np.ndarray, vals: np.ndarray, v: int) -> int:
     """The value of key ``v`` in an ``_id_table`` (every looked-up id is in it)."""
     mask = keys.size - 1
-    h = ((v >> 4) ^ (v >> 13)) & mask
+    h = _slot(v, mask)
     while keys[h] != v:
         h = (h + 1) & mask
     return vals[h]
@@ -230,7 +232,16 @@ def _lookup(keys: np.ndarray, vals: np.ndarray, v: int) -> int:
 
 @njit(cache=True)
 def _later(fl: np.ndarray, u: int, v: int) -> bool:
-    """Contact row ``u`` after row ``v`` among equal normals: by the impulse's size, then the depth."""
+    """Contact row ``u`` after row ``v`` of one particle pair: by the normal up to its sign (the batch's
+    sign follows Chipmunk's order of the pair, which follows memory layout), then the impulse's size,
+    then the depth."""
+    su = 1.0 if fl[u, 2] > 0.0 or (fl[u, 2] == 0.0 and fl[u, 3] >= 0.0) else -1.0
+    sv = 1.0 if fl[v, 2] > 0.0 or (fl[v, 2] == 0.0 and fl[v, 3] >= 0.0) else -1.0
+    ux, uy, vx, vy = su * fl[u, 2], su * fl[u, 3], sv * fl[v, 2], sv * fl[v, 3]
+    if ux != vx:
+        return ux > vx
+    if uy != vy:
+        return uy > vy
     ju = fl[u, 0] * fl[u, 0] + fl[u, 1] * fl[u, 1]
     jv = fl[v, 0] * fl[v, 0] + fl[v, 1] * fl[v, 1]
     return ju > jv or (ju == jv and fl[u, 6] > fl[v, 6])
@@ -245,13 +256,13 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
     """One step's contacts (the batch rows of ``pymunk.batch.get_space_arbiters``: body ids ``ints``
     (m, 3), impulse, normal, point on shape a, distance ``fl`` (m, 7)) -> overlap statistics into ``hist``/``acc``, and
     the bodies' new velocities (``rows``: x, y, vx, vy, omega per batch row) into ``vel_rows`` after
-    rolling friction (``mu_r``; ``_rolling_impulse``) and end-plate friction (``end_k``, s). True if
+    rolling friction (``mu_r``) and end-plate friction (``end_k``, s). True if
     ``vel_rows`` was written. ``inv_m_x``, ``inv_i_x``, ``r_x``: 1 / mass, 1 / moment, radius per
     particle and the drum (index n: 0, 0, 0).
 
-    The contacts are taken in a canonical order (particle pair, then normal): Chipmunk's contact
-    cache is a hash set keyed by memory addresses, and the sums must not depend on where a restored
-    copy lives in memory (bit-exact branches)."""
+    The contacts are taken in a canonical order (particle pair as (lower, higher) index, then
+    ``_later``): Chipmunk's contact cache is a hash set keyed by memory addresses, and the sums must
+    not depend on where a twin or a restored copy lives in memory (bit-exact branches and runs)."""
     n = batch_of.size
     nbins = hist.size - 1
     m_all = ints.shape[0]
@@ -271,7 +282,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
     # sort of a * (n + 1) + b gives
     order = _counting_sort(a_, _counting_sort(b_, np.arange(m), n), n)
     key = a_[:m] * (n + 1) + b_[:m]
-    # ties (one particle pair, several convex pieces): by the normal, insertion sort within each run
+    # ties (one particle pair, several convex pieces): by ``_later``, insertion sort within each run
     i = 0
     while i < m:
         j = i + 1
@@ -280,12 +291,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
         for p in range(i + 1, j):
             q = p
             while q > i:
-                u, v = keep[order[q - 1]], keep[order[q]]
-                # the normals up to their sign (the batch's sign follows Chipmunk's order of the pair)
-                su = 1.0 if fl[u, 2] > 0.0 or (fl[u, 2] == 0.0 and fl[u, 3] >= 0.0) else -1.0
-                sv = 1.0 if fl[v, 2] > 0.0 or (fl[v, 2] == 0.0 and fl[v, 3] >= 0.0) else -1.0
-                ux, uy, vx, vy = su * fl[u, 2], su * fl[u, 3], sv * fl[v, 2], sv * fl[v, 3]
-                if ux > vx or (ux == vx and (uy > vy or (uy == vy and _later(fl, u, v)))):
+                if _later(fl, keep[order[q - 1]], keep[order[q]]):
                     order[q - 1], order[q] = order[q], order[q - 1]
                     q -= 1
                 else:
@@ -303,7 +309,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
         depth = -fl[k, 6]
         touched[a] = True
         touched[b] = True
-        if a == n or b == n:
+        if b == n:  # a < b: the drum (n) is only ever b
             wall_max = max(wall_max, depth)
         else:
             ov = depth * inv_r_min
@@ -348,7 +354,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
             if d < 0.0:
                 nx, ny = -nx, -ny
             pa, pb = r_x[a], r_x[b]
-            r_eff = pa if b == n else (pb if a == n else pa * pb / (pa + pb + 1e-300))
+            r_eff = pa if b == n else pa * pb / (pa + pb + 1e-300)  # a < b: the drum (n) is only ever b
             # the contact's tangential inverse mass and the rolling mode's inverse moment (no slip kept)
             k_t = inv_m_x[a] + pa * pa * inv_i_x[a] + inv_m_x[b] + pb * pb * inv_i_x[b]
             c = pa * inv_i_x[a] - pb * inv_i_x[b]
@@ -365,7 +371,7 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
         for _ in range(ROLL_SWEEPS):
             for q in range(nr):
                 a, b = ca[q], cb[q]
-                wa = w_drum if a == n else vel_rows[batch_of[a], 2]
+                wa = vel_rows[batch_of[a], 2]
                 wb = w_drum if b == n else vel_rows[batch_of[b], 2]
                 acc_l = cf[q, 5]
                 new_l = min(cf[q, 3], max(-cf[q, 3], acc_l + (wa - wb) / cf[q, 2]))
@@ -375,19 +381,17 @@ def _post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: n
                 cf[q, 5] = new_l
                 pt = lb * cf[q, 4]
                 tx, ty = cf[q, 0], cf[q, 1]
-                if a == n or b == n:  # the reaction on the drum: the couple, and the impulse's moment at the contact
-                    sgn = -1.0 if a == n else 1.0
-                    acc[4] += sgn * (lb + pt * (cf[q, 6] * ty - cf[q, 7] * tx))
-                if b != n:
+                if b == n:  # the reaction on the drum: the couple, and the impulse's moment at the contact
+                    acc[4] += lb + pt * (cf[q, 6] * ty - cf[q, 7] * tx)
+                else:
                     row = batch_of[b]
                     vel_rows[row, 0] += pt * tx * inv_m_x[b]
                     vel_rows[row, 1] += pt * ty * inv_m_x[b]
                     vel_rows[row, 2] += (lb - pt * r_x[b]) * inv_i_x[b]
-                if a != n:
-                    row = batch_of[a]
-                    vel_rows[row, 0] -= pt * tx * inv_m_x[a]
-                    vel_rows[row, 1] -= pt * ty * inv_m_x[a]
-                    vel_rows[row, 2] += (-lb - pt * r_x[a]) * inv_i_x[a]
+                row = batch_of[a]
+                vel_rows[row, 0] -= pt * tx * inv_m_x[a]
+                vel_rows[row, 1] -= pt * ty * inv_m_x[a]
+                vel_rows[row, 2] += (-lb - pt * r_x[a]) * inv_i_x[a]
     if end_k > 0.0:
         sfn = np.zeros(n + 1)
         for t in range(m):
