@@ -104,6 +104,12 @@ def _owner_id(pid: int) -> str | None:
     return f"{pid} {fields[19]}" if len(fields) > 19 else None
 
 
+def owner_pid(text: str) -> int | None:
+    """The pid in an owner file's text (``OWNER_FILE``), None when it names none (not written yet)."""
+    first = text.split()[:1]
+    return int(first[0]) if first and first[0].isdigit() else None
+
+
 def remove_stale_pty_dirs(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
     """Remove ``drumtwin-mill-*`` directories in ``tmp`` (default: the temp directory)
     whose owner process is gone (a ``kill -9`` leaves them with a dangling pty link).
@@ -121,8 +127,8 @@ def remove_stale_pty_dirs(tmp: str | os.PathLike[str] | None = None) -> list[Pat
                 continue
             owner = d / OWNER_FILE
             text = owner.read_text(encoding="ascii", errors="replace").strip() if owner.exists() else ""
-            pid = int(text.split()[0]) if text.split() and text.split()[0].isdigit() else -1
-            if pid > 0:
+            pid = owner_pid(text)
+            if pid is not None and pid > 0:
                 if _owner_id(pid) == text:
                     continue  # its owner still runs
             elif (d / "mill").exists() or time.time() - d.lstat().st_mtime < 60.0:

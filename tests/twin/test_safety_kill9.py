@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from control.emulator import OWNER_FILE, PTY_DIR_PREFIX
+from control.emulator import OWNER_FILE, PTY_DIR_PREFIX, owner_pid
 from twin.runlog import EVENTS_FILE, FRAMES_FILE, read_events, read_frames
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
@@ -47,10 +47,9 @@ def _reached(milestone: str, tmp: Path, log: Path, pid: int) -> bool:
 def _owner_pid(d: Path) -> int | None:
     """The pid in a pty directory's owner file (None while it is not written yet)."""
     try:
-        text = (d / OWNER_FILE).read_text(encoding="ascii").split()
+        return owner_pid((d / OWNER_FILE).read_text(encoding="ascii"))
     except OSError:
         return None
-    return int(text[0]) if text and text[0].isdigit() else None
 
 
 def _ours(marker: str) -> list[int]:
