@@ -464,6 +464,7 @@ def trace_particle(g: np.ndarray, where: str = "traced shape", what: str = "the 
 ROUND_FILL = 0.75  # a particle covering this much of its enclosing circle (``mask_fill``) and
 ROUND_SOLIDITY = 0.92  # this much of its traced outline's convex hull is a disc (the real PMMA discs of
 # tests/data: 0.81, 0.96 at 22 px; a 90-degree cut disc of that size: 0.65, 0.90)
+SHAPE_MIN_PX = 16.0  # particles fewer pixels across than this show no shape (the PMMA discs at 11.5 px read 0.72-0.76)
 
 
 def outline_roundness(v: np.ndarray) -> tuple[float, float]:
@@ -500,7 +501,12 @@ def shape_from_crops(crops: Sequence[np.ndarray], diameter_m: float, mm_per_px: 
     (``Shape("disc", diameter_m)``) when the median particle covers ``ROUND_FILL`` of its
     enclosing circle (``mask_fill``) and its outline ``ROUND_SOLIDITY`` of its convex hull, else the median particle's
     outline as a ``vertices`` shape (its circumscribed diameter from the trace, ``mm_per_px``).
-    The second item says how (a comment for the written mixer)."""
+    Particles under ``SHAPE_MIN_PX`` across (``diameter_m`` at ``mm_per_px``) are round: too few
+    pixels to tell. The second item says how (a comment for the written mixer)."""
+    d_px = diameter_m * 1e3 / mm_per_px if mm_per_px > 0 else math.inf
+    if d_px < SHAPE_MIN_PX:
+        return Shape("disc", diameter_m), (f"round assumed: particles {d_px:.0f} px across are too few pixels to show "
+                                           f"a shape (fewer than {SHAPE_MIN_PX:g}); edit for other shapes")
     traced = []
     for c in crops:
         try:
@@ -726,6 +732,7 @@ __all__ = [
     "ROUND_SHAPES",
     "ROUND_SOLIDITY",
     "SHAPE_KINDS",
+    "SHAPE_MIN_PX",
     "Baffles",
     "Mixer",
     "ParticleKind",

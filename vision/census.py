@@ -5,13 +5,20 @@ Pure functions of label maps and meter readings (no I/O). Units: px in the image
 and ``share`` are fractions; the rotation is +1 counter-clockwise as the camera sees it
 (the free surface rises to the right: the bed climbs the right-hand wall), -1 clockwise.
 
-- **Size**: the run-length diameter of ``run_diameter_px`` (the length of the horizontal
-  runs of a class that half of its pixels lie in, over the median chord of a disc) over
-  the class's single particles (``single_particles``: the blobs with one distance-transform
-  peak; touching particles of one colour merge into longer runs), the median over frames.
+- **Size**: round particles are circles in the gray image (``circle_diameters_px``: OpenCV's
+  gradient Hough transform; each circle belongs to the class that covers its core): the
+  median circle of a class over the frames. The gray edge of a particle sets its size, not
+  the class map, whose edges move with the light (a class that takes the dark gaps between
+  its particles merges them into one blob; one that loses its shaded rim shrinks). Where a
+  class has too few circles, or its single particles are not round, the run-length diameter
+  of ``run_diameter_px`` (the length of the horizontal runs of a class that half of its
+  pixels lie in, over the median chord of a disc) over the class's single particles
+  (``single_particles``: the blobs with one distance-transform peak), the median over frames.
   Classes whose sizes agree within ``SAME_SIZE`` are one size, their mean (``same_size``).
-- **Count**: the particles of a class in a frame are the peaks of its distance transform
-  (``count_particles``: touching particles keep separate centres), the median over frames.
+- **Count**: the particles of a class in a frame (``count_particles``): per blob of its map,
+  the peaks of its distance transform (touching particles keep separate centres) or, when
+  more, as many particles as the blob's area holds at the bed's packing (a class that takes
+  the gaps between its particles makes one blob of them, with few peaks); the median over frames.
 - **Share**: each class's share of the bed's solid area, ``n_k d_k^2 / sum n_j d_j^2`` (as
   ``sim.mixer`` counts it); the pixel share (the class's pixels over all classified pixels)
   beside it as a cross-check.
@@ -40,9 +47,34 @@ CROP_PAD_PX = 2  # background pixels around a particle's crop
 CROP_OPEN_D = 0.25  # a crop's opening (spurs, bridges to neighbours off), in particle diameters
 CROP_AREA = (0.4, 1.3)  # a single particle's blob: this many times a disc of the measured diameter
 
-__all__ = ["CHORD_MEDIAN", "CROP_AREA", "CROP_OPEN_D", "CROP_PAD_PX", "ClassCensus", "MixerCensus", "census",
-           "count_particles", "rotation_from_slope", "run_diameter_px", "same_size", "single_particle_crops",
+BODY_GRAY = 0.5  # a class's pixels darker than this times its median gray are gaps it took, not particle
+
+CIRCLES_MIN = 12  # fewer circles of a class over the frames: its size from its runs
+CIRCLE_CORE = 0.7  # a circle's core: the disc of this many of its radii ...
+CIRCLE_COVER = 0.6  # ... of which its class covers at least this share
+CIRCLE_EDGE = 100.0  # Canny's upper threshold of the circle search (gray levels)
+CIRCLE_SCORE = 0.6  # how round an edge must be to be a circle (OpenCV's HOUGH_GRADIENT_ALT param2)
+CIRCLE_FINE_PX = 14.0  # particles smaller than this (px) are searched in the gray image upsampled x2
+
+__all__ = ["BODY_GRAY", "CHORD_MEDIAN", "CIRCLES_MIN", "CROP_AREA", "CROP_OPEN_D", "CROP_PAD_PX", "ClassCensus",
+           "ClassSize", "MixerCensus", "census", "circle_diameters_px", "class_size", "count_particles",
+           "particle_body", "rotation_from_slope", "run_diameter_px", "same_size", "single_particle_crops",
            "single_particles"]
+
+
+def particle_body(mask: np.ndarray, gray: np.ndarray) -> np.ndarray:
+    """The pixels of one class's boolean map that are particle, not gap: at least ``BODY_GRAY``
+    times the class's median gray level in ``gray`` (same shape). Colour bleeding gives a
+    class the dark gaps between its particles (dark, of its hue), which join its particles into
+    blobs and square their outlines; the particles' own pixels are lighter. A class without
+    pixels: the map as it is."""
+    m = np.asarray(mask, dtype=bool)
+    g = np.asarray(gray)
+    if g.shape != m.shape:
+        raise ValueError(f"mask and gray must be one (h, w) crop (got {m.shape}, {g.shape})")
+    if not m.any():
+        return m
+    return m & (g >= BODY_GRAY * float(np.median(g[m])))
 
 
 def run_diameter_px(mask: np.ndarray) -> float:
@@ -69,13 +101,65 @@ def _peaks(mask: np.ndarray, diameter_px: float) -> np.ndarray:
     return np.asarray((dt >= top) & (dt >= PEAK_MIN_R * diameter_px))
 
 
-def count_particles(mask: np.ndarray, diameter_px: float) -> int:
-    """Particles of one class in a boolean map: the peaks of its distance transform (touching
-    particles of one colour keep separate centres). 0 for an unknown diameter."""
+def count_particles(mask: np.ndarray, diameter_px: float, packing: float) -> int:
+    """Particles of one class in a boolean map: per blob, the peaks of its distance transform
+    (touching particles of one colour keep separate centres) or, when more, the discs of
+    ``diameter_px`` its area holds at the 2D ``packing`` fraction (a class that takes the gaps
+    between its particles -- colour bleeding -- makes one blob of them, with peaks only along
+    its middle). 0 for an unknown diameter."""
     if not (math.isfinite(diameter_px) and diameter_px > 2):
         return 0
-    n, _ = cv2.connectedComponents(_peaks(mask, diameter_px).astype(np.uint8))
-    return int(n - 1)
+    m = np.asarray(mask, dtype=bool)
+    blobs, per_blob = _peaks_per_blob(m, diameter_px)
+    area = np.bincount(blobs.ravel(), minlength=per_blob.size).astype(float)
+    by_area = np.floor(area * float(packing) / (0.25 * math.pi * diameter_px ** 2) + 0.5)
+    n = np.maximum(per_blob, by_area)
+    return int(n[1:].sum())
+
+
+def circle_diameters_px(gray: np.ndarray, labels: np.ndarray, n_classes: int, d_lo_px: float,
+                        d_hi_px: float) -> list[np.ndarray]:
+    """Each class's round particles found as circles in a gray image: their diameters (px).
+
+    ``gray`` (h, w) uint8 and ``labels`` (h, w) the same crop (``labels`` 0 = no class or
+    outside the drum, ``k + 1`` = class k of ``n_classes``); circles of ``d_lo_px`` to
+    ``d_hi_px`` across. OpenCV's gradient Hough transform (``HOUGH_GRADIENT_ALT``: Canny
+    edges at ``CIRCLE_EDGE``, roundness ``CIRCLE_SCORE``; the image upsampled x2 below
+    ``CIRCLE_FINE_PX``); a circle belongs to class k when that class covers ``CIRCLE_COVER``
+    of its core (``CIRCLE_CORE`` of its radius): circles across two particles, in a gap or
+    outside the drum belong to none. The gray edge sets the size, not the class map's."""
+    g = np.asarray(gray)
+    lab = np.asarray(labels)
+    if g.shape != lab.shape or g.ndim != 2:
+        raise ValueError(f"gray and labels must be one (h, w) crop (got {g.shape}, {lab.shape})")
+    out: list[list[float]] = [[] for _ in range(n_classes)]
+    if not (math.isfinite(d_lo_px) and math.isfinite(d_hi_px) and 2.0 <= d_lo_px < d_hi_px):
+        return [np.zeros(0) for _ in range(n_classes)]
+    up = 2 if d_lo_px < CIRCLE_FINE_PX else 1
+    src = cv2.resize(g, None, fx=up, fy=up, interpolation=cv2.INTER_CUBIC) if up > 1 else g
+    r_lo = max(1, int(math.floor(0.5 * d_lo_px * up)))
+    r_hi = max(r_lo + 1, int(math.ceil(0.5 * d_hi_px * up)))
+    found = cv2.HoughCircles(np.ascontiguousarray(src, dtype=np.uint8), cv2.HOUGH_GRADIENT_ALT, dp=1.0,
+                             minDist=max(2.0, r_lo), param1=CIRCLE_EDGE, param2=CIRCLE_SCORE,
+                             minRadius=r_lo, maxRadius=r_hi)
+    if found is None:
+        return [np.zeros(0) for _ in range(n_classes)]
+    h, w = lab.shape
+    for x, y, r in np.asarray(found, dtype=float).reshape(-1, 3) / up:
+        rc = CIRCLE_CORE * r
+        x0, x1 = int(math.floor(x - rc)), int(math.ceil(x + rc)) + 1
+        y0, y1 = int(math.floor(y - rc)), int(math.ceil(y + rc)) + 1
+        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+            continue
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        core = lab[y0:y1, x0:x1][(xx - x) ** 2 + (yy - y) ** 2 <= rc * rc]
+        if core.size == 0:
+            continue
+        cnt = np.bincount(core.astype(np.int64), minlength=n_classes + 1)[1:n_classes + 1]
+        k = int(np.argmax(cnt))
+        if cnt[k] >= CIRCLE_COVER * core.size:
+            out[k].append(2.0 * float(r))
+    return [np.asarray(v, dtype=float) for v in out]
 
 
 def _peaks_per_blob(m: np.ndarray, diameter_px: float) -> tuple[np.ndarray, np.ndarray]:
@@ -174,16 +258,41 @@ def rotation_from_slope(slope_deg: float) -> int:
 
 
 @dataclass(frozen=True)
+class ClassSize:
+    """One class's own particle diameter (px) and where it came from: ``"circles"`` (the median
+    of ``count`` circles, ``circle_diameters_px``) or ``"runs"`` (the median over ``count``
+    frames of ``run_diameter_px``); NaN when neither measured it."""
+
+    diameter_px: float
+    source: str
+    count: int
+
+
+def class_size(circles_px: np.ndarray, runs_px: Sequence[float] | np.ndarray) -> ClassSize:
+    """A class's size from its circles over the frames (``circle_diameters_px``, pooled) when it
+    has at least ``CIRCLES_MIN`` of them, else from its per-frame run-length diameters (NaN:
+    none). The caller uses the circles only for round particles (a cut disc's or a pellet's
+    circles are not its size)."""
+    c = np.asarray(circles_px, dtype=float)
+    c = c[np.isfinite(c)]
+    if c.size >= CIRCLES_MIN:
+        return ClassSize(float(np.median(c)), "circles", int(c.size))
+    r = np.asarray(runs_px, dtype=float)
+    r = r[np.isfinite(r)]
+    return ClassSize(float(np.median(r)) if r.size else math.nan, "runs", int(r.size))
+
+
+@dataclass(frozen=True)
 class ClassCensus:
-    """One colour class: particle diameter (px; ``run_diameter_px`` its own runs' before
-    ``same_size``), share of the bed's solid area, particles per frame, pixel share."""
+    """One colour class: particle diameter (px; after ``same_size``), share of the bed's solid
+    area, particles per frame, pixel share, and its own measured size (``ClassSize``)."""
 
     name: str
     diameter_px: float
     share: float
     count: float
     pixel_share: float
-    run_diameter_px: float
+    own: ClassSize
 
 
 @dataclass(frozen=True)
@@ -196,7 +305,7 @@ class MixerCensus:
     direction: int
     drum_r_px: float
     frames: int
-    same_size: bool = False  # the classes' sizes were set to the smallest (``same_size``)
+    same_size: bool = False  # the classes' sizes were set to their mean (``same_size``)
 
     def diameter_mm(self, k: int, drum_diameter_mm: float) -> float:
         """Class ``k``'s particle diameter (mm), scaled by the drum's diameter."""
@@ -207,7 +316,7 @@ def census(
     names: Sequence[str],
     class_px: np.ndarray,
     roi_px: np.ndarray,
-    diameters_px: np.ndarray,
+    sizes: Sequence[ClassSize],
     counts: np.ndarray,
     slopes_deg: Sequence[float],
     drum_r_px: float,
@@ -215,25 +324,25 @@ def census(
 ) -> MixerCensus:
     """The census of ``len(roi_px)`` frames (see the module doc).
 
-    Per frame and class: ``class_px`` its pixels in the drum, ``diameters_px`` its
-    ``run_diameter_px`` (NaN: unknown), ``counts`` its ``count_particles``; per frame
-    ``roi_px`` the drum's pixels and ``slopes_deg`` the meter's free-surface slope;
-    ``drum_r_px`` the drum's radius (px); ``packing`` the bed's 2D packing fraction.
+    Per class its own measured size (``sizes``: ``class_size``); per frame and class:
+    ``class_px`` its pixels in the drum, ``counts`` its ``count_particles`` (at the size
+    after ``same_size``); per frame ``roi_px`` the drum's pixels and ``slopes_deg`` the
+    meter's free-surface slope; ``drum_r_px`` the drum's radius (px); ``packing`` the bed's
+    2D packing fraction.
     """
     shape = (len(roi_px), len(names))
     cpx = np.asarray(class_px, dtype=float).reshape(shape)
-    dia = np.asarray(diameters_px, dtype=float).reshape(shape)
     cnt = np.asarray(counts, dtype=float).reshape(shape)
-    own = [float(np.median(dia[:, k][np.isfinite(dia[:, k])])) if np.isfinite(dia[:, k]).any() else math.nan
-           for k in range(len(names))]
-    sizes, merged = same_size(own)
+    if len(sizes) != len(names):
+        raise ValueError(f"one size per class: {len(sizes)} sizes for {len(names)} classes")
+    diameters, merged = same_size([s.diameter_px for s in sizes])
     n = [float(np.median(cnt[:, k])) for k in range(len(names))]
-    solid = [nk * dk * dk if math.isfinite(dk) else 0.0 for nk, dk in zip(n, sizes, strict=True)]
+    solid = [nk * dk * dk if math.isfinite(dk) else 0.0 for nk, dk in zip(n, diameters, strict=True)]
     total = sum(solid)
     pix = float(cpx.sum())
     out = tuple(
-        ClassCensus(str(name), sizes[k], solid[k] / total if total > 0 else math.nan, n[k],
-                    float(cpx[:, k].sum()) / pix if pix > 0 else math.nan, own[k])
+        ClassCensus(str(name), diameters[k], solid[k] / total if total > 0 else math.nan, n[k],
+                    float(cpx[:, k].sum()) / pix if pix > 0 else math.nan, sizes[k])
         for k, name in enumerate(names)
     )
     drum_area = math.pi * float(drum_r_px) ** 2

@@ -170,14 +170,60 @@ def test_classes_suggest_measures_the_pmma_discs_and_shares(real_drum_dir, memo_
     for k in mixer.particles:
         assert k.shape.kind == "disc"
         assert abs(k.shape.diameter_m * 1e3 - truth_mm) <= 0.10 * truth_mm, (k.name, k.shape.diameter_m, truth_mm)
-    n_blue = float(np.median([len(a) for a in labels.values()]))
-    frames = sorted((real_drum_dir / "images").glob("*.jpg"))[::4]
-    n_white = float(np.median([_white_circles(cv2.imread(str(f))) for f in frames]))
-    share_blue = n_blue / (n_blue + n_white)  # equal discs: the share of the solid area is the share of the count
+    share_blue = _pmma_blue_share(str(real_drum_dir))  # equal discs: the share of the solid area is the count's
     got = {k.name: k.share for k in mixer.particles}
     assert got["blue"] == pytest.approx(share_blue, abs=0.05)
     assert got["blue"] + got["white"] == pytest.approx(1.0, abs=1e-6)
     assert "# " in r.out.split("[drum]")[1].splitlines()[1]  # the numbers say where they came from
+
+
+def _gain(g: tuple[float, float, float]):
+    return lambda im: np.clip(im.astype(np.float32) * np.asarray(g, np.float32), 0, 255).astype(np.uint8)
+
+
+# the real frames as another rig's camera would give them: a warm (tungsten) cast, 30 % more light, half the
+# resolution (discs 12 px across); before the circle census the first two read the blue discs as one 20-26 mm
+# polygon (the blue class takes the dark gaps between its discs), the third as 15 mm discs and 9.6 mm polygons
+CAMERAS = {
+    "warm light": (_gain((0.85, 1.0, 1.15)), 1.0),
+    "brighter": (_gain((1.3, 1.3, 1.3)), 1.0),
+    "half resolution": (lambda im: cv2.resize(im, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA), 0.5),
+}
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("camera", list(CAMERAS))
+def test_classes_suggest_measures_the_pmma_discs_under_another_light_and_scale(real_drum_dir, tmp_path, camera):
+    """The same must-show on the real frames seen by another camera: one disc size within 10 % of the labels'
+    boxes (scaled), round, and the shares within 5 points of the labelled frames'."""
+    look, scale = CAMERAS[camera]
+    for f in sorted((real_drum_dir / "images").glob("*.jpg")):
+        cv2.imwrite(str(tmp_path / f.name), look(cv2.imread(str(f))), [cv2.IMWRITE_JPEG_QUALITY, 95])
+    r = cli("classes", "suggest", tmp_path, "--drum-diameter-mm", "250")
+    assert r.code == 0, r.err
+    mixer = parse_mixer(tomllib.loads(r.out), ["blue", "white"])
+    labels = _labels(real_drum_dir)
+    box_px = float(np.median(np.concatenate([0.5 * (a[:, 3] + a[:, 4]) * 640 for a in labels.values()])))
+    truth_mm = box_px / (2 * 312.45) * 250  # the drum's size in the frames scales with the discs'
+    sizes = [k.shape.diameter_m * 1e3 for k in mixer.particles]
+    assert [k.shape.kind for k in mixer.particles] == ["disc", "disc"], r.out
+    assert sizes[0] == sizes[1] and abs(sizes[0] - truth_mm) <= 0.10 * truth_mm, (sizes, truth_mm)
+    assert mixer.particles[0].share == pytest.approx(_pmma_blue_share(str(real_drum_dir)), abs=0.05)
+    assert "circles in the gray frames" in r.out and (scale == 1.0 or "too few pixels to show a shape" in r.out)
+
+
+_SHARES: dict[str, float] = {}
+
+
+def _pmma_blue_share(real_drum_dir: str) -> float:
+    """The blue discs' share of the PMMA bed: their labels against the white discs' Hough count (equal discs)."""
+    if real_drum_dir not in _SHARES:
+        d = Path(real_drum_dir)
+        n_blue = float(np.median([len(a) for a in _labels(d).values()]))
+        frames = sorted((d / "images").glob("*.jpg"))[::4]
+        n_white = float(np.median([_white_circles(cv2.imread(str(f))) for f in frames]))
+        _SHARES[real_drum_dir] = n_blue / (n_blue + n_white)
+    return _SHARES[real_drum_dir]
 
 
 @pytest.mark.timeout(300)

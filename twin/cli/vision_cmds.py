@@ -487,41 +487,69 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     """The twin's ``[drum]`` and ``[[particles]]`` tables measured in ``frames`` (``vision.census``),
     every number commented with where it came from; each class's shape round or the outline traced
     from its single particles in the frames (``sim.mixer.shape_from_crops``)."""
+    import cv2
     import numpy as np
 
     from sim.errors import SimError
-    from sim.mixer import MAX_FILL, Mixer, ParticleKind, mixer_to_toml, shape_from_crops
+    from sim.mixer import MAX_FILL, Mixer, ParticleKind, Shape, mixer_to_toml, shape_from_crops
     from sim.recipe import PACKING_2D, DrumSpec
     from vision.census import (
         SAME_SIZE,
         census,
+        circle_diameters_px,
+        class_size,
         count_particles,
+        particle_body,
         run_diameter_px,
         same_size,
         single_particle_crops,
         single_particles,
     )
+    from vision.roi import roi_bbox
     from vision.suggest import drum_labels
 
     counted = [(j + 1, c) for j, c in enumerate(cfg.classes) if not c.reject]
     names = [c.name for _, c in counted]
-    labels, cpx, rpx, dia, slopes = [], [], [], [], []
+    labels, grays, bodies, cpx, rpx, runs, slopes = [], [], [], [], [], [], []
     for img, roi in zip(frames, rois, strict=True):
         lab = drum_labels(cfg, img, roi)
+        x0, y0, x1, y1 = roi_bbox(roi, img.shape[:2])
+        gray = cv2.cvtColor(np.ascontiguousarray(img[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY)
+        body = [particle_body(lab == j, gray) for j, _ in counted]  # each class's particles without its gaps
         labels.append(lab)
+        grays.append(gray)
+        bodies.append(body)
         rd = cfg.make_meter(roi=roi).measure(img)
         cpx.append([rd.cls(n).n_px for n in names])
         rpx.append(roi.area_px)
-        dia.append([run_diameter_px(single_particles(lab == j, run_diameter_px(lab == j))) for j, _ in counted])
+        runs.append([run_diameter_px(single_particles(b, run_diameter_px(b))) for b in body])
         slopes.append(rd.slope_deg)
-    own = [float(np.nanmedian(col)) if np.isfinite(col).any() else math.nan for col in np.asarray(dia).T]
-    sizes, _ = same_size(own)
-    cnt = [[count_particles(lab == j, sizes[i]) for i, (j, _) in enumerate(counted)] for lab in labels]
-    crops = [[c for lab in labels for c in single_particle_crops(lab == j, sizes[i], CROPS_PER_FRAME)]
-             for i, (j, _) in enumerate(counted)]  # each class's single particles, to trace their outline
     r_px = float(np.median([r.r_px for r in rois]))
-    cen = census(names, np.asarray(cpx), np.asarray(rpx), np.asarray(dia), np.asarray(cnt), slopes, r_px,
-                 PACKING_2D)
+    runs_a = np.asarray(runs, dtype=float).reshape(len(frames), len(counted))
+    by_runs = [class_size(np.zeros(0), runs_a[:, i]) for i in range(len(counted))]
+    known = [s.diameter_px for s in by_runs if math.isfinite(s.diameter_px)]
+    circles: list[list[np.ndarray]] = [[] for _ in counted]
+    if known:  # round particles as circles in the gray frames: 0.6x the smallest class's runs to 1.6x the largest's
+        lo, hi = 0.6 * min(known), min(1.6 * max(known), 2.0 * r_px / 3.0)
+        for gray, lab in zip(grays, labels, strict=True):
+            found = circle_diameters_px(gray, lab, len(cfg.classes), lo, hi)
+            for i, (j, _) in enumerate(counted):
+                circles[i].append(found[j - 1])
+    own, shapes = [], []
+    for i, (_, c) in enumerate(counted):
+        # a class's circles are its size when its single particles at that size are round; else its runs
+        cand = class_size(np.concatenate(circles[i]) if circles[i] else np.zeros(0), runs_a[:, i])
+        for size in ([cand, by_runs[i]] if cand.source == "circles" else [by_runs[i]]):
+            crops = [cr for body in bodies for cr in single_particle_crops(body[i], size.diameter_px, CROPS_PER_FRAME)]
+            shape, how = shape_from_crops(crops, size.diameter_px * drum_diameter_mm / (2.0 * r_px) * 1e-3,
+                                          drum_diameter_mm / (2.0 * r_px), f"class {c.name!r}")
+            if shape.kind == "disc" or size is by_runs[i]:
+                break
+        own.append(size)
+        shapes.append((shape, how))
+    sizes, _ = same_size([s.diameter_px for s in own])
+    cnt = [[count_particles(b, sizes[i], PACKING_2D) for i, b in enumerate(body)] for body in bodies]
+    cen = census(names, np.asarray(cpx), np.asarray(rpx), own, np.asarray(cnt), slopes, r_px, PACKING_2D)
     if not all(math.isfinite(c.diameter_px) for c in cen.classes):
         missing = next(c.name for c in cen.classes if not math.isfinite(c.diameter_px))
         raise VisionError(f"class {missing!r}: too few particle pixels in the frames to measure a size")
@@ -544,11 +572,14 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     for i, c in enumerate(cen.classes):
         w = f"particles.{c.name}"
         d_mm = c.diameter_px * px_mm
-        why = (f"; its own {c.run_diameter_px:.1f} px, the classes within {100 * SAME_SIZE:.0f}%: one size"
+        why = (f"; its own {c.own.diameter_px:.1f} px, the classes within {100 * SAME_SIZE:.0f}%: one size"
                if cen.same_size else "")
-        shape, how = shape_from_crops(crops[i], d_mm * 1e-3, px_mm, f"class {c.name!r}")
-        notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px (median horizontal run / 0.91 of its single "
-                                     f"particles, {cen.frames} frames){why}" if shape.kind == "disc" else
+        shape, how = shapes[i]
+        if shape.kind == "disc":
+            shape = Shape("disc", d_mm * 1e-3)
+        src = (f"median of {c.own.count} circles in the gray frames" if c.own.source == "circles" else
+               f"median horizontal run / 0.91 of its single particles, {cen.frames} frames")
+        notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px ({src}){why}" if shape.kind == "disc" else
                                      "the traced outline's circumscribed diameter")
         notes[f"{w}.shape"] = how
         notes[f"{w}.share"] = (f"{c.count:.0f} particles per frame x their area; the class's pixel share is "
