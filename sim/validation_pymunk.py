@@ -253,41 +253,64 @@ def window_mean(row: dict, key: str, from_s: float) -> float:
     return float(np.nanmean(v[t >= from_s]))
 
 
-def _t_plateau(t: np.ndarray, mi: np.ndarray, frac: float = 0.9) -> float:
-    """First time the MI reaches ``frac`` of its late-third level (s)."""
-    level = _late(mi)
-    hit = np.flatnonzero(mi >= frac * level)
-    return float(t[hit[0]]) if hit.size else math.nan
+BAFFLE_TARGET_MI = 0.85  # the baffles study's time to mix: to this MI (``sim.whatif.time_to_target``)
+BAFFLE_LATE_S = 40.0  # ... and its plateau: the MI from this time on
 
 
-def baffles(out_dir: Path, seeds=(0, 1, 2, 3), rpm: float = 10.0, duration_s: float = 30.0,
+def baffle_summary(runs: list[dict], target_mi: float = BAFFLE_TARGET_MI, late_s: float = BAFFLE_LATE_S) -> dict:
+    """One arm of the baffles study (``series`` rows from a case-A start): each run's time to mix,
+    ``sim.whatif.time_to_target`` of its MI at ``target_mi`` (the what-if studies' definition: a
+    2 s moving average that reaches it and stays there), and its plateau, the mean MI from
+    ``late_s`` on; mean and seed sd of each (``_ms``), the spread ratio over the same late window."""
+    from sim.whatif import time_to_target
+
+    return {"t_mix_s": _ms([time_to_target(r["t"], r["mi"], target_mi) for r in runs]),
+            "plateau_mi": _ms([window_mean(r, "mi", late_s) for r in runs]),
+            "ratio": _ms([window_mean(r, "ratio", late_s) for r in runs]),
+            "rtf": float(np.mean([r["rtf"] for r in runs])), "target_mi": target_mi, "late_s": late_s}
+
+
+def plot_baffles(curves: dict[str, list[dict]], path: Path, rpm: float, target_mi: float = BAFFLE_TARGET_MI) -> None:
+    """MI against time, seed mean and 10-90 % band per arm, and each seed's time to ``target_mi``."""
+    from sim.whatif import time_to_target
+
+    plt = _plt()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 3.8), gridspec_kw={"width_ratios": [3, 1]})
+    for x, ((name, rs), col) in enumerate(zip(curves.items(), ("C0", "C3"), strict=False)):
+        arr = np.array([r["mi"] for r in rs])
+        ax.plot(rs[0]["t"], arr.mean(0), color=col, label=f"{name} ({len(rs)} seeds)")
+        ax.fill_between(rs[0]["t"], np.percentile(arr, 10, 0), np.percentile(arr, 90, 0), color=col, alpha=0.15)
+        tm = np.array([time_to_target(r["t"], r["mi"], target_mi) for r in rs])
+        bx.scatter(np.full(tm.size, x) + np.linspace(-0.15, 0.15, tm.size), tm, color=col, s=12)
+        bx.errorbar([x + 0.3], [np.nanmean(tm)], yerr=[np.nanstd(tm, ddof=1)], color=col, capsize=4, fmt="o")
+    ax.axhline(target_mi, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("MI (eq. 4, particles)")
+    ax.set_title(f"cut-disc rig from a left/right split, {rpm:g} rpm (band: 10-90 % of seeds)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    bx.set_xticks(range(len(curves)), [n.replace(" lifters ", " lifters\n") for n in curves])
+    bx.set_ylabel(f"time to MI {target_mi:g} (s)")
+    bx.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def baffles(out_dir: Path, seeds=tuple(range(16)), rpm: float = 10.0, duration_s: float = 60.0,
             lifters: Baffles = RIG_TALL_BAFFLES) -> dict:
-    """The cut-disc rig from case A (blue left, white right) at 10 rpm, with and without ``lifters``:
-    time to 90 % of the plateau MI and the plateau MI."""
-    out: dict = {}
+    """The cut-disc rig from case A (blue left, white right) at ``rpm``, plain and with ``lifters``,
+    one run per seed each: ``baffle_summary`` of each arm and how many standard errors apart the
+    arms' times to mix and plateaus are (``difference_in_se``); the plot ``pymunk_baffles.png``."""
     curves = {}
     label = f"{lifters.count} lifters {lifters.height_m * 1e3:g} mm"
     for name, bf in (("plain", None), (label, lifters)):
-        rs = [series(rig(True, bf), rpm, s, duration_s, case="A", every_s=0.25, **CONTACT) for s in seeds]
-        curves[name] = rs
-        out[name] = {"plateau_mi": _ms([_late(r["mi"]) for r in rs]),
-                     "t_plateau_s": _ms([_t_plateau(r["t"], r["mi"]) for r in rs]),
-                     "ratio": _ms([_late(r["ratio"]) for r in rs]),
-                     "rtf": float(np.mean([r["rtf"] for r in rs]))}
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 3.8))
-    for (name, rs), col in zip(curves.items(), ("C0", "C3"), strict=True):
-        arr = np.array([r["mi"] for r in rs])
-        ax.plot(rs[0]["t"], arr.mean(0), color=col, label=name)
-        ax.fill_between(rs[0]["t"], arr.min(0), arr.max(0), color=col, alpha=0.15)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("MI (eq. 4, particles)")
-    ax.set_title(f"cut-disc rig, case A, {rpm:g} rpm ({len(seeds)} seeds, band = min-max)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out_dir / "pymunk_baffles.png", dpi=110)
-    plt.close(fig)
+        curves[name] = [series(rig(True, bf), rpm, s, duration_s, case="A", every_s=0.25, **CONTACT) for s in seeds]
+    out: dict = {name: baffle_summary(rs) for name, rs in curves.items()}
+    plain, lift = out["plain"], out[label]
+    out["t_mix_se"] = difference_in_se(plain["t_mix_s"]["values"], lift["t_mix_s"]["values"])
+    out["plateau_se"] = difference_in_se(plain["plateau_mi"]["values"], lift["plateau_mi"]["values"])
+    plot_baffles(curves, out_dir / "pymunk_baffles.png", rpm)
     return out
 
 
@@ -385,6 +408,29 @@ if __name__ == "__main__":
     main()
 
 
-__all__ = ["CONTACT", "RIG_BAFFLES", "RIG_CONFIG", "RIG_TALL_BAFFLES", "SECTIONS", "SEGREGATION_SD", "baffles",
-           "calibration", "convergence", "dem", "difference_in_se", "long_runs", "main", "pymunk_slope_deg", "rig",
-           "sd_from_one", "segregates", "segregation", "series", "window_mean"]
+__all__ = [
+    "BAFFLE_LATE_S",
+    "BAFFLE_TARGET_MI",
+    "CONTACT",
+    "RIG_BAFFLES",
+    "RIG_CONFIG",
+    "RIG_TALL_BAFFLES",
+    "SECTIONS",
+    "SEGREGATION_SD",
+    "baffle_summary",
+    "baffles",
+    "calibration",
+    "convergence",
+    "dem",
+    "difference_in_se",
+    "long_runs",
+    "main",
+    "plot_baffles",
+    "pymunk_slope_deg",
+    "rig",
+    "sd_from_one",
+    "segregates",
+    "segregation",
+    "series",
+    "window_mean",
+]

@@ -52,3 +52,26 @@ def test_window_mean_takes_the_samples_from_its_start_on():
     row = {"t": [0.5 * k for k in range(1, 21)], "ratio": [float(k) for k in range(1, 21)]}
     assert window_mean(row, "ratio", 5.0) == pytest.approx(sum(range(10, 21)) / 11)  # t = 5.0 .. 10.0
     assert window_mean(row, "ratio", 0.0) == pytest.approx(10.5)
+
+
+def test_baffle_summary_times_each_run_to_the_target_and_takes_its_plateau_from_the_late_window():
+    import numpy as np
+
+    from sim.validation_pymunk import baffle_summary
+
+    t = np.arange(0.25, 60.01, 0.25)
+    runs = []
+    for tau in (5.0, 10.0, 20.0):  # MI rising to 0.97 with time constant tau
+        mi = 0.97 * (1 - np.exp(-t / tau))
+        runs.append({"t": t, "mi": mi, "ratio": np.full(t.size, 1.0 + tau / 100), "rtf": 2.0})
+    got = baffle_summary(runs, target_mi=0.85, late_s=40.0)
+    # 0.97 (1 - exp(-t / tau)) = 0.85 at t = tau ln(0.97 / 0.12); the 2 s centred average of the concave curve
+    # reaches it a little later (0.2 s at tau = 20 s)
+    want = [tau * math.log(0.97 / 0.12) for tau in (5.0, 10.0, 20.0)]
+    assert got["t_mix_s"]["values"] == pytest.approx(want, abs=0.3)
+    late = [float(np.mean(0.97 * (1 - np.exp(-t[t >= 40.0] / tau)))) for tau in (5.0, 10.0, 20.0)]
+    assert got["plateau_mi"]["values"] == pytest.approx(late)
+    assert got["ratio"]["values"] == pytest.approx([1.05, 1.10, 1.20])
+    # a run that never gets there has no time to mix (NaN), not the end of the run
+    flat = {"t": t, "mi": np.full(t.size, 0.8), "ratio": np.ones(t.size), "rtf": 1.0}
+    assert math.isnan(baffle_summary([flat, flat])["t_mix_s"]["values"][0])
