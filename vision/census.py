@@ -52,14 +52,18 @@ BODY_GRAY = 0.5  # a class's pixels darker than this times its median gray are g
 CIRCLES_MIN = 12  # fewer circles of a class over the frames: its size from its runs
 CIRCLE_CORE = 0.7  # a circle's core: the disc of this many of its radii ...
 CIRCLE_COVER = 0.6  # ... of which its class covers at least this share
+CIRCLE_GAPS = 0.05  # ... and at most this share is gap (``BODY_GRAY``): a circle round a ring of particles is none
 CIRCLE_EDGE = 100.0  # Canny's upper threshold of the circle search (gray levels)
 CIRCLE_SCORE = 0.6  # how round an edge must be to be a circle (OpenCV's HOUGH_GRADIENT_ALT param2)
-CIRCLE_FINE_PX = 14.0  # particles smaller than this (px) are searched in the gray image upsampled x2
+CIRCLE_FINE_PX = 12.0  # a search for circles smaller than this (px) runs on the gray image upsampled x2
+CIRCLE_FRAMES = 8  # frames the circle census searches (100 and more circles a frame)
+CIRCLE_SCALE_FRAMES = 2  # ... of which the first search for the particles' scale
+CIRCLE_SCALE_MIN = 5  # circles a class needs in that search (fewer: searched again upsampled)
 
 __all__ = ["BODY_GRAY", "CHORD_MEDIAN", "CIRCLES_MIN", "CROP_AREA", "CROP_OPEN_D", "CROP_PAD_PX", "ClassCensus",
-           "ClassSize", "MixerCensus", "census", "circle_diameters_px", "class_size", "count_particles",
-           "particle_body", "rotation_from_slope", "run_diameter_px", "same_size", "single_particle_crops",
-           "single_particles"]
+           "ClassSize", "MixerCensus", "census", "circle_census", "circle_diameters_px", "class_size",
+           "count_particles", "particle_body", "rotation_from_slope", "run_diameter_px", "same_size",
+           "single_particle_crops", "single_particles"]
 
 
 def particle_body(mask: np.ndarray, gray: np.ndarray) -> np.ndarray:
@@ -126,8 +130,10 @@ def circle_diameters_px(gray: np.ndarray, labels: np.ndarray, n_classes: int, d_
     ``d_hi_px`` across. OpenCV's gradient Hough transform (``HOUGH_GRADIENT_ALT``: Canny
     edges at ``CIRCLE_EDGE``, roundness ``CIRCLE_SCORE``; the image upsampled x2 below
     ``CIRCLE_FINE_PX``); a circle belongs to class k when that class covers ``CIRCLE_COVER``
-    of its core (``CIRCLE_CORE`` of its radius): circles across two particles, in a gap or
-    outside the drum belong to none. The gray edge sets the size, not the class map's."""
+    of its core (``CIRCLE_CORE`` of its radius) and at most ``CIRCLE_GAPS`` of the core is gap
+    (darker than ``BODY_GRAY`` times its median gray): circles across two particles, round a
+    ring of them, in a gap or outside the drum belong to none. The gray edge sets the size,
+    not the class map's."""
     g = np.asarray(gray)
     lab = np.asarray(labels)
     if g.shape != lab.shape or g.ndim != 2:
@@ -152,14 +158,50 @@ def circle_diameters_px(gray: np.ndarray, labels: np.ndarray, n_classes: int, d_
         if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
             continue
         yy, xx = np.mgrid[y0:y1, x0:x1]
-        core = lab[y0:y1, x0:x1][(xx - x) ** 2 + (yy - y) ** 2 <= rc * rc]
+        inside = (xx - x) ** 2 + (yy - y) ** 2 <= rc * rc
+        core = lab[y0:y1, x0:x1][inside]
         if core.size == 0:
             continue
         cnt = np.bincount(core.astype(np.int64), minlength=n_classes + 1)[1:n_classes + 1]
         k = int(np.argmax(cnt))
-        if cnt[k] >= CIRCLE_COVER * core.size:
+        shade = g[y0:y1, x0:x1][inside].astype(float)
+        gaps = float(np.mean(shade < BODY_GRAY * float(np.median(shade))))
+        if cnt[k] >= CIRCLE_COVER * core.size and gaps <= CIRCLE_GAPS:  # one particle, not a ring of several
             out[k].append(2.0 * float(r))
     return [np.asarray(v, dtype=float) for v in out]
+
+
+def circle_census(grays: Sequence[np.ndarray], labels: Sequence[np.ndarray], n_classes: int,
+                  classes: Sequence[int], d_hi_px: float) -> list[np.ndarray]:
+    """The circles (diameters, px) of each class of ``classes`` (indices into the map's
+    ``n_classes``) over up to ``CIRCLE_FRAMES`` of the frames (spread through them), searched
+    from 0.6 times the smallest class's scale to ``d_hi_px``. The scale: the median circle of
+    each class in a first search of ``CIRCLE_SCALE_FRAMES`` frames from ``CIRCLE_FINE_PX`` at
+    the frames' resolution, or upsampled from half that when a class has fewer than
+    ``CIRCLE_SCALE_MIN`` circles there (small particles; a class that is not round); the
+    search's upper end then 1.6 times the largest class's scale when every class has one. A class's
+    run length cannot set the lower bound: a class packed into blobs has long runs whatever
+    its particles' size. Empty arrays when no class has circles."""
+    if len(grays) != len(labels):
+        raise ValueError(f"one class map per gray frame ({len(grays)} frames, {len(labels)} maps)")
+    pick = np.unique(np.linspace(0, len(grays) - 1, min(CIRCLE_FRAMES, len(grays))).round().astype(int))
+    none = [np.zeros(0) for _ in classes]
+    if pick.size == 0:
+        return none
+
+    def search(frames: np.ndarray, lo: float, hi: float) -> list[np.ndarray]:
+        found = [circle_diameters_px(grays[f], labels[f], n_classes, lo, hi) for f in frames]
+        return [np.concatenate([fd[k] for fd in found]) for k in classes]
+
+    first = pick[:CIRCLE_SCALE_FRAMES]
+    scale = search(first, CIRCLE_FINE_PX, d_hi_px)
+    if any(c.size < CIRCLE_SCALE_MIN for c in scale):
+        scale = search(first, 0.5 * CIRCLE_FINE_PX, d_hi_px)
+    meds = [float(np.median(c)) for c in scale if c.size >= CIRCLE_SCALE_MIN]
+    if not meds:
+        return none
+    hi = min(d_hi_px, 1.6 * max(meds)) if len(meds) == len(classes) else d_hi_px
+    return search(pick, max(0.5 * CIRCLE_FINE_PX, 0.6 * min(meds)), hi)
 
 
 def _peaks_per_blob(m: np.ndarray, diameter_px: float) -> tuple[np.ndarray, np.ndarray]:

@@ -212,6 +212,30 @@ def test_classes_suggest_measures_the_pmma_discs_under_another_light_and_scale(r
     assert "circles in the gray frames" in r.out and (scale == 1.0 or "too few pixels to show a shape" in r.out)
 
 
+@pytest.mark.timeout(300)
+def test_classes_suggest_measures_two_disc_sizes_in_rendered_frames_of_the_paper_bed(tmp_path):
+    """The paper's bed (10 and 20 mm discs in a 300 mm drum) rendered through the synthetic camera (noise, blur,
+    glare, JPEG): each class's size within 10 %. From a left/right split the small discs pack into one blob
+    whose runs are 80+ px: before the circle census the twin got 46 mm small discs and 61 mm large polygons."""
+    from sim.engine import make_twin
+    from sim.mixer import paper_mixer
+    from sim.render import Realism, Renderer
+
+    twin = make_twin(paper_mixer(), "dem", case="A", seed=0, rpm=10.0)
+    renderer = Renderer(twin.drum, 640, realism=Realism(seed=0, drop_prob=0.0))
+    for k in range(6):
+        twin.advance(0.5)
+        cv2.imwrite(str(tmp_path / f"{k:02d}.png"), renderer.render(twin.particles(), twin.t_s))
+    r = cli("classes", "suggest", tmp_path, "--drum-diameter-mm", "300", "--drum-depth-mm", "100")
+    assert r.code == 0, r.err
+    table = tomllib.loads(r.out)
+    mixer = parse_mixer(table, [c["name"] for c in table["classes"] if not c.get("reject")])
+    got = sorted((k.shape.diameter_m * 1e3, k.shape.kind) for k in mixer.particles)
+    assert [kind for _, kind in got] == ["disc", "disc"], r.out
+    assert got[0][0] == pytest.approx(10.0, rel=0.10) and got[1][0] == pytest.approx(20.0, rel=0.10), got
+    assert [k.share for k in mixer.particles] == pytest.approx([0.5, 0.5], abs=0.1)  # equal volumes
+
+
 _SHARES: dict[str, float] = {}
 
 

@@ -496,7 +496,7 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     from vision.census import (
         SAME_SIZE,
         census,
-        circle_diameters_px,
+        circle_census,
         class_size,
         count_particles,
         particle_body,
@@ -528,17 +528,13 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     runs_a = np.asarray(runs, dtype=float).reshape(len(frames), len(counted))
     by_runs = [class_size(np.zeros(0), runs_a[:, i]) for i in range(len(counted))]
     known = [s.diameter_px for s in by_runs if math.isfinite(s.diameter_px)]
-    circles: list[list[np.ndarray]] = [[] for _ in counted]
-    if known:  # round particles as circles in the gray frames: 0.6x the smallest class's runs to 1.6x the largest's
-        lo, hi = 0.6 * min(known), min(1.6 * max(known), 2.0 * r_px / 3.0)
-        for gray, lab in zip(grays, labels, strict=True):
-            found = circle_diameters_px(gray, lab, len(cfg.classes), lo, hi)
-            for i, (j, _) in enumerate(counted):
-                circles[i].append(found[j - 1])
+    # round particles as circles in the gray frames, up to 1.6x the largest class's runs (a third of the drum)
+    circles = (circle_census(grays, labels, len(cfg.classes), [j - 1 for j, _ in counted],
+                             min(1.6 * max(known), 2.0 * r_px / 3.0)) if known else [np.zeros(0) for _ in counted])
     own, shapes = [], []
     for i, (_, c) in enumerate(counted):
         # a class's circles are its size when its single particles at that size are round; else its runs
-        cand = class_size(np.concatenate(circles[i]) if circles[i] else np.zeros(0), runs_a[:, i])
+        cand = class_size(circles[i], runs_a[:, i])
         for size in ([cand, by_runs[i]] if cand.source == "circles" else [by_runs[i]]):
             crops = [cr for body in bodies for cr in single_particle_crops(body[i], size.diameter_px, CROPS_PER_FRAME)]
             shape, how = shape_from_crops(crops, size.diameter_px * drum_diameter_mm / (2.0 * r_px) * 1e-3,
