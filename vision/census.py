@@ -66,6 +66,13 @@ __all__ = ["BODY_GRAY", "CHORD_MEDIAN", "CIRCLES_MIN", "CROP_AREA", "CROP_OPEN_D
            "single_particle_crops", "single_particles"]
 
 
+def _lit(values: np.ndarray) -> np.ndarray:
+    """Which gray ``values`` (a class's or a circle's pixels) are particle, not gap: at least
+    ``BODY_GRAY`` times their median."""
+    v = np.asarray(values, dtype=float)
+    return v >= BODY_GRAY * float(np.median(v))
+
+
 def particle_body(mask: np.ndarray, gray: np.ndarray) -> np.ndarray:
     """The pixels of one class's boolean map that are particle, not gap: at least ``BODY_GRAY``
     times the class's median gray level in ``gray`` (same shape). Colour bleeding gives a
@@ -78,7 +85,9 @@ def particle_body(mask: np.ndarray, gray: np.ndarray) -> np.ndarray:
         raise ValueError(f"mask and gray must be one (h, w) crop (got {m.shape}, {g.shape})")
     if not m.any():
         return m
-    return m & (g >= BODY_GRAY * float(np.median(g[m])))
+    out = np.zeros_like(m)
+    out[m] = _lit(g[m])
+    return out
 
 
 def run_diameter_px(mask: np.ndarray) -> float:
@@ -164,8 +173,7 @@ def circle_diameters_px(gray: np.ndarray, labels: np.ndarray, n_classes: int, d_
             continue
         cnt = np.bincount(core.astype(np.int64), minlength=n_classes + 1)[1:n_classes + 1]
         k = int(np.argmax(cnt))
-        shade = g[y0:y1, x0:x1][inside].astype(float)
-        gaps = float(np.mean(shade < BODY_GRAY * float(np.median(shade))))
+        gaps = 1.0 - float(np.mean(_lit(g[y0:y1, x0:x1][inside])))
         if cnt[k] >= CIRCLE_COVER * core.size and gaps <= CIRCLE_GAPS:  # one particle, not a ring of several
             out[k].append(2.0 * float(r))
     return [np.asarray(v, dtype=float) for v in out]
