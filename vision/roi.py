@@ -6,7 +6,10 @@ a least-squares refinement on the rim edges); ``DrumROI`` given by hand override
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import cv2
@@ -202,6 +205,14 @@ def _refine_circle(
     return cx, cy, r
 
 
+DETECT_MEMO = 64
+"""Frames whose detection ``detect_drum`` remembers (by content): the same frame is often looked at
+again (``classes suggest`` samples a frame, then sizes its particles and previews it; a new meter on
+frames already seen), and a detection costs 10-50 ms against 1 ms to hash a VGA frame."""
+_memo: OrderedDict[tuple, DrumROI | str] = OrderedDict()
+_memo_lock = threading.Lock()
+
+
 def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
     """Find the drum circle in a front-view frame (px of the original image).
 
@@ -221,6 +232,28 @@ def detect_drum(image_bgr: np.ndarray, *, inset: float = 0.025) -> DrumROI:
         raise VisionError(f"cannot detect a drum in an image of shape {img.shape}")
     if gray.dtype != np.uint8:
         raise VisionError(f"expected an 8-bit image, got dtype {gray.dtype}")
+    # a pure function of the pixels: a frame seen before gets its answer (or its error) again
+    key = (gray.shape, float(inset), hashlib.sha1(np.ascontiguousarray(gray).data).digest())
+    with _memo_lock:
+        seen = _memo.get(key)
+        if seen is not None:
+            _memo.move_to_end(key)
+    if seen is None:
+        try:
+            seen = _detect(gray, inset)
+        except VisionError as exc:
+            seen = str(exc)
+        with _memo_lock:
+            _memo[key] = seen
+            while len(_memo) > DETECT_MEMO:
+                _memo.popitem(last=False)
+    if isinstance(seen, str):
+        raise VisionError(seen)
+    return seen
+
+
+def _detect(gray: np.ndarray, inset: float) -> DrumROI:
+    """``detect_drum`` of an 8-bit gray frame, without the memo."""
     h, w = gray.shape
     s = min(1.0, 400.0 / max(h, w))
     small = cv2.resize(gray, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1.0 else gray.copy()

@@ -128,11 +128,12 @@ def test_study_on_a_real_dask_scheduler_and_worker():
             assert a.job.rpm == b.job.rpm
             assert np.array_equal(a.mi, b.mi)
     finally:
+        # the worker first, then the scheduler; a worker that outlives its scheduler sometimes
+        # retries it for ~20 s before it exits, so what is not gone 3 s after the SIGTERM is killed
         for p in reversed(procs):
             p.terminate()
-        for p in reversed(procs):
             try:
-                p.wait(timeout=20)
+                p.wait(timeout=3)
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()

@@ -256,6 +256,35 @@ def test_detect_drum_fails_clearly():
         detect_drum(np.zeros((200, 300, 3), np.uint8))
 
 
+def test_detect_drum_remembers_a_frame_by_its_pixels_not_by_its_array(monkeypatch):
+    """The memo (``vision.roi.DETECT_MEMO``): a frame seen before is not detected again, also as a
+    new array of the same pixels; a frame that differs anywhere (here: the drum moved 30 px), the
+    same frame at another ``inset``, and a frame without a drum are their own answers; an error is
+    raised again, not turned into a drum; the oldest frame is forgotten past the limit."""
+    import vision.roi as roi_mod
+
+    monkeypatch.setattr(roi_mod, "_memo", type(roi_mod._memo)())
+    calls = []
+    real = roi_mod._detect
+    monkeypatch.setattr(roi_mod, "_detect", lambda gray, inset: (calls.append(inset), real(gray, inset))[1])
+    img = particle_drum((400, 300), mix=0.5, seed=1).image
+    first = detect_drum(img)
+    assert detect_drum(img.copy()) == first and len(calls) == 1
+    moved = np.roll(img, 30, axis=1)
+    assert abs(detect_drum(moved).cx_px - (first.cx_px + 30)) < 2 and len(calls) == 2
+    assert abs(detect_drum(img, inset=0.1).r_px / 0.9 - first.r_px / 0.975) < 0.5 and len(calls) == 3
+    blank = np.zeros((200, 300, 3), np.uint8)
+    for _ in range(2):
+        with pytest.raises(VisionError, match="--roi"):
+            detect_drum(blank)
+    assert len(calls) == 4
+    monkeypatch.setattr(roi_mod, "DETECT_MEMO", 2)  # the next new frame leaves it and the blank one
+    detect_drum(np.roll(img, 60, axis=1))
+    assert len(calls) == 5
+    assert detect_drum(img) == first and len(calls) == 6  # forgotten: detected again, the same drum
+    assert detect_drum(img) == first and len(calls) == 6
+
+
 def test_rect_roi_mask():
     roi = DrumROI(50, 40, 20, kind="rect", half_w_px=30, half_h_px=10)
     m = roi_mask(roi, (100, 120))

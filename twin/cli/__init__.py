@@ -7,10 +7,11 @@ import. ``main`` turns expected user errors into a one-line message and exit cod
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import sys
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 try:  # typer >= 0.20 vendors click; older typer uses the click package
     from typer._click import exceptions as click_exc
@@ -21,6 +22,9 @@ import typer
 from rich.markup import escape
 
 from twin.cli.app import USER_ERRORS, app, bench_app, console_err  # noqa: F401
+
+if TYPE_CHECKING:
+    from typer._click.core import Command
 
 # Command modules, in the order they appear in --help. Each registers its commands
 # on ``app`` / ``bench_app`` at import time.
@@ -48,6 +52,15 @@ def _one_line_error(msg: str, code: int = 2) -> NoReturn:
     sys.exit(code)
 
 
+@functools.cache
+def _command() -> Command:
+    """``app``'s click command tree, built once per process: ``app(...)`` rebuilds it on every
+    call (typer reads every command's signature again: ~12 ms a call, a third of a bad-input
+    case). The app has no pretty exceptions (``twin.cli.app``), so nothing else of typer's
+    ``__call__`` is lost."""
+    return typer.main.get_command(app)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``drumtwin`` console script.
 
@@ -55,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     (``USER_ERRORS``) are one line on stderr and exit code 2, never a traceback.
     """
     try:
-        rv = app(args=argv, prog_name="drumtwin", standalone_mode=False)
+        rv = _command().main(args=argv, prog_name="drumtwin", standalone_mode=False)
     except click_exc.UsageError as exc:
         if os.environ.get("DRUMTWIN_DEBUG"):
             raise
