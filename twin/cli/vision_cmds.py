@@ -525,6 +525,7 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
         runs.append([run_diameter_px(single_particles(b, run_diameter_px(b))) for b in body])
         slopes.append(rd.slope_deg)
     r_px = float(np.median([r.r_px for r in rois]))
+    px_mm = drum_diameter_mm / (2.0 * r_px)
     runs_a = np.asarray(runs, dtype=float).reshape(len(frames), len(counted))
     by_runs = [class_size(np.zeros(0), runs_a[:, i]) for i in range(len(counted))]
     known = [s.diameter_px for s in by_runs if math.isfinite(s.diameter_px)]
@@ -537,8 +538,7 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
         cand = class_size(circles[i], runs_a[:, i])
         for size in ([cand, by_runs[i]] if cand.source == "circles" else [by_runs[i]]):
             crops = [cr for body in bodies for cr in single_particle_crops(body[i], size.diameter_px, CROPS_PER_FRAME)]
-            shape, how = shape_from_crops(crops, size.diameter_px * drum_diameter_mm / (2.0 * r_px) * 1e-3,
-                                          drum_diameter_mm / (2.0 * r_px), f"class {c.name!r}")
+            shape, how = shape_from_crops(crops, size.diameter_px * px_mm * 1e-3, px_mm, f"class {c.name!r}")
             if shape.kind == "disc" or size is by_runs[i]:
                 break
         own.append(size)
@@ -549,7 +549,6 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
     if not all(math.isfinite(c.diameter_px) for c in cen.classes):
         missing = next(c.name for c in cen.classes if not math.isfinite(c.diameter_px))
         raise VisionError(f"class {missing!r}: too few particle pixels in the frames to measure a size")
-    px_mm = drum_diameter_mm / (2.0 * r_px)
     notes: dict[str, str] = {
         "drum.diameter_mm": f"--drum-diameter-mm (the drum is {2 * r_px:.0f} px across in the frames: "
                             f"{px_mm:.3f} mm/px)",
