@@ -120,6 +120,26 @@ def test_connecting_reads_and_never_restarts_a_stopped_mill() -> None:
     assert not link.board.running and link.board.fault == "WDOG"
 
 
+def test_a_lost_link_is_an_alarm_before_anyone_can_see_the_link_down() -> None:
+    """The fault is published while the box still says "connected": the supervisor and the
+    dashboard, which read the box, never see the link down without its alarm (a CI run read
+    the safe state and found no "mill link" alarm yet)."""
+    w, link, sink, box = make(RUNNING)
+    w.cycle()
+    seen: list[bool] = []
+    publish = sink.publish
+
+    def publish_and_look(rec: Record) -> None:
+        if isinstance(rec, FaultRaised) and rec.fault == "mill_link":
+            seen.append(box.get().connected)
+        publish(rec)
+
+    sink.publish = publish_and_look  # type: ignore[method-assign]
+    link.up = False
+    w.cycle()
+    assert seen == [True] and not box.get().connected
+
+
 def test_a_watchdog_trip_after_a_link_loss_stays_stopped_until_commanded() -> None:
     w, link, sink, box = make(RUNNING)
     w.cycle()

@@ -226,7 +226,6 @@ class MillWorker:
 
     def _lost(self, snap: MillSnapshot, exc: BaseException) -> MillSnapshot:
         new = MillSnapshot(status=snap.status, connected=False, epoch=snap.epoch, polled=True, refused=self._refused)
-        self.box.set(new)
         self._expect_rpm = None  # the board is read again when the link is back
         if self._rpm is not None:  # decided on a board we can no longer see
             self._drop(self._rpm, f"link lost: {exc}")
@@ -234,8 +233,11 @@ class MillWorker:
         if isinstance(self._run, StartMill):
             self._drop(self._run, f"link lost: {exc}")
             self._run = None
+        # the fault (logged, shown as an alarm) before the snapshot says "disconnected": whoever
+        # sees the link down (the supervisor, the dashboard) also sees why
         self.sink.publish(FaultRaised(t_s=self.now_s(), fault="mill_link", message=f"mill link lost: {exc}",
                                       url=self.link.url))
+        self.box.set(new)
         self._publish(new)
         return new
 
