@@ -170,6 +170,18 @@ def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Pat
     assert png.stat().st_size > 10_000
 
 
+def test_compare_prints_labels_and_paths_with_brackets_whole(tmp_path: Path) -> None:
+    """``drumtwin compare`` on the previous release's log with a label and a plot path that
+    rich markup would have read as style tags (``[a]``, ``[b]``)."""
+    from tests.cli import cli
+
+    png = tmp_path / "plots[b]" / "cmp[b].png"
+    png.parent.mkdir()
+    r = cli("compare", f"run[a]={PREVIOUS}", "--plot", png)
+    assert r.code == 0, r.err
+    assert "run[a]" in r.out and f"plot written to {png}" in r.err and png.is_file()
+
+
 OTHER_CSVS = ("twin/cli/vision_cmds.py", "twin/cli/sim_cmds.py", "tests/vision/test_cli.py")
 """The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv,
 and the test of ``drumtwin mi``'s CSV header."""

@@ -76,6 +76,15 @@ def test_mi_baseline_methods(frames_dir, method):
         assert vals[0] < 0.5 < vals[-1]
 
 
+def test_paths_with_brackets_are_printed_whole(frames_dir, tmp_path):
+    """Rich markup took ``[run]`` in a path for a style tag: the message named another file."""
+    out = tmp_path / "runs[a]" / "mi[run].csv"
+    out.parent.mkdir()
+    r = cli("mi", frames_dir, "--csv", out)
+    assert r.code == 0, r.err
+    assert out.is_file() and f"-> {out}" in r.err, r.err
+
+
 def test_mi_real_frames_with_config_and_manual_roi(real_drum_dir):
     r = cli("mi", real_drum_dir / "images" / "0002.jpg", real_drum_dir / "images" / "0097.jpg",
             "--config", CONFIG, "--roi", "320.3,319.2,312")

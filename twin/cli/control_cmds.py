@@ -47,8 +47,8 @@ def _mill(
     timeout_s: float = typer.Option(0.3, "--timeout", help="Per-attempt reply timeout (s)."),
     retries: int = typer.Option(5, "--retries", help="Resends after the first attempt."),
     config: Path | None = typer.Option(
-        None, "--config", help="The mixer's TOML: set-rpm's limits come from its [drum]'s critical speed and a "
-        "drive's hz_per_rpm from its [drive], as in `drumtwin run --config` (default: the demo's drum)."
+        None, "--config", help="The mixer's TOML: set-rpm's limits come from its \\[drum]'s critical speed and a "
+        "drive's hz_per_rpm from its \\[drive], as in `drumtwin run --config` (default: the demo's drum)."
     ),
 ) -> None:
     check_number("--timeout", timeout_s, above=0.0, at_most=60.0)
@@ -263,7 +263,8 @@ def mill_emulator(
         else:
             emu.open_pty(link)
         print(emu.url, flush=True)
-        console_err.print(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop", highlight=False)
+        console_err.print(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop", highlight=False,
+                          markup=False)
         t_end = None if duration_s is None else time.monotonic() + duration_s
         last = None
         try:
@@ -337,7 +338,7 @@ def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None
             emu.open_pty(link)
         print(emu.mill_url(), flush=True)
         console_err.print(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
-                          f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop", highlight=False)
+                          f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop", highlight=False, markup=False)
         t_end = None if duration_s is None else time.monotonic() + duration_s
         last = None
         try:

@@ -22,7 +22,7 @@ def report(
     from twin.report.build import endpoint_of
 
     path = build_report(runs, out, title)
-    console_err.print(f"report of {len(runs)} run(s) written to {path}", highlight=False)
+    console_err.print(f"report of {len(runs)} run(s) written to {path}", highlight=False, markup=False)
     if json_out:
         out_runs = {}
         for spec in runs:

@@ -127,7 +127,7 @@ def run(
     video: Path = typer.Option(None, "--video", help="Replay a recorded video instead of a camera."),
     mill: str = typer.Option(None, "--mill", help="Mill serial URL: /dev/ttyUSB0, socket://host:port, rfc2217://..."),
     config: Path = typer.Option(None, "--config", help="Meter TOML (colour classes, ROI; the twin's mixer: "
-                                "[drum], [[particles]])."),
+                                "\\[drum], [\\[particles]])."),
     engine: str = typer.Option(None, "--engine", help="Twin engine: dem or pymunk (default: the mixer's)."),
     no_dashboard: bool = typer.Option(False, "--no-dashboard", help="Run without the browser dashboard."),
     duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of run time."),
@@ -204,7 +204,7 @@ def run(
         console_err.print(
             f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
             f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}",
-            highlight=False,
+            highlight=False, markup=False,
         )
 
 
@@ -217,6 +217,7 @@ def compare(
     title: str = typer.Option("", "--title", help="Plot title."),
 ) -> None:
     """Compare run logs: one plot of their MI curves and rpm (e.g. AUTO against OFF)."""
+    from rich.markup import escape
     from rich.table import Table
 
     from twin.cli.app import console
@@ -239,11 +240,11 @@ def compare(
         last = next((r for r in reversed(rows) if r.get("trend_mi") is not None), rows[-1] if rows else {})
         moves = sum(1 for e in read_events(path) if e["kind"] == "decision" and e.get("decision") == "move")
         fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
-        table.add_row(label, str(len(rows)), fmt(last.get("t_s"), ".1f"), fmt(last.get("trend_mi"), ".3f"),
+        table.add_row(escape(label), str(len(rows)), fmt(last.get("t_s"), ".1f"), fmt(last.get("trend_mi"), ".3f"),
                       fmt(last.get("rpm_actual"), ".1f"), str(moves))
     console.print(table)
     out = plot_runs(labelled, plot, title)
-    console_err.print(f"plot written to {out}", highlight=False)
+    console_err.print(f"plot written to {out}", highlight=False, markup=False)
 
 
 @bench_app.command("dashboard")

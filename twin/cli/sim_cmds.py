@@ -46,7 +46,7 @@ def _check_seed(seed: int) -> int:
     return check_seed("--seed", seed)
 
 
-CONFIG_HELP = "TOML with the colour classes and the mixer ([drum], [[particles]]; default: the paper's drum)"
+CONFIG_HELP = "TOML with the colour classes and the mixer (\\[drum], [\\[particles]]; default: the paper's drum)"
 ENGINE_HELP = "twin engine: dem (discs in a plain drum) or pymunk (any shape, baffles); default: the mixer's"
 
 

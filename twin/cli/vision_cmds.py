@@ -253,7 +253,8 @@ def mi_cmd(
         raise VisionError(f"none of the {n} frames could be read (corrupt or not images): {first_bad}")
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
-    console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False)
+    console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False,
+                      markup=False)
     if endpoint or json_out:
         summary = _mi_summary(ts, mis, method.value, endpoint, target_mi, ep_options)
         if json_out:
@@ -375,8 +376,8 @@ def suggest_cmd(
     n_frames: int = typer.Option(12, "--frames", help="Frames to learn from, spread over the source (1..500)."),
     preview: Path | None = typer.Option(None, "--preview", help="PNG: a frame beside its class map."),
     drum_diameter_mm: float | None = typer.Option(
-        None, "--drum-diameter-mm", help="The drum's inner diameter (mm): also write the twin's mixer ([drum], "
-        "[[particles]]) measured in the frames."),
+        None, "--drum-diameter-mm", help="The drum's inner diameter (mm): also write the twin's mixer (\\[drum], "
+        "[\\[particles]]) measured in the frames."),
     drum_depth_mm: float | None = typer.Option(
         None, "--drum-depth-mm", help="With --drum-diameter-mm: the end plates' distance (mm); default a "
         "monolayer drum (one particle thick)."),
@@ -469,7 +470,7 @@ def suggest_cmd(
 
         if not cv2.imwrite(str(preview), class_preview(picked[0][1], cfg.classes, r0)):
             raise VisionError(f"cannot write {preview}")
-        console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False)
+        console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False, markup=False)
     text = config_to_toml(cfg, comment)
     if drum_diameter_mm is not None:
         n = len(census_frames)
