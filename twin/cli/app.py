@@ -33,6 +33,12 @@ ENDPOINT_HELP = {  # the --endpoint-* options of run and mi (defaults: control.e
 }
 
 
+def say(msg: str) -> None:
+    """One plain message on stderr: no markup (a path's ``[x]`` stays), no highlighting, no
+    wrapping (a long path stays one piece to copy, also in a log file)."""
+    console_err.print(msg, highlight=False, markup=False, soft_wrap=True)
+
+
 def print_json(obj: object) -> None:
     """Print ``obj`` as one line of strict JSON on stdout (NaN/inf -> null, numpy -> plain)."""
     import json

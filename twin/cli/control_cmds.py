@@ -22,7 +22,7 @@ from control.errors import ControlError, check_number
 from control.modbus.link import ModbusMill, comm_loss_problem, is_modbus_url, parse_modbus_url
 from control.motor import MotorConfig
 from control.protocol import MillStatus
-from twin.cli.app import app, bench_app, console, console_err, print_json
+from twin.cli.app import app, bench_app, console, console_err, print_json, say
 
 if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
     from control.limits import Limits
@@ -263,8 +263,7 @@ def mill_emulator(
         else:
             emu.open_pty(link)
         print(emu.url, flush=True)
-        console_err.print(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop", highlight=False,
-                          markup=False)
+        say(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop")
         t_end = None if duration_s is None else time.monotonic() + duration_s
         last = None
         try:
@@ -337,8 +336,8 @@ def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None
         else:
             emu.open_pty(link)
         print(emu.mill_url(), flush=True)
-        console_err.print(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
-                          f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop", highlight=False, markup=False)
+        say(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
+            f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop")
         t_end = None if duration_s is None else time.monotonic() + duration_s
         last = None
         try:

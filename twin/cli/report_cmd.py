@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from twin.cli.app import app, console_err, print_json
+from twin.cli.app import app, print_json, say
 
 
 @app.command("report")
@@ -22,7 +22,7 @@ def report(
     from twin.report.build import endpoint_of
 
     path = build_report(runs, out, title)
-    console_err.print(f"report of {len(runs)} run(s) written to {path}", highlight=False, markup=False)
+    say(f"report of {len(runs)} run(s) written to {path}")
     if json_out:
         out_runs = {}
         for spec in runs:

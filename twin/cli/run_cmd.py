@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console_err, print_json
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console_err, print_json, say
 from twin.errors import TwinError
 
 if TYPE_CHECKING:
@@ -201,11 +201,8 @@ def run(
     if json_out:
         print_json(out)
     else:
-        console_err.print(
-            f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
-            f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}",
-            highlight=False, markup=False,
-        )
+        say(f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
+            f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}")
 
 
 @app.command("compare")
@@ -244,7 +241,7 @@ def compare(
                       fmt(last.get("rpm_actual"), ".1f"), str(moves))
     console.print(table)
     out = plot_runs(labelled, plot, title)
-    console_err.print(f"plot written to {out}", highlight=False, markup=False)
+    say(f"plot written to {out}")
 
 
 @bench_app.command("dashboard")

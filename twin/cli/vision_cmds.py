@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console, console_err, print_json
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console, console_err, print_json, say
 from vision.errors import VisionError
 
 if TYPE_CHECKING:
@@ -63,7 +63,7 @@ def _check_number(option: str, value: float, lo: float, hi: float) -> None:
 
 def _warn(lines: tuple[str, ...] | list[str]) -> None:
     for ln in lines:
-        console_err.print(f"warning: {ln}", highlight=False, markup=False)
+        say(f"warning: {ln}")
 
 
 def _no_default_pixels_error() -> VisionError:
@@ -253,8 +253,7 @@ def mi_cmd(
         raise VisionError(f"none of the {n} frames could be read (corrupt or not images): {first_bad}")
     if plot is not None:
         _plot(plot, ts, mis, avgs, method.value, window)
-    console_err.print(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""), highlight=False,
-                      markup=False)
+    say(f"{n} frames, {n_valid} valid" + (f" -> {csv_out}" if csv_out else ""))
     if endpoint or json_out:
         summary = _mi_summary(ts, mis, method.value, endpoint, target_mi, ep_options)
         if json_out:
@@ -470,7 +469,7 @@ def suggest_cmd(
 
         if not cv2.imwrite(str(preview), class_preview(picked[0][1], cfg.classes, r0)):
             raise VisionError(f"cannot write {preview}")
-        console_err.print(f"preview of {picked[0][0]} -> {preview}", highlight=False, markup=False)
+        say(f"preview of {picked[0][0]} -> {preview}")
     text = config_to_toml(cfg, comment)
     if drum_diameter_mm is not None:
         n = len(census_frames)
