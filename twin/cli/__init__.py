@@ -21,7 +21,7 @@ except ImportError:  # pragma: no cover
 import typer
 from rich.markup import escape
 
-from twin.cli.app import USER_ERRORS, app, bench_app, console_err  # noqa: F401
+from twin.cli.app import USER_ERRORS, app, bench_app, console_err, say  # noqa: F401
 
 if TYPE_CHECKING:
     from typer._click.core import Command
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> None:
             exc.ctx is not None and " " in exc.ctx.command_path) else " (see 'drumtwin --help')"
         _one_line_error(exc.format_message() + hint)
     except (typer.Abort, KeyboardInterrupt):
-        console_err.print("aborted", highlight=False)
+        say("aborted")
         sys.exit(130)
     except typer.Exit as exc:
         sys.exit(exc.exit_code)

@@ -102,7 +102,7 @@ def _hold(c: MillClient | ModbusMill, hold_s: float, as_json: bool) -> None:
     while time.monotonic() < t_end:
         st = c.heartbeat()
         if not as_json:
-            console_err.print(f"actual {st.actual_rpm:6.2f} rpm (setpoint {st.setpoint_rpm:.2f})", highlight=False)
+            say(f"actual {st.actual_rpm:6.2f} rpm (setpoint {st.setpoint_rpm:.2f})")
         time.sleep(min(0.25, max(0.0, t_end - time.monotonic())))
 
 
@@ -271,11 +271,8 @@ def mill_emulator(
                 st = emu.status()
                 line = (round(st.setpoint_rpm, 1), round(st.actual_rpm, 1), st.running, st.fault)
                 if line != last:
-                    console_err.print(
-                        f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
-                        f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}",
-                        highlight=False,
-                    )
+                    say(f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
+                        f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}")
                     last = line
                 done.wait(0.5)
         except KeyboardInterrupt:
@@ -345,8 +342,8 @@ def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None
                 m = emu.motor
                 line = (round(emu.output_hz, 1), m.running, m.fault)
                 if line != last:
-                    console_err.print(f"output {emu.output_hz:6.2f} Hz  {'running' if m.running else 'stopped'}"
-                                      f"  fault {m.fault or 'none'}", highlight=False)
+                    say(f"output {emu.output_hz:6.2f} Hz  {'running' if m.running else 'stopped'}"
+                        f"  fault {m.fault or 'none'}")
                     last = line
                 done.wait(0.25)
         except KeyboardInterrupt:

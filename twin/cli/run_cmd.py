@@ -56,7 +56,7 @@ def run_live(
 
 def _still_stopping(signum: int, frame: object) -> None:
     """SIGINT after the first Ctrl-C: the run log's stop record and the mill's stop come first."""
-    console_err.print("still stopping…")
+    say("still stopping…")
 
 
 def _wait(loop: LiveLoop, cfg: RunConfig, progress: bool) -> None:
@@ -83,7 +83,7 @@ def _wait(loop: LiveLoop, cfg: RunConfig, progress: bool) -> None:
                 bar.update(task, completed=min(loop.now_s(), cfg.duration_s), mi=mi, rpm=f"{rpm:.1f}")
                 stop.wait(0.2)
     except KeyboardInterrupt:
-        console_err.print("stopping…")
+        say("stopping…")
         if threading.current_thread() is threading.main_thread():  # a second Ctrl-C must not cut the
             signal.signal(signal.SIGINT, _still_stopping)  # stop short
 
@@ -297,10 +297,8 @@ def bench_dashboard(
     if as_json:
         print_json(rate.as_dict())
     else:
-        console_err.print(
-            f"dashboard in headless chromium over {rate.seconds:g} s: camera {rate.camera_hz:.1f} updates/s, "
-            f"twin {rate.twin_hz:.1f} updates/s (target 10)", highlight=False
-        )
+        say(f"dashboard in headless chromium over {rate.seconds:g} s: camera {rate.camera_hz:.1f} updates/s, "
+            f"twin {rate.twin_hz:.1f} updates/s (target 10)")
 
 
 @bench_app.command("memory")

@@ -13,7 +13,7 @@ import typer
 
 from control.limits import WHATIF_MAX_S as MAX_SIM_S  # and the longest simulated run of one command, s
 from sim.errors import SimError
-from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json
+from twin.cli.app import app, bench_app, check_outputs, console, console_err, print_json, say
 
 SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_linear", "mi_particles", "mi_sigmoid_particles", "slope_deg",
                "slope_deg_particles", "valid")
@@ -302,7 +302,7 @@ def calibrate_cmd(
         target, measured_curv, n_frames = _measure_source_surface(source, max_frames, bed, config)
         if target_curv is None:
             target_curv = measured_curv
-        console_err.print(f"measured slope {target:.1f} deg in {n_frames} frame(s)")
+        say(f"measured slope {target:.1f} deg in {n_frames} frame(s)")
     else:
         target = check_number("--slope-deg", slope_deg, -90.0, 90.0)
     with _progress("calibrate") as prog:

@@ -260,8 +260,8 @@ def mi_cmd(
             print_json(summary)
         elif endpoint:
             mt = summary["mixing_time_s"]
-            console_err.print("endpoint: " + ("never mixed" if mt is None else f"mixed at {mt:.2f} s "
-                              f"(plateau MI {summary['plateau_mi']:.3f})"), highlight=False)
+            say("endpoint: " + ("never mixed" if mt is None else f"mixed at {mt:.2f} s "
+                f"(plateau MI {summary['plateau_mi']:.3f})"))
 
 
 def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, target_mi: float | None,
@@ -456,12 +456,12 @@ def suggest_cmd(
                f"{cfg.stride}" if cfg.stride > 1 else "it moved a class centroid by more than 1% of R on these frames")
         comment += (f"\nopening = true ({why}): it drops the thin rims and gaps that colour blur gives a class,\n"
                     "and keeps whole particles.")
-        console_err.print(f"class opening on ({why})", highlight=False)
+        say(f"class opening on ({why})")
     if rotation is None and cfg.camera_rotation_deg:
         why = (f"camera_rotation_deg = {cfg.camera_rotation_deg:g}: the bed lies towards the image's "
                f"{_SIDE[int(cfg.camera_rotation_deg) // 90]}, so gravity points there (nearest quarter turn)")
         comment += f"\n{why}"
-        console_err.print(why, highlight=False)
+        say(why)
     comment += "".join(f"\nwarning: {w}" for w in cfg.warnings)
     _warn(cfg.warnings)
     if preview is not None:
@@ -617,7 +617,7 @@ def bench_vision(
     from vision.bench import run_vision_bench
 
     _check_number("--seconds", seconds, 0.01, 600)
-    res = run_vision_bench(seconds=seconds, log=lambda s: console_err.print(s, highlight=False))
+    res = run_vision_bench(seconds=seconds, log=say)
     if json_out:
         print_json(res)
         return
