@@ -323,7 +323,7 @@ def test_residual_flags_direction_slope_and_mi() -> None:
     assert not residual(float("nan"), 30.0, 0.9, 0.9, tol).known  # no camera slope: no verdict
 
 
-def _mismatch_rig(camera_slope: float, twin_slope: float):
+def _mismatch_rig(camera_slope: float, twin_slope: float, tol=None):
     from tests.twin.test_workers import Boxes, _reading
     from twin.live.mismatch import MismatchMonitor
 
@@ -336,10 +336,11 @@ def _mismatch_rig(camera_slope: float, twin_slope: float):
 
     sink = Sink()
     w = SupervisorWorker(Supervisor(SupervisorConfig(vision_timeout_s=3.0, recover_s=2.0), mode=Mode.AUTO),
-                         b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(),
+                         b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(tol),
                          on_twin_mismatch=lambda: recal.append(b.view.now_s()))
 
-    def run(t0: float, t1: float, twin_slope_deg: float, twin_steps: bool = True) -> None:
+    def run(t0: float, t1: float, twin_slope_deg: float, twin_steps: bool = True, seeded_s: float = 0.0) -> None:
+        """Run time ``t0`` to ``t1`` in 0.5 s ticks; the twin was seeded at run time ``seeded_s``."""
         from control.trend import TrendEstimate
         from twin.live.records import CameraInfo, FrameInfo, TwinInfo
 
@@ -350,7 +351,7 @@ def _mismatch_rig(camera_slope: float, twin_slope: float):
             b.camera.set(CameraInfo(t, b.wall.t, None, None, int(t * 2) + 1, False))
             b.frames.set(FrameInfo(t, int(t * 2) + 1, t, _reading(0.9, slope=camera_slope), est))
             if twin_steps:  # False: the twin lags (its newest state stays where it was)
-                b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg))
+                b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg, age_s=t - seeded_s))
             w.tick(b.view.now_s())
             t += 0.5
 
@@ -533,6 +534,7 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
     import math
     import time
 
+    from twin.live.mismatch import MismatchMonitor, MismatchTolerance
     from twin.runlog import read_events
 
     cfg = RunConfig(dashboard=False, duration_s=600, speed=4.0, mode="auto", log_dir=tmp_path / "run").resolved()
@@ -552,8 +554,11 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
         box.set = wrong_set
 
     def body(loop, plant) -> None:
+        # the twin goes wrong once it is evidence (past its spin-up, ``warmup_s`` simulated since
+        # it was seeded) and has agreed a whole median window: on a busy machine it seeds late
+        settled = MismatchTolerance().warmup_s + MismatchMonitor().window_s
         end = time.monotonic() + 120
-        while time.monotonic() < end and not (loop.twin_box.get().updated_s and loop.now_s() > 15.0):
+        while time.monotonic() < end and not (loop.now_s() > 15.0 and loop.twin_box.get().age_s > settled):
             time.sleep(0.1)
         report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
         report["t_wrong"] = loop.now_s()
@@ -625,9 +630,10 @@ def test_a_lagging_or_spinning_up_twin_is_no_evidence_of_a_mismatch() -> None:
     from twin.live.mismatch import MismatchTolerance, twin_is_evidence
 
     tol = MismatchTolerance()
-    assert not twin_is_evidence(9.0, 1.0, 0.1, tol)  # 8 s old
-    assert not twin_is_evidence(4.0, 4.0, 0.1, tol)  # fresh, but 3.9 s into its run
-    assert twin_is_evidence(9.0, 8.5, 0.1, tol)
+    assert not twin_is_evidence(9.0, 1.0, 8.0, tol)  # 8 s old
+    assert not twin_is_evidence(4.0, 4.0, 3.9, tol)  # fresh, but 3.9 s into its run
+    assert twin_is_evidence(9.0, 8.5, 8.4, tol)
+    assert not twin_is_evidence(9.0, None, 8.4, tol)  # no twin yet
     w, sink, recal, run = _mismatch_rig(camera_slope=34.0, twin_slope=4.0)
     run(0.0, 4.5, 4.0)  # spinning up: a wrong slope, but no verdict
     assert "twin_mismatch" not in sink.faults
@@ -636,4 +642,29 @@ def test_a_lagging_or_spinning_up_twin_is_no_evidence_of_a_mismatch() -> None:
     assert "twin_mismatch" not in sink.faults and not recal
     assert w.view.twin().updated_s == 4.0
     run(20.0, 30.0, 4.0)  # fresh again and past its spin-up, still wrong: raised
+    assert "twin_mismatch" in sink.faults and recal
+
+
+@pytest.mark.parametrize("how", ["late seeding", "reseeded"])
+def test_a_twin_that_skipped_ahead_or_was_seeded_again_is_spinning_up_whatever_run_time_says(how) -> None:
+    """CI at stop 37: the twin of a busy machine seeded late, published its first state 15 s
+    behind and skipped ahead to now; counted from that first state's run time it looked spun up
+    at once. Spin-up is the twin's own simulated time since its latest seeding
+    (``TwinInfo.age_s``): a wrong bed fresh from seeding is no verdict until it has run
+    ``warmup_s``, and then it is."""
+    from twin.live.mismatch import MismatchMonitor, MismatchTolerance
+
+    tol = MismatchTolerance(warmup_s=8.0)  # longer than a median window and a raise (a verdict without it)
+    warm = tol.warmup_s
+    assert warm > MismatchMonitor().window_s + tol.raise_after_s
+    _w, sink, recal, run = _mismatch_rig(camera_slope=34.0, twin_slope=4.0, tol=tol)
+    if how == "late seeding":
+        run(0.0, 0.5, 4.0)  # its first state, published at run time 0 ...
+        seeded = 15.0  # ... then 15 s on the twin skipped ahead (only 0.5 s simulated)
+    else:
+        run(0.0, 10.0, 34.0)  # a right twin, well spun up
+        seeded = 10.0  # then seeded again (an operator's reseed): a fresh bed
+    run(seeded, seeded + warm - 0.5, 4.0, seeded_s=seeded)
+    assert "twin_mismatch" not in sink.faults and not recal
+    run(seeded + warm - 0.5, seeded + warm + 5.0, 4.0, seeded_s=seeded)
     assert "twin_mismatch" in sink.faults and recal

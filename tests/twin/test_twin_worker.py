@@ -127,3 +127,61 @@ def test_the_live_calibrations_minimum_is_the_runs_supervisor_minimum(tmp_path) 
     assert creeping.pool.jobs == [] and creeping.waiting() == ["not turning"]
     assert "below the run's 5 rpm minimum" in creeping.sink.kinds("calibration_waiting")[0]["reason"]
     assert [job[1] for job in turning.pool.jobs] == [pytest.approx(5.5)]
+
+
+def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> None:
+    """``TwinInfo.age_s`` (what the twin-versus-camera check waits on for the bed's spin-up):
+    the real worker thread, seeded at run time 0, falls 20 s behind and skips ahead (run time
+    jumps, its bed has not run), steps 3 s, and is seeded again: age 0 -> ~0 -> ~3 -> ~0."""
+    import threading
+    import time
+
+    from twin.live.twin import MAX_LAG_S
+    from vision.colours import DEFAULT_CLASSES
+
+    camera: Latest[CameraInfo] = Latest(CameraInfo())
+    frames: Latest[FrameInfo] = Latest(FrameInfo(t_s=0.0))
+    mill: Latest[MillSnapshot] = Latest(MillSnapshot(MillStatus(5.0, 5.0, True, None), connected=True, polled=True))
+    box: Latest[TwinInfo] = Latest(TwinInfo())
+    view = RunView(1.0, camera, frames, mill, box, Latest("auto"), clock_now=lambda: 0.0)
+    sink = Sink()
+    settings = TwinSettings(start_rpm=5.0, classes=DEFAULT_CLASSES)
+    worker = TwinWorker(settings, view, sink, LiveState(), box, queue.SimpleQueue())
+    worker._cal_wanted = False  # no calibration process: this is about the clock
+    stop = threading.Event()
+    thread = threading.Thread(target=worker.run, args=(stop,), daemon=True)
+
+    def until(cond, what: str) -> TwinInfo:
+        end = time.monotonic() + 60
+        while time.monotonic() < end and thread.is_alive():
+            info = box.get()
+            if cond(info):
+                return info
+            time.sleep(0.01)
+        raise AssertionError(f"the twin never {what}: {box.get()}")
+
+    from sim.drum import DrumSim
+    from sim.render import Renderer
+
+    bed = DrumSim(case="C", seed=0, rpm=5.0)
+    renderer = Renderer(bed.drum, 240)
+    camera.set(CameraInfo(0.0, 0.0, renderer.render(bed.particles()), renderer.roi, 1))
+    thread.start()
+    try:
+        first = until(lambda i: i.updated_s is not None, "published")
+        assert first.seeds == 1 and first.age_s == 0.0
+        jump = 4.0 * MAX_LAG_S
+        frames.set(FrameInfo(t_s=jump))  # the run is far ahead: the twin skips, its bed does not run
+        skipped = until(lambda i: i.updated_s >= jump - 1e-6, "caught up")
+        assert sink.kinds("twin_lag") and skipped.updated_s == pytest.approx(jump) and skipped.age_s < 0.05
+        for k in range(1, 31):  # 3 s more of run time, in 0.1 s frames
+            frames.set(FrameInfo(t_s=jump + 0.1 * k))
+            until(lambda i, k=k: i.updated_s >= jump + 0.1 * k - 1e-6, "kept up")
+        ran = box.get()
+        assert ran.updated_s == pytest.approx(jump + 3.0) and ran.age_s == pytest.approx(3.0, abs=0.05)
+        worker.request("reseed")
+        again = until(lambda i: i.seeds == 2, "was seeded again")
+        assert again.updated_s >= jump + 3.0 - 1e-6 and again.age_s < 0.2
+    finally:
+        stop.set()
+        thread.join(30)

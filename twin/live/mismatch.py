@@ -13,8 +13,8 @@ Three comparisons, each with its tolerance (:class:`MismatchTolerance`):
 ``raise_after_s`` of continuous disagreement, *agree* again after ``clear_after_s`` of
 continuous agreement. Missing numbers (NaN: no valid camera reading, no twin yet) are no
 evidence either way: they neither raise nor clear; nor is a twin that lags behind the camera
-(its newest state older than ``fresh_s``: the ``twin_lag`` alarm's business) or has run less than
-``warmup_s`` (:func:`twin_is_evidence`).
+(its newest state older than ``fresh_s``: the ``twin_lag`` alarm's business) or has simulated less
+than ``warmup_s`` since it was seeded (:func:`twin_is_evidence`).
 """
 
 from __future__ import annotations
@@ -126,15 +126,17 @@ class MismatchMonitor:
         return None
 
 
-def twin_is_evidence(now_s: float, twin_updated_s: float | None, twin_started_s: float | None,
+def twin_is_evidence(now_s: float, twin_updated_s: float | None, twin_age_s: float,
                      tol: MismatchTolerance | None = None) -> bool:
     """True when the twin's numbers may be compared with the camera's at run time ``now_s``:
-    it is fresh (stepped to within ``fresh_s`` of now) and past its spin-up (``warmup_s`` of run
-    time since it was first seen, ``twin_started_s``)."""
+    it is fresh (stepped to within ``fresh_s`` of now) and past its spin-up (``twin_age_s``,
+    ``TwinInfo.age_s``: simulated seconds since its latest seeding, at least ``warmup_s``). A twin
+    that was slow to seed and skipped ahead to catch up, or was seeded again, is spinning up
+    still, however long ago run time first saw it."""
     t = tol or MismatchTolerance()
-    if twin_updated_s is None or twin_started_s is None:
+    if twin_updated_s is None:
         return False
-    return now_s - twin_updated_s <= t.fresh_s and twin_updated_s - twin_started_s >= t.warmup_s
+    return now_s - twin_updated_s <= t.fresh_s and twin_age_s >= t.warmup_s
 
 
 def _median(values: tuple[float, ...]) -> float:

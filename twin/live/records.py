@@ -140,13 +140,15 @@ class TwinInfo:
     """The twin worker's newest state: run time it last stepped to (None: no twin yet),
     its measured MI and slope, the engine's snapshot (``Twin.snapshot()``: opaque, picklable;
     a ``sim.drum.SimState`` or a pymunk state) no older than a few seconds for what-if studies,
-    and ``seeds``: how many times it was seeded (from the camera's bed)."""
+    ``seeds``: how many times it was seeded (from the camera's bed), and ``age_s``: the simulated
+    seconds since its latest seeding (its bed's spin-up; run time skipped to catch up is not in it)."""
 
     updated_s: float | None = None
     mi: float = math.nan
     slope_deg: float = math.nan
     state: Any = None  # as sim.engine.Twin.snapshot() (Any there: each engine its own state class)
     seeds: int = 0
+    age_s: float = 0.0
 
 
 # -- commands ---------------------------------------------------------------------------------

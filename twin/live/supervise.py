@@ -102,7 +102,6 @@ class SupervisorWorker:
         self._epoch = 0  # the mill epoch of the inputs of the latest step
         self.safe = False  # mirrors supervisor.safe after each tick (read by tests and the CLI)
         self.mismatch = mismatch  # twin vs camera (None: not compared)
-        self._twin_seen_s: float | None = None  # run time of the twin's first state
         self.on_twin_mismatch = on_twin_mismatch  # e.g. request a recalibration
         self._doubts: dict[str, str] = {}  # why the twin is not trusted (key -> reason)
         self._doubts_lock = threading.Lock()
@@ -189,11 +188,7 @@ class SupervisorWorker:
         if self.mismatch is None:
             return
         r, twin = self.view.frames().reading, self.view.twin()
-        if twin.updated_s is None:
-            return
-        if self._twin_seen_s is None:
-            self._twin_seen_s = twin.updated_s
-        if not twin_is_evidence(now, twin.updated_s, self._twin_seen_s, self.mismatch.tol):
+        if not twin_is_evidence(now, twin.updated_s, twin.age_s, self.mismatch.tol):
             return  # lagging (twin_lag says so) or still spinning up: no evidence either way
         valid = r is not None and is_valid_mi(r)
         change = self.mismatch.observe(

@@ -105,6 +105,7 @@ class TwinWorker:
         self._slopes: deque[tuple[float, float]] = deque(maxlen=4000)
         self._state: Any = None
         self._seeds = 0  # times seeded (TwinInfo.seeds: a what-if "from the bed" waits for the next)
+        self._seeded_sim_s = 0.0  # the twin's own time at its latest seeding (TwinInfo.age_s counts from it)
         self._mi = math.nan
         self._slope = math.nan
         self._pool: Executor | None = None
@@ -129,7 +130,8 @@ class TwinWorker:
         return self.t0_run + (self.sim.t_s if self.sim is not None else 0.0)
 
     def _publish(self, updated_s: float | None) -> None:
-        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds))
+        age = self.sim.t_s - self._seeded_sim_s if self.sim is not None else 0.0
+        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds, age))
 
     def _drain_slopes(self) -> None:
         self._slopes.extend(drain(self.slopes))
@@ -154,6 +156,8 @@ class TwinWorker:
                 self.sink.publish(TwinLag(t_s=target, lag_s=lag))
                 self.t0_run += lag
                 render.restart(self.now_s)
+                self._publish(self.now_s)  # caught up: its bed as it was (the skipped time is not simulated)
+                continue
             if lag <= 1e-6:
                 stop.wait(0.005)
                 continue
@@ -322,6 +326,7 @@ class TwinWorker:
             self.meter = Meter(roi=self.renderer.roi, classes=s.classes)
         self.sim = sim
         self.t0_run = t - sim.t_s
+        self._seeded_sim_s = sim.t_s
         self._state = sim.snapshot()
         self._seeds += 1
         self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))
