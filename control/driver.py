@@ -29,6 +29,12 @@ from control import protocol as p
 from control.errors import ControlError, MillRefused, check_number
 from control.protocol import MillStatus
 
+WRITE_TIMEOUT_S = 1.0
+"""How long a write to the mill link may take (s) before the link is down: a frame's bytes
+at the slowest baud rate, not the reply timeout. pyserial checks its write timer after a
+complete ``os.write`` too, so a host that loses the CPU for that long just after writing
+would otherwise call a healthy link down (and the run safe)."""
+
 __all__ = ["MillClient", "MillStatus"]
 
 try:  # termios errors are not OSErrors; a closed pty can raise them
@@ -172,7 +178,7 @@ class MillClient:
         if not force and now < self._next_open_s:
             raise ConnectionError(f"mill link {self.url} down (next reconnect in {self._next_open_s - now:.2f} s)")
         try:
-            kw = {} if self.url.startswith("rfc2217://") else {"write_timeout": 1.0}  # rfc2217 has none
+            kw = {} if self.url.startswith("rfc2217://") else {"write_timeout": WRITE_TIMEOUT_S}  # rfc2217 has none
             # a fixed short read timeout: changing it per read would re-configure the port
             # (tcsetattr; a whole settings negotiation on rfc2217://)
             port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=self._poll_s, **kw)

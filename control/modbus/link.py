@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qsl
 
+from control.driver import WRITE_TIMEOUT_S
 from control.errors import ControlError, MillRefused, check_number
 from control.modbus.profile import CommLossSetting, DriveProfile, load_profile, read_blocks
 from control.protocol import MillStatus
@@ -311,6 +312,8 @@ class ModbusMill:
                 self._connected = False
                 self.last_error = f"cannot open {s.port}"
                 raise ConnectionError(f"cannot open mill link {s.port} (modbus)")
+            if client.socket is not None and client.socket.write_timeout is not None:
+                client.socket.write_timeout = max(WRITE_TIMEOUT_S, self.timeout_s)  # pymodbus: the reply timeout
             self._client = client
             self._checked = False
             self.stats["reconnects"] += 1

@@ -275,6 +275,32 @@ def test_a_garbled_slow_or_missing_reply_is_a_timeout(drive: DriveEmulator, faul
         assert mill.status().fault is None and mill.connected
 
 
+def test_a_host_that_loses_the_cpu_just_after_a_write_keeps_its_link(drive: DriveEmulator, monkeypatch) -> None:
+    """CI on a loaded machine: pymodbus opens its port with the reply timeout as the write
+    timeout, and pyserial checks that timer after a complete ``os.write`` too; a thread that
+    lost the CPU for 0.1 s just after writing its request had the healthy link called down
+    (and a run would go safe). A write may take ``control.driver.WRITE_TIMEOUT_S``."""
+    import types
+
+    import serial.serialposix as sp
+
+    from control.driver import WRITE_TIMEOUT_S
+
+    with ModbusMill(drive.mill_url(), timeout_s=0.1, retries=0) as mill:
+        port = mill._client.socket
+        assert port.write_timeout == WRITE_TIMEOUT_S
+        real_write = sp.os.write
+
+        def write_then_lose_the_cpu(fd: int, data: bytes) -> int:
+            n = real_write(fd, data)
+            if fd == port.fd:
+                time.sleep(0.3)  # all written; the thread runs again 0.3 s later
+            return n
+
+        monkeypatch.setattr(sp, "os", types.SimpleNamespace(**{**vars(sp.os), "write": write_then_lose_the_cpu}))
+        assert mill.status().fault is None and mill.connected
+
+
 def test_emulator_on_tcp(tmp_path) -> None:
     with DriveEmulator(load_profile("siemens-v20")) as emu:
         emu.open_tcp(0)
