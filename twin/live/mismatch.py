@@ -13,8 +13,9 @@ Three comparisons, each with its tolerance (:class:`MismatchTolerance`):
 ``raise_after_s`` of continuous disagreement, *agree* again after ``clear_after_s`` of
 continuous agreement. Missing numbers (NaN: no valid camera reading, no twin yet) are no
 evidence either way: they neither raise nor clear; nor is a twin that lags behind the camera
-(its newest state older than ``fresh_s``: the ``twin_lag`` alarm's business) or has simulated less
-than ``warmup_s`` since it was seeded (:func:`twin_is_evidence`).
+(its newest state older than ``fresh_s``; one that falls ``twin.live.twin.MAX_LAG_S`` behind skips
+ahead, logged as a ``twin_lag`` record, and the supervisor's ``twin_timeout_s`` covers one that
+stops) or has simulated less than ``warmup_s`` since it was seeded (:func:`twin_is_evidence`).
 """
 
 from __future__ import annotations

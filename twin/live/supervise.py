@@ -189,7 +189,7 @@ class SupervisorWorker:
             return
         r, twin = self.view.frames().reading, self.view.twin()
         if not twin_is_evidence(now, twin.updated_s, twin.age_s, self.mismatch.tol):
-            return  # lagging (twin_lag says so) or still spinning up: no evidence either way
+            return  # lagging or still spinning up: no evidence either way
         valid = r is not None and is_valid_mi(r)
         change = self.mismatch.observe(
             now, r.slope_deg if r is not None else math.nan, twin.slope_deg,
