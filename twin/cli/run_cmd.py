@@ -247,7 +247,7 @@ def compare(
 @bench_app.command("dashboard")
 def bench_dashboard(
     seconds: float = typer.Option(20.0, "--seconds", help="Counting window (s)."),
-    warmup: float = typer.Option(15.0, "--warmup", help="Seconds after the page opens before counting."),
+    warmup: float = typer.Option(15.0, "--warmup", help="Seconds after both images are live before counting."),
     speed: float = typer.Option(1.0, "--speed", help="Demo clock speed."),
     port: int = typer.Option(8079, "--port", help="Dashboard port of the demo started for the bench."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON: camera_hz, twin_hz, seconds."),
@@ -262,10 +262,10 @@ def bench_dashboard(
     import sys
     import tempfile
 
-    from twin.dashboard.ratebench import FIRST_IMAGE_S, check_bench_args, measure_dashboard_rate
+    from twin.dashboard.ratebench import FIRST_IMAGE_S, LIVE_S, check_bench_args, measure_dashboard_rate
 
     check_bench_args(seconds, warmup, speed, port)
-    budget = warmup + seconds + 2 * FIRST_IMAGE_S + 30.0  # the demo outlives the browser's waits
+    budget = warmup + seconds + 2 * FIRST_IMAGE_S + LIVE_S + 30.0  # the demo outlives the browser's waits
     with tempfile.TemporaryDirectory(prefix="drumtwin-bench-dash-") as tmp:
         cmd = [sys.executable, "-c", "from twin.cli import main; main()", "run", "--port", str(port),
                "--speed", str(speed), "--duration", str(budget * speed), "--log", str(Path(tmp) / "run")]

@@ -1,8 +1,10 @@
 """Benchmark: how often the dashboard's camera and twin images change in a real browser.
 
-A headless chromium (driven by Playwright) opens the dashboard, waits for it to warm
-up, then counts the changes of each GUI image's ``src`` (viser swaps a new blob URL in
-for every pushed frame) with a ``MutationObserver`` for a fixed window. This is what
+A headless chromium (driven by Playwright) opens the dashboard, waits until both images
+are live (each changed once: the twin's first frame comes after its seeding, seconds after
+the camera's on a busy machine) and then the warm-up, and counts the changes of each GUI
+image's ``src`` (viser swaps a new blob URL in for every pushed frame) with a
+``MutationObserver`` for a fixed window. This is what
 a viewer sees, after the server's encoding, the websocket and the browser's decoding,
 with the 3D scene rendering beside it.
 """
@@ -16,11 +18,30 @@ from pathlib import Path
 
 from twin.errors import TwinError
 
-__all__ = ["CHROMIUM", "FIRST_IMAGE_S", "IMG_SELECTOR", "DashboardRate", "check_bench_args", "measure_dashboard_rate"]
+__all__ = [
+    "CHROMIUM", "FIRST_IMAGE_S", "IMG_SELECTOR", "LIVE_S",
+    "DashboardRate", "check_bench_args", "measure_dashboard_rate",
+]
 
 CHROMIUM = Path("/usr/bin/chromium")
 IMG_SELECTOR = 'img[src^="blob:"]'  # the GUI images, in panel order: camera, then twin
 FIRST_IMAGE_S = 120.0  # budget (s) for the page to load, and then for its first image
+LIVE_S = 60.0  # budget (s) for both images to change once (past it, what changes is counted: 0 is a result)
+
+_LIVE_JS = """([sel, ms]) => new Promise(resolve => {
+  const imgs = Array.from(document.querySelectorAll(sel)).slice(0, 2);
+  const seen = imgs.map(() => false);
+  let obs = [];
+  const timer = setTimeout(() => { obs.forEach(o => o.disconnect()); resolve(seen); }, ms);
+  obs = imgs.map((im, i) => {
+    const o = new MutationObserver(() => {
+      seen[i] = true;
+      if (seen.every(Boolean)) { clearTimeout(timer); obs.forEach(o => o.disconnect()); resolve(seen); }
+    });
+    o.observe(im, {attributes: true, attributeFilter: ['src']});
+    return o;
+  });
+})"""
 
 _COUNT_JS = """([sel, ms]) => new Promise(resolve => {
   const imgs = Array.from(document.querySelectorAll(sel));
@@ -86,6 +107,7 @@ def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15
                 deadline = time.monotonic() + 30.0
                 while len(page.query_selector_all(IMG_SELECTOR)) < 2 and time.monotonic() < deadline:
                     time.sleep(0.2)
+                page.evaluate(_LIVE_JS, [IMG_SELECTOR, int(LIVE_S * 1000)])  # both moving (or the budget)
                 time.sleep(max(0.0, warmup_s))
                 counts = page.evaluate(_COUNT_JS, [IMG_SELECTOR, int(seconds * 1000)])
             finally:
