@@ -1,6 +1,7 @@
-"""``twin.dashboard.ratebench.measure_dashboard_rate`` in the real chromium on a page of its
-own: two GUI-like images (blob URLs swapped every 100 ms), the second starting late, as the
-twin's does when its seeding takes seconds on a busy machine.
+"""``twin.dashboard.ratebench.count_image_updates`` (``bench dashboard``'s count) in the real
+chromium (the session's) on a page of its own: two GUI-like images (blob URLs swapped every
+100 ms), the second starting late, as the twin's does when its seeding takes seconds on a
+busy machine.
 
 Defect (a fresh clone's suite, `bench dashboard --warmup 0`): counting began as soon as both
 image elements existed, so a twin image that started moving late read 0.5 updates/s over 2 s."""
@@ -13,7 +14,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from twin.dashboard.ratebench import measure_dashboard_rate
+from twin.dashboard.ratebench import count_image_updates
 
 PAGE = """<!doctype html><html><body><img id=a><img id=b><script>
 const blob = (n) => URL.createObjectURL(new Blob(
@@ -52,8 +53,8 @@ def late_twin_page() -> Iterator[str]:
 
 @pytest.mark.browser
 @pytest.mark.timeout(300)
-def test_counting_starts_once_both_images_move(late_twin_page: str) -> None:
+def test_counting_starts_once_both_images_move(page, late_twin_page: str) -> None:
     """With no warm-up, a 1 s window counts both images at their 10 Hz, the late one too."""
-    rate = measure_dashboard_rate(late_twin_page, seconds=1.0, warmup_s=0.0)
+    rate = count_image_updates(page, late_twin_page, seconds=1.0, warmup_s=0.0)
     assert rate.seconds == 1.0
     assert rate.camera_hz >= 5.0 and rate.twin_hz >= 5.0, rate

@@ -15,12 +15,13 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from twin.errors import TwinError
 
 __all__ = [
     "CHROMIUM", "FIRST_IMAGE_S", "IMG_SELECTOR", "LIVE_S",
-    "DashboardRate", "check_bench_args", "measure_dashboard_rate",
+    "DashboardRate", "check_bench_args", "count_image_updates", "measure_dashboard_rate",
 ]
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -100,19 +101,24 @@ def measure_dashboard_rate(url: str, seconds: float = 20.0, warmup_s: float = 15
                                         args=["--no-sandbox", "--no-first-run"])
             try:
                 page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                # generous budgets: on a loaded 2-core machine chromium can take tens of
-                # seconds to load and run viser's client bundle before the first image
-                page.goto(url, timeout=FIRST_IMAGE_S * 1000)
-                page.wait_for_selector(IMG_SELECTOR, timeout=FIRST_IMAGE_S * 1000)
-                deadline = time.monotonic() + 30.0
-                while len(page.query_selector_all(IMG_SELECTOR)) < 2 and time.monotonic() < deadline:
-                    time.sleep(0.2)
-                page.evaluate(_LIVE_JS, [IMG_SELECTOR, int(LIVE_S * 1000)])  # both moving (or the budget)
-                time.sleep(max(0.0, warmup_s))
-                counts = page.evaluate(_COUNT_JS, [IMG_SELECTOR, int(seconds * 1000)])
+                return count_image_updates(page, url, seconds, warmup_s)
             finally:
                 browser.close()
     except PlaywrightError as exc:
         raise TwinError(f"bench dashboard: the browser failed: {str(exc).splitlines()[0]}") from exc
-    counts = [*counts, 0, 0]
+
+
+def count_image_updates(page: Any, url: str, seconds: float, warmup_s: float) -> DashboardRate:
+    """Open ``url`` in the Playwright ``page`` (sync API); once both images are live (or after
+    ``LIVE_S``) and ``warmup_s`` (s) more, count their updates for ``seconds`` (s)."""
+    # generous budgets: on a loaded 2-core machine chromium can take tens of
+    # seconds to load and run viser's client bundle before the first image
+    page.goto(url, timeout=FIRST_IMAGE_S * 1000)
+    page.wait_for_selector(IMG_SELECTOR, timeout=FIRST_IMAGE_S * 1000)
+    deadline = time.monotonic() + 30.0
+    while len(page.query_selector_all(IMG_SELECTOR)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    page.evaluate(_LIVE_JS, [IMG_SELECTOR, int(LIVE_S * 1000)])  # both moving (or the budget)
+    time.sleep(max(0.0, warmup_s))
+    counts = [*page.evaluate(_COUNT_JS, [IMG_SELECTOR, int(seconds * 1000)]), 0, 0]
     return DashboardRate(camera_hz=counts[0] / seconds, twin_hz=counts[1] / seconds, seconds=seconds)
