@@ -262,16 +262,18 @@ def test_a_garbled_slow_or_missing_reply_is_a_timeout(drive: DriveEmulator, faul
     url = drive.mill_url(unit=8) if fault == "unit" else drive.mill_url()
     if fault == "unit":
         with pytest.raises(TimeoutError, match="unit 8"):
-            ModbusMill(url, timeout_s=0.1, retries=1)
+            ModbusMill(url, timeout_s=0.25, retries=1)
         return
-    with ModbusMill(url, timeout_s=0.1, retries=1) as mill:
-        drive.faults = {"corrupt": DriveFaults(corrupt_p=1.0), "slow": DriveFaults(delay_s=0.3),
+    # (timeouts with room for a loaded 2-core machine: 0.05-0.1 s ones failed there)
+    with ModbusMill(url, timeout_s=0.25, retries=1) as mill:
+        drive.faults = {"corrupt": DriveFaults(corrupt_p=1.0), "slow": DriveFaults(delay_s=0.6),
                         "mute": DriveFaults(mute=True)}[fault]
         with pytest.raises(TimeoutError, match="no valid answer"):
             mill.status()
         assert not mill.connected
         drive.faults = DriveFaults()
-        time.sleep(0.4)  # the slow reply is on its way: a new request after it
+        if fault == "slow":  # both slow replies (served one after the other) are on their way: ask after them
+            time.sleep(1.5)
         assert mill.status().fault is None and mill.connected
 
 
@@ -286,7 +288,7 @@ def test_a_host_that_loses_the_cpu_just_after_a_write_keeps_its_link(drive: Driv
 
     from control.driver import WRITE_TIMEOUT_S
 
-    with ModbusMill(drive.mill_url(), timeout_s=0.1, retries=0) as mill:
+    with ModbusMill(drive.mill_url(), timeout_s=0.25, retries=1) as mill:
         port = mill._client.socket
         assert port.write_timeout == WRITE_TIMEOUT_S
         real_write = sp.os.write
@@ -294,7 +296,7 @@ def test_a_host_that_loses_the_cpu_just_after_a_write_keeps_its_link(drive: Driv
         def write_then_lose_the_cpu(fd: int, data: bytes) -> int:
             n = real_write(fd, data)
             if fd == port.fd:
-                time.sleep(0.3)  # all written; the thread runs again 0.3 s later
+                time.sleep(0.5)  # all written; the thread runs again 0.5 s later
             return n
 
         monkeypatch.setattr(sp, "os", types.SimpleNamespace(**{**vars(sp.os), "write": write_then_lose_the_cpu}))
@@ -345,9 +347,9 @@ def test_an_unopenable_port_is_a_connection_error(tmp_path) -> None:
 def test_a_late_answer_to_an_earlier_request_is_never_taken_for_this_one(drive: DriveEmulator) -> None:
     """RTU has no transaction id: a slow drive's answer to a write can arrive while the host
     waits for a read (the loop's worker crashed on it with a KeyError)."""
-    with ModbusMill(drive.mill_url(), timeout_s=0.05, retries=0) as mill:
+    with ModbusMill(drive.mill_url(), timeout_s=0.2, retries=0) as mill:  # (0.05 s failed on a loaded machine)
         mill.set_rpm(5.0)
-        drive.faults = DriveFaults(delay_s=0.08)
+        drive.faults = DriveFaults(delay_s=0.3)  # each answer lands in the next request's wait
         outcomes = []
         for i in range(12):
             try:
@@ -357,5 +359,5 @@ def test_a_late_answer_to_an_earlier_request_is_never_taken_for_this_one(drive: 
                 outcomes.append("timeout")
         assert "timeout" in outcomes  # and nothing but TimeoutError escaped
         drive.faults = DriveFaults()
-        time.sleep(0.3)
+        time.sleep(2.0)  # the drive's backlog of slow answers (12 x 0.3 s served against 12 x 0.2 s asked)
         assert mill.status().setpoint_rpm == 5.0
