@@ -156,8 +156,13 @@ def test_garbage_to_emulator_never_moves_motor(kind):
             port.write(b"$1,SET," + b"7" * 300 + b"\n")  # over-long
             port.write(b"$2,RUN*0000\n$3,SET,30.00*FFFF\n")  # wrong checksums
             port.write(p.encode_frame(4, "ZAP") + p.encode_frame(5, p.SET, "-3") + p.encode_frame(6, p.RUN, "now"))
-            time.sleep(0.3)
-            port.read(100000)
+            # a status request last: its answer says the board has read everything before it
+            # (a fixed 0.3 s wait saw no NAK yet on a loaded machine)
+            port.write(p.encode_frame(7, p.STA))
+            decoder, seqs, end = p.FrameDecoder(), [], time.monotonic() + 20.0
+            while 7 not in seqs and time.monotonic() < end:
+                seqs += [f.seq for f in decoder.feed(port.read(4096)) if isinstance(f, p.Frame)]
+            assert 7 in seqs, "the board never answered the status request after the garbage"
         finally:
             port.close()
         st = emu.motor
