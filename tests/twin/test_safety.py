@@ -19,6 +19,7 @@ from control.motor import MotorConfig
 from tests.cli import assert_one_line_error, cli
 from tests.conftest import BENCH_MEMORY_ARGS, BENCHES
 from tests.twin.live_script import run_scripted
+from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.loop import Seams, supervisor_config
 from twin.records import FaultRaised
@@ -246,8 +247,9 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
             c.start()
             assert emu.motor.running
             assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
-            time.sleep(0.8)  # silent host: the watchdog stops the motor
-            assert not emu.motor.running and emu.motor.fault is not None
+            time.sleep(0.3)  # the watchdog's time, then it trips on the emulator's next tick
+            wait_until(lambda: not emu.motor.running and emu.motor.fault is not None, 10.0,
+                       "the watchdog to stop the motor of a silent host")
 
 
 @pytest.mark.timeout(120)
