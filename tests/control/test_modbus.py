@@ -218,7 +218,9 @@ def test_the_comm_loss_trip_stops_a_drive_nobody_writes_to_again_and_again(drive
     drive.commission(0.5)
     p = drive.profile
     trip_s = drive.model.comm_loss_time_s()
-    with ModbusMill(drive.mill_url()) as mill:
+    # reads polled back to back: a 0.5 s reply timeout (3 x 0.2 s of no answer from the in-process
+    # emulator happened in a fresh clone's suite, the other worker busy)
+    with ModbusMill(drive.mill_url(), timeout_s=0.5) as mill:
         mill.set_rpm(10.0)
         for _ in range(3):  # a reset that leaves its bit set would not clear the second trip
             mill.start()  # the latched comm fault is reset by a start (as RUN clears WDOG)
