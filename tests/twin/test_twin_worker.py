@@ -134,8 +134,8 @@ def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> Non
     the real worker thread, seeded at run time 0, falls 20 s behind and skips ahead (run time
     jumps, its bed has not run), steps 3 s, and is seeded again: age 0 -> ~0 -> ~3 -> ~0."""
     import threading
-    import time
 
+    from tests.waiting import wait_until
     from twin.live.twin import MAX_LAG_S
     from vision.colours import DEFAULT_CLASSES
 
@@ -152,13 +152,8 @@ def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> Non
     thread = threading.Thread(target=worker.run, args=(stop,), daemon=True)
 
     def until(cond, what: str) -> TwinInfo:
-        end = time.monotonic() + 60
-        while time.monotonic() < end and thread.is_alive():
-            info = box.get()
-            if cond(info):
-                return info
-            time.sleep(0.01)
-        raise AssertionError(f"the twin never {what}: {box.get()}")
+        wait_until(lambda: cond(box.get()), 60, f"the twin to have {what}", poll_s=0.01)
+        return box.get()  # (it waits for the next frame: the state that met cond)
 
     from sim.drum import DrumSim
     from sim.render import Renderer
@@ -180,7 +175,7 @@ def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> Non
         ran = box.get()
         assert ran.updated_s == pytest.approx(jump + 3.0) and ran.age_s == pytest.approx(3.0, abs=0.05)
         worker.request("reseed")
-        again = until(lambda i: i.seeds == 2, "was seeded again")
+        again = until(lambda i: i.seeds == 2, "been seeded again")
         assert again.updated_s >= jump + 3.0 - 1e-6 and again.age_s < 0.2
     finally:
         stop.set()
