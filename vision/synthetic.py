@@ -75,13 +75,15 @@ def drum_frame(
 @dataclass(frozen=True)
 class DrumScene:
     """A rendered drum frame and its truth: the drum circle, each class's pixel centroid
-    (px) and pixel count, and the free surface's central-chord angle (deg)."""
+    (px) and pixel count, the free surface's central-chord angle (deg), and each class's
+    pixel spread ``sqrt(var_x + var_y)`` (px)."""
 
     image: np.ndarray
     roi: DrumROI
     centroids: tuple[tuple[float, float], ...]
     counts: tuple[int, ...]
     surface_deg: float
+    sigmas: tuple[float, ...] = ()
 
 
 def _surface_truth(a_rad: float, t: float, s_shape: float, R: float) -> float:
@@ -166,12 +168,14 @@ def particle_drum(
             k = (1 if u > 0 else 0) if rng.random() >= mix else int(rng.random() < 0.5)
             _draw_particle(img, lab, x, y, pr, np.asarray(colours[k], np.float32), k + 1, shading, highlight)
     out = np.clip(img + rng.normal(0, 1.5, img.shape), 0, 255).astype(np.uint8)
-    cents, counts = [], []
+    cents, counts, sigmas = [], [], []
     for k in (1, 2):
         yy, xx = np.nonzero(lab == k)
         cents.append((float(xx.mean()), float(yy.mean())) if xx.size else (math.nan, math.nan))
         counts.append(int(xx.size))
-    return DrumScene(out, DrumROI(cx, cy, R), tuple(cents), tuple(counts), _surface_truth(a, t, s_shape, R))
+        sigmas.append(math.sqrt(float(xx.var() + yy.var())) if xx.size else math.nan)
+    return DrumScene(out, DrumROI(cx, cy, R), tuple(cents), tuple(counts), _surface_truth(a, t, s_shape, R),
+                     tuple(sigmas))
 
 
 def _draw_particle(img: np.ndarray, lab: np.ndarray, x: float, y: float, pr: float, colour: np.ndarray, k: int,
