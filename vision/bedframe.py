@@ -21,8 +21,8 @@ from vision.errors import VisionError
 from vision.meter import gravity_matrix
 from vision.roi import DrumROI, _mask_in_box, roi_bbox
 
-__all__ = ["EMPTY_DENSITY", "EMPTY_HEIGHT", "FrameSamples", "frame_samples", "frame_turn", "in_gravity",
-           "propose_rotation_deg", "sample_drum_pixels"]
+__all__ = ["EMPTY_DENSITY", "EMPTY_HEIGHT", "FrameSamples", "density_ratio", "frame_samples", "frame_turn",
+           "in_gravity", "propose_rotation_deg", "sample_drum_pixels"]
 
 _CLIP_LEVEL = 250  # a channel at or above this is clipped (glare, specular spots)
 NO_DIRECTION = 0.05
@@ -123,13 +123,20 @@ def in_gravity(parts: Sequence[FrameSamples], camera_rotation_deg: float | None,
         if size >= NO_DIRECTION and float(p.bed_offset @ ref_down) < 0.0:
             disagree.append(i)
         h = -(p.off @ down)
-        level = float(np.percentile(p.density, 95)) if p.density.size else 0.0
+        ratio = density_ratio(p)
         heights.append(h)
-        empty.append((h > EMPTY_HEIGHT) & (p.density < EMPTY_DENSITY * level))
-        bed.append(p.density > 2.0 * EMPTY_DENSITY * level)
+        empty.append((h > EMPTY_HEIGHT) & (ratio < EMPTY_DENSITY))
+        bed.append(ratio > 2.0 * EMPTY_DENSITY)
     cat = np.concatenate
     return (DrumSamples(cat([p.lab for p in parts]).astype(np.float64), cat(heights), cat([p.clipped for p in parts]),
                         cat(empty), cat(bed)), float(ref), disagree)
+
+
+def density_ratio(part: FrameSamples) -> np.ndarray:
+    """Each sample's texture density over its frame's bed's (the 95th percentile of the frame's
+    samples): under :data:`EMPTY_DENSITY` is empty drum, over twice that is bed."""
+    level = float(np.percentile(part.density, 95)) if part.density.size else 0.0
+    return part.density / level if level > 0 else np.full(part.density.shape, np.nan)  # (no texture: neither)
 
 
 def _reference_turn(bed_offsets: Sequence[np.ndarray]) -> float:

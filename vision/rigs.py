@@ -35,6 +35,7 @@ from vision.roi import DrumROI, detect_drum, roi_mask
 from vision.synthetic import light_change
 
 __all__ = [
+    "BEYOND",
     "CAMERAS",
     "GAMMA",
     "LIGHTS",
@@ -101,6 +102,11 @@ LIGHTS: dict[str, tuple[float, float, float]] = {
 }
 """Light after set-up: linear-light gains (B, G, R) of each frame (``vision.synthetic.light_change``)."""
 
+BEYOND: dict[str, tuple[float, float, float] | None] = {
+    "x3": (3.0, 3.0, 3.0), "x0.2": (0.2, 0.2, 0.2), "curve1.8": None}
+"""Light past what a gain per channel maps back (:func:`relight`): saturating, near darkness, and
+a tone curve (display value ** 1.8, no gain explains it): the frames should be flagged."""
+
 _BED_V = 50  # a source pixel with a channel at or above this lies on a disc (the background is near black)
 _EDGE_V = 22  # ... one between this and _BED_V next to a disc is its dark edge (re-coloured with it)
 _BLUE_CHROMA = 0.3  # a disc pixel whose blue exceeds its other channels by this share of it is blue
@@ -135,7 +141,8 @@ class RigSpec:
 class RigFrame:
     """One frame of a rig and its truth: ``labelled`` (0/1: the pair's first or second colour),
     the labels' centroid ``truth_px`` (x, y in this image), the drum radius ``r_px`` in this
-    image, and the labels' MI (``mi``; NaN when it cannot be formed)."""
+    image, the labels' MI (``mi``; NaN when it cannot be formed) and the source's class map
+    seen by the same camera (``classes``: 0 none, k + 1 the pair's colour k)."""
 
     name: str
     image: np.ndarray
@@ -143,22 +150,31 @@ class RigFrame:
     truth_px: tuple[float, float]
     r_px: float
     mi: float
+    classes: np.ndarray | None = None
 
 
 def source_labels(image_bgr: np.ndarray, roi: DrumROI) -> np.ndarray:
     """The source rig's class map (0 none, 1 blue, 2 white) of an untouched PMMA frame: a disc
-    pixel (a channel >= 50) is blue when its blue channel exceeds the other two by 30 % of it,
-    else white; a darker pixel next to a disc (a channel >= 22) is its edge and takes the class
-    of the disc pixels around it (the more of them in a 5 x 5 window); beyond 1.01 R, in the
-    drum's wall, only the blue discs' reflections (blue, out to 1.06 R)."""
+    pixel (a channel >= 50, in the bed: what an opening by a 7 px disc keeps, in pieces of at
+    least 0.0015 R^2, so the drum's scratches, hub and rim glints stay out) is blue when its
+    blue channel exceeds the other two by 30 % of it, else white; a darker pixel next to a
+    disc (a channel >= 22) is its edge and takes the class of the disc pixels around it (the
+    more of them in a 5 x 5 window); beyond 1.01 R, in the drum's wall, only the blue discs'
+    reflections (blue, out to 1.06 R)."""
     img = np.asarray(image_bgr)
     f = img.astype(np.int16)
     hi = f.max(axis=2)
     inside = roi_mask(DrumROI(roi.cx_px, roi.cy_px, _R_MAX * roi.r_px), img.shape[:2])
-    bed = inside & (hi >= _BED_V)
+    bright = (inside & (hi >= _BED_V)).astype(np.uint8)
+    core = cv2.morphologyEx(bright, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7)))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(core, connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= 0.0015 * roi.r_px**2
+    near = cv2.dilate(keep[comp].astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    bed = (bright > 0) & near
     blue = bed & (f[..., 0] - np.maximum(f[..., 1], f[..., 2]) >= _BLUE_CHROMA * f[..., 0])
     white = bed & ~blue
-    edge = inside & ~bed & (hi >= _EDGE_V)
+    edge = inside & near & ~bed & (hi >= _EDGE_V)
     kern = np.ones((5, 5), np.float32)
     nb = cv2.filter2D(blue.astype(np.float32), -1, kern)
     nw = cv2.filter2D(white.astype(np.float32), -1, kern)
@@ -231,11 +247,14 @@ def _shade_and_white(p: np.ndarray, a: np.ndarray, white: np.ndarray) -> tuple[n
     return sw[:, 0].astype(np.float32), sw[:, 1].astype(np.float32)
 
 
-def camera_view(image_bgr: np.ndarray, camera: str) -> tuple[np.ndarray, np.ndarray]:
+def camera_view(image_bgr: np.ndarray, camera: str, labels: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The frame as a camera of :data:`CAMERAS` sees it, and the 2x3 affine from the source's pixel
-    coordinates (pixel centres at integers) to the new frame's."""
+    coordinates (pixel centres at integers) to the new frame's. ``labels``: a class map
+    (nearest neighbours; blur and JPEG leave it as it is)."""
     img = np.asarray(image_bgr)
     h, w = img.shape[:2]
+    if labels and (camera == "blur" or camera.startswith("jpeg")):
+        camera = "plain"
     ident = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     if camera == "plain":
         return img, ident
@@ -245,14 +264,15 @@ def camera_view(image_bgr: np.ndarray, camera: str) -> tuple[np.ndarray, np.ndar
         return np.ascontiguousarray(img[::-1, ::-1]), np.array([[-1.0, 0.0, w - 1.0], [0.0, -1.0, h - 1.0]])
     if camera.startswith("rot"):
         m = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), float(camera[3:]), 1.0)
-        border = tuple(int(v) for v in np.median(np.concatenate([img[0], img[-1]]), axis=0))
-        return cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_LINEAR, borderValue=border), m
+        border = 0 if labels else tuple(int(v) for v in np.median(np.concatenate([img[0], img[-1]]), axis=0))
+        flags = cv2.INTER_NEAREST if labels else cv2.INTER_LINEAR
+        return cv2.warpAffine(img, m, (w, h), flags=flags, borderValue=border), m
     if camera == "mirror":
         return np.ascontiguousarray(img[:, ::-1]), np.array([[-1.0, 0.0, w - 1.0], [0.0, 1.0, 0.0]])
     if camera.startswith("scale"):
         s = float(camera[5:]) / w
         size = (int(round(w * s)), int(round(h * s)))
-        interp = cv2.INTER_AREA if s < 1.0 else cv2.INTER_CUBIC
+        interp = cv2.INTER_NEAREST if labels else cv2.INTER_AREA if s < 1.0 else cv2.INTER_CUBIC
         return cv2.resize(img, size, interpolation=interp), np.array([[s, 0.0, 0.5 * s - 0.5], [0.0, s, 0.5 * s - 0.5]])
     if camera == "blur":
         return cv2.GaussianBlur(img, (0, 0), 1.5), ident
@@ -263,8 +283,12 @@ def camera_view(image_bgr: np.ndarray, camera: str) -> tuple[np.ndarray, np.ndar
 
 
 def relight(image_bgr: np.ndarray, light: str) -> np.ndarray:
-    """The frame under the light ``light`` of :data:`LIGHTS` (the set-up light: unchanged)."""
-    gains = LIGHTS[light]
+    """The frame under the light ``light`` of :data:`LIGHTS` or :data:`BEYOND` (the set-up
+    light: unchanged)."""
+    if light == "curve1.8":
+        return (255.0 * (np.asarray(image_bgr, np.float32) / 255.0) ** 1.8 + 0.5).astype(np.uint8)
+    gains = LIGHTS[light] if light in LIGHTS else BEYOND[light]
+    assert gains is not None
     return np.asarray(image_bgr) if gains == (1.0, 1.0, 1.0) else light_change(image_bgr, gains)
 
 
@@ -299,7 +323,8 @@ def make_rig(spec: RigSpec, frames: Sequence[SourceFrame]) -> Iterator[RigFrame]
         (cx, cy), mi = label_truth(f, lab, roi)
         tx, ty = m @ np.array([cx, cy, 1.0])
         scale = math.sqrt(abs(float(np.linalg.det(m[:, :2]))))
-        yield RigFrame(f.name, view, f.labelled, (float(tx), float(ty)), roi.r_px * scale, mi)
+        yield RigFrame(f.name, view, f.labelled, (float(tx), float(ty)), roi.r_px * scale, mi,
+                       camera_view(lab, spec.camera, labels=True)[0])
 
 
 def setup_indices(n: int, k: int = 12) -> list[int]:
