@@ -13,6 +13,8 @@ changed), and per rig and light the bench gives:
   tracker taking the bed for the light);
 - ``wrong_unflagged``: the share neither within 3 % nor flagged (a wrong or missing MI
   without a reason);
+- ``holds_1pct``: the share of frames whose labelled class's centroid stays within 1 % of R of
+  the same frame's at the set-up light (the light tracker alone, whatever the classes' accuracy);
 - ``mi_err_median`` / ``mi_err_p90``: |MI - the labels' MI| over the valid frames.
 
 Reading the files is this module's only I/O (:func:`load_source`); the rest is
@@ -112,15 +114,19 @@ def rig_setup(frames: Sequence[np.ndarray], colours_bgr: Sequence[Sequence[float
     return RigSetup(cfg, (pick[0], pick[1]), tuple(c.name for c in counted))
 
 
-def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
-                  spreads: list[float] | None = None) -> dict[str, float]:
+def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str, spreads: list[float] | None = None,
+                  at_setup: list[tuple[float, float]] | None = None) -> dict[str, float]:
     """One meter over the rig's frames in order under ``light``: the shares and MI errors of the
     module's doc. ``spreads`` gets the spread of each light estimate made (NaN for one flagged
-    for another cause than its spread: saturated, too dark, a gain out of range)."""
+    for another cause than its spread: saturated, too dark, a gain out of range). ``at_setup``:
+    the labelled class's centroid in each frame at the set-up light (filled when empty; else
+    ``holds_1pct`` = the share of frames whose centroid stays within 1 % of R of it, valid and
+    unflagged both times: the light changed, the reading did not)."""
     meter = setup.config.make_meter()
-    n = within = flagged = wrong = 0
+    n = within = flagged = wrong = held = 0
     mi_err: list[float] = []
-    for f in frames:
+    fill = at_setup is not None and not at_setup
+    for i, f in enumerate(frames):
         made = meter.estimates
         r = meter.measure(relight(f.image, light))
         est = meter.light
@@ -131,6 +137,11 @@ def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
         err = math.hypot(st.cx_px - f.truth_px[0], st.cy_px - f.truth_px[1]) / f.r_px
         lit = any(fl.startswith("lighting_changed:") for fl in r.flags)
         good = r.valid and not lit and err < 0.03
+        here = (st.cx_px, st.cy_px) if r.valid and not lit else (math.nan, math.nan)
+        if at_setup is not None:
+            if fill:
+                at_setup.append(here)
+            held += math.hypot(here[0] - at_setup[i][0], here[1] - at_setup[i][1]) / f.r_px < 0.01
         n += 1
         within += good
         flagged += lit
@@ -138,7 +149,7 @@ def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
         if r.valid and math.isfinite(f.mi):
             mi_err.append(abs(r.mi - f.mi))
     return {"frames": n, "within_3pct": within / max(n, 1), "flagged": flagged / max(n, 1),
-            "wrong_unflagged": wrong / max(n, 1),
+            "wrong_unflagged": wrong / max(n, 1), "holds_1pct": held / max(n, 1),
             "mi_err_median": float(np.median(mi_err)) if mi_err else math.nan,
             "mi_err_p90": float(np.percentile(mi_err, 90)) if mi_err else math.nan}
 
@@ -185,10 +196,11 @@ def _bench_rig(name: str, frames: Callable[[], Iterable[RigFrame]], colours: Seq
     ratio, bed = density_records(chosen)
     rec: dict = {"setup_spreads": [], "curve_spreads": [], "density_ratio": ratio, "density_bed": bed}
     row: dict = {"classes": list(setup.names)}
-    for light in lights:
+    at_setup: list[tuple[float, float]] = []
+    for light in sorted(lights, key=lambda v: v != "setup"):  # the set-up light first: the others are held to it
         say(f"rig {name}: {light} ...")
         keep = rec["setup_spreads"] if light == "setup" else rec["curve_spreads"] if light == "curve1.8" else None
-        row[light] = measure_light(setup, frames(), light, keep)
+        row[light] = measure_light(setup, frames(), light, keep, at_setup)
     return row, rec
 
 
@@ -248,3 +260,27 @@ def summarise(res: dict) -> dict:
                           "rigs_missing_aim": misses}
         out[suite] = per
     return out
+
+
+def rig_table(res: dict) -> list[str]:
+    """The bench as text: one line per rig and light (within 3 % of R / flagged / held to the
+    set-up light, shares in %; the median MI error), the rigs that miss the aims, the
+    leave-one-rig-out rows. (``res`` as :func:`run_rig_bench` gives it, or read back from its JSON.)"""
+    def num(v: float | None, fmt: str, scale: float = 1.0) -> str:
+        return "-" if v is None or not math.isfinite(v) else format(scale * v, fmt)
+
+    lines = []
+    for suite in ("real", "synthetic"):
+        for rig, row in res.get(suite, {}).items():
+            lines.append(f"{suite} {rig} (classes {', '.join(row['classes'])})")
+            for light, v in row.items():
+                if light != "classes":
+                    lines.append(f"  {light:9s} within 3%: {num(v['within_3pct'], '5.1f', 100)}  flagged: "
+                                 f"{num(v['flagged'], '5.1f', 100)}  held: {num(v['holds_1pct'], '5.1f', 100)}  "
+                                 f"MI error: {num(v['mi_err_median'], '.3f')}")
+    for suite, per in res.get("summary", {}).items():
+        missing = sorted({r for v in per.values() for r in v.get("rigs_missing_aim", [])})
+        lines.append(f"{suite}: rigs missing an aim: {', '.join(missing) or 'none'}")
+    for rig, row in res.get("loro", {}).get("rigs", {}).items():
+        lines.append(f"left out {rig}: " + ", ".join(f"{k} {num(v, '.3g')}" for k, v in row.items()))
+    return lines

@@ -612,11 +612,18 @@ def suggest_mixer_toml(cfg, frames, rois, drum_diameter_mm: float, drum_depth_mm
 def bench_vision(
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
     seconds: float = typer.Option(1.5, "--seconds", help="Time per measurement (s)."),
+    rigs: bool = typer.Option(False, "--rigs", help="Accuracy on rigs made from the real frames (vision.rigbench)."),
 ) -> None:
     """Frames/s of the centroid, GLCM and Lacey pipelines on the same frames (one thread)."""
     from vision.bench import run_vision_bench
 
     _check_number("--seconds", seconds, 0.01, 600)
+    if rigs:  # the cross-rig bench (issue 38): its own module
+        from vision.rigbench import rig_table, run_rig_bench
+
+        res = run_rig_bench(log=say)
+        print_json(res) if json_out else console.print("\n".join(rig_table(res)), highlight=False, markup=False)
+        return
     res = run_vision_bench(seconds=seconds, log=say)
     if json_out:
         print_json(res)
