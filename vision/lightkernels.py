@@ -198,6 +198,7 @@ def _refine_py(px, ref3, n_cls, lut, cls_levels, min_cls, start, res):  # pragma
         res[6] = 0.0
         for k in range(1, n_cls):
             res[6] += 1.0 if ccur[k, 0, 0] >= 0.0 else 0.0  # (a class with too few pixels: -1)
+        res[7] = _disagreement(ref3, q3, n_cls - 1, nl)
         if res[4] != 0:
             return
         moved = 0.0
@@ -207,12 +208,35 @@ def _refine_py(px, ref3, n_cls, lut, cls_levels, min_cls, start, res):  # pragma
             return  # the labels these gains give would be the same: another pass changes nothing
 
 
+def _disagreement_py(ref3, q3, n_cls, nl):  # pragma: no cover - compiled
+    """How far apart the classes' own gains are: per channel, the range over the classes of
+    GAMMA x log(now / then) at their median level (classes bright enough there: both at least
+    3 x :data:`FLOOR`, unclipped), the largest over the channels (0 with fewer than two such
+    classes). One light gives every class the same gain; a tone curve or a cast does not -- and
+    a class's median, unlike its dark edge levels, does not move with the mix."""
+    worst = 0.0
+    mid = nl // 2
+    for c in range(3):
+        lo = 1e30
+        hi = -1e30
+        for k in range(n_cls):
+            r = ref3[c, k * nl + mid]
+            q = q3[c, k * nl + mid]
+            if r >= 3.0 * FLOOR and q >= 3.0 * FLOOR and r < CEIL and q < CEIL:
+                g = GAMMA * (math.log(q) - math.log(r))
+                lo = min(lo, g)
+                hi = max(hi, g)
+        if hi > lo:
+            worst = max(worst, hi - lo)
+    return worst
+
+
 def _track_py(flat, sample, ref, ref_cls, n_cls, lut, levels, cls_levels, min_cls, prev,
               res):  # pragma: no cover - compiled
     """:func:`track_light` in one pass: gather the samples; without a per-class reference
     (``n_cls`` = 0) the drum-wide quantiles fitted against ``ref``; with one, the per-class
-    refinement from ``prev`` (the last light) and, when it fails or lands away from it (the
-    light moved), from two more starts: the drum-wide quantiles' gains (a guess only: they
+    refinement from ``prev`` (the last light) and, when it fails, loses a class from view or
+    lands away from it (the light moved), from two more starts: the drum-wide quantiles' gains (a guess only: they
     follow the bed's colour shares) and the best result's gains made grey (their mean in every
     channel: an exposure change, which a white balance misled by the first labels cannot pull
     aside). Of the results that map back, the one that fits more channels, then the lower
@@ -233,14 +257,17 @@ def _track_py(flat, sample, ref, ref_cls, n_cls, lut, levels, cls_levels, min_cl
         for k in range(1, n_cls):
             for j in range(nl):
                 r3[c, (k - 1) * nl + j] = ref_cls[k, c, j]
+    seen = 0
+    for k in range(1, n_cls):
+        seen += 1 if ref_cls[k, 0, 0] >= 0.0 else 0
     _refine(px, r3, n_cls, lut, cls_levels, min_cls, prev, res)
-    if res[4] == 0:
+    if res[4] == 0 and res[6] >= seen:
         far = 0.0
         for c in range(3):
             far = max(far, abs(math.log(prev[c] / res[c])))
         if far < PREV_START:
-            return  # the refinement landed on the last light (a steady video): the only candidate
-    alt = np.zeros(7)
+            return  # the refinement landed on the last light, every class in view (a steady video)
+    alt = np.zeros(8)
     _quantiles(px, np.zeros(ns, np.int64), 1, levels, 1, cur)
     _fit(ref, cur[0], np.ones(3), False, False, alt)
     if alt[4] == 0 and GAIN_RANGE[0] <= min(alt[0], alt[1], alt[2]) and max(alt[0], alt[1], alt[2]) <= GAIN_RANGE[1]:
@@ -262,7 +289,7 @@ def _better_py(alt, res):  # pragma: no cover - compiled
     key_a = (alt[6], alt[5], -alt[3])
     key_r = (res[6], res[5], -res[3])
     if res[4] != 0 or key_a > key_r:
-        for c in range(7):
+        for c in range(8):
             res[c] = alt[c]
 
 
@@ -304,6 +331,7 @@ _quantiles = _quantiles_py  # replaced by their compiled forms before _track_py 
 _wmedian = _wmedian_py
 _better = _better_py
 _clipping_disagrees = _clipping_disagrees_py
+_disagreement = _disagreement_py
 _fit = _fit_py
 _maps = _maps_py
 _refine = _refine_py
@@ -311,7 +339,7 @@ _refine = _refine_py
 
 def kernels() -> tuple:
     """The compiled kernels: (quantiles, fit, track, maps, means), compiled on first use."""
-    global _compiled, _quantiles, _wmedian, _better, _clipping_disagrees, _fit, _maps, _refine
+    global _compiled, _quantiles, _wmedian, _better, _clipping_disagrees, _disagreement, _fit, _maps, _refine
     if _compiled is None:
         import numba  # imported here: the CLI starts fast when no frame is measured
 
@@ -319,6 +347,7 @@ def kernels() -> tuple:
         _wmedian = numba.njit(nogil=True, cache=True)(_wmedian_py)
         _better = numba.njit(nogil=True, cache=True)(_better_py)
         _clipping_disagrees = numba.njit(nogil=True, cache=True)(_clipping_disagrees_py)
+        _disagreement = numba.njit(nogil=True, cache=True)(_disagreement_py)
         _fit = numba.njit(nogil=True, cache=True)(_fit_py)
         _maps = numba.njit(nogil=True, cache=True)(_maps_py)
         _refine = numba.njit(nogil=True, cache=True)(_refine_py)

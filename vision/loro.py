@@ -5,11 +5,12 @@ chosen by a stated rule, and checked the way a new rig would meet it: for every 
 cross-rig bench (``vision.rigbench``), the rule is applied to the *other* rigs' records, and
 the threshold it gives is measured on the rig left out.
 
-- ``vision.photometric.MAX_CLASS_SPREAD`` (a light no gain per channel explains:
-  ``lighting_changed:unexplained_cast``): :func:`spread_rule` -- twice the 99th percentile
-  of the spreads seen at the set-up light. Measured on the rig left out: the share of its
-  set-up-light estimates over the threshold (the aim: at most 2 %), and the share of its
-  estimates under a tone curve (display value ** 1.8, no gain explains it) flagged.
+- ``vision.photometric.MAX_CLASS_SPREAD`` and ``MAX_DISAGREEMENT`` (a light no gain per
+  channel explains: ``lighting_changed:unexplained_cast``): :func:`spread_rule` -- twice the
+  99th percentile of what the set-up light gives, each on its own. Measured on the rig left
+  out, the two together: the share of its set-up-light estimates over either threshold (the
+  aim: at most 2 %), and the share of its estimates under a tone curve (display value ** 1.8,
+  no gain explains it) flagged.
 - ``vision.bedframe.EMPTY_DENSITY`` (the empty drum: texture under this share of the bed's):
   :func:`density_rule` -- the ratio that best tells the upper drum's empty samples from its
   bed samples (the most balanced accuracy, the source's class map as truth). Measured on the
@@ -82,18 +83,19 @@ def _ratio(part: FrameSamples) -> np.ndarray:
 
 
 def leave_one_rig_out(records: Mapping[str, Mapping]) -> dict:
-    """Per rig (``records[rig]``: ``setup_spreads``, ``curve_spreads``, and ``density_ratio`` /
-    ``density_bed`` when known), each rule chosen on the other rigs and measured on it; ``all``:
-    the rules on every rig (the values in the code)."""
+    """Per rig (``records[rig]``: ``setup_spreads`` and ``curve_spreads`` as (spread,
+    disagreement) pairs, and ``density_ratio`` / ``density_bed`` when known), each rule chosen on
+    the other rigs and measured on it; ``all``: the rules on every rig (the values in the code)."""
     out: dict = {"rigs": {}}
     names = list(records)
     for rig in names:
         others = [records[r] for r in names if r != rig]
-        tau = spread_rule([s for o in others for s in o["setup_spreads"]])
+        tau = (spread_rule([p[0] for o in others for p in o["setup_spreads"]]),
+               spread_rule([p[1] for o in others for p in o["setup_spreads"]]))
         mine = records[rig]
-        row = {"spread_threshold": tau,
-               "setup_flagged": _share_over(mine["setup_spreads"], tau, nan_flagged=True),
-               "curve_flagged": _share_over(mine["curve_spreads"], tau, nan_flagged=True)}
+        row = {"spread_threshold": tau[0], "disagreement_threshold": tau[1],
+               "setup_flagged": _share_over(mine["setup_spreads"], tau),
+               "curve_flagged": _share_over(mine["curve_spreads"], tau)}
         dens = [o for o in others if len(o.get("density_ratio", ()))]
         if len(mine.get("density_ratio", ())) and dens:
             t = density_rule(np.concatenate([np.asarray(o["density_ratio"]) for o in dens]),
@@ -103,7 +105,8 @@ def leave_one_rig_out(records: Mapping[str, Mapping]) -> dict:
                     "empty_found": float((r[~b] < t).mean()) if (~b).any() else math.nan}
         out["rigs"][rig] = row
     allr = list(records.values())
-    out["all"] = {"spread_threshold": spread_rule([s for o in allr for s in o["setup_spreads"]])}
+    out["all"] = {"spread_threshold": spread_rule([p[0] for o in allr for p in o["setup_spreads"]]),
+                  "disagreement_threshold": spread_rule([p[1] for o in allr for p in o["setup_spreads"]])}
     dens = [o for o in allr if len(o.get("density_ratio", ()))]
     if dens:
         out["all"]["density_threshold"] = density_rule(
@@ -112,10 +115,10 @@ def leave_one_rig_out(records: Mapping[str, Mapping]) -> dict:
     return out
 
 
-def _share_over(spreads: Sequence[float], tau: float, nan_flagged: bool = False) -> float:
-    """The share of ``spreads`` over ``tau`` (a NaN spread: an estimate flagged for another cause --
-    saturated, too dark, out of range -- counts as flagged when ``nan_flagged``)."""
-    if not spreads:
+def _share_over(pairs: Sequence[tuple[float, float]], tau: tuple[float, float]) -> float:
+    """The share of (spread, disagreement) ``pairs`` over either threshold of ``tau`` (NaN: an
+    estimate flagged for another cause -- saturated, too dark, out of range -- counts as flagged)."""
+    if not pairs:
         return math.nan
-    n = sum(1 for s in spreads if ((s > tau) if math.isfinite(s) else nan_flagged))
-    return n / len(spreads)
+    n = sum(1 for s, d in pairs if not (math.isfinite(s) and s <= tau[0] and d <= tau[1]))
+    return n / len(pairs)

@@ -68,8 +68,15 @@ MAX_SPREAD = 0.2
 """Largest median |log ratio - log gain| over a channel's levels that one gain explains (the
 real PMMA frames, unperturbed, reach 0.11 against a reference from another frame: the bed's
 share of the drum moves the levels near the bed/background step)."""
-MAX_CLASS_SPREAD = 0.16
-"""The same for the per-class quantiles (:func:`refine_light`), which one gain explains closely."""
+MAX_CLASS_SPREAD = 0.17
+"""The largest pooled weighted spread (:func:`track_light`) one gain per channel explains: the
+rule of ``vision.loro.spread_rule`` (twice the 99th percentile at the set-up light) on every
+rig of the cross-rig bench gave 0.168 (docs/validation.md, section 14: checked leave-one-rig-out)."""
+MAX_DISAGREEMENT = 0.35
+"""The largest range of the classes' own gains at their median level (log, any channel) that one
+light explains: a tone curve or a cast that the pooled fit absorbs moves bright classes apart
+(``vision.lightkernels``); the rule of ``vision.loro.spread_rule`` on every rig of the cross-rig
+bench (docs/validation.md, section 14: checked leave-one-rig-out)."""
 JUMP = 0.03
 """Between two full estimates, a frame whose sampled mean moved by more than this share in a
 channel (or 3 display levels) since the last estimate is estimated at once (``Meter``)."""
@@ -89,13 +96,15 @@ _NAMES = ("blue", "green", "red")
 
 @dataclass(frozen=True, slots=True)
 class LightEstimate:
-    """Gains (linear light, B, G, R) of a frame against the reference, the largest disagreement
-    along a channel (median |log ratio - log gain|), and the cause when it cannot be mapped back
-    (``None`` when it can)."""
+    """Gains (linear light, B, G, R) of a frame against the reference, how far one gain per
+    channel leaves the entries (``spread``: median |log ratio - log gain|), how far apart the
+    classes' own gains are (``disagreement``, log; 0 without a per-class reference), and the
+    cause when it cannot be mapped back (``None`` when it can)."""
 
     gains_bgr: tuple[float, float, float]
     spread: float
     cause: str | None = None
+    disagreement: float = 0.0
 
 
 def check_reference(ref, where: str = "light_reference") -> np.ndarray:
@@ -203,8 +212,11 @@ def _fit_gains(ref3: np.ndarray, cur3: np.ndarray, start: tuple[float, float, fl
     return _verdict(res, max_spread)
 
 
-def _verdict(res: np.ndarray, max_spread: float) -> LightEstimate:
-    """A :class:`LightEstimate` from a fit's result row (gains, spread, status)."""
+def _verdict(res: np.ndarray, max_spread: float, n_ref: int = 0) -> LightEstimate:
+    """A :class:`LightEstimate` from a fit's result row (gains, spread, status, fitted, classes in
+    view, the classes' disagreement; the last three when the row has them); ``n_ref``: the
+    counted classes the per-class reference saw -- one of them out of view after mapping back
+    is a light the gains did not explain (a class's colour turned into another's, or none)."""
     status = int(res[4])
     if status:
         cause = "saturated" if status <= 3 else "too_dark"
@@ -213,9 +225,14 @@ def _verdict(res: np.ndarray, max_spread: float) -> LightEstimate:
     spread = float(res[3])
     if not all(GAIN_RANGE[0] <= v <= GAIN_RANGE[1] for v in g):
         return LightEstimate(g, spread, "gain:" + "/".join(f"{v:.2f}" for v in g))
+    apart = float(res[7]) if res.shape[0] > 7 else 0.0
+    if n_ref and res[6] < n_ref:
+        return LightEstimate(g, spread, f"unexplained_cast:class_lost_{n_ref - int(res[6])}", apart)
     if spread > max_spread:
-        return LightEstimate(g, spread, f"unexplained_cast:{spread:.2f}")
-    return LightEstimate(g, spread, None)
+        return LightEstimate(g, spread, f"unexplained_cast:{spread:.2f}", apart)
+    if apart > MAX_DISAGREEMENT:
+        return LightEstimate(g, spread, f"unexplained_cast:classes_apart_{apart:.2f}", apart)
+    return LightEstimate(g, spread, None, apart)
 
 
 def track_light(flat_bgr: np.ndarray, sample: np.ndarray, ref: np.ndarray, ref_cls: np.ndarray | None,
@@ -226,12 +243,13 @@ def track_light(flat_bgr: np.ndarray, sample: np.ndarray, ref: np.ndarray, ref_c
     quantiles fitted against ``ref_cls`` (the module's doc), from ``prev`` (the last accepted
     gains; the set-up light, gain 1, when None) and, when the light moved, from two more
     starts. Without a per-class reference, the drum-wide quantiles against ``ref``."""
-    res = np.zeros(7)
+    res = np.zeros(8)
     n = 0 if ref_cls is None else ref_cls.shape[0]
     rc = np.zeros((1, 3, len(CLASS_LEVELS))) if ref_cls is None else ref_cls
     pv = np.ones(3) if prev is None else np.asarray(prev, np.float64)
     kernels()[2](flat_bgr, sample, ref, rc, n, lut, LEVELS, CLASS_LEVELS, MIN_CLASS_SAMPLES, pv, res)
-    return _verdict(res, MAX_CLASS_SPREAD if n else MAX_SPREAD)
+    n_ref = 0 if ref_cls is None else int((ref_cls[1:, 0, 0] >= 0).sum())
+    return _verdict(res, MAX_CLASS_SPREAD if n else MAX_SPREAD, n_ref)
 
 
 def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -114,11 +114,13 @@ def rig_setup(frames: Sequence[np.ndarray], colours_bgr: Sequence[Sequence[float
     return RigSetup(cfg, (pick[0], pick[1]), tuple(c.name for c in counted))
 
 
-def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str, spreads: list[float] | None = None,
+def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
+                  spreads: list[tuple[float, float]] | None = None,
                   at_setup: list[tuple[float, float]] | None = None) -> dict[str, float]:
     """One meter over the rig's frames in order under ``light``: the shares and MI errors of the
-    module's doc. ``spreads`` gets the spread of each light estimate made (NaN for one flagged
-    for another cause than its spread: saturated, too dark, a gain out of range). ``at_setup``:
+    module's doc. ``spreads`` gets the spread and the classes' disagreement of each light
+    estimate made (NaN, NaN for one flagged for another cause: saturated, too dark, a gain out
+    of range). ``at_setup``:
     the labelled class's centroid in each frame at the set-up light (filled when empty; else
     ``holds_1pct`` = the share of frames whose centroid stays within 1 % of R of it, valid and
     unflagged both times: the light changed, the reading did not)."""
@@ -132,7 +134,7 @@ def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str, sprea
         est = meter.light
         if spreads is not None and est is not None and meter.estimates > made:
             ok = est.cause is None or est.cause.startswith("unexplained_cast")
-            spreads.append(est.spread if ok else math.nan)
+            spreads.append((est.spread, est.disagreement) if ok else (math.nan, math.nan))
         st = r.classes[setup.index[f.labelled]]
         err = math.hypot(st.cx_px - f.truth_px[0], st.cy_px - f.truth_px[1]) / f.r_px
         lit = any(fl.startswith("lighting_changed:") for fl in r.flags)
@@ -167,19 +169,20 @@ def _pair_colours(pair: str, source: np.ndarray) -> list[tuple[int, int, int]]:
 
 def synthetic_rig(pair: str, n: int = 12, size_wh: tuple[int, int] = (480, 360)) -> list[RigFrame]:
     """A synthetic run of ``n`` frames of the pair ``pair`` of ``vision.rigs.SYNTHETIC_PAIRS``
-    (``particle_drum``, JPEG 90): segregated to mixed, the surface at 25-35 deg; colour 0 is the
-    labelled class, the truth the drawn discs'."""
+    (``particle_drum``, JPEG 90): segregated to mixed, the surface at 25-35 deg, the drum filled
+    to 35-75 % (a bed reaching into the drum's top: the empty region's hard case); colour 0 is
+    the labelled class, the truth the drawn discs'."""
     from vision.mixing import mixing_indices
 
     out = []
     cols = SYNTHETIC_PAIRS[pair]
     for i in range(n):
         sc = particle_drum(size_wh, cols, mix=i / max(n - 1, 1), slope_deg=25.0 + 10.0 * ((i * 7) % n) / n, seed=i,
-                           particle_r_frac=0.045)
+                           particle_r_frac=0.045, fill=0.35 + 0.4 * ((i * 5) % n) / n)
         img = np.asarray(cv2.imdecode(cv2.imencode(".jpg", sc.image, [cv2.IMWRITE_JPEG_QUALITY, 90])[1],
                                       cv2.IMREAD_COLOR))
         mi = mixing_indices(sc.centroids[0], sc.centroids[1], sc.sigmas[0], sc.sigmas[1], sc.roi.r_px).mi
-        out.append(RigFrame(f"{pair}-{i}", img, 0, sc.centroids[0], sc.roi.r_px, mi))
+        out.append(RigFrame(f"{pair}-{i}", img, 0, sc.centroids[0], sc.roi.r_px, mi, sc.labels))
     return out
 
 

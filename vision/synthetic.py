@@ -75,8 +75,9 @@ def drum_frame(
 @dataclass(frozen=True)
 class DrumScene:
     """A rendered drum frame and its truth: the drum circle, each class's pixel centroid
-    (px) and pixel count, the free surface's central-chord angle (deg), and each class's
-    pixel spread ``sqrt(var_x + var_y)`` (px)."""
+    (px) and pixel count, the free surface's central-chord angle (deg), each class's pixel
+    spread ``sqrt(var_x + var_y)`` (px) and the class map of the drawn discs (0 none, k + 1
+    colour k)."""
 
     image: np.ndarray
     roi: DrumROI
@@ -84,6 +85,7 @@ class DrumScene:
     counts: tuple[int, ...]
     surface_deg: float
     sigmas: tuple[float, ...] = ()
+    labels: np.ndarray | None = None
 
 
 def _surface_truth(a_rad: float, t: float, s_shape: float, R: float) -> float:
@@ -175,7 +177,7 @@ def particle_drum(
         counts.append(int(xx.size))
         sigmas.append(math.sqrt(float(xx.var() + yy.var())) if xx.size else math.nan)
     return DrumScene(out, DrumROI(cx, cy, R), tuple(cents), tuple(counts), _surface_truth(a, t, s_shape, R),
-                     tuple(sigmas))
+                     tuple(sigmas), lab)
 
 
 def _draw_particle(img: np.ndarray, lab: np.ndarray, x: float, y: float, pr: float, colour: np.ndarray, k: int,
