@@ -120,7 +120,7 @@ def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
     """One meter over the rig's frames in order under ``light``: the shares and MI errors of the
     module's doc. ``spreads`` gets the spread and the classes' disagreement of each light
     estimate made (NaN, NaN for one flagged for another cause: saturated, too dark, a gain out
-    of range). ``at_setup``:
+    of range, a class lost from view). ``at_setup``:
     the labelled class's centroid in each frame at the set-up light (filled when empty; else
     ``holds_1pct`` = the share of frames whose centroid stays within 1 % of R of it, valid and
     unflagged both times: the light changed, the reading did not)."""
@@ -133,7 +133,7 @@ def measure_light(setup: RigSetup, frames: Iterable[RigFrame], light: str,
         r = meter.measure(relight(f.image, light))
         est = meter.light
         if spreads is not None and est is not None and meter.estimates > made:
-            ok = est.cause is None or est.cause.startswith("unexplained_cast")
+            ok = est.cause is None or (est.cause.startswith("unexplained_cast") and "class_lost" not in est.cause)
             spreads.append((est.spread, est.disagreement) if ok else (math.nan, math.nan))
         st = r.classes[setup.index[f.labelled]]
         err = math.hypot(st.cx_px - f.truth_px[0], st.cy_px - f.truth_px[1]) / f.r_px
