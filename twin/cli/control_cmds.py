@@ -19,7 +19,7 @@ from control.device import DeviceConfig
 from control.driver import MillClient
 from control.emulator import Faults, MillEmulator
 from control.errors import ControlError, check_number
-from control.modbus.link import ModbusMill, comm_loss_problem, is_modbus_url, parse_modbus_url
+from control.modbus.link import ModbusMill, is_modbus_url, parse_modbus_url
 from control.motor import MotorConfig
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json, say
@@ -79,9 +79,12 @@ def mill_limits(config: Path | None) -> Limits:
 
 
 def _client(ctx: typer.Context) -> MillClient | ModbusMill:
+    """The link of a ``mill`` command. A drive is not refused as a whole when its comm-loss
+    trip is unsafe: ``stop`` and ``status`` always go to it, ``start`` and a faster
+    ``set-rpm`` are refused with the reason (``SafetyRefused``, exit 2)."""
     o = ctx.obj
     if is_modbus_url(o["url"]):
-        return ModbusMill(o["url"], timeout_s=o["timeout_s"], retries=o["retries"])
+        return ModbusMill(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], refuse_unsafe=False)
     return MillClient(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], heartbeat_s=None)
 
 
@@ -185,23 +188,26 @@ def mill_check(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
     if not is_modbus_url(url):
         raise ControlError("check reads a drive's parameters: give a modbus: URL (modbus:PORT?profile=NAME)")
     spec = parse_modbus_url(url)
-    mill = ModbusMill(url, timeout_s=ctx.obj["timeout_s"], retries=ctx.obj["retries"], enforce=False)
-    with mill:  # not enforced: check reports the problem instead of refusing to read
+    mill = ModbusMill(url, timeout_s=ctx.obj["timeout_s"], retries=ctx.obj["retries"], refuse_unsafe=False)
+    with mill:  # reads only: the problem is reported, not refused
         ident = mill.read_identity()
-        setting = mill.read_comm_loss()
+        why = mill.comm_loss_check()
+        setting = mill.comm_loss  # None: the parameters could not be read
         st = mill.status()
     p = mill.profile
-    why = comm_loss_problem(p, setting, spec.comm_loss_limit_s)
     if as_json:
-        print_json({"profile": p.name, "unit": spec.unit, "identity": ident, "comm_loss_s": setting.time_s,
-                    "comm_loss_action": setting.action, "safe": why is None, "change": why, **st.as_dict()})
+        print_json({"profile": p.name, "unit": spec.unit, "identity": ident,
+                    "comm_loss_s": setting.time_s if setting else None,
+                    "comm_loss_action": setting.action if setting else None, "safe": why is None, "change": why,
+                    **st.as_dict()})
     else:
         console.print(f"{p.title} (profile {p.name}), unit {spec.unit}", highlight=False)
         for name, v in ident.items():
             console.print(f"  {name}: {v} (0x{v:04X})", highlight=False)
         cl = p.comm_loss
-        console.print(f"  comm-loss trip {cl.time_parameter}: {setting.time_s:g} s; action"
-                      f" {cl.action_parameter or '(fixed)'}: {setting.action}", highlight=False)
+        if setting is not None:
+            console.print(f"  comm-loss trip {cl.time_parameter}: {setting.time_s:g} s; action"
+                          f" {cl.action_parameter or '(fixed)'}: {setting.action}", highlight=False)
         console.print(f"  hz_per_rpm {mill.hz_per_rpm:g}, max {mill.max_hz:g} Hz"
                       f" = {mill.max_hz / mill.hz_per_rpm:.2f} drum rpm", highlight=False)
         _report(st, False)
