@@ -102,7 +102,9 @@ class BookFramer(FramerRTU):
 
     def decode(self, data: bytes) -> tuple[int, int, int, bytes]:
         now = time.monotonic()
-        stale = min(self._left, len(data)) if now - self._last_s > GAP_S else 0
+        if len(data) < self._left:  # the transport dropped its buffer (an overflow): nothing is left
+            self._left = 0
+        stale = self._left if now - self._last_s > GAP_S else 0
         self._last_s = now
         found = find_request(data, stale)
         if found is None:

@@ -271,3 +271,20 @@ def test_the_status_word_says_decelerating_and_a_drive_fault_coasts() -> None:
     m.tick(12.0)
     m.set_fault(p.drive_fault_code)  # the power stage trips: output off at once (coast)
     assert m.regs[0x2103] == 0 and m.regs[0x2101] == 0x0000 and m.regs[0x2100] == p.drive_fault_code
+
+
+def test_find_request_frames_by_layout_by_crc_and_hunts_past_noise() -> None:
+    from control.modbus.server import find_request
+
+    read = frame(b"\x03\x21\x00\x00\x04")
+    assert find_request(read) == (0, 8)
+    assert find_request(read + b"\x01\x02") == (0, 8)  # what follows a complete frame is not its part
+    assert find_request(read[:6]) is None  # still arriving: wait
+    assert find_request(b"\x00\xff\x13" + read) == (3, 11)  # noise before it
+    assert find_request(read[:5] + read) == (5, 13)  # a broken frame before it, no silence between
+    assert find_request(b"\xee" * 4 + read, start=4) == (4, 12)  # bytes before a silence are skipped
+    odd = frame(b"\x63\x01")
+    assert find_request(odd) == (0, len(odd))  # an unknown function: the frame its CRC closes
+    short16 = frame(b"\x10", struct.pack(">HHB", 1, 1, 4), b"\x00\x64")  # byte count 4, 2 bytes follow
+    assert find_request(short16) == (0, len(short16))  # closed by its CRC: the decoder answers exception 3
+    assert find_request(short16[:-1]) is None

@@ -6,6 +6,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from collections.abc import Callable
 
 import typer
 
@@ -66,21 +67,33 @@ def mill_emulator(
             emu.open_pty(link)
         print(emu.url, flush=True)
         say(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop")
-        t_end = None if duration_s is None else time.monotonic() + duration_s
-        last = None
-        try:
-            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
-                st = emu.status()
-                line = (round(st.setpoint_rpm, 1), round(st.actual_rpm, 1), st.running, st.fault)
-                if line != last:
-                    say(f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
-                        f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}")
-                    last = line
-                done.wait(0.5)
-        except KeyboardInterrupt:
-            pass
+
+        def board() -> tuple[object, str]:
+            st = emu.status()
+            return ((round(st.setpoint_rpm, 1), round(st.actual_rpm, 1), st.running, st.fault),
+                    f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
+                    f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}")
+
+        _report_until(done, duration_s, 0.5, board)
     finally:
         emu.close()
+
+
+def _report_until(done: threading.Event, duration_s: float | None, period_s: float,
+                  state: Callable[[], tuple[object, str]]) -> None:
+    """Say the emulator's state line whenever its key changes, every ``period_s``, until
+    ``done`` (SIGTERM), Ctrl-C or ``duration_s``."""
+    t_end = None if duration_s is None else time.monotonic() + duration_s
+    last = None
+    try:
+        while not done.is_set() and (t_end is None or time.monotonic() < t_end):
+            key, text = state()
+            if key != last:
+                say(text)
+                last = key
+            done.wait(period_s)
+    except KeyboardInterrupt:
+        pass
 
 
 def _check_emulator_options(tcp: int | None, host: str, link: str | None, unit: int, comm_loss_s: float,
@@ -137,18 +150,12 @@ def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None
         print(emu.mill_url(), flush=True)
         say(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
             f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop")
-        t_end = None if duration_s is None else time.monotonic() + duration_s
-        last = None
-        try:
-            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
-                m = emu.motor
-                line = (round(emu.output_hz, 1), m.running, m.fault)
-                if line != last:
-                    say(f"output {emu.output_hz:6.2f} Hz  {'running' if m.running else 'stopped'}"
-                        f"  fault {m.fault or 'none'}")
-                    last = line
-                done.wait(0.25)
-        except KeyboardInterrupt:
-            pass
+
+        def drive() -> tuple[object, str]:
+            m, hz = emu.motor, emu.output_hz
+            return ((round(hz, 1), m.running, m.fault),
+                    f"output {hz:6.2f} Hz  {'running' if m.running else 'stopped'}  fault {m.fault or 'none'}")
+
+        _report_until(done, duration_s, 0.25, drive)
     finally:
         emu.close()
