@@ -166,7 +166,21 @@ def test_raw_requests_get_the_protocols_exceptions(drive: DriveEmulator, line: s
     assert ask(line, frame(b"\x03\x00"), 5) == exception_reply(3, 3)  # a CRC-valid fc 3 of the wrong length
 
 
-def test_after_a_malformed_frame_the_next_valid_one_is_answered(drive: DriveEmulator, line: serial.Serial) -> None:
+@pytest.fixture(scope="module")
+def delta() -> Iterator[tuple[DriveEmulator, serial.Serial]]:
+    """One profile for the framing (the framer does not know profiles)."""
+    emu = DriveEmulator(load_profile("delta-ms300"), unit=UNIT)
+    emu.open_pty()
+    port = serial.serial_for_url(emu.url, timeout=1.0)
+    try:
+        yield emu, port
+    finally:
+        port.close()
+        emu.close()
+
+
+def test_after_a_malformed_frame_the_next_valid_one_is_answered(delta: tuple[DriveEmulator, serial.Serial]) -> None:
+    drive, line = delta
     p = drive.profile
     read = frame(b"\x03", struct.pack(">HH", p.status_register, 1))
     answer = frame(b"\x03\x02", struct.pack(">H", drive.registers(p.status_register)[0]))

@@ -7,6 +7,8 @@ and checks that the stop frame reached the drive and that the drive, running bef
 
 from __future__ import annotations
 
+import shutil
+import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -88,8 +90,13 @@ def _stopped_by_the_stop_word(drive: DriveEmulator, n_before: int) -> None:
 
 def _unsafe(drive: DriveEmulator, how: str) -> str:
     """Make the drive's comm-loss check fail ``how``; the parameter the refusal names."""
-    if how == "disabled":
-        drive.commission(0.0)  # another master wrote Pr.09-03 = 0
+    if how == "disabled":  # the audit's repro: another bus master writes Pr.09-03 = 0 (reference 2308, 1-based)
+        drive.commission(2.0)
+        exe = shutil.which("mbpoll")
+        assert exe, "mbpoll is not installed (scripts/bootstrap.sh installs it: apt-get install mbpoll)"
+        subprocess.run([exe, "-m", "rtu", "-b", "19200", "-P", "none", "-a", str(drive.unit), "-t", "4", "-r", "2308",
+                        "-1", drive.url, "0"], check=True, capture_output=True, timeout=30)
+        assert drive.model.comm_loss_time_s() == 0.0
         return "Pr.09-03 = 0"
     if how == "too long":
         drive.commission(9.0)  # longer than the 5 s the link accepts
@@ -204,7 +211,7 @@ def board() -> Iterator[MillEmulator]:
 
 def _board_running(board: MillEmulator) -> int:
     board.set_drive_fault(False)
-    board.set_motor(setpoint_rpm=10.0, actual_rpm=10.0, running=True)
+    board.set_motor(setpoint_rpm=3.0, actual_rpm=3.0, running=True)
     assert board.motor.running
     return len(board.applied)
 
