@@ -20,12 +20,12 @@ from twin.records import MillState, Record
 from twin.run.loop import LiveLoop, Summary
 from twin.run.metadata import mixer_metadata, versions
 from twin.run.settings import RunInputs, Seams, mill_url, resolve_inputs
-from twin.runlog import RunLog, default_run_dir
 from twin.state import LiveState
 
 if TYPE_CHECKING:
     from twin.dashboard import Dashboard
     from twin.demo import DemoPlant
+    from twin.runlog import RunLog
     from vision.roi import DrumROI
     from vision.sources import Frame
 
@@ -128,7 +128,9 @@ class _Parts:
         return open_source(cfg.camera), mill, inputs.roi
 
     def open_log(self, cfg: RunConfig) -> RunLog:
-        self.runlog = runlog = RunLog(cfg.log_dir or default_run_dir())  # columns: twin.records.FRAME_COLUMNS
+        from twin import runlog as logs  # looked up per run (a test stands a full disk in for RunLog)
+
+        self.runlog = runlog = logs.RunLog(cfg.log_dir or logs.default_run_dir())  # columns: twin.records.FRAME_COLUMNS
         runlog.set_metadata(config=cfg.to_metadata(), versions=versions(),
                             started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
         if self.plant is not None:
