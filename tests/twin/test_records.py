@@ -17,7 +17,7 @@ import pytest
 from control.trend import MITrend
 from tests.twin.test_workers import Boxes, _reading
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.live.records import RunEvents
+from twin.live.events import RunEvents
 from twin.records import (
     FRAME_COLUMNS,
     KINDS,
@@ -62,7 +62,7 @@ def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
 
 
 SINK_METHODS = {"publish", "metadata"}
-"""What ``twin.live.records.EventSink`` offers: typed records and the run's metadata."""
+"""What ``twin.live.events.EventSink`` offers: typed records and the run's metadata."""
 
 
 def _calls(tree: ast.Module) -> list[ast.Call]:
@@ -78,7 +78,7 @@ def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> No
     dashboard, ``RunEvents.fault``); a new one fails here."""
     import inspect
 
-    from twin.live.records import EventSink
+    from twin.live.events import EventSink
 
     record_classes = {cls.__name__ for cls in KINDS.values()} | {"MillRefusedRecord", "MillMismatchRecord", "change"}
     bad, built = [], 0
@@ -287,12 +287,12 @@ def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: P
 
 
 def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and_the_mill() -> None:
-    """The demo's start (``twin.loop.DemoStart``): nothing is started before the mill worker's
+    """The demo's start (``twin.run.main.DemoStart``): nothing is started before the mill worker's
     first connected ``MillState`` record; then the front panel, then the operator's Start."""
     import threading
 
-    from twin.loop import DemoStart
     from twin.records import Bus, MillState
+    from twin.run.main import DemoStart
 
     calls: list[str] = []
 
@@ -300,11 +300,13 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
         def start_drive(self) -> None:
             calls.append("drive")
 
-    class Loop:
-        stop_event = threading.Event()
-
+    class Controls:
         def start_mill(self) -> None:
             calls.append("start")
+
+    class Loop:
+        stop_event = threading.Event()
+        controls = Controls()
 
     bus = Bus()
     plan = DemoStart(Plant(), connect_timeout_s=30.0)  # type: ignore[arg-type]
@@ -320,14 +322,14 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
 
 
 def test_run_config_has_no_untyped_bag() -> None:
-    """Test seams are the typed ``twin.loop.Seams``, not a ``RunConfig.extra`` dict."""
+    """Test seams are the typed ``twin.run.settings.Seams``, not a ``RunConfig.extra`` dict."""
     from twin.config import RunConfig
-    from twin.loop import Seams
+    from twin.run.settings import Seams
 
     assert "extra" not in {f.name for f in fields(RunConfig)}
     assert {f.name for f in fields(Seams)} >= {"supervisor", "calibrate", "whatif_study", "mismatch", "on_started"}
     with pytest.raises(TypeError):  # a misspelt supervisor setting is refused, not ignored
-        from twin.loop import supervisor_config
+        from twin.run.settings import supervisor_config
 
         supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
 
@@ -363,8 +365,8 @@ def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
     a decision's JSON form is ``control.supervisor.Decision.as_dict`` (pinned by control's tests).
     The record declares exactly its keys (``kind`` as ``decision``) and its JSONL line is that
     dict, so a key added in control fails here instead of crashing the supervisor worker."""
+    from control.decision import Action, Decision, Mode, SupervisorInputs
     from control.objective import RpmPrediction
-    from control.supervisor import Action, Decision, Mode, SupervisorInputs
 
     full = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0,
                     inputs=SupervisorInputs(mill_connected=True), predictions={5.0: 0.3},

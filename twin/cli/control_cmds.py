@@ -66,7 +66,7 @@ def mill_limits(config: Path | None) -> Limits:
     with the critical speed of the config's drum (the demo's drum without a config or
     without a ``[drum]``). A bad config is a one-line error."""
     from twin.cli.sim_cmds import load_mixer
-    from twin.loop import supervisor_config
+    from twin.run.settings import supervisor_config
 
     if config is None:
         return supervisor_config().limits

@@ -7,10 +7,10 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -19,39 +19,33 @@ from twin.errors import TwinError
 
 if TYPE_CHECKING:
     from twin.config import RunConfig
-    from twin.dashboard import Dashboard
-    from twin.demo import DemoPlant
-    from twin.loop import LiveLoop, Seams, Summary
-
-StartHook = Callable[["LiveLoop", Optional["DemoPlant"], Optional["Dashboard"]], None]
+    from twin.run.loop import LiveLoop, Summary
 
 
-def run_live(
-    cfg: RunConfig, *, progress: bool = True, on_started: StartHook | None = None, seams: Seams | None = None
-) -> Summary:
-    """``drumtwin run`` for ``cfg`` (a resolved ``RunConfig``): the one composition root
-    (``twin.loop.run_live``) with the CLI's progress bar, Ctrl-C and SIGTERM; returns the
-    run's ``Summary``. ``on_started(loop, plant, dashboard)`` is the ``Seams.on_started``
-    seam (tests inject faults there)."""
-    from dataclasses import replace
-
-    from twin.loop import Seams
-    from twin.loop import run_live as run
-
-    seams = seams or Seams()
-    if on_started is not None:
-        seams = replace(seams, on_started=on_started)
+@contextlib.contextmanager
+def _signals_restored() -> Iterator[None]:
+    """The run's SIGINT and SIGTERM handlers (set by :func:`_wait`) end with the run; after a
+    Ctrl-C the process is on its way out: a repeated one stays harmless to the end."""
     main = threading.current_thread() is threading.main_thread()
     saved = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) if main else None
     try:
-        return run(cfg, seams, wait=lambda loop: _wait(loop, cfg, progress),
-                   on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
-                                                              highlight=False))
+        yield
     finally:
-        if saved is not None:  # _wait's SIGTERM handler ends with the run; after a Ctrl-C the process is
-            signal.signal(signal.SIGTERM, saved[1])  # on its way out: a repeated one stays harmless to the end
+        if saved is not None:
+            signal.signal(signal.SIGTERM, saved[1])
             if signal.getsignal(signal.SIGINT) is not _still_stopping:
                 signal.signal(signal.SIGINT, saved[0])
+
+
+def _run(cfg: RunConfig, progress: bool) -> Summary:
+    """``drumtwin run`` for ``cfg`` (a resolved ``RunConfig``): the one composition root
+    (``twin.run.main.run_live``) with the CLI's progress bar, Ctrl-C and SIGTERM."""
+    from twin.run import main
+
+    with _signals_restored():
+        return main.run_live(cfg, wait=lambda loop: _wait(loop, cfg, progress),
+                             on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
+                                                                        highlight=False))
 
 
 def _still_stopping(signum: int, frame: object) -> None:
@@ -179,27 +173,31 @@ def run(
             check_port_free(cfg.host, cfg.port)
         if json_out:
             with stdout_to_stderr():
-                summary = run_live(cfg, progress=False)
+                summary = _run(cfg, progress=False)
         else:
-            summary = run_live(cfg, progress=True)
+            summary = _run(cfg, progress=True)
     except OSError as exc:
         if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
             raise
         raise TwinError(str(exc)) from None  # one line (twin.cli.main), never wrapped
-    out = {
-        "final_trend_mi": summary.final_trend_mi,
-        "final_rpm": summary.final_rpm,
-        "decisions": summary.decisions,
-        "faults": summary.faults,
-        "log_dir": summary.log_dir,
-        "frames": summary.frames,
-        "run_time_s": round(summary.run_time_s, 2),
-        "wall_time_s": round(summary.wall_time_s, 2),
-        "camera_fps": round(summary.camera_fps, 1),
-        "twin_fps": round(summary.twin_fps, 1),
-    }
+    _report(summary, json_out)
+
+
+def _report(summary: Summary, json_out: bool) -> None:
+    """The run's end: its summary as JSON (``--json``, stdout) or one line."""
     if json_out:
-        print_json(out)
+        print_json({
+            "final_trend_mi": summary.final_trend_mi,
+            "final_rpm": summary.final_rpm,
+            "decisions": summary.decisions,
+            "faults": summary.faults,
+            "log_dir": summary.log_dir,
+            "frames": summary.frames,
+            "run_time_s": round(summary.run_time_s, 2),
+            "wall_time_s": round(summary.wall_time_s, 2),
+            "camera_fps": round(summary.camera_fps, 1),
+            "twin_fps": round(summary.twin_fps, 1),
+        })
     else:
         say(f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
             f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}")

@@ -282,7 +282,7 @@ def _mi_summary(ts: list[float], mis: list[float], method: str, endpoint: bool, 
 
         from control.endpoint import EndpointConfig, endpoint_of_series
         from twin.config import RunConfig
-        from twin.loop import endpoint_config, trend_config
+        from twin.run.settings import endpoint_config, trend_config
 
         cfg: EndpointConfig = endpoint_config(RunConfig(target_mi=target_mi, endpoint=ep_options or {}))
         res = endpoint_of_series(ts, mis, cfg, trend_config())

@@ -189,7 +189,7 @@ def endpoint_of(run: RunData) -> dict[str, Any]:
                 "changes": [(e.get("t_s"), e.get("kind"), e.get("mixing_time_s"), e.get("reason", ""))
                             for e in changes]}
     from control.endpoint import endpoint_of_series
-    from twin.loop import endpoint_config, trend_config
+    from twin.run.settings import endpoint_config, trend_config
 
     t, mi = run.series("t_s"), run.series("mi")
     ok = np.isfinite(t)
@@ -252,7 +252,7 @@ def time_to_mix_check(run: RunData) -> dict[str, Any] | None:
         cfg: dict[str, Any] = meta_cfg if isinstance(meta_cfg, dict) else {}
         target = _num(None if study is None else study.get("target_mi")) or _num(cfg.get("target_mi"))
         if target is None:
-            from twin.loop import endpoint_config
+            from twin.run.settings import endpoint_config
 
             target = endpoint_config().target_mi
         horizon = _num(None if study is None else study.get("duration_s")) or DEFAULT_HORIZON_S
