@@ -225,11 +225,14 @@ class Supervisor:
 
     def _resync(self, inputs: SupervisorInputs) -> None:
         """Take the board's state as ours (see "Board resync" in the module doc)."""
-        first = inputs.actual_rpm if inputs.mill_running else inputs.setpoint_rpm
-        if first is None:
-            first = inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm
-        board = first
-        if board is None or not math.isfinite(board):
+        def known(x: float | None) -> float | None:  # a NaN from the board says nothing
+            return x if x is not None and math.isfinite(x) else None
+
+        actual, setpoint = known(inputs.actual_rpm), known(inputs.setpoint_rpm)
+        board = actual if inputs.mill_running else setpoint
+        if board is None:
+            board = setpoint if setpoint is not None else actual
+        if board is None:
             return
         self._epoch = inputs.mill_epoch
         ramping = self._ramping

@@ -366,3 +366,25 @@ def test_manual_does_not_adopt_a_board_rpm_outside_the_limits():
     inside = Supervisor(cfg(), mode=Mode.MANUAL)
     run(inside, 0, 1, level=0.9, setpoint_rpm=12.0, actual_rpm=12.0, mill_running=True, mill_epoch=1)
     assert inside.manual_rpm == 12.0
+
+
+def test_a_running_board_that_reports_no_actual_speed_is_resynced_from_its_setpoint() -> None:
+    """A board read back running with a NaN actual speed and a known setpoint: the supervisor
+    takes the setpoint as its state at that epoch, so a later read of the same epoch does
+    not resync again and a manual ramp goes on from what it commanded (found by the
+    property test: it used to skip the NaN read and resync from a later setpoint)."""
+    sup = Supervisor(worked_config(min_rpm=5.0, max_rpm=10.0, max_rate_rpm_per_s=1.0), Mode.MANUAL)
+
+    def step(t: float, **inp: Any) -> Any:
+        kw: dict[str, Any] = dict(last_valid_mi_s=t, twin_updated_s=t, mill_connected=True)
+        kw.update(inp)
+        d, _ = sup.step(t, SupervisorInputs(trend=est(t, 0.0), **kw))
+        return d
+
+    step(0.9, actual_rpm=math.nan, setpoint_rpm=4.0, mill_running=True, mill_epoch=1)
+    assert sup.commanded_rpm == 4.0
+    sup.set_manual_rpm(7.0)
+    d = step(1.0, actual_rpm=None, setpoint_rpm=None, mill_epoch=1)
+    assert d is not None and d.rpm == 5.0  # one rate step above the board's 4 rpm, not a jump to 7
+    d = step(2.0, actual_rpm=None, setpoint_rpm=6.5, mill_epoch=1)  # same epoch: no new resync
+    assert d is not None and d.rpm == 6.0
