@@ -16,7 +16,6 @@ from sim.mixer import (
     Baffles,
     Shape,
     disk_classes,
-    is_simple_polygon,
     mixer_to_toml,
     paper_mixer,
     parse_mixer,
@@ -25,6 +24,7 @@ from sim.mixer import (
     shape_area_m2,
 )
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, slice_2d
+from vision.shapes import is_simple_polygon
 
 PMMA = """
 [drum]
