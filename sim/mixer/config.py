@@ -66,6 +66,8 @@ _PARTICLE_KEYS = {"name", "shape", "diameter_mm", "density_kg_m3", "share", "cou
 _SHAPE_KEYS = {"polygon": {"sides"}, "pellet": {"width_mm", "corner_mm"}, "cut_disc": {"wedge_deg"},
                "vertices": {"vertices_mm"}, "traced": {"image"}}
 MAX_PARTICLE_SHARE_OF_DRUM = 0.25  # a particle's diameter over the drum's, at most
+MIN_PARTICLE_MM = 0.1  # a particle's size (diameter, width, thickness), at least: below ~0.1 mm cohesion
+# outweighs a particle's weight (a powder, not the free-flowing bed the twin's contact laws describe)
 MAX_BAFFLES = 36
 
 
@@ -101,7 +103,7 @@ def _parse_shape(where: str, t: Mapping, drum_d_m: float, base_dir: Path | None)
             raise SimError(f"{where}: {stray[0]} belongs to shape = {other!r}, not {kind!r}")
     if "diameter_mm" not in t:
         raise SimError(f"{where}: needs diameter_mm (the particle's size)")
-    d_m = 1e-3 * _num(where, "diameter_mm", t["diameter_mm"], 0.0, 1e4, lo_open=True)
+    d_m = 1e-3 * _num(where, "diameter_mm", t["diameter_mm"], MIN_PARTICLE_MM, 1e4)
     if d_m > MAX_PARTICLE_SHARE_OF_DRUM * drum_d_m:
         raise SimError(f"{where}: diameter_mm = {d_m * 1e3:g} does not fit a {drum_d_m * 1e3:g} mm drum "
                        f"(at most {MAX_PARTICLE_SHARE_OF_DRUM:g} of its diameter)")
@@ -111,7 +113,7 @@ def _parse_shape(where: str, t: Mapping, drum_d_m: float, base_dir: Path | None)
         sides = int(_num(where, "sides", t.get("sides", 6), 3, 64, integer=True))
         return Shape("polygon", d_m, sides=sides)
     if kind == "pellet":
-        w_m = 1e-3 * _num(where, "width_mm", t.get("width_mm", d_m * 1e3), 0.0, d_m * 1e3, lo_open=True)
+        w_m = 1e-3 * _num(where, "width_mm", t.get("width_mm", d_m * 1e3), MIN_PARTICLE_MM, d_m * 1e3)
         c_m = 1e-3 * _num(where, "corner_mm", t.get("corner_mm", 0.0), 0.0, 0.5 * w_m * 1e3)
         return Shape("pellet", d_m, width_m=w_m, corner_m=c_m)
     if kind == "cut_disc":
@@ -238,7 +240,7 @@ def _parse_particle(source: str, i: int, t: Mapping, kinds: Sequence[ParticleKin
         raise SimError(f"{wp}: give either count or share (got {'both' if 'count' in t else 'neither'})")
     count_v = int(_num(wp, "count", t["count"], 1, 1e6, integer=True)) if "count" in t else None
     share_v = _num(wp, "share", t["share"], 0.0, 1.0, lo_open=True) if "share" in t else None
-    thick_v = (1e-3 * _num(wp, "thickness_mm", t["thickness_mm"], 0.0, 1e4, lo_open=True)
+    thick_v = (1e-3 * _num(wp, "thickness_mm", t["thickness_mm"], MIN_PARTICLE_MM, 1e4)
                if "thickness_mm" in t else None)
     if "colour_bgr" in t:
         bgr = _bgr(wp, t["colour_bgr"])
@@ -333,12 +335,3 @@ def mixer_to_toml(mixer: Mixer, notes: Mapping[str, str] | None = None) -> str:
     return "\n".join(out) + "\n"
 
 
-
-__all__ = [
-    "MAX_BAFFLES",
-    "MAX_PARTICLE_SHARE_OF_DRUM",
-    "SHAPE_KINDS",
-    "mixer_from_config",
-    "mixer_to_toml",
-    "parse_mixer",
-]

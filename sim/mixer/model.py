@@ -312,24 +312,3 @@ def with_counts(mixer: Mixer, counts: Sequence[int]) -> Mixer:
 
 
 
-
-__all__ = [
-    "ROUND_SHAPES",
-    "Baffles",
-    "Mixer",
-    "ParticleKind",
-    "ResolvedKind",
-    "Shape",
-    "ShapeKind",
-    "bed_area_m2",
-    "check_fits",
-    "disk_classes",
-    "paper_mixer",
-    "polygon_shape",
-    "resolve",
-    "resolve_counts",
-    "shape_area_m2",
-    "shape_from_crops",
-    "shape_outline_m",
-    "with_counts",
-]

@@ -102,7 +102,7 @@ def mi_cmd(
     import numpy as np
 
     from control.trend import MovingAverage
-    from vision.config import load_config
+    from twin.config import load_checked_config
     from vision.overlay import draw_overlay
     from vision.roi import parse_roi
     from vision.sources import open_source, source_kind
@@ -116,7 +116,7 @@ def mi_cmd(
 
     ep_options = endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
                                   block_sd_max=endpoint_block_sd_max)
-    cfg = load_config(config)
+    cfg = load_checked_config(config).meter
     if cfg.endpoint_table:  # [endpoint] under the --endpoint-* options
         from twin.config import config_endpoint
 
