@@ -156,14 +156,14 @@ def test_mill_set_rpm_takes_its_limits_from_the_configs_drum(tmp_path) -> None:
     refuses. Each refusal names the limit and leaves the board untouched."""
     import math
 
-    from twin.cli.sim_cmds import load_mixer
+    from twin.config import load_checked_config
 
     def crit(d_mm: float) -> float:  # n_c = (30 / pi) sqrt(g / R), independently of sim/
         return 30.0 / math.pi * math.sqrt(9.81 / (d_mm / 2000.0))
 
     big, mid, small = (_drum_config(tmp_path / f"d{d}.toml", d) for d in (1000, 400, 100))
     for cfg, d in ((big, 1000), (mid, 400), (small, 100)):
-        assert load_mixer(cfg)[0].drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
+        assert load_checked_config(cfg).mixer.drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
         want = RunConfig(meter_config=cfg)
         assert supervisor_config(None, crit(d), want).limits.rpm_range[1] == pytest.approx(min(45.0, 0.6 * crit(d)),
                                                                                       rel=1e-3)
