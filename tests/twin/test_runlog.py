@@ -45,7 +45,7 @@ def test_rows_events_metadata_round_trip(tmp_path: Path) -> None:
     meta = read_metadata(tmp_path / "run")
     assert meta["config"]["seed"] == 3 and meta["calibration"]["friction"] == 0.4
     header = (tmp_path / "run" / "frames.csv").read_text().splitlines()[0].split(",")
-    assert tuple(header) == FRAME_COLUMNS
+    assert tuple(header) == (*FRAME_COLUMNS, "run_uid")  # the run uid last (twin.runlog)
 
 
 def test_reader_drops_a_cut_off_last_line(tmp_path: Path) -> None:

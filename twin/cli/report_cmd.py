@@ -9,29 +9,64 @@ import typer
 from twin.cli.app import app, bench_app, console_err, print_json, say
 from twin.errors import TwinError
 
+LABEL_HELP = ("A label for each run, in order (repeat once per run): the runs are then taken as paths "
+              "as given (a folder name with '=' in it).")
+
 
 @app.command("report")
 def report(
-    runs: list[str] = typer.Argument(..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name)."),
+    runs: list[str] = typer.Argument(..., help="Run log dirs, each DIR (its folder name is the label) or LABEL=DIR "
+                                     "(split at the last '='; a path that exists is a path)."),
     out: Path = typer.Option(..., "--out", help="HTML file to write (self-contained: opens offline)."),
     title: str = typer.Option("drumtwin report", "--title", help="Report title."),
+    label: list[str] = typer.Option([], "--label", help=LABEL_HELP),
     json_out: bool = typer.Option(False, "--json", help="Also print each run's endpoint and the twin's time to "
                                   "mix against the plant's (JSON, stdout)."),
 ) -> None:
-    """One HTML file of runs side by side: MI, rpm, slope, events, endpoint, energy, config."""
-    from twin.report import build_report, load_run, time_to_mix_check
-    from twin.report.build import endpoint_of
+    """One HTML file of runs side by side: MI, rpm, slope, events, endpoint, energy, config.
+    A line or cell of a log that cannot be read is skipped and counted in a note on its run."""
+    from twin.report import write_report
 
-    path = build_report(runs, out, title)
+    path, results = write_report(runs, out, title, label or None)
     say(f"report of {len(runs)} run(s) written to {path}")
     if json_out:
-        out_runs = {}
-        for spec in runs:
-            label, sep, d = spec.partition("=")
-            run = load_run(d if sep else spec, label if sep else None)
-            end = endpoint_of(run)
-            out_runs[run.label] = {"mixing_time_s": end["mixing_time_s"], "time_to_mix": time_to_mix_check(run)}
-        print_json(out_runs)
+        print_json(results)
+
+
+@app.command("compare")
+def compare(
+    runs: list[str] = typer.Argument(..., help="Run log dirs, each DIR (its folder name is the label) or LABEL=DIR "
+                                     "(split at the last '='; a path that exists is a path)."),
+    plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
+    title: str = typer.Option("", "--title", help="Plot title."),
+    label: list[str] = typer.Option([], "--label", help=LABEL_HELP),
+) -> None:
+    """Compare run logs: one plot of their MI curves and rpm (e.g. AUTO against OFF). A line or
+    cell of a log that cannot be read is skipped and counted in a note on stderr."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from twin.cli.app import check_outputs, console
+    from twin.plots import compare_runs
+    from twin.report import run_specs
+    from twin.report.load import check_dir
+
+    check_outputs(plot)  # a directory as --plot would become DIR.png
+    specs = run_specs(runs, label or None)
+    for _, path in specs:
+        check_dir(path)
+    out, rows = compare_runs(specs, plot, title)
+    table = Table(title="runs")
+    for col in ("run", "frames", "run time s", "final trend MI", "final rpm", "rpm moves"):
+        table.add_column(col, justify="right" if col != "run" else "left")
+    fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
+    for name, s, notes in rows:
+        table.add_row(escape(name), str(s["frames"]), fmt(s["t_s"], ".1f"), fmt(s["trend_mi"], ".3f"),
+                      fmt(s["rpm_actual"], ".1f"), str(s["moves"]))
+        for n in notes:
+            say(f"note: {name}: {n}")
+    console.print(table)
+    say(f"plot written to {out}")
 
 
 @bench_app.command("report")

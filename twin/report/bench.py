@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.errors import TwinError
+from twin.records import DecisionMade, Mixed, Record, RunStart, RunStop, WhatIfResult
 from twin.runlog import RunLog
 
 FPS = 10.0
@@ -103,36 +104,30 @@ def write_run(d: Path, rows: int, seed: int = 0) -> Path:
     with RunLog(d) as log:
         log.set_metadata(config={"mode": "auto", "case": "C", "speed": 1.0, "camera_fps": FPS},
                          versions={"python": sys.version.split()[0], "numpy": np.__version__}, bench=True)
-        log.event("start", 0.0, mode="auto", mill="bench")
-        columns, extra = log.columns, {}
+        for rec in _records(rows):
+            log.record(rec)
+        columns, extra = log.columns, {"run_uid": log.run_uid}
     write_frames(d / "frames.csv", columns, rows, seed, extra)
-    with open(d / "events.jsonl", "a", encoding="utf-8") as fh:
-        fh.writelines(_events(rows))
     return d
 
 
-def _events(rows: int) -> list[str]:
-    """The events of a generated run, as the run log writes them (``RunLog.event``'s JSON)."""
-    import json
-
-    out = []
+def _records(rows: int) -> list[Record]:
+    """The events of a generated run: an rpm move every 6,000 rows and the study behind it,
+    the endpoint at 90 s, start and stop."""
+    out: list[Record] = [RunStart(t_s=0.0, mode="auto", mill="bench")]
     for k in range(6000, rows, 6000):
         t = k / FPS
         target = 25.0 if (k // 6000) % 2 == 1 else 5.0
         pred = {"5.0": 0.9, "25.0": 0.95}
-        out.append({"t_s": t - 1.0, "wall_s": 1.7e9 + t, "kind": "whatif", "reason": "AUTO", "requested_t_s": t - 5,
-                    "duration_s": 40.0, "predictions": pred, "took_s": 1.0, "target_mi": 0.9,
-                    "time_to_target_s": {"5.0": 60.0, "25.0": 20.0}, "power_w": {"5.0": 0.5, "25.0": 12.5},
-                    "energy_to_target_j": {"5.0": 30.0, "25.0": 250.0}})
-        out.append({"t_s": t, "wall_s": 1.7e9 + t, "kind": "decision", "decision": "move", "mode": "auto",
-                    "action": "set_rpm", "reason": "bench", "rpm": target, "target_rpm": target, "safe": False,
-                    "level": 0.9, "rate": 0.0, "predictions": pred, "inputs": {}})
+        out.append(WhatIfResult(t_s=t - 1.0, reason="AUTO", requested_t_s=t - 5, duration_s=40.0, predictions=pred,
+                                took_s=1.0, target_mi=0.9, time_to_target_s={"5.0": 60.0, "25.0": 20.0},
+                                power_w={"5.0": 0.5, "25.0": 12.5}, energy_to_target_j={"5.0": 30.0, "25.0": 250.0}))
+        out.append(DecisionMade(t_s=t, decision="move", mode="auto", action="set_rpm", reason="bench", rpm=target,
+                                target_rpm=target, safe=False, level=0.9, rate=0.0, predictions=pred, inputs={}))
     if rows > 900:
-        out.append({"t_s": 90.0, "wall_s": 1.7e9 + 90, "kind": "mixed", "mixing_time_s": 80.0, "plateau_mi": 0.95,
-                    "reason": "bench"})
-    out.append({"t_s": rows / FPS, "wall_s": 1.7e9 + rows / FPS, "kind": "stop", "frames": rows,
-                "workers_alive": [], "failure": None})
-    return [json.dumps(e) + "\n" for e in out]
+        out.append(Mixed(t_s=90.0, mixing_time_s=80.0, plateau_mi=0.95, reason="bench"))
+    out.append(RunStop(t_s=rows / FPS, frames=rows, workers_alive=(), failure=None))
+    return out
 
 
 def _du_mb(root: Path) -> float:
