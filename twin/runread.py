@@ -38,6 +38,10 @@ MAX_ROW_BYTES = 1 << 16
 cell under the csv module's 131,072-character field limit)."""
 MAX_EVENT_BYTES = 1 << 20
 """An ``events.jsonl`` line longer than this is skipped (a decision with its inputs is ~2 kB)."""
+LIMIT = 1e15
+"""A time or reading beyond this magnitude is no run's (1e15 s: 30 million years) and no plot can
+place 1e308: an event whose ``t_s`` is beyond it is skipped, and so is a frame row
+(``twin.report``)."""
 MAX_METADATA_BYTES = 16 << 20
 """A ``metadata.json`` larger than this is not read (a note)."""
 
@@ -226,8 +230,8 @@ def _event_or_why(line: str) -> tuple[dict[str, Any] | None, str]:
     t = e.get("t_s")
     if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))):
         return None, "t_s not a number"
-    if t is not None and not math.isfinite(t):
-        return None, "t_s not a finite number"
+    if t is not None and not (math.isfinite(t) and abs(t) <= LIMIT):
+        return None, f"t_s not a finite number within ±{LIMIT:g}"
     return e, ""
 
 

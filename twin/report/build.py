@@ -193,7 +193,8 @@ def all_runs_row(run: RunData) -> tuple[str, ...]:
     """One run's row of the "All runs" table."""
     s = run.summary()
     notes = "<br>".join(f'<span class="note">{html.escape(n)}</span>' for n in run.notes)
-    return (text(run.label), text(run.path, 500), fmt(s["mode"]), str(s["frames"]), fmt(s["run_time_s"], ".1f"),
+    return (f'<span class="run-label">{text(run.label)}</span>', text(run.path, 500), fmt(s["mode"]),
+            str(s["frames"]), fmt(s["run_time_s"], ".1f"),
             fmt(s["final_trend_mi"]), str(s["decisions"]), str(s["faults"]), fmt(s["mixing_time_s"], ".1f"),
             "yes" if s["ended_cleanly"] else "no", notes)
 
@@ -233,6 +234,8 @@ def run_specs(specs: Sequence[Path | str], labels: Sequence[str] | None = None) 
     if labels:
         if len(labels) != len(specs):
             raise TwinError(f"--label given {len(labels)} time(s) for {len(specs)} run(s): give one per run, or none")
+        if not all(lab.strip() for lab in labels):
+            raise TwinError("--label: a label cannot be empty")
         return [(lab, Path(s)) for lab, s in zip(labels, specs, strict=True)]
     out = []
     for s in specs:
@@ -255,19 +258,21 @@ def check_out(out: Path | str) -> Path:
 
 
 def write_report(run_dirs: Sequence[Path | str], out: Path | str, title: str = "drumtwin report",
-                 labels: Sequence[str] | None = None) -> tuple[Path, dict[str, dict[str, Any]]]:
+                 labels: Sequence[str] | None = None, detailed: int = MAX_DETAILED,
+                 ) -> tuple[Path, dict[str, dict[str, Any]]]:
     """Read the runs one at a time and write the report to ``out`` (atomically: a temporary file,
-    then renamed); returns it and each run's endpoint and time-to-mix check by label."""
+    then renamed); returns it and each run's endpoint and time-to-mix check by label. More runs
+    than ``detailed``: the "All runs" table and plot, and the sections of the first ``detailed``."""
     if not run_dirs:
         raise TwinError("give at least one run dir")
     target = check_out(out)
     specs = run_specs(run_dirs, labels)
-    many = len(specs) > MAX_DETAILED
+    many = len(specs) > detailed
     columns, rows, curves, results = [], [], [], {}
     for i, (label, path) in enumerate(specs):
         run = load_run(path, label)
         results[run.label] = {"mixing_time_s": run.endpoint["mixing_time_s"], "time_to_mix": run.time_to_mix}
-        if i < MAX_DETAILED:
+        if i < detailed:
             columns.append(run_column(run, i))
         if many:
             rows.append(all_runs_row(run))

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from twin.report.decimate import MinMax
+from twin.runread import LIMIT
 
 MAX_KINDS = 40
 """Kinds counted and drawn one by one; the rest are counted as "other kinds"."""
@@ -32,7 +33,7 @@ MARKS = 50
 """Moves marked on ``compare``'s plot (the first ones)."""
 STUDIES = 64
 """What-if studies remembered to match a decision to the study behind it (the latest ones)."""
-PLOT_LIMIT = 1e15
+PLOT_LIMIT = LIMIT
 """A number beyond this (in magnitude) is not drawn: matplotlib cannot place 1e308 on an axis."""
 
 
@@ -145,7 +146,7 @@ class EventSummary:
             self.other += 1
             kind = "(other kinds)"
         self.counts[kind] = self.counts.get(kind, 0) + 1
-        if t is not None and abs(t) <= PLOT_LIMIT:
+        if t is not None:
             pending = self._times.setdefault(kind, [])
             pending.append(t)
             if len(pending) >= 4096:

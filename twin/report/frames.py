@@ -54,7 +54,7 @@ def numbers(cells: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
     return out, bad
 
 
-def _finite(v: np.ndarray) -> np.ndarray:
+def finite(v: np.ndarray) -> np.ndarray:
     """Finite and within ``PLOT_LIMIT``: what a plot can place."""
     with np.errstate(invalid="ignore"):
         return np.isfinite(v) & (np.abs(v) <= PLOT_LIMIT)
@@ -95,7 +95,7 @@ class FrameScan:
         """``t_s`` of the rows and the rows, those without a usable time dropped and counted."""
         i = header.index("t_s")
         t, bad = numbers([r[i] for r in rows])
-        ok = _finite(t)
+        ok = finite(t)
         if ok.all():
             return t, rows
         n_bad = 0 if bad is None else int(bad.sum())

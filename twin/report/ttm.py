@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from twin.report.events import Move, num
-from twin.report.frames import numbers
-from twin.runread import RunFiles, frame_batches
+from twin.report.frames import finite, numbers
+from twin.runread import RunFiles, Skips, frame_batches
 
 DEFAULT_HORIZON_S = 40.0
 """The plant's window after a decision when the run logged no study horizon (``RunConfig.whatif_horizon_s``)."""
@@ -42,12 +42,15 @@ def _window(run: RunFiles, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray
     first batch past ``hi``)."""
     parts: list[tuple[np.ndarray, ...]] = []
     held = 0
-    for header, rows in frame_batches(run):
+    again = RunFiles(run.path, run.uid, run.metadata, Skips())  # the first pass counted what it skips
+    for header, rows in frame_batches(again):
         cols = []
         for name in ("t_s", "mi", "twin_mi"):
             if name in header:
                 i = header.index(name)
-                cols.append(numbers([r[i] for r in rows])[0])
+                v = numbers([r[i] for r in rows])[0]
+                v[~finite(v)] = math.nan  # as the first pass: no number beyond the limit
+                cols.append(v)
             else:
                 cols.append(np.full(len(rows), math.nan))
         t = cols[0]
