@@ -8,7 +8,8 @@ its fields and their units once, here; everything else is derived from these cla
 * the ``events.jsonl`` lines: ``{"t_s", "wall_s", "kind", **fields}`` of every record whose
   class is ``logged`` (:func:`event_fields`; optional fields that are None are left out);
 * the dashboard's numbers panel (``twin.state.Panel``), which folds the records it sees;
-* the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test).
+* the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test);
+* the run log's descriptors (units, dtype, source of each column and field: ``twin.descriptors``)
 
 Producers (the live workers, the loop, the dashboard) construct these classes and ``publish``
 them (``twin.live.records.EventSink``; no producer names a kind by string, so a misspelt kind
@@ -694,63 +695,6 @@ def records_table() -> str:
             parts.append(f"`{name}`" + (f" ({u})" if u else ""))
         lines.append(f"| `{kind}` | {where}: {cls.doc} | {', '.join(parts)} |")
     return "\n".join(lines) + "\n"
-
-
-# -- the descriptors (after bluesky's event-model: an EventDescriptor's data_keys) --------------
-LOG_KEYS: Mapping[str, Mapping[str, object]] = {
-    "wall_s": {"dtype": "number", "shape": [], "units": "s", "source": "twin.runlog",
-               "doc": "unix time when the line was written"},
-    "run_uid": {"dtype": "string", "shape": [], "units": "", "source": "twin.runlog",
-                "doc": "the run's uid (metadata.json's run_uid): the line belongs to that run"},
-}
-"""The keys the run log adds to every line beside the record's fields (``frames.csv`` columns,
-``events.jsonl`` keys), described as the fields are."""
-
-_DTYPES = {"float": "number", "int": "integer", "bool": "boolean", "str": "string"}
-
-
-def _dtype(f: Field[Any], csv: bool) -> tuple[str, list[None]]:
-    """(event-model dtype, shape) of a field from its annotation: ``Mapping`` -> "object" (a JSON
-    object; event-model has no such dtype), ``Sequence``/``tuple`` -> "array" of any length (in
-    ``frames.csv``: one ';'-joined "string" cell)."""
-    t = str(f.type).replace(" | None", "").strip()
-    if t in _DTYPES:
-        return _DTYPES[t], []
-    if t.startswith(("Mapping[", "dict[")):
-        return "object", []
-    if t.startswith(("Sequence[", "tuple[", "list[")):
-        return ("string", []) if csv else ("array", [None])
-    raise TypeError(f"field {f.name} of type {t}: no descriptor dtype for it (twin/records.py _dtype)")
-
-
-def data_keys(cls: type[Record], *, csv: bool = False) -> dict[str, dict[str, object]]:
-    """Every field of ``cls`` described as event-model's ``data_keys`` do: ``dtype``, ``shape``
-    (``[]``: a scalar, ``[null]``: any length), ``units``, ``source`` (the field's own, else the
-    class's ``producer``), with its ``doc`` and ``optional`` (left out of the line when unset)."""
-    out: dict[str, dict[str, object]] = {}
-    for f in fields(cls):
-        dtype, shape = _dtype(f, csv)
-        key: dict[str, object] = {"dtype": dtype, "shape": shape, "units": f.metadata.get("unit", ""),
-                                  "source": f.metadata.get("source") or cls.producer, "doc": f.metadata.get("doc", "")}
-        if f.metadata.get("optional"):
-            key["optional"] = True
-        out[f.name] = key
-    return out
-
-
-def descriptors(frame_columns: Sequence[str]) -> dict[str, dict[str, object]]:
-    """The run log's descriptors, one per stream: ``frame`` (``frames.csv``: its columns in order,
-    ``frame_columns``; a column no record declares is a "string" of source "undeclared") and each
-    logged kind (``events.jsonl``); each ``{"file", "doc", "data_keys"}``."""
-    frame = {**data_keys(FrameReading, csv=True), **LOG_KEYS}
-    undeclared = {"dtype": "string", "shape": [], "units": "", "source": "undeclared", "doc": ""}
-    out: dict[str, dict[str, object]] = {"frame": {
-        "file": "frames.csv", "doc": FrameReading.doc,
-        "data_keys": {c: dict(frame.get(c, undeclared)) for c in frame_columns}}}
-    for kind, cls in KINDS.items():
-        if cls.logged:
-            out[kind] = {"file": "events.jsonl", "doc": cls.doc, "data_keys": {**data_keys(cls), **LOG_KEYS}}
-    return out
 
 
 def fields_of(cls: type[Record]) -> Mapping[str, str]:

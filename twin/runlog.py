@@ -45,8 +45,9 @@ from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from twin.descriptors import descriptors
 from twin.errors import TwinError
-from twin.records import FRAME_COLUMNS, FrameReading, Record, descriptors, event_fields, kind_of, record_of
+from twin.records import FRAME_COLUMNS, FrameReading, Record, event_fields, kind_of, record_of
 from twin.runread import (
     EVENTS_FILE,
     FRAMES_FILE,

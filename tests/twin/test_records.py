@@ -403,7 +403,8 @@ def test_the_descriptors_are_derived_from_the_record_declarations() -> None:
     from collections.abc import Mapping
     from dataclasses import dataclass
 
-    from twin.records import LOG_KEYS, Record, data_keys, descriptors, opt, unit
+    from twin.descriptors import LOG_KEYS, data_keys, descriptors
+    from twin.records import Record, opt, unit
 
     desc = descriptors(FRAME_COLUMNS)
     assert set(desc) == {"frame"} | {k for k, c in KINDS.items() if c.logged and c is not FrameReading}

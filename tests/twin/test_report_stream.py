@@ -19,6 +19,7 @@ from twin.records import FRAME_COLUMNS
 from twin.report import build, load_run, render_html, run_specs
 from twin.report.bench import write_run
 from twin.report.decimate import BUCKETS, MinMax, minmax_rows
+from twin.report.frames import PLOTTED
 from twin.runlog import RunLog
 
 
@@ -65,7 +66,7 @@ def test_a_long_log_is_read_into_a_few_thousand_points(tmp_path: Path) -> None:
     d = write_run(tmp_path / "long", 40_000)
     run = load_run(d)
     assert run.n_frames == 40_000 and run.notes == [] and run.frames.t_max == pytest.approx(3999.9)
-    for name in ("mi", "trend_mi", "rpm_actual", "slope_deg", "twin_mi"):
+    for name in PLOTTED:
         t, _ = run.series(name)
         assert 0 < len(t) <= 4 * BUCKETS + 4_000, name
     t, mi = run.series("mi")
