@@ -22,7 +22,7 @@ from twin.errors import TwinError
 from twin.report import figures
 from twin.report.events import text
 from twin.report.frames import PLOTS
-from twin.report.load import RunData, load_run
+from twin.report.load import RunData, check_dir, load_run
 
 SECTIONS: tuple[tuple[str, str], ...] = (
     ("summary", "Summary"),
@@ -267,6 +267,8 @@ def write_report(run_dirs: Sequence[Path | str], out: Path | str, title: str = "
         raise TwinError("give at least one run dir")
     target = check_out(out)
     specs = run_specs(run_dirs, labels)
+    for _, path in specs:  # a wrong path is one line before any run is read
+        check_dir(path)
     many = len(specs) > detailed
     columns, rows, curves, results = [], [], [], {}
     for i, (label, path) in enumerate(specs):
