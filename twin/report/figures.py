@@ -30,13 +30,16 @@ def png(fig: Any) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def axes(ylabel: str, size: tuple[float, float] = (6.4, 2.8)) -> tuple[Any, Any]:
+def axes(ylabel: str, size: tuple[float, float] = (6.4, 2.8), left: float = 0.11) -> tuple[Any, Any]:
+    """One figure and its axes, with fixed margins (a layout engine draws every figure twice:
+    half a report's time)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=size, constrained_layout=True)
+    fig, ax = plt.subplots(figsize=size)
+    fig.subplots_adjust(left=left, right=0.98, bottom=0.17, top=0.96)
     ax.set_xlabel("run time (s)")
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
@@ -69,7 +72,7 @@ def lines(run: RunData, names: Sequence[tuple[str, str]], ylabel: str, marks: Se
 
 def timeline(run: RunData) -> str:
     """Events against run time, one row per kind (decimated: the first and last of each bucket)."""
-    fig, ax = axes("event")
+    fig, ax = axes("event", left=0.27)
     kinds = sorted(run.events.timeline)
     for i, k in enumerate(kinds):
         t, _ = run.events.timeline[k].points()
@@ -95,7 +98,7 @@ def energy(run: RunData) -> str | None:
 
 def overview(curves: Sequence[tuple[str, np.ndarray, np.ndarray]], ylabel: str = "Kalman trend MI") -> str:
     """Every run's trend in one plot (many runs: a thin line each, a legend for a dozen or fewer)."""
-    fig, ax = axes(ylabel, (9.6, 3.6))
+    fig, ax = axes(ylabel, (9.6, 3.6), left=0.08)
     many = len(curves) > 12
     for label, t, y in curves:
         if t.size and np.isfinite(y).any():
