@@ -9,14 +9,15 @@ import typer
 from twin.cli.app import app, bench_app, console_err, print_json, say
 from twin.errors import TwinError
 
+RUNS_HELP = ("Run log dirs, each DIR (its folder name is the label) or LABEL=DIR (split at the last '='; "
+             "a path that exists is a path).")
 LABEL_HELP = ("A label for each run, in order (repeat once per run): the runs are then taken as paths "
               "as given (a folder name with '=' in it).")
 
 
 @app.command("report")
 def report(
-    runs: list[str] = typer.Argument(..., help="Run log dirs, each DIR (its folder name is the label) or LABEL=DIR "
-                                     "(split at the last '='; a path that exists is a path)."),
+    runs: list[str] = typer.Argument(..., help=RUNS_HELP),
     out: Path = typer.Option(..., "--out", help="HTML file to write (self-contained: opens offline)."),
     title: str = typer.Option("drumtwin report", "--title", help="Report title."),
     label: list[str] = typer.Option([], "--label", help=LABEL_HELP),
@@ -35,8 +36,7 @@ def report(
 
 @app.command("compare")
 def compare(
-    runs: list[str] = typer.Argument(..., help="Run log dirs, each DIR (its folder name is the label) or LABEL=DIR "
-                                     "(split at the last '='; a path that exists is a path)."),
+    runs: list[str] = typer.Argument(..., help=RUNS_HELP),
     plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
     title: str = typer.Option("", "--title", help="Plot title."),
     label: list[str] = typer.Option([], "--label", help=LABEL_HELP),

@@ -49,7 +49,7 @@ def fmt(v: Any, spec: str = ".3f") -> str:
     if isinstance(v, bool) or v is None:
         return "–" if v is None else str(v)
     if isinstance(v, (int, float)):
-        return format(v, spec) if abs(v) < float("inf") else "–"
+        return format(v, spec) if abs(v) <= 1e300 else "–"  # not NaN, inf or an int no float holds
     return html.escape(str(v))
 
 

@@ -38,11 +38,10 @@ PLOT_LIMIT = LIMIT
 
 
 def num(v: Any) -> float | None:
-    """``v`` as a finite float (None: not a number, a bool, infinite)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    f = float(v)
-    return f if math.isfinite(f) else None
+    """``v`` as a float (None: not a number, a bool, NaN, or beyond ``PLOT_LIMIT``)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) <= PLOT_LIMIT:
+        return None  # NaN compares False; a JSON integer of 400 digits is no float
+    return float(v)
 
 
 def rpm_key(k: Any) -> float | None:
