@@ -121,7 +121,7 @@ class EventSummary:
         self._last_move: Move | None = None
 
     def add(self, e: dict[str, Any]) -> None:
-        kind, t = str(e["kind"]), num(e.get("t_s"))
+        kind, t = str(e["kind"])[:100], num(e.get("t_s"))
         self.n += 1
         self._count(kind, t)
         if kind not in ("trend_settled", "trend_unsettled"):
