@@ -62,10 +62,6 @@ class Skips:
         if text not in self.files:
             self.files.append(text)
 
-    def total(self, file: str | None = None) -> int:
-        """Lines and cells skipped (of ``file``, or of all files)."""
-        return sum(n for (f, _, _), n in self.counts.items() if file is None or f == file)
-
     def notes(self) -> list[str]:
         """One sentence per file note and per (file, what, why): "3 lines of frames.csv skipped: ..."."""
         out = list(self.files)
