@@ -162,7 +162,8 @@ def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Pat
     from twin.report import build_report, load_run
 
     run = load_run(PREVIOUS)
-    assert len(run.frames) == 120 and {e["kind"] for e in run.events} >= {"decision", "mill_command"}
+    assert run.n_frames == 120 and set(run.events.counts) >= {"decision", "mill_command"}
+    assert run.notes == []  # no uid to check (a log of an earlier release): nothing skipped, nothing to say
     out = build_report([PREVIOUS], tmp_path / "report.html")
     html = out.read_text(encoding="utf-8")
     assert "runlog-previous" in html and "decision" in html
@@ -394,3 +395,47 @@ def test_the_dashboard_plots_read_exactly_the_plot_series_of_the_frame_record() 
     assert read == set(SERIES)
     state = LiveState()
     assert set(state.snapshot().history) == set(SERIES)
+
+
+def test_the_descriptors_are_derived_from_the_record_declarations() -> None:
+    """Issue 41 item 6: each logged kind's descriptor lists exactly its fields (then the run log's
+    wall_s and run_uid) with the unit declared beside the field and a source (the field's own, else
+    its class's producer): a field added, renamed or given another unit is described without a
+    second table. A record class declared here is described the same way."""
+    from collections.abc import Mapping
+    from dataclasses import dataclass
+
+    from twin.descriptors import LOG_KEYS, data_keys, descriptors
+    from twin.records import Record, opt, unit
+
+    desc = descriptors(FRAME_COLUMNS)
+    assert set(desc) == {"frame"} | {k for k, c in KINDS.items() if c.logged and c is not FrameReading}
+    for kind, cls in KINDS.items():
+        if not cls.logged:
+            continue
+        keys = desc[kind]["data_keys"]
+        assert list(keys) == [f.name for f in fields(cls)] + list(LOG_KEYS), kind
+        for f in fields(cls):
+            assert keys[f.name]["units"] == f.metadata["unit"], (kind, f.name)
+            assert keys[f.name]["source"] == (f.metadata.get("source") or cls.producer) != "", (kind, f.name)
+            assert keys[f.name].get("optional", False) == bool(f.metadata.get("optional")), (kind, f.name)
+
+    @dataclass(frozen=True, kw_only=True)
+    class Probe(Record):
+        producer = "a test"
+        depth_mm: float = unit("mm", "how deep")
+        counts: Mapping[str, int] | None = opt("", "by name")
+        names: tuple[str, ...] = unit("", "some names", source="elsewhere")
+
+    got = data_keys(Probe)
+    assert got["depth_mm"] == {"dtype": "number", "shape": [], "units": "mm", "source": "a test", "doc": "how deep"}
+    assert got["counts"]["dtype"] == "object" and got["counts"]["optional"] is True
+    assert got["names"]["dtype"] == "array" and got["names"]["source"] == "elsewhere"
+    assert data_keys(Probe, csv=True)["names"]["dtype"] == "string"  # one ';'-joined cell in a CSV
+
+    @dataclass(frozen=True, kw_only=True)
+    class Odd(Record):
+        blob: bytes = unit("", "no JSON type")
+
+    with pytest.raises(TypeError, match="blob"):
+        data_keys(Odd)

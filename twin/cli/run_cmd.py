@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console_err, print_json, say
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, console_err, print_json, say
 from twin.errors import TwinError
 
 if TYPE_CHECKING:
@@ -201,45 +201,6 @@ def _report(summary: Summary, json_out: bool) -> None:
     else:
         say(f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
             f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}")
-
-
-@app.command("compare")
-def compare(
-    runs: list[str] = typer.Argument(
-        ..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name is the label)."
-    ),
-    plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
-    title: str = typer.Option("", "--title", help="Plot title."),
-) -> None:
-    """Compare run logs: one plot of their MI curves and rpm (e.g. AUTO against OFF)."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from twin.cli.app import console
-    from twin.plots import plot_runs
-    from twin.runlog import FRAMES_FILE, read_events, read_frames
-
-    check_outputs(plot)  # a directory as --plot would become DIR.png
-    labelled: dict[str, Path] = {}
-    for spec in runs:
-        label, sep, d = spec.partition("=")
-        path = Path(d if sep else spec)
-        if not (path / FRAMES_FILE).is_file():
-            raise TwinError(f"{path} is not a run log dir (no {FRAMES_FILE})")
-        labelled[label if sep else path.name] = path
-    table = Table(title="runs")
-    for col in ("run", "frames", "run time s", "final trend MI", "final rpm", "rpm moves"):
-        table.add_column(col, justify="right" if col != "run" else "left")
-    for label, path in labelled.items():
-        rows = read_frames(path)
-        last = next((r for r in reversed(rows) if r.get("trend_mi") is not None), rows[-1] if rows else {})
-        moves = sum(1 for e in read_events(path) if e["kind"] == "decision" and e.get("decision") == "move")
-        fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
-        table.add_row(escape(label), str(len(rows)), fmt(last.get("t_s"), ".1f"), fmt(last.get("trend_mi"), ".3f"),
-                      fmt(last.get("rpm_actual"), ".1f"), str(moves))
-    console.print(table)
-    out = plot_runs(labelled, plot, title)
-    say(f"plot written to {out}")
 
 
 @bench_app.command("dashboard")
