@@ -63,9 +63,9 @@ def test_mi_and_run_write_the_same_row_for_every_frame_of_a_video(real_drum_dir:
     assert r.code == 0, r.err
     emu = MillEmulator(DeviceConfig(watchdog_s=0.0), seed=1)  # stopped: the trend's ripple is off in both
     port = emu.open_tcp(0)
-    try:  # the run lasts 1 s past the video's end: every frame is processed by then
+    try:  # the run lasts 2 s past the video's end: every frame is processed by then
         r = cli("run", "--video", video, "--mill", f"socket://127.0.0.1:{port}", "--config", conf, "--mode", "off",
-                "--no-dashboard", "--duration", n / FPS + 1.0, "--log", tmp_path / "run")
+                "--no-dashboard", "--duration", n / FPS + 2.0, "--log", tmp_path / "run")
         assert r.code == 0, r.err[-2000:]
     finally:
         emu.close()
