@@ -35,8 +35,8 @@ from vision.meter import Meter, Reading
 from vision.sources import Frame
 from vision.stream import FrameMeter
 
-__all__ = ["READINGS_MAX", "SLOPES_MAX", "CameraReading", "CameraWorker", "ProcessWorker", "Rate", "is_valid_mi", "make_room",
-           "put_dropping_oldest"]
+__all__ = ["READINGS_MAX", "SLOPES_MAX", "CameraReading", "CameraWorker", "ProcessWorker", "Rate", "is_valid_mi",
+           "make_room", "put_dropping_oldest"]
 
 T = TypeVar("T")
 
