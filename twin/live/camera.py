@@ -207,8 +207,8 @@ class ProcessWorker:
         endpoint: EndpointDetector | None = None,
     ) -> None:
         self.inbox = inbox
-        self.rows = FrameRows(trend, ma_window, endpoint)  # the batch endpoint: events mixed / unmixed
         self.trend = trend
+        self.rows = FrameRows(trend, ma_window, endpoint)  # the batch endpoint: events mixed / unmixed
         self.box = box
         self.view = view
         self.sink = sink
