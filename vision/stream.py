@@ -9,8 +9,8 @@ everywhere (the no-drum policy, :class:`DrumWatch`):
 * a frame in which the drum cannot be found (a webcam warming up: black or washed-out
   frames; a test chart of another size) is an invalid reading flagged ``no_drum:<why>``;
 * the stream is bad input (a ``VisionError``) when no drum has been found within
-  ``NO_DRUM_GRACE_S`` of camera time from its first frame, or when it ends without one, or
-  without a single readable frame.
+  ``NO_DRUM_GRACE_S`` of camera time from its first frame, or when it ends without one
+  (:func:`readings`, a file's frames, also when it ends without a single readable frame).
 
 The frame -> ``Reading`` step itself is ``vision.meter.Meter.measure``; the trend, moving
 average and the frame row (``twin.records.FrameReading``) follow in ``twin.frame_rows``.
@@ -79,15 +79,15 @@ class DrumWatch:
 class FrameMeter:
     """``Frame`` -> ``Reading`` with the no-drum policy: ``measure(frame)`` never raises for a
     frame that cannot be measured (it flags it), only when the policy says the stream is bad
-    input; ``finish()`` at the end of the source. ``meter`` may be swapped between frames (the
-    live run's re-learned classes)."""
+    input; ``finish()`` at the end of the source (the policy's last word). ``meter`` may be
+    swapped between frames (the live run's re-learned classes)."""
 
     def __init__(self, meter: Meter, grace_s: float = NO_DRUM_GRACE_S) -> None:
         self.meter = meter
         self.watch = DrumWatch(grace_s)
         self.frames = 0  # frames handed in
         self.measured = 0  # frames the meter measured (readable, drum found)
-        self._first_bad: str | None = None
+        self.first_bad: str | None = None  # why the first unreadable frame could not be read
 
     def measure(self, frame: Frame) -> Reading:
         """One frame's reading (flagged ``bad_frame:`` / ``no_drum:`` when it cannot be measured)."""
@@ -97,7 +97,7 @@ class FrameMeter:
         if frame.error or image.ndim == 2:
             why = frame.error or (f"{frame.name or 'the frame'} is a grayscale image; the mixing index needs "
                                   "colour frames")
-            self._first_bad = self._first_bad or why
+            self.first_bad = self.first_bad or why
             return self.meter.invalid(f"bad_frame:{why}")
         try:
             reading = self.meter.measure(image)
@@ -108,22 +108,24 @@ class FrameMeter:
         return reading
 
     def finish(self) -> None:
-        """The source ended: a ``VisionError`` when it gave no frame, no readable frame or no drum."""
-        if self.frames == 0:
-            raise VisionError("the source gave no frames")
-        if self.measured == 0 and self.watch.misses == 0:
-            raise VisionError(f"none of the {self.frames} frames could be read (corrupt or not images): "
-                              f"{self._first_bad}")
+        """The source ended: a ``VisionError`` when frames came and none showed a drum."""
         self.watch.finish()
 
 
 def readings(frames: Iterable[Frame], meter: FrameMeter, max_frames: int = 0) -> Iterator[tuple[Frame, Reading]]:
-    """Each frame of ``frames`` with its reading, in order (at most ``max_frames``, 0: all),
-    then ``meter.finish()`` (the policy's word on the frames measured)."""
+    """Each frame of ``frames`` with its reading, in order (at most ``max_frames``, 0: all), then
+    the policy's word on the frames measured: a ``VisionError`` when the source gave no frame, no
+    readable frame (a run's camera that ends so is lost vision instead: the supervisor's safe
+    state) or no drum."""
     for n, frame in enumerate(frames, 1):
         yield frame, meter.measure(frame)
         if max_frames and n >= max_frames:
             break
+    if meter.frames == 0:
+        raise VisionError("the source gave no frames")
+    if meter.measured == 0 and meter.watch.misses == 0:
+        raise VisionError(f"none of the {meter.frames} frames could be read (corrupt or not images): "
+                          f"{meter.first_bad}")
     meter.finish()
 
 

@@ -42,17 +42,20 @@ def test_once_a_drum_was_found_frames_without_one_stay_flagged_rows() -> None:
     fm.finish()  # a drum was seen: the stream was good input
 
 
-def test_unreadable_frames_are_bad_frame_rows_and_finish_says_what_the_source_lacked() -> None:
+def test_unreadable_frames_are_bad_frame_rows_and_the_end_says_what_the_source_lacked() -> None:
     gray = np.zeros((480, 640), np.uint8)
     fm = FrameMeter(Meter())
     bad = [fm.measure(Frame(0, 0.0, np.zeros((0, 0, 3), np.uint8), "a.jpg", "cannot decode image a.jpg")),
            fm.measure(Frame(1, 0.1, gray, "b.png"))]
     assert [r.flags for r in bad] == [("bad_frame:cannot decode image a.jpg",),
                                       ("bad_frame:b.png is a grayscale image; the mixing index needs colour frames",)]
+    fm.finish()  # a run's camera giving only these: lost vision (the supervisor's), not the drum policy's
+    unreadable = [Frame(0, 0.0, np.zeros((0, 0, 3), np.uint8), "a.jpg", "cannot decode image a.jpg"),
+                  Frame(1, 0.1, gray, "b.png")]
     with pytest.raises(VisionError, match=r"none of the 2 frames could be read.*decode image a\.jpg"):
-        fm.finish()
+        list(readings(unreadable, FrameMeter(Meter())))  # a file's frames: nothing to measure is an error
     with pytest.raises(VisionError, match="gave no frames"):
-        FrameMeter(Meter()).finish()
+        list(readings([], FrameMeter(Meter())))
     fm = FrameMeter(Meter())
     fm.measure(Frame(0, 0.0, BLACK, "black.png"))
     with pytest.raises(VisionError, match=r"no drum in any frame \(1 without one; the first, black.png: .*--roi"):
