@@ -65,6 +65,13 @@ def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
     assert n == 5
 
 
+def test_mi_max_frames_and_window(frames_dir):
+    """``--max-frames`` stops early; ``--window`` is the moving average's (``ma_mi``) sample count."""
+    rows = rows_of(cli("mi", frames_dir, "--max-frames", 3, "--window", 2).out)
+    mis = [float(r["mi"]) for r in rows]
+    assert len(rows) == 3 and float(rows[2]["ma_mi"]) == pytest.approx((mis[1] + mis[2]) / 2)
+
+
 @pytest.mark.parametrize("method", ["lacey", "glcm"])
 def test_mi_baseline_methods(frames_dir, method):
     r = cli("mi", frames_dir, "--method", method)
