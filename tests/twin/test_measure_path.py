@@ -26,7 +26,7 @@ from twin.records import FRAME_COLUMNS
 from vision.config import config_to_toml
 from vision.sources import read_image
 
-FPS = 30.0
+FPS = 60.0
 BLACK = 3  # frames without a drum before the real ones (within vision.stream.NO_DRUM_GRACE_S)
 
 RUN_ONLY = {c for c in FRAME_COLUMNS if c.startswith(("twin_", "rpm_"))} | {"mode"}
