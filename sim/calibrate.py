@@ -164,6 +164,73 @@ def reachable_range(rpm: float, *, seed: int = 0, **kwargs) -> tuple[float, floa
     return min(s_lo, s_hi), max(s_lo, s_hi)
 
 
+def _check_calibration(rpm: float, drum: DrumSpec, target_curvature: float | None, tol_deg: float,
+                       max_evals: int) -> float:
+    """``calibrate``'s arguments checked (one-line ``SimError``s); the rpm as a float."""
+    rpm = check_rpm(rpm, drum)
+    if rpm == 0:
+        raise SimError("calibration needs a turning drum (rpm > 0)")
+    if target_curvature is not None and not math.isfinite(float(target_curvature)):
+        raise SimError(f"target curvature must be a finite number (got {target_curvature})")
+    if not (math.isfinite(tol_deg) and tol_deg > 0):
+        raise SimError(f"tolerance must be > 0 deg (got {tol_deg})")
+    if max_evals < 1:
+        raise SimError(f"calibration needs at least 1 search evaluation (got {max_evals})")
+    return rpm
+
+
+def _check_reachable(target_mag: float, lo_b: float, hi_b: float, rpm: float) -> None:
+    """A ``SimError`` naming the reachable range when the target slope (deg) lies outside it."""
+    if not (lo_b - RANGE_TOL_DEG <= target_mag <= hi_b + RANGE_TOL_DEG):
+        raise SimError(
+            f"target slope {target_mag:.1f} deg is outside the twin's reachable range {lo_b:.1f}-{hi_b:.1f} deg "
+            f"at {abs(rpm):g} rpm (sliding friction {FRICTION_RANGE[0]:g}-{FRICTION_RANGE[1]:g}, "
+            f"rolling friction {ROLLING_RANGE[0]:g}-{ROLLING_RANGE[1]:g})"
+        )
+
+
+def _search_path(evaluate: Callable[[float, float], float], history: list[tuple[float, float, float]], path: str,
+                 ends: list[tuple[float, float, float]], slopes: tuple[float, float], high: tuple[float, float],
+                 target_mag: float, tol_deg: float, max_evals: int) -> tuple[float, float, float]:
+    """The point of ``path`` (friction, rolling, slope) nearest the target slope: a bracketing search
+    (regula falsi, kept off the ends) from the range ends, at most ``max_evals`` evaluations."""
+    start = len(history)
+    lo_u, hi_u = 0.0, 1.0
+    sl, sh = slopes
+    own: list[tuple[float, float, float]] = list(ends)
+    while len(history) - start < max_evals:
+        best = min(own, key=lambda h: abs(h[2] - target_mag))
+        if abs(best[2] - target_mag) <= tol_deg or not (sl < target_mag < sh):
+            break
+        w = min(max((target_mag - sl) / (sh - sl), 0.15), 0.85)  # regula falsi, kept off the ends
+        u = lo_u + w * (hi_u - lo_u)
+        s = evaluate(*path_point(u, path, high))
+        own.append(history[-1])
+        if not math.isfinite(s):
+            break
+        if s < target_mag:
+            lo_u, sl = u, s
+        else:
+            hi_u, sh = u, s
+    return min(own, key=lambda h: abs(h[2] - target_mag))
+
+
+def _pick(candidates: list[tuple[str, tuple[float, float, float]]], curv: dict[tuple[float, float], float],
+          target_mag: float, tol_deg: float,
+          target_curvature: float | None) -> tuple[str, tuple[float, float, float]]:
+    """The calibration among the paths' best points: the slope decides first (only points within the
+    tolerance, or the best slope found, compete); with a measured curvature the surface shape then
+    picks among them."""
+    def err(c: tuple[str, tuple[float, float, float]]) -> float:
+        return abs(c[1][2] - target_mag)
+
+    best_err = min(err(c) for c in candidates)
+    fits = [c for c in candidates if err(c) <= max(tol_deg, best_err)]
+    if target_curvature is None:
+        return min(fits, key=err)
+    return min(fits, key=lambda c: abs(curv[(c[1][0], c[1][1])] - float(target_curvature)))
+
+
 def calibrate(
     target_slope_deg: float,
     rpm: float,
@@ -190,15 +257,7 @@ def calibrate(
     target = _check_target(target_slope_deg)
     if mixer is not None:
         drum = mixer.drum
-    rpm = check_rpm(rpm, drum)
-    if rpm == 0:
-        raise SimError("calibration needs a turning drum (rpm > 0)")
-    if target_curvature is not None and not math.isfinite(float(target_curvature)):
-        raise SimError(f"target curvature must be a finite number (got {target_curvature})")
-    if not (math.isfinite(tol_deg) and tol_deg > 0):
-        raise SimError(f"tolerance must be > 0 deg (got {tol_deg})")
-    if max_evals < 1:
-        raise SimError(f"calibration needs at least 1 search evaluation (got {max_evals})")
+    rpm = _check_calibration(rpm, drum, target_curvature, tol_deg, max_evals)
     sign = 1.0 if target > 0 else -1.0  # compare magnitudes; report with the target's sign
     target_mag = abs(target)
     paths = PATHS if target_curvature is not None else PATHS[:1]
@@ -218,45 +277,11 @@ def calibrate(
 
     s_lo, s_hi, high = _range_ends(evaluate, rpm)
     lo_b, hi_b = min(s_lo, s_hi), max(s_lo, s_hi)
-    if not (lo_b - RANGE_TOL_DEG <= target_mag <= hi_b + RANGE_TOL_DEG):
-        raise SimError(
-            f"target slope {target_mag:.1f} deg is outside the twin's reachable range {lo_b:.1f}-{hi_b:.1f} deg "
-            f"at {abs(rpm):g} rpm (sliding friction {FRICTION_RANGE[0]:g}-{FRICTION_RANGE[1]:g}, "
-            f"rolling friction {ROLLING_RANGE[0]:g}-{ROLLING_RANGE[1]:g})"
-        )
+    _check_reachable(target_mag, lo_b, hi_b, rpm)
     ends = [history[0], next(h for h in history if (h[0], h[1]) == high)]
-    candidates: list[tuple[str, tuple[float, float, float]]] = []
-    for path in paths:
-        start = len(history)
-        lo_u, hi_u, sl, sh = 0.0, 1.0, s_lo, s_hi
-        own: list[tuple[float, float, float]] = list(ends)
-        while len(history) - start < max_evals:
-            best = min(own, key=lambda h: abs(h[2] - target_mag))
-            if abs(best[2] - target_mag) <= tol_deg or not (sl < target_mag < sh):
-                break
-            w = min(max((target_mag - sl) / (sh - sl), 0.15), 0.85)  # regula falsi, kept off the ends
-            u = lo_u + w * (hi_u - lo_u)
-            s = evaluate(*path_point(u, path, high))
-            own.append(history[-1])
-            if not math.isfinite(s):
-                break
-            if s < target_mag:
-                lo_u, sl = u, s
-            else:
-                hi_u, sh = u, s
-        candidates.append((path, min(own, key=lambda h: abs(h[2] - target_mag))))
-
-    def err(c: tuple[str, tuple[float, float, float]]) -> float:
-        return abs(c[1][2] - target_mag)
-
-    # the slope decides first: only points within the tolerance (or the best slope found) compete;
-    # with a measured curvature the surface shape then picks among them
-    best_err = min(err(c) for c in candidates)
-    fits = [c for c in candidates if err(c) <= max(tol_deg, best_err)]
-    if target_curvature is None:
-        path, (f, r, s) = min(fits, key=err)
-    else:
-        path, (f, r, s) = min(fits, key=lambda c: abs(curv[(c[1][0], c[1][1])] - float(target_curvature)))
+    candidates = [(path, _search_path(evaluate, history, path, ends, (s_lo, s_hi), high, target_mag, tol_deg,
+                                      max_evals)) for path in paths]
+    path, (f, r, s) = _pick(candidates, curv, target_mag, tol_deg, target_curvature)
     return Calibration(
         friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s),
         residual_deg=float(sign * (s - target_mag)),

@@ -188,7 +188,7 @@ def from_placement(
 ) -> Twin:
     """A twin of ``mixer`` on ``engine`` (``engine_for``) whose particles the caller placed
     (``sim.from_image``: where the camera sees each class): centres ``pos_m`` (n, 2; m, drum frame)
-    at the engines' placement size (``sim.drum._SHRINK``) without overlaps, class indices
+    at the engines' placement size (``sim.placement.SHRINK``) without overlaps, class indices
     ``classes`` (n,), angles ``angle_rad`` (n,; rad); inflated, settled for ``settle_s`` with the
     drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: defaults."""
     import numpy as np

@@ -8,10 +8,11 @@ its fields and their units once, here; everything else is derived from these cla
 * the ``events.jsonl`` lines: ``{"t_s", "wall_s", "kind", **fields}`` of every record whose
   class is ``logged`` (:func:`event_fields`; optional fields that are None are left out);
 * the dashboard's numbers panel (``twin.state.Panel``), which folds the records it sees;
-* the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test).
+* the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test);
+* the run log's descriptors (units, dtype, source of each column and field: ``twin.descriptors``)
 
 Producers (the live workers, the loop, the dashboard) construct these classes and ``publish``
-them (``twin.live.records.EventSink``; no producer names a kind by string, so a misspelt kind
+them (``twin.live.events.EventSink``; no producer names a kind by string, so a misspelt kind
 or field is a mypy error) onto a :class:`Bus`; consumers subscribe: the run log
 (``twin.runlog.RunLog.record``: CSV rows and JSONL lines), the dashboard's state
 (``twin.state.LiveState.record``: plots, numbers panel). The one set of active faults is
@@ -39,10 +40,11 @@ if TYPE_CHECKING:
 log = logging.getLogger("drumtwin.records")
 
 
-def unit(u: str = "", doc: str = "", *, plot: bool = False, default: object = MISSING) -> Any:
+def unit(u: str = "", doc: str = "", *, plot: bool = False, default: object = MISSING, source: str = "") -> Any:
     """A record field with its unit (``""``: none, a count, a name) and a short description;
-    ``plot``: a dashboard plot series (frame readings only)."""
-    meta = {"unit": u, "doc": doc, "plot": plot}
+    ``plot``: a dashboard plot series (frame readings only); ``source``: where the value comes
+    from when not from the record's ``producer`` (the descriptors' ``source``)."""
+    meta = {"unit": u, "doc": doc, "plot": plot, "source": source}
     if default is MISSING:
         return field(metadata=meta)
     return field(default=default, metadata=meta)
@@ -62,6 +64,8 @@ class Record:
     kind: ClassVar[str] = ""
     logged: ClassVar[bool] = True
     doc: ClassVar[str] = ""
+    producer: ClassVar[str] = ""
+    """The producer (a module or person): the descriptors' ``source`` of its fields (unless a field names its own)."""
 
     t_s: float = unit("s", "run time (the demo clock, scaled by --speed)")
 
@@ -89,30 +93,32 @@ class FrameReading(Record):
     kind: ClassVar[str] = "frame"
     logged: ClassVar[bool] = False
     doc: ClassVar[str] = "one processed camera frame (a row of frames.csv)"
+    producer: ClassVar[str] = "twin.live.camera"
 
-    t_s: float = unit("s", "run time of the frame", plot=True)
-    frame: int = unit("", "camera frame index")
-    mi: float = unit("", "mixing index, paper eq. 4 (0..1, NaN when invalid)", plot=True)
-    mi_sigmoid: float = unit("", "paper eq. 3")
-    mi_linear: float = unit("", "paper eq. 1")
-    d_px: float = unit("px", "centroid distance of the two classes")
-    dsigma_px: float = unit("px", "spread difference of the two classes")
-    concentration: float = unit("", "n_1 / (n_1 + n_2)")
-    slope_deg: float = unit("deg", "bed free-surface slope", plot=True)
-    valid: bool = unit("", "the reading counts as vision")
-    trend_mi: float = unit("", "Kalman trend level", plot=True)
-    trend_lo95: float = unit("", "trend 95 % band, low", plot=True)
-    trend_hi95: float = unit("", "trend 95 % band, high", plot=True)
-    trend_rate: float = unit("1/s", "trend rate of change")
-    ma_mi: float = unit("", "the paper's 150-sample moving average", plot=True)
-    twin_mi: float | None = unit("", "twin MI (empty: no twin yet)", plot=True)
-    twin_slope_deg: float | None = unit("deg", "twin slope (empty: no twin yet)", plot=True)
-    rpm_setpoint: float | None = unit("rpm", "board setpoint (empty: link lost)", plot=True)
-    rpm_actual: float | None = unit("rpm", "board actual speed (empty: link lost)", plot=True)
-    mode: str = unit("", "supervisor mode: off | manual | auto")
-    flags: tuple[str, ...] = unit("", "reading flags, ';'-separated")
-    mixed: bool = unit("", "the batch is at its endpoint (control.endpoint)", default=False)
-    mixing_time_s: float | None = unit("s", "mixing time of the endpoint (empty: not mixed)", default=None)
+    t_s: float = unit("s", "run time of the frame", plot=True, source="vision.sources")
+    frame: int = unit("", "camera frame index", source="vision.sources")
+    mi: float = unit("", "mixing index, paper eq. 4 (0..1, NaN when invalid)", plot=True, source="vision.meter")
+    mi_sigmoid: float = unit("", "paper eq. 3", source="vision.meter")
+    mi_linear: float = unit("", "paper eq. 1", source="vision.meter")
+    d_px: float = unit("px", "centroid distance of the two classes", source="vision.meter")
+    dsigma_px: float = unit("px", "spread difference of the two classes", source="vision.meter")
+    concentration: float = unit("", "n_1 / (n_1 + n_2)", source="vision.meter")
+    slope_deg: float = unit("deg", "bed free-surface slope", plot=True, source="vision.meter")
+    valid: bool = unit("", "the reading counts as vision", source="vision.meter")
+    trend_mi: float = unit("", "Kalman trend level", plot=True, source="control.trend")
+    trend_lo95: float = unit("", "trend 95 % band, low", plot=True, source="control.trend")
+    trend_hi95: float = unit("", "trend 95 % band, high", plot=True, source="control.trend")
+    trend_rate: float = unit("1/s", "trend rate of change", source="control.trend")
+    ma_mi: float = unit("", "the paper's 150-sample moving average", plot=True, source="control.trend")
+    twin_mi: float | None = unit("", "twin MI (empty: no twin yet)", plot=True, source="twin.live.twin")
+    twin_slope_deg: float | None = unit("deg", "twin slope (empty: no twin yet)", plot=True, source="twin.live.twin")
+    rpm_setpoint: float | None = unit("rpm", "board setpoint (empty: link lost)", plot=True, source="twin.live.mill")
+    rpm_actual: float | None = unit("rpm", "board actual speed (empty: link lost)", plot=True, source="twin.live.mill")
+    mode: str = unit("", "supervisor mode: off | manual | auto", source="control.supervisor")
+    flags: tuple[str, ...] = unit("", "reading flags, ';'-separated", source="vision.meter")
+    mixed: bool = unit("", "the batch is at its endpoint", default=False, source="control.endpoint")
+    mixing_time_s: float | None = unit("s", "mixing time of the endpoint (empty: not mixed)", default=None,
+                                       source="control.endpoint")
 
     def as_dict(self) -> dict[str, object]:
         """The CSV row (without ``wall_s``, which the run log fills in)."""
@@ -133,6 +139,7 @@ SERIES: tuple[str, ...] = tuple(f.name for f in fields(FrameReading) if f.metada
 class RunStart(Record):
     kind: ClassVar[str] = "start"
     doc: ClassVar[str] = "the workers start: the run's configuration, versions and mixer (also in metadata.json)"
+    producer: ClassVar[str] = "twin.run.loop"
     mode: str = unit("", "supervisor mode at start")
     mill: str = unit("", "mill link URL")
     config: Mapping[str, object] | None = unit("", "the resolved run options (RunConfig.to_metadata: the token never)",
@@ -148,6 +155,7 @@ class RunStart(Record):
 class RunStop(Record):
     kind: ClassVar[str] = "stop"
     doc: ClassVar[str] = "the run ended"
+    producer: ClassVar[str] = "twin.run.loop"
     frames: int = unit("", "frames processed")
     workers_alive: Sequence[str] = unit("", "workers still running after the join")
     failure: str | None = unit("", "why the run had to end (null: it did not)")
@@ -159,6 +167,7 @@ class RunStop(Record):
 class FaultRaised(Record):
     kind: ClassVar[str] = "fault"
     doc: ClassVar[str] = "a named fault raised (once until cleared; a dashboard alarm)"
+    producer: ClassVar[str] = "twin.live"
     fault: str = unit("", "fault key, e.g. mill_link, vision_lost")
     message: str = unit("", "what the operator reads")
     url: str | None = opt("", "mill link URL")
@@ -174,6 +183,7 @@ class FaultRaised(Record):
 class FaultCleared(Record):
     kind: ClassVar[str] = "recovered"
     doc: ClassVar[str] = "an active fault cleared"
+    producer: ClassVar[str] = "twin.live"
     fault: str = unit("", "fault key")
     message: str = unit("", "why it cleared")
     url: str | None = opt("", "mill link URL")
@@ -185,6 +195,7 @@ class FaultCleared(Record):
 class OperatorAction(Record):
     kind: ClassVar[str] = "operator"
     doc: ClassVar[str] = "an operator command taken"
+    producer: ClassVar[str] = "operator"
     action: str = unit("", "start | stop | emergency_stop | manual_rpm | recalibrate | reseed | whatif | ...")
     rpm: float | None = opt("rpm", "requested rpm")
     clamped_rpm: float | None = opt("rpm", "rpm after the limits")
@@ -198,6 +209,7 @@ class OperatorAction(Record):
 class OperatorRejected(Record):
     kind: ClassVar[str] = "operator_rejected"
     doc: ClassVar[str] = "an operator command refused (bad input, busy)"
+    producer: ClassVar[str] = "operator"
     action: str = unit("", "the command")
     error: str = unit("", "why")
     mode: str | None = opt("", "requested mode")
@@ -210,6 +222,7 @@ class OperatorRejected(Record):
 class OperatorClamped(Record):
     kind: ClassVar[str] = "operator_clamped"
     doc: ClassVar[str] = "a dashboard rpm brought inside the limits"
+    producer: ClassVar[str] = "twin.dashboard"
     client: int = unit("", "dashboard client id")
     requested: float = unit("rpm", "what was asked")
     rpm: float = unit("rpm", "what is sent")
@@ -221,6 +234,7 @@ class OperatorClamped(Record):
 class DecisionMade(Record):
     kind: ClassVar[str] = "decision"
     doc: ClassVar[str] = "a supervisor decision and the inputs it was made on"
+    producer: ClassVar[str] = "control.supervisor"
     decision: str = unit("", "mode | manual | move | ramp | hold | safe | recover")
     mode: str = unit("", "supervisor mode")
     action: str = unit("", "none | set_rpm | stop")
@@ -249,6 +263,7 @@ class DecisionMade(Record):
 # -- mill -------------------------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _MillCommandRecord(Record):
+    producer: ClassVar[str] = "twin.live.mill"
     command: str = unit("", "set_rpm | start | stop")
     source: str = unit("", "supervisor | operator | emergency_stop | run_failed")
     rpm: float | None = opt("rpm", "setpoint of a set_rpm")
@@ -279,6 +294,7 @@ class MillRefused(_MillCommandRecord):
 
 @dataclass(frozen=True, kw_only=True)
 class _MillStatusRecord(Record):
+    producer: ClassVar[str] = "twin.live.mill"
     setpoint_rpm: float = unit("rpm", "board setpoint")
     actual_rpm: float = unit("rpm", "board actual speed")
     running: bool = unit("", "motor running")
@@ -312,6 +328,7 @@ class MillSynced(_MillStatusRecord):
 # -- trend ------------------------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _TrendChange(Record):
+    producer: ClassVar[str] = "control.trend"
     level: float = unit("", "trend MI level")
     lo95: float = unit("", "95 % band, low")
     hi95: float = unit("", "95 % band, high")
@@ -336,6 +353,7 @@ class TrendUnsettled(_TrendChange):
 # -- batch endpoint (control.endpoint, docs/endpoint.md) ----------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _EndpointChange(Record):
+    producer: ClassVar[str] = "control.endpoint"
     mixing_time_s: float | None = opt("s", "mixing time (run time since which the trend holds its plateau)")
     plateau_mi: float | None = opt("", "the plateau the trend holds")
     block_sd: float | None = opt("", "moving-block sd of the raw MI")
@@ -362,6 +380,7 @@ class Unmixed(_EndpointChange):
 class TwinLag(Record):
     kind: ClassVar[str] = "twin_lag"
     doc: ClassVar[str] = "the twin fell behind the camera and skipped ahead"
+    producer: ClassVar[str] = "twin.live.twin"
     lag_s: float = unit("s", "run time skipped")
 
 
@@ -370,6 +389,7 @@ class TwinLag(Record):
 class TwinSeeded(Record):
     kind: ClassVar[str] = "twin_seeded"
     doc: ClassVar[str] = "the twin was (re)seeded"
+    producer: ClassVar[str] = "twin.live.twin"
     source: str = unit("", "live frame | recipe case (...)")
     n_particles: int = unit("", "particles in the twin")
 
@@ -379,6 +399,7 @@ class TwinSeeded(Record):
 class CalibrationWaiting(Record):
     kind: ClassVar[str] = "calibration_waiting"
     doc: ClassVar[str] = "the twin waits for a turning, steady drum before it calibrates (not a fault)"
+    producer: ClassVar[str] = "twin.live.twin"
     reason: str = unit("", "why it waits")
     rpm: float = unit("rpm", "the board's actual speed now")
 
@@ -388,6 +409,7 @@ class CalibrationWaiting(Record):
 class CalibrationStarted(Record):
     kind: ClassVar[str] = "calibration_started"
     doc: ClassVar[str] = "a twin calibration started"
+    producer: ClassVar[str] = "twin.live.twin"
     target_slope_deg: float = unit("deg", "camera slope to match")
     rpm: float = unit("rpm", "speed it is calibrated at")
 
@@ -397,6 +419,7 @@ class CalibrationStarted(Record):
 class Calibrated(Record):
     kind: ClassVar[str] = "calibration"
     doc: ClassVar[str] = "a twin calibration applied"
+    producer: ClassVar[str] = "twin.live.twin"
     target_slope_deg: float = unit("deg", "camera slope to match")
     rpm: float = unit("rpm", "speed it was calibrated at")
     friction: float = unit("", "sliding friction coefficient")
@@ -412,6 +435,7 @@ class Calibrated(Record):
 class WhatIfResult(Record):
     kind: ClassVar[str] = "whatif"
     doc: ClassVar[str] = "a what-if study's result"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
     requested_t_s: float = unit("s", "run time it was asked")
     duration_s: float = unit("s", "simulated time per rpm")
@@ -428,6 +452,7 @@ class WhatIfResult(Record):
 class WhatIfError(Record):
     kind: ClassVar[str] = "whatif_error"
     doc: ClassVar[str] = "a what-if study failed"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
     error: str = unit("", "why")
 
@@ -437,6 +462,7 @@ class WhatIfError(Record):
 class WhatIfCancelled(Record):
     kind: ClassVar[str] = "whatif_cancelled"
     doc: ClassVar[str] = "the operator cancelled a study"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
 
 
@@ -445,7 +471,7 @@ class WhatIfCancelled(Record):
 class DashboardEvent(Record):
     """A dashboard security event (the fields each kind may carry)."""
 
-
+    producer: ClassVar[str] = "twin.dashboard"
     client: int | None = opt("", "viser client id")
     address: str | None = opt("", "client address")
     origin: str | None = opt("", "Origin header")

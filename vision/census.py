@@ -244,7 +244,7 @@ def single_particle_crops(mask: np.ndarray, diameter_px: float, max_n: int = 12)
     of a boolean class map (blobs of at most one ``_peaks`` centre and ``CROP_AREA`` of a disc of
     ``diameter_px``; opened by ``CROP_OPEN_D``, holes filled), those whose area is nearest
     the median single blob's first; blobs touching the map's border are left out. For tracing the
-    particles' outline (the caller's: ``sim.mixer.shape_from_crops``)."""
+    particles' outline (``vision.shapes.particle_shape``)."""
     m = np.asarray(mask, dtype=bool)
     if not (math.isfinite(diameter_px) and diameter_px > 2):
         return []

@@ -138,7 +138,7 @@ def test_endpoint_settings_replace_the_one_set_of_defaults_and_refuse_bad_values
 def test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_exit_2(tmp_path):
     from tests.cli import assert_one_line_error, cli
     from twin.config import RunConfig, endpoint_options
-    from twin.loop import endpoint_config
+    from twin.run.settings import endpoint_config
 
     opts = endpoint_options(band=0.03, dwell_s=12.0, block_s=None, block_sd_max=0.0)
     assert opts == {"band": 0.03, "dwell_s": 12.0, "block_sd_max": 0.0}
@@ -158,7 +158,7 @@ def test_an_endpoint_table_in_the_config_is_read_under_the_options_and_a_bad_one
     from tests.cli import assert_one_line_error, cli
     from twin.config import RunConfig, config_endpoint
     from twin.errors import TwinError
-    from twin.loop import endpoint_config
+    from twin.run.settings import endpoint_config
     from vision.config import parse_config
 
     example = (Path(__file__).resolve().parents[2] / "configs" / "example.toml").read_text()

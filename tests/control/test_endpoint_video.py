@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tests.cli import assert_one_line_error, cli
-from twin.loop import trend_config
+from twin.run.settings import trend_config
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "configs" / "pmma-blue-white.toml"

@@ -17,7 +17,7 @@ from control.modbus.reply import READ, WRITE, BadReply, Reply, Request, check_re
 from tests.cli import assert_one_line_error, cli
 from tests.twin.test_mill_worker import Sink
 from twin.live.mill import MillWorker
-from twin.live.records import Latest, MillSnapshot
+from twin.live.snapshots import Latest, MillSnapshot
 
 DELTA = load_profile("delta-ms300")
 UNIT = 5

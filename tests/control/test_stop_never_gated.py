@@ -26,8 +26,9 @@ from control.motor import MotorConfig
 from tests.cli import assert_one_line_error, cli
 from tests.twin.test_mill_worker import Sink
 from tests.waiting import wait_until
+from twin.live.commands import SetRpm, StartMill, StopMill
 from twin.live.mill import MillWorker
-from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
+from twin.live.snapshots import Latest, MillSnapshot
 
 DELTA = load_profile("delta-ms300")
 ABB = load_profile("abb-acs")

@@ -2,7 +2,7 @@
 
 Each frame is measured once (classes learned from the frames, as ``classes suggest``
 does); the sequences are composed from those raw MI values at 30 fps. The two issue
-reproductions run with the live loop's own trend settings (``twin.loop.trend_config``).
+reproductions run with the live loop's own trend settings (``twin.run.settings.trend_config``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from control.trend import MITrend, TrendEstimate
 from control.trendbench import RealFrameMI, real_sequences, run_trend_bench
 from tests.learned import memoised_learning
 from twin.cli.control_cmds import real_frame_mi
-from twin.loop import trend_config
+from twin.run.settings import trend_config
 
 FPS = 30.0
 

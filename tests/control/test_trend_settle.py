@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from control.supervisor import Action, Mode, Supervisor, SupervisorConfig, SupervisorInputs
+from control.decision import Action, Mode, SupervisorInputs
+from control.supervisor import Supervisor
 from control.trend import MITrend, TrendEstimate
+from tests.control.supervisor_values import worked_config
 
-CFG = SupervisorConfig(detect_dwell_s=5.0, min_change_interval_s=30.0, prediction_wait_s=0.0,
+CFG = worked_config(detect_dwell_s=5.0, min_change_interval_s=30.0, prediction_wait_s=0.0,
                        max_rate_rpm_per_s=100.0)
 
 
@@ -49,7 +51,7 @@ def test_auto_neither_asks_nor_moves_while_the_trend_is_unsettled():
 
 
 def test_auto_waits_when_the_trend_unsettles_after_detection():
-    cfg = SupervisorConfig(detect_dwell_s=5.0, min_change_interval_s=30.0, prediction_wait_s=10.0)
+    cfg = worked_config(detect_dwell_s=5.0, min_change_interval_s=30.0, prediction_wait_s=10.0)
     sup = Supervisor(cfg, mode=Mode.AUTO)
     _, requests = drive(sup, 0.0, 5.5, level=0.2, settled=True)
     assert sup.detector.segregated and len(requests) == 1

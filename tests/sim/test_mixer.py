@@ -16,7 +16,6 @@ from sim.mixer import (
     Baffles,
     Shape,
     disk_classes,
-    is_simple_polygon,
     mixer_to_toml,
     paper_mixer,
     parse_mixer,
@@ -25,6 +24,7 @@ from sim.mixer import (
     shape_area_m2,
 )
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, slice_2d
+from vision.shapes import is_simple_polygon
 
 PMMA = """
 [drum]
@@ -178,6 +178,12 @@ BAD = {
     "camera class missing": (PMMA, "no \\[\\[particles\\]\\] table for the camera's class 'red'"),
     "polygon with two sides": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "polygon"\nsides = 2'),
                                "sides"),
+    # below 0.1 mm (issue 42: particles of 1e-9 mm passed; by share their area underflowed to a division by 0)
+    "particle of a powder": (PMMA.replace("diameter_mm = 10", "diameter_mm = 1e-9", 1), r"diameter_mm .*\[0.1,"),
+    "particle area underflows": (PMMA.replace("diameter_mm = 10", "diameter_mm = 1e-300", 1), r"\[0.1,"),
+    "pellet of no width": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "pellet"\nwidth_mm = 0.01'),
+                           r"width_mm .*\[0.1,"),
+    "wafer-thin particle": (PMMA.replace("thickness_mm = 4", "thickness_mm = 0.05"), r"thickness_mm .*\[0.1,"),
 }
 
 

@@ -42,8 +42,8 @@ from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origi
 from twin.dashboard.ratebench import check_bench_args
 from twin.dashboard.scene import ring_segments
 from twin.errors import TwinError
-from twin.loop import supervisor_config
 from twin.records import FrameReading, MillState, ModeSet, event_fields
+from twin.run.settings import supervisor_config
 from twin.state import LiveState, Panel, forward_fill
 
 # viser warns when the GUI it builds for a connection that the tests close or refuse
@@ -93,6 +93,14 @@ class RecordingControls:
 
     def run_whatif(self, rpms, duration_s) -> None:
         self._rec("run_whatif", tuple(rpms), duration_s)
+
+    def cancel_whatif(self) -> bool:
+        self._rec("cancel_whatif")
+        return False
+
+    def relearn_classes(self) -> str:
+        self._rec("relearn_classes")
+        return "re-learning the classes from the live bed ..."
 
 
 class Feeder:
@@ -183,10 +191,10 @@ def test_dashboard_in_chromium(page, tmp_path: Path) -> None:
             wait_until(lambda: plot_pixels(page)["Mixing index"] != mi_plot, 10, "the MI plot to redraw")
 
             assert not slider_enabled(page)  # AUTO: the operator rpm is inactive
-            lo, hi = Supervisor(sup).config.rpm_limits  # the slider shows what the supervisor enforces
+            lo, hi = Supervisor(sup).config.limits.rpm_range  # the slider shows what the supervisor enforces
             assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(hi, abs=1e-9)
             assert float(slider(page).get_attribute("aria-valuemin")) == pytest.approx(lo, abs=1e-9)
-            assert Supervisor(sup).config.clamp(1000.0) == hi  # the supervisor's enforced maximum
+            assert Supervisor(sup).config.limits.clamp(1000.0) == hi  # the supervisor's enforced maximum
             choose_mode(page, "MANUAL")
             wait_until(lambda: ("manual",) in controls.args_of("set_mode"), 10, "set_mode('manual')")
             wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable in MANUAL")

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,9 @@ from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from tests.waiting import wait_until
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
-from twin.loop import Seams
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames, read_metadata
 from vision.synthetic import drum_frame
 
@@ -60,7 +61,8 @@ def _predict(jobs):
 # at most 15 rpm (the plant stays cheap to simulate).
 QUICK_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 20.0,
-                "min_change_interval_s": 60.0, "max_rpm": 15.0},
+                "min_change_interval_s": 60.0},
+    limits={"max_rpm": 15.0},
     calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
     whatif_study=_predict,
 )
@@ -101,7 +103,7 @@ def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     for mode, seams, duration, hook in runs:
         cfg = RunConfig(dashboard=False, duration_s=duration, speed=SPEED, case="C", seed=0, mode=mode,
                         log_dir=base / mode).resolved()
-        run_live(cfg, progress=False, on_started=hook, seams=seams)
+        run_live(cfg, replace(seams, on_started=hook))
     return {"auto": base / "auto", "off": base / "off"}
 
 
@@ -178,7 +180,7 @@ def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mo
     video = _video(tmp_path / "v.avi")
     cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=3.0, mode=mode,
                     log_dir=tmp_path / "run").resolved()
-    run_live(cfg, progress=False)
+    run_live(cfg)
     left = [t.name for t in threading.enumerate() if t.name.startswith(("drumtwin-", "mill-heartbeat"))]
     assert left == []  # the root joined every worker; the mill client has no thread of its own
     m = emu.motor
@@ -331,7 +333,7 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
         _wait(lambda: mill().connected, 20, "the link to come back")
         time.sleep(1.0)
         report["motor_after_reconnect"] = plant.emulator.motor
-        loop.start_mill()  # the operator
+        loop.controls.start_mill()  # the operator
         _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
         _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
         t_pause = loop.now_s()
@@ -453,7 +455,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
 
     def runner() -> None:
         try:
-            run_live(cfg, progress=False, on_started=on_started)
+            run_live(cfg, Seams(on_started=on_started))
         finally:
             done.set()
 
@@ -473,12 +475,12 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         choose_mode(page, "MANUAL")
         wait_until(lambda: loop.mode_name == "manual", 10, "MANUAL mode in the loop")
         wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable")
-        enforced = loop.supervisor.supervisor.config.rpm_limits  # the run's supervisor, as the loop built it
+        enforced = loop.supervisor.supervisor.config.limits.rpm_range  # the run's supervisor, as the loop built it
         assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(enforced[1], abs=1e-9)
         drag_slider_to(page, 0.2)
         wait_until(lambda: abs(slider_value(page) - 5.0) > 5, 10, "the slider to move")
         wanted = slider_value(page)
-        clamp = loop.supervisor.supervisor.config.clamp
+        clamp = loop.supervisor.supervisor.config.limits.clamp
         wait_until(
             lambda: abs(plant.emulator.motor.setpoint_rpm - clamp(wanted)) < 0.05,
             30,

@@ -23,8 +23,9 @@ from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from tests.twin.test_live import QUICK_AUTO, SPEED, _free_port, _video, _wait
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events
 
 # the whole-loop tests share one worker, group "live" (see test_live.py: two loops at once on two cores
@@ -96,7 +97,7 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
         delta.set_motor(setpoint_rpm=10.0, actual_rpm=10.0, running=True)
         seen["t_s"], seen["reads"] = loop.now_s(), delta.counters["reads"]
 
-    run_live(cfg, progress=False, on_started=another_host)
+    run_live(cfg, Seams(on_started=another_host))
     assert delta.writes == []  # OFF: not one write on the bus
     m = delta.motor
     assert not m.running and m.fault == "CE1" and delta.counters["comm_loss_trips"] == 1
@@ -226,8 +227,9 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
     the re-read is dropped, the first exchange after the link is back is a read."""
     from control.modbus.link import ModbusMill
     from tests.twin.test_mill_worker import Sink
+    from twin.live.commands import SetRpm, StartMill
     from twin.live.mill import MillWorker
-    from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill
+    from twin.live.snapshots import Latest, MillSnapshot
 
     emu = DriveEmulator(DELTA, unit=1, comm_loss_s=1.0)
     emu.open_pty()

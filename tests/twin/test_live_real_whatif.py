@@ -8,20 +8,22 @@ from __future__ import annotations
 import math
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
-from twin.loop import Seams
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events
 
 pytestmark = pytest.mark.xdist_group("live")  # (see test_live.py)
 
 REAL_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
-                "min_change_interval_s": 60.0, "max_rpm": 15.0, "horizon_s": 6.0, "n_candidates": 2},
+                "min_change_interval_s": 60.0, "horizon_s": 6.0, "n_candidates": 2},
+    limits={"max_rpm": 15.0},
     calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
 )
 
@@ -45,7 +47,7 @@ def test_auto_decides_on_the_dem_twins_predictions(tmp_path: Path) -> None:
 
     cfg = RunConfig(dashboard=False, duration_s=600.0, speed=4.0, case="C", seed=0, mode="auto", log_dir=log,
                     ).resolved()
-    run_live(cfg, progress=False, on_started=until_a_decision_quotes_the_twin, seams=REAL_AUTO)
+    run_live(cfg, replace(REAL_AUTO, on_started=until_a_decision_quotes_the_twin))
     events = read_events(log)
     studies = [e for e in events if e["kind"] == "whatif" and e["reason"] == "AUTO"]
     assert studies, sorted({e["kind"] for e in events})

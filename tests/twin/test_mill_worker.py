@@ -6,8 +6,9 @@ import pytest
 
 from control.errors import MillRefused
 from control.protocol import MillStatus
+from twin.live.commands import SetRpm, StartMill, StopMill
 from twin.live.mill import MillWorker
-from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
+from twin.live.snapshots import Latest, MillSnapshot
 from twin.records import FaultCleared, FaultRaised, FrameReading, Record, UntypedEvent, event_fields, kind_of
 from twin.state import LiveState
 
@@ -406,13 +407,13 @@ def test_a_refused_command_puts_the_supervisor_in_its_safe_state_over_tcp() -> N
     """Every refused command ends in the safe state: MANUAL asks for 40 rpm, the board's drive
     tops out at 20 rpm and answers NAK,RANGE; the supervisor used to resync and try again,
     never safe. Now: a ``mill_refused`` event and a safe decision naming the refusal."""
+    from control.decision import Mode
     from control.device import DeviceConfig
     from control.driver import MillClient
     from control.emulator import MillEmulator
     from control.motor import MotorConfig
-    from control.supervisor import Mode
     from tests.twin.test_workers import Boxes, sup_worker
-    from twin.live.records import SetManualRpm
+    from twin.live.commands import SetManualRpm
 
     emu = MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=20.0)), seed=4)
     port = emu.open_tcp(0)
@@ -445,7 +446,7 @@ def test_a_new_board_fault_is_logged_even_while_another_one_is_active() -> None:
     """The board's fault changed from WDOG to DRIVE: the ``mill_fault`` fault was already
     raised (the run's sink logs a fault once until cleared), so the DRIVE fault left no
     event. Each new fault code is an event."""
-    from twin.live.records import RunEvents
+    from twin.live.events import RunEvents
     from twin.state import LiveState
 
     class Log:

@@ -17,7 +17,7 @@ import pytest
 from control.trend import MITrend
 from tests.twin.test_workers import Boxes, _reading
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.live.records import RunEvents
+from twin.live.events import RunEvents
 from twin.records import (
     FRAME_COLUMNS,
     KINDS,
@@ -62,7 +62,7 @@ def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
 
 
 SINK_METHODS = {"publish", "metadata"}
-"""What ``twin.live.records.EventSink`` offers: typed records and the run's metadata."""
+"""What ``twin.live.events.EventSink`` offers: typed records and the run's metadata."""
 
 
 def _calls(tree: ast.Module) -> list[ast.Call]:
@@ -78,7 +78,7 @@ def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> No
     dashboard, ``RunEvents.fault``); a new one fails here."""
     import inspect
 
-    from twin.live.records import EventSink
+    from twin.live.events import EventSink
 
     record_classes = {cls.__name__ for cls in KINDS.values()} | {"MillRefusedRecord", "MillMismatchRecord", "change"}
     bad, built = [], 0
@@ -162,7 +162,8 @@ def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Pat
     from twin.report import build_report, load_run
 
     run = load_run(PREVIOUS)
-    assert len(run.frames) == 120 and {e["kind"] for e in run.events} >= {"decision", "mill_command"}
+    assert run.n_frames == 120 and set(run.events.counts) >= {"decision", "mill_command"}
+    assert run.notes == []  # no uid to check (a log of an earlier release): nothing skipped, nothing to say
     out = build_report([PREVIOUS], tmp_path / "report.html")
     html = out.read_text(encoding="utf-8")
     assert "runlog-previous" in html and "decision" in html
@@ -287,12 +288,12 @@ def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: P
 
 
 def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and_the_mill() -> None:
-    """The demo's start (``twin.loop.DemoStart``): nothing is started before the mill worker's
+    """The demo's start (``twin.run.main.DemoStart``): nothing is started before the mill worker's
     first connected ``MillState`` record; then the front panel, then the operator's Start."""
     import threading
 
-    from twin.loop import DemoStart
     from twin.records import Bus, MillState
+    from twin.run.main import DemoStart
 
     calls: list[str] = []
 
@@ -300,11 +301,13 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
         def start_drive(self) -> None:
             calls.append("drive")
 
-    class Loop:
-        stop_event = threading.Event()
-
+    class Controls:
         def start_mill(self) -> None:
             calls.append("start")
+
+    class Loop:
+        stop_event = threading.Event()
+        controls = Controls()
 
     bus = Bus()
     plan = DemoStart(Plant(), connect_timeout_s=30.0)  # type: ignore[arg-type]
@@ -320,14 +323,14 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
 
 
 def test_run_config_has_no_untyped_bag() -> None:
-    """Test seams are the typed ``twin.loop.Seams``, not a ``RunConfig.extra`` dict."""
+    """Test seams are the typed ``twin.run.settings.Seams``, not a ``RunConfig.extra`` dict."""
     from twin.config import RunConfig
-    from twin.loop import Seams
+    from twin.run.settings import Seams
 
     assert "extra" not in {f.name for f in fields(RunConfig)}
     assert {f.name for f in fields(Seams)} >= {"supervisor", "calibrate", "whatif_study", "mismatch", "on_started"}
     with pytest.raises(TypeError):  # a misspelt supervisor setting is refused, not ignored
-        from twin.loop import supervisor_config
+        from twin.run.settings import supervisor_config
 
         supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
 
@@ -363,8 +366,8 @@ def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
     a decision's JSON form is ``control.supervisor.Decision.as_dict`` (pinned by control's tests).
     The record declares exactly its keys (``kind`` as ``decision``) and its JSONL line is that
     dict, so a key added in control fails here instead of crashing the supervisor worker."""
+    from control.decision import Action, Decision, Mode, SupervisorInputs
     from control.objective import RpmPrediction
-    from control.supervisor import Action, Decision, Mode, SupervisorInputs
 
     full = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0,
                     inputs=SupervisorInputs(mill_connected=True), predictions={5.0: 0.3},
@@ -392,3 +395,47 @@ def test_the_dashboard_plots_read_exactly_the_plot_series_of_the_frame_record() 
     assert read == set(SERIES)
     state = LiveState()
     assert set(state.snapshot().history) == set(SERIES)
+
+
+def test_the_descriptors_are_derived_from_the_record_declarations() -> None:
+    """Issue 41 item 6: each logged kind's descriptor lists exactly its fields (then the run log's
+    wall_s and run_uid) with the unit declared beside the field and a source (the field's own, else
+    its class's producer): a field added, renamed or given another unit is described without a
+    second table. A record class declared here is described the same way."""
+    from collections.abc import Mapping
+    from dataclasses import dataclass
+
+    from twin.descriptors import LOG_KEYS, data_keys, descriptors
+    from twin.records import Record, opt, unit
+
+    desc = descriptors(FRAME_COLUMNS)
+    assert set(desc) == {"frame"} | {k for k, c in KINDS.items() if c.logged and c is not FrameReading}
+    for kind, cls in KINDS.items():
+        if not cls.logged:
+            continue
+        keys = desc[kind]["data_keys"]
+        assert list(keys) == [f.name for f in fields(cls)] + list(LOG_KEYS), kind
+        for f in fields(cls):
+            assert keys[f.name]["units"] == f.metadata["unit"], (kind, f.name)
+            assert keys[f.name]["source"] == (f.metadata.get("source") or cls.producer) != "", (kind, f.name)
+            assert keys[f.name].get("optional", False) == bool(f.metadata.get("optional")), (kind, f.name)
+
+    @dataclass(frozen=True, kw_only=True)
+    class Probe(Record):
+        producer = "a test"
+        depth_mm: float = unit("mm", "how deep")
+        counts: Mapping[str, int] | None = opt("", "by name")
+        names: tuple[str, ...] = unit("", "some names", source="elsewhere")
+
+    got = data_keys(Probe)
+    assert got["depth_mm"] == {"dtype": "number", "shape": [], "units": "mm", "source": "a test", "doc": "how deep"}
+    assert got["counts"]["dtype"] == "object" and got["counts"]["optional"] is True
+    assert got["names"]["dtype"] == "array" and got["names"]["source"] == "elsewhere"
+    assert data_keys(Probe, csv=True)["names"]["dtype"] == "string"  # one ';'-joined cell in a CSV
+
+    @dataclass(frozen=True, kw_only=True)
+    class Odd(Record):
+        blob: bytes = unit("", "no JSON type")
+
+    with pytest.raises(TypeError, match="blob"):
+        data_keys(Odd)

@@ -23,9 +23,10 @@ import pytest
 
 from tests.cli import cli
 from tests.twin.test_report import data_pixels, open_report
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.report.build import SECTIONS
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames
 
 pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]
@@ -35,11 +36,11 @@ MIXED_RPM = 45.0  # the demo plant's bed stays mixed at 45 rpm (MI ~0.95); at 5 
 
 OFF_SCRIPT = """
 import sys
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
+from twin.run.main import run_live
 cfg = RunConfig(dashboard=False, duration_s=600.0, speed={speed}, case="C", seed=0, mode="off",
                 start_rpm={rpm}, log_dir=sys.argv[1]).resolved()
-run_live(cfg, progress=False)
+run_live(cfg)
 """
 
 
@@ -67,7 +68,7 @@ def auto_run(tmp_path_factory) -> Path:
 
     cfg = RunConfig(dashboard=False, duration_s=40.0, speed=SPEED, case="C", seed=0, mode="auto",
                     start_rpm=MIXED_RPM, stop_at_endpoint=True, log_dir=d).resolved()
-    run_live(cfg, progress=False, on_started=end_after_the_stop)
+    run_live(cfg, Seams(on_started=end_after_the_stop))
     return d
 
 

@@ -19,6 +19,7 @@ from control.errors import ControlError, check_number
 from control.modbus.link import ModbusMill, is_modbus_url, parse_modbus_url
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json, say
+from twin.config import load_checked_config
 
 if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
     from control.limits import Limits
@@ -53,25 +54,19 @@ def _mill(
     limits = None
     if config is not None:  # a given config is read (and refused when bad) whatever the subcommand
         from control.modbus.link import config_mill_url
-        from vision.config import load_config
 
-        mc = load_config(config)
-        url = config_mill_url(url, mc.drive_table, f"config {mc.source}")
-        limits = mill_limits(config)
+        checked = load_checked_config(config)
+        url = config_mill_url(url, checked.meter.drive_table, f"config {checked.meter.source}")
+        limits = mill_limits(checked.mixer.drum.critical_rpm)
     ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries, "limits": limits}
 
 
-def mill_limits(config: Path | None) -> Limits:
-    """The limits ``drumtwin run --config CONFIG`` enforces: the supervisor's rpm range
-    with the critical speed of the config's drum (the demo's drum without a config or
-    without a ``[drum]``). A bad config is a one-line error."""
-    from twin.cli.sim_cmds import load_mixer
-    from twin.loop import supervisor_config
+def mill_limits(critical_rpm: float | None) -> Limits:
+    """The limits ``drumtwin run --config CONFIG`` enforces: the supervisor's rpm range with the
+    critical speed of the config's drum (``critical_rpm``; None: the demo's drum)."""
+    from twin.run.settings import supervisor_config
 
-    if config is None:
-        return supervisor_config().limits
-    mixer, _ = load_mixer(config)
-    return supervisor_config(None, mixer.drum.critical_rpm).limits
+    return supervisor_config().limits if critical_rpm is None else supervisor_config(None, critical_rpm).limits
 
 
 def _client(ctx: typer.Context) -> MillClient | ModbusMill:
@@ -240,7 +235,6 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
     import cv2
 
     from control.trendbench import RealFrameMI
-    from vision.config import load_config
     from vision.errors import VisionError
     from vision.sources import open_source
     from vision.suggest import suggest_classes
@@ -251,7 +245,7 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
         raise ControlError(f"cannot read the real frames in {images}: {exc} (use --frames DIR)") from None
     if len(frames) < 3:
         raise ControlError(f"the real trend bench needs at least 3 frames in {images}, found {len(frames)}")
-    cfg = load_config(config) if config is not None else suggest_classes(list(frames.values()))
+    cfg = load_checked_config(config).meter if config is not None else suggest_classes(list(frames.values()))
     # the frames are as shot and their blends are no change of light (but mixed colours no gain maps back):
     # the trend bench measures them in the set-up's light, without tracking it
     meter = replace(cfg, light_reference=None, light_reference_classes=None).make_meter()
@@ -309,6 +303,8 @@ def bench_trend(
     check_number("--fps", fps, above=0.0, at_most=10000.0)
     check_number("--noise", noise_sd, at_least=0.0, at_most=1.0)
     check_number("--ripple", ripple, at_least=0.0, at_most=1.0)
+    if config is not None and real_seeds:  # refused now, not after the synthetic sequences
+        load_checked_config(config)
     if source == "synthetic":
         make: SequenceSource = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
     elif source in TREND_SOURCES:

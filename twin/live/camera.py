@@ -17,7 +17,10 @@ import numpy as np
 from control.endpoint import EndpointDetector
 from control.trend import MITrend, MovingAverage, TrendEstimate
 from twin.clock import Cadence
-from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView, SwapClasses
+from twin.live.commands import SwapClasses
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
+from twin.live.snapshots import CameraInfo, FrameInfo, Latest, RunView
 from twin.records import (
     CameraRate,
     FaultCleared,
@@ -131,8 +134,10 @@ class CameraWorker:
         overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
         commands: queue.SimpleQueue[SwapClasses] | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.frames = frames
+        self.faults = faults
         self.meter = meter
         self.commands = commands  # SwapClasses: a new meter from the next frame on
         self.out = out
@@ -158,6 +163,7 @@ class CameraWorker:
         found = False  # a drum was found in a frame of this run
         missed: VisionError | None = None
         for frame in self.frames:
+            at(self.faults.camera_frame, float(frame.t_s))
             if stop.is_set():
                 return
             wall = self._monotonic()  # when the frame arrived
@@ -217,8 +223,10 @@ class ProcessWorker:
         ma_window: int = 150,
         camera_fps: Callable[[], float] = lambda: 0.0,
         endpoint: EndpointDetector | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.inbox = inbox
+        self.faults = faults
         self.trend = trend
         self.ma = MovingAverage(ma_window)
         self.box = box
@@ -236,6 +244,7 @@ class ProcessWorker:
                 item = self.inbox.get(timeout=0.1)
             except queue.Empty:
                 continue
+            at(self.faults.process_reading, item.t_s)
             self.process(item)
 
     def process(self, item: CameraReading) -> FrameReading | None:
