@@ -1,8 +1,9 @@
 """The operator's words on a run (tags, a note, the golden mark), kept in the run folder.
 
 The run folder is the truth and the catalogue only its index, so what an operator says of a
-run is appended to the folder's ``annotations.jsonl`` (one JSON object a line, never
-rewritten) before the catalogue is updated: ``runs rebuild`` recovers it. A rig has one
+run is appended to the folder's ``annotations.jsonl`` before the catalogue is updated: ``runs
+rebuild`` recovers it. Its lines are run-log lines (``kind`` "annotation", the run's uid), read
+back by ``twin.runread`` like the events. A rig has one
 golden batch: the run marked golden most recently.
 """
 
@@ -14,7 +15,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from twin.catalogue.summary import ANNOTATIONS_FILE, iter_json_objects
+from twin import runread
+from twin.catalogue.summary import ANNOTATIONS_FILE
 from twin.errors import TwinError
 
 
@@ -24,7 +26,9 @@ def append(directory: Path | str, **entry: Any) -> dict[str, Any]:
     d = Path(directory)
     if not d.is_dir():
         raise TwinError(f"run folder {d} is gone: its annotation cannot be kept")
-    line = {"wall_s": time.time(), **entry}
+    run = runread.open_run(d)
+    line = {"t_s": None, "wall_s": time.time(), "kind": "annotation", **entry,
+            **({runread.UID_KEY: run.uid} if run.uid else {})}
     text = json.dumps(line, allow_nan=False) + "\n"
     with open(d / ANNOTATIONS_FILE, "a", encoding="utf-8") as fh:
         fh.write(text)
@@ -40,7 +44,8 @@ def read(directory: Path | str) -> dict[str, Any]:
     tags: dict[str, str] = {}
     note = ""
     golden_s: float | None = None
-    for a in iter_json_objects(Path(directory) / ANNOTATIONS_FILE):
+    run = runread.open_run(directory)
+    for a in runread.events(run, Path(directory) / ANNOTATIONS_FILE):
         tag = a.get("tag")
         if isinstance(tag, dict):
             for k, v in tag.items():

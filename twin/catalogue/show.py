@@ -6,7 +6,8 @@ import datetime as dt
 from pathlib import Path
 from typing import Any
 
-from twin.catalogue.summary import EVENTS_FILE, RunSummary, iter_json_objects
+from twin import runread
+from twin.catalogue.summary import EVENTS_FILE, RunSummary
 
 KEY_KINDS = ("start", "stop", "mixed", "unmixed", "fault", "recovered", "decision", "calibration",
              "operator", "mill_refused", "slower_than_golden")
@@ -43,7 +44,7 @@ def key_events(run_dir: str | Path, limit: int = MAX_EVENTS) -> list[dict[str, A
     counted in a last line)."""
     out: list[dict[str, Any]] = []
     more = 0
-    for e in iter_json_objects(Path(run_dir) / EVENTS_FILE):
+    for e in runread.events(runread.open_run(run_dir)):
         if e.get("kind") not in KEY_KINDS:
             continue
         if len(out) >= limit:

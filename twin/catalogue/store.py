@@ -58,6 +58,14 @@ def resolve_url(url: str | None, runs_root: Path | str = DEFAULT_RUNS_ROOT) -> s
     return url
 
 
+def hide_password(url: str) -> str:
+    """A database URL with its password masked (for logs and metadata)."""
+    try:
+        return sa.make_url(url).render_as_string(hide_password=True)
+    except Exception:  # not a URL at all: nothing to hide that we could find
+        return url
+
+
 def _engine_url(url: str) -> tuple[sa.URL, Path | None]:
     """An SQLAlchemy URL of a path or a database URL, and the SQLite file (None: a server)."""
     if "://" not in url:
@@ -280,13 +288,13 @@ class Catalogue:
         return [RunSummary(**dict(row), tags=tags.get(row["id"], {})) for row in rows]
 
     def get(self, run: str) -> RunSummary:
-        """One run by its id, a unique prefix of it, or its folder's path."""
+        """One run by its id, a unique prefix of it, its folder's path or its folder's name."""
         r = schema.runs.c
-        p = str(Path(run).resolve()) if os.sep in run or Path(run).is_dir() else None
+        which = [r.id == run, r.id.startswith(run, autoescape=True), r.path.endswith(os.sep + run, autoescape=True)]
+        if os.sep in run or Path(run).is_dir():
+            which.append(r.path == str(Path(run).resolve()))
         with self._begin() as conn:
-            rows = conn.execute(sa.select(r.id).where(
-                sa.or_(r.id == run, r.id.startswith(run, autoescape=True), r.path == p) if p else
-                sa.or_(r.id == run, r.id.startswith(run, autoescape=True))).limit(3)).scalars().all()
+            rows = conn.execute(sa.select(r.id).where(sa.or_(*which)).limit(3)).scalars().all()
         exact = [x for x in rows if x == run]
         if exact or len(rows) == 1:
             return self._one((exact or rows)[0])

@@ -18,14 +18,14 @@ import json
 import math
 import os
 import socket
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-FRAMES_FILE = "frames.csv"
-EVENTS_FILE = "events.jsonl"
-METADATA_FILE = "metadata.json"
+from twin import runread
+
+FRAMES_FILE, EVENTS_FILE, METADATA_FILE = runread.FRAMES_FILE, runread.EVENTS_FILE, runread.METADATA_FILE
 ANNOTATIONS_FILE = "annotations.jsonl"
 RUN_FILES = (FRAMES_FILE, EVENTS_FILE, METADATA_FILE)
 
@@ -80,7 +80,7 @@ class RunSummary:
         return {**self.row(), "tags": dict(self.tags)}
 
 
-# -- tolerant readers ---------------------------------------------------------------------
+# -- readers -------------------------------------------------------------------------------------
 def _number(value: Any) -> float | None:
     """A finite float of a JSON or CSV value, else None."""
     try:
@@ -90,34 +90,8 @@ def _number(value: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def iter_json_objects(path: Path) -> Iterator[dict[str, Any]]:
-    """The JSON objects of a JSON-lines file, one line at a time; other lines passed over."""
-    try:
-        fh = open(path, encoding="utf-8", errors="replace")
-    except OSError:
-        return
-    with fh:
-        for line in fh:
-            if not line.endswith("\n"):
-                break  # being written, or cut by a crash
-            try:
-                obj = json.loads(line)
-            except (ValueError, RecursionError):
-                continue
-            if isinstance(obj, dict):
-                yield obj
-
-
 def _mapping(value: Any) -> Mapping[str, Any]:
     return value if isinstance(value, Mapping) else {}
-
-
-def _read_object(path: Path) -> dict[str, Any]:
-    try:
-        obj = json.loads(path.read_text(encoding="utf-8", errors="replace"))
-    except (OSError, ValueError, RecursionError):
-        return {}
-    return obj if isinstance(obj, dict) else {}
 
 
 def _last_row(path: Path) -> tuple[dict[str, str], int | None]:
@@ -189,10 +163,10 @@ def rig_hash(mixer: object, classes: object) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-def run_id(directory: Path, metadata: Mapping[str, Any]) -> str:
-    """The run's uid (written by the run); a folder of an older release gets one from its path."""
-    uid = metadata.get("run_uid") or metadata.get("uid")
-    if isinstance(uid, str) and 0 < len(uid) <= 64:
+def run_id(directory: Path, uid: str | None) -> str:
+    """The run's uid (``twin.runread`` decides it from the run's files); a folder of an older
+    release, without one, gets one from its path."""
+    if uid is not None and 0 < len(uid) <= 64:
         return uid
     return "path-" + hashlib.sha1(str(directory.resolve()).encode()).hexdigest()[:16]
 
@@ -238,7 +212,6 @@ class _Events:
         kind = e.get("kind")
         if kind == "start":
             self.mode = str(e.get("mode", "")) or self.mode
-            self.uid = e.get("run_uid") if isinstance(e.get("run_uid"), str) else self.uid
         elif kind == "stop":
             self.stop = dict(e)
         elif kind == "mixed":
@@ -259,9 +232,10 @@ def summarise(directory: Path | str) -> RunSummary | None:
     d = Path(directory).resolve()
     if not is_run_dir(d):
         return None
-    meta = _read_object(d / METADATA_FILE)
-    ev = _Events()
-    for e in iter_json_objects(d / EVENTS_FILE):
+    run = runread.open_run(d)
+    meta = run.metadata
+    ev = _Events(uid=run.uid)
+    for e in runread.events(run):
         ev.fold(e)
     last, count = _last_row(d / FRAMES_FILE)
     mixed: Mapping[str, Any] = ev.mixed or {}
@@ -275,7 +249,7 @@ def summarise(directory: Path | str) -> RunSummary | None:
         rpms.append(row_rpm)  # the last frame is newer than the last command: its setpoint is final
     mtime = newest_mtime(d)
     summary = RunSummary(
-        id=ev.uid or run_id(d, meta),
+        id=run_id(d, ev.uid),
         path=str(d),
         rig=rig,
         rig_hash=rhash,

@@ -78,7 +78,7 @@ def summary_line(s: object) -> str:
         "mixed" if s.mixed else "not mixed")
     tags = " ".join(f"{k}={v}" for k, v in sorted(s.tags.items()))
     star = "*" if s.golden else " "
-    return (f"{star}{s.id[:16]:<16}  {_when(s.started_s)}  {s.rig[:16]:<16} {s.mode:<6} {rpm:>10} rpm  "
+    return (f"{star}{s.id[:8]:<8}  {_when(s.started_s)}  {s.rig[:16]:<16} {s.mode:<6} {rpm:>10} rpm  "
             f"{mixed:<14} MI {_num(s.final_mi, '.3f'):>5}  {s.ended:<7} {tags}").rstrip()
 
 
@@ -122,7 +122,7 @@ def runs_list(
 
 @runs_app.command("show")
 def runs_show(
-    run: str = typer.Argument(..., help="Run id (or a unique prefix, or its folder)."),
+    run: str = typer.Argument(..., help="Run id (or a unique prefix of it, or its folder or the folder's name)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary and events as JSON (stdout)."),
     catalogue: str = CATALOGUE_OPT,
     runs_dir: Path = RUNS_DIR_OPT,
