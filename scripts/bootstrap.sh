@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Create .venv (if missing) and install drumtwin with every extra, plus Debian's
-# chromium for the dashboard's browser test and mbpoll (libmodbus) for the drive
-# emulator's tests (apt, as root only). Idempotent; safe to run again.
+# chromium for the dashboard's browser test, mbpoll (libmodbus) for the drive
+# emulator's tests and postgresql for the run catalogue's server tests (apt, as root
+# only). Idempotent; safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -11,7 +12,7 @@ fi
 stamp=.venv/.drumtwin-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e '.[test,bench,cluster]'
+  .venv/bin/python -m pip install -q -e '.[test,bench,cluster,postgres]'
   touch "$stamp"
 fi
 # apt_install PACKAGE PRESENT WHAT: install a Debian package unless PRESENT (a command) succeeds;
@@ -30,3 +31,4 @@ apt_install() {
 }
 apt_install chromium '[ -x /usr/bin/chromium ]' "the browser test"
 apt_install mbpoll 'command -v mbpoll >/dev/null 2>&1' "the drive emulator's tests (libmodbus's mbpoll)"
+apt_install postgresql 'ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1' "the run catalogue's PostgreSQL tests"

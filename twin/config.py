@@ -113,6 +113,8 @@ class RunConfig:
     stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed (control.endpoint)
     endpoint: Mapping[str, float] = field(default_factory=dict)  # endpoint settings (control.endpoint.ENDPOINT_KEYS)
     drive: str | None = None  # demo only: the mill is this drive profile's emulator over Modbus RTU
+    catalogue: str | None = None  # run catalogue: a path or postgresql:// URL (None: $DRUMTWIN_CATALOGUE, else
+    #                               the SQLite file beside the run folders: twin.catalogue.store.resolve_url)
 
     @property
     def demo(self) -> bool:
@@ -208,6 +210,10 @@ class RunConfig:
 
         d = to_jsonable(self)
         d["control_token"] = "***" if self.control_token else None
+        if self.catalogue is not None and "://" in self.catalogue:  # a server URL's password is never written
+            from twin.catalogue.store import hide_password
+
+            d["catalogue"] = hide_password(self.catalogue)
         return d
 
 

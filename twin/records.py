@@ -159,6 +159,8 @@ class RunStop(Record):
     frames: int = unit("", "frames processed")
     workers_alive: Sequence[str] = unit("", "workers still running after the join")
     failure: str | None = unit("", "why the run had to end (null: it did not)")
+    energy_j: float | None = opt("J", "drive energy over the run as the twin estimates it (its drum torque x "
+                                 "angular speed, sim.power; null: no twin ran)")
 
 
 # -- faults -----------------------------------------------------------------------------------
@@ -265,7 +267,7 @@ class DecisionMade(Record):
 class _MillCommandRecord(Record):
     producer: ClassVar[str] = "twin.live.mill"
     command: str = unit("", "set_rpm | start | stop")
-    source: str = unit("", "supervisor | operator | emergency_stop | run_failed")
+    source: str = unit("", "supervisor | operator | emergency_stop | run_failed | run_end")
     rpm: float | None = opt("rpm", "setpoint of a set_rpm")
 
 
@@ -372,6 +374,29 @@ class Mixed(_EndpointChange):
 class Unmixed(_EndpointChange):
     kind: ClassVar[str] = "unmixed"
     doc: ClassVar[str] = "the batch left its endpoint band again"
+
+
+# -- the run catalogue (twin.catalogue) ---------------------------------------------------------
+@register
+@dataclass(frozen=True, kw_only=True)
+class CatalogueUnavailable(Record):
+    kind: ClassVar[str] = "catalogue_unavailable"
+    doc: ClassVar[str] = "the run could not be indexed in the run catalogue (it goes on; 'runs list' indexes it later)"
+    producer: ClassVar[str] = "twin.catalogue"
+    message: str = unit("", "why, and what happens next")
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class SlowerThanGolden(Record):
+    kind: ClassVar[str] = "slower_than_golden"
+    doc: ClassVar[str] = "this batch is behind its rig's golden batch by more than the rig's usual spread (no alarm)"
+    producer: ClassVar[str] = "twin.live.golden"
+    golden_run: str = unit("", "the golden batch's run id")
+    mi: float = unit("", "this run's trend MI now")
+    golden_mi: float = unit("", "the golden batch's trend MI at the same run time")
+    deviation: float = unit("", "mi - golden_mi")
+    spread: float = unit("", "the rig's usual spread of MI at this run time (its runs' sd, or the floor)")
 
 
 # -- twin -------------------------------------------------------------------------------------

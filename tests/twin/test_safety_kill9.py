@@ -6,6 +6,7 @@ the temp directory either (no ``drumtwin-*``, no ``pymp-*``, nothing) and no pro
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -138,6 +139,19 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
     p = subprocess.run([*argv[:-1], "20", "--log", str(tmp_path / "next")], env=env, capture_output=True,
                        text=True, timeout=240)
     assert p.returncode == 0, p.stderr[-2000:]
+
+    # issue 40: the catalogue beside the runs lists each killed run as ended without a stop,
+    # with what its log holds, and the next run as a clean one
+    listed = subprocess.run([str(DRUMTWIN), "runs", "list", "--runs-dir", str(tmp_path), "--json"], env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert listed.returncode == 0, listed.stderr[-2000:]
+    rows = {Path(r["path"]).name: r for r in json.loads(listed.stdout)}
+    assert rows["next"]["ended"] == "clean" and rows["next"]["frames"] > 0
+    for log, _t, moment in killed:
+        if (log / EVENTS_FILE).exists() or (log / FRAMES_FILE).exists():
+            row = rows[log.name]
+            assert row["ended"] == "killed" and "without a stop" in row["failure"], (moment, row)
+            assert (row["frames"] or 0) == len(read_frames(log)), moment
     assert "Traceback" not in p.stderr
     assert not _wait_gone(marker, 20.0)
     assert sorted(p.name for p in tmp.iterdir()) == [], "left in the temp directory after the next run"

@@ -150,6 +150,9 @@ def run(
     endpoint_dwell_s: float = typer.Option(None, "--endpoint-dwell-s", help=ENDPOINT_HELP["dwell_s"]),
     endpoint_block_s: float = typer.Option(None, "--endpoint-block-s", help=ENDPOINT_HELP["block_s"]),
     endpoint_block_sd_max: float = typer.Option(None, "--endpoint-block-sd-max", help=ENDPOINT_HELP["block_sd_max"]),
+    catalogue: str = typer.Option(None, "--catalogue", help="Run catalogue to index the run in: an SQLite path or "
+                                  "postgresql://... (default $DRUMTWIN_CATALOGUE, else catalogue.sqlite beside the run "
+                                  "folder)."),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
 
@@ -168,6 +171,7 @@ def run(
             endpoint=endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
                                       block_sd_max=endpoint_block_sd_max),
             drive=None if drive is None else _drive_profile(drive, camera, video, mill),
+            catalogue=catalogue,
         ).resolved()
         if cfg.dashboard:  # issue 26: a port in use is refused, not swapped for another
             check_port_free(cfg.host, cfg.port)

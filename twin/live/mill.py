@@ -108,6 +108,11 @@ class MillWorker:
         self._controlling = False  # a command of this run went through: feed the watchdog
 
     # -- any thread ------------------------------------------------------------------------
+    @property
+    def controlling(self) -> bool:
+        """A command of this run went through to the mill (this run has moved or stopped it)."""
+        return self._controlling
+
     def submit(self, cmd: MillCommand) -> None:
         """Queue a command (never blocks)."""
         self._inbox.put(cmd)

@@ -126,7 +126,8 @@ class TwinInfo:
     its measured MI and slope, the engine's snapshot (``Twin.snapshot()``: opaque, picklable;
     a ``sim.drum.SimState`` or a pymunk state) no older than a few seconds for what-if studies,
     ``seeds``: how many times it was seeded (from the camera's bed), and ``age_s``: the simulated
-    seconds since its latest seeding (its bed's spin-up; run time skipped to catch up is not in it)."""
+    seconds since its latest seeding (its bed's spin-up; run time skipped to catch up is not in it),
+    ``energy_j``: the drive energy its drum torque and speed add up to over the run."""
 
     updated_s: float | None = None
     mi: float = math.nan
@@ -134,6 +135,7 @@ class TwinInfo:
     state: Any = None  # as sim.engine.Twin.snapshot() (Any there: each engine its own state class)
     seeds: int = 0
     age_s: float = 0.0
+    energy_j: float = 0.0  # drive energy the twin estimates since the run started (sim.power), J
 
 
 class RunView:

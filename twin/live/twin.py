@@ -115,6 +115,8 @@ class TwinWorker:
         self._seeded_sim_s = 0.0  # the twin's own time at its latest seeding (TwinInfo.age_s counts from it)
         self._mi = math.nan
         self._slope = math.nan
+        self._energy_j = 0.0  # drive energy over the run (sim.power: drum torque x angular speed)
+        self._depth_scale = 1.0  # slice -> drum (sim.power.depth_scale), per seeding
         self._pool: Executor | None = None
         self._closed = False
         self._cal_future: Future | None = None
@@ -136,7 +138,7 @@ class TwinWorker:
 
     def _publish(self, updated_s: float | None) -> None:
         age = self.sim.t_s - self._seeded_sim_s if self.sim is not None else 0.0
-        info = TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds, age)
+        info = TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds, age, self._energy_j)
         hook = self.faults.twin_published
         self.box.set(info if hook is None else hook(info))
 
@@ -175,13 +177,24 @@ class TwinWorker:
             rpm = view.mill().actual_rpm
             if math.isfinite(rpm):
                 sim.set_rpm(simulated_rpm(rpm, sim.critical_rpm))
-            sim.step(min(lag, 1.0 / TWIN_FPS))
+            dt = min(lag, 1.0 / TWIN_FPS)
+            sim.step(dt)
+            self._add_energy(sim, dt)
             if render.due(self.now_s):
                 self._render_and_measure()
             if self.now_s >= next_snap:
                 next_snap = self.now_s + SNAPSHOT_EVERY_S
                 self._state = sim.snapshot()
             self._publish(self.now_s)
+
+    def _add_energy(self, sim: Twin, dt_s: float) -> None:
+        """The drive's energy over the step the twin just took (its mean drum torque there, scaled
+        from the slice to the drum, at its actual speed; a NaN torque adds nothing)."""
+        from sim.power import drive_power_w
+
+        power = float(drive_power_w(sim.drum_torque_nm() * self._depth_scale, sim.rpm_actual))
+        if math.isfinite(power):
+            self._energy_j += power * dt_s
 
     def _serve_requests(self) -> None:
         for cmd in drain(self._requests):
@@ -304,6 +317,7 @@ class TwinWorker:
         from sim.errors import SimError
         from sim.from_image import seed_from_frame
         from sim.mixer import paper_mixer
+        from sim.power import depth_scale
         from sim.render import Renderer
         from vision.meter import Meter
 
@@ -332,6 +346,8 @@ class TwinWorker:
         self.sim = sim
         self.t0_run = t - sim.t_s
         self._seeded_sim_s = sim.t_s
+        self._depth_scale = depth_scale(sim)
+        sim.drum_torque_nm()  # the torque's mean starts at the first step of this bed
         self._state = sim.snapshot()
         self._seeds += 1
         self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))

@@ -348,8 +348,11 @@ class LiveLoop:
         """Stop every worker and join it (``timeout_s`` in all), then close the mill link.
 
         The what-if pool is closed first, so a running study ends at once instead of being
-        waited for. The mill keeps its last setpoint; its watchdog stops it once nobody
-        feeds it. A run that had to end (``failure``) stops the mill itself on the way out.
+        waited for. Then the loop, owning the link again, stops the mill when this run had
+        control of it (a command of this run went through: ``run_end``) or had to end
+        (``failure``: ``run_failed``); a stop is never gated (docs/safety.md), and the board's
+        watchdog or the drive's comm-loss trip remains the stop of last resort. A mill this
+        run never commanded (OFF, or a manual run that sent nothing) is left as it was.
         """
         self.stop_event.set()
         self.whatif.close()
@@ -360,17 +363,19 @@ class LiveLoop:
         alive = [th.name for th in self._threads if th.is_alive()]
         if alive:
             log.warning("workers still running after stop: %s", ", ".join(alive))
-        if self.failure is not None:  # the workers are gone: the link is ours to stop the mill
-            t = self.now_s()
+        if self.failure is not None or self.mill.controlling:  # the workers are gone: the link is ours
+            t, source = self.now_s(), "run_failed" if self.failure is not None else "run_end"
             try:
                 self.mill_link.stop()
             except (OSError, ControlError) as exc:
-                self.events.publish(MillCommandDropped(t_s=t, command="stop", source="run_failed", reason=str(exc)))
+                self.events.publish(MillCommandDropped(t_s=t, command="stop", source=source, reason=str(exc)))
             else:
-                self.events.publish(MillCommandSent(t_s=t, command="stop", source="run_failed"))
+                self.events.publish(MillCommandSent(t_s=t, command="stop", source=source))
         self.mill_link.close()
         f = self.frames_box.get()
-        self.events.publish(RunStop(t_s=f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure))
+        twin = self.twin_box.get()
+        self.events.publish(RunStop(t_s=f.t_s, frames=f.n_frames, workers_alive=alive, failure=self.failure,
+                                    energy_j=twin.energy_j if twin.updated_s is not None else None))
 
     def summary(self, wall_s: float = 0.0) -> Summary:
         f = self.frames_box.get()

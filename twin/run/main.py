@@ -16,13 +16,14 @@ from twin.clock import RunClock
 from twin.config import RunConfig
 from twin.errors import RunFailed, TwinError
 from twin.live.mill import MillLink
-from twin.records import MillState, Record
+from twin.records import CatalogueUnavailable, MillState, Record
 from twin.run.loop import LiveLoop, Summary
 from twin.run.metadata import mixer_metadata, versions
 from twin.run.settings import RunInputs, Seams, mill_url, resolve_inputs
 from twin.state import LiveState
 
 if TYPE_CHECKING:
+    from twin.catalogue.hook import RunIndexer
     from twin.dashboard import Dashboard
     from twin.demo import DemoPlant
     from twin.runlog import RunLog
@@ -105,6 +106,7 @@ class _Parts:
     runlog: RunLog | None = None
     loop: LiveLoop | None = None
     dash: Dashboard | None = None
+    index: RunIndexer | None = None
 
     def open_sources(self, cfg: RunConfig, inputs: RunInputs, seams: Seams,
                      clock: RunClock) -> tuple[Iterable[Frame], MillLink, DrumROI | None]:
@@ -136,6 +138,23 @@ class _Parts:
         if self.plant is not None:
             runlog.set_metadata(plant=asdict(self.plant.config), mill_url="emulator pty")
         return runlog
+
+    def open_index(self, cfg: RunConfig, inputs: RunInputs, loop: LiveLoop) -> None:
+        """The run in the catalogue: its rig and process in ``metadata.json``, then registered
+        (running); a catalogue that cannot be written is a warning and a record, not an end."""
+        from twin.catalogue.hook import RunIndexer, run_metadata
+
+        assert self.runlog is not None
+        from twin.runlog import to_jsonable
+
+        mixer = mixer_metadata(inputs.mixer) if inputs.mixer is not None else None
+        loop.events.metadata(**run_metadata(cfg.meter_config, mixer, to_jsonable(inputs.classes)))
+
+        def unavailable(message: str) -> None:
+            loop.events.publish(CatalogueUnavailable(t_s=loop.now_s(), message=message))
+
+        self.index = RunIndexer(cfg.catalogue, self.runlog.paths.directory, unavailable)
+        self.index.index("start")
 
     def open_dashboard(self, cfg: RunConfig, state: LiveState, loop: LiveLoop,
                        on_dashboard: Callable[[str], None] | None) -> None:
@@ -169,6 +188,8 @@ class _Parts:
             if self.loop is not None:
                 summary = self.loop.summary(wall_s)
                 self.loop.events.metadata(summary=asdict(summary))
+            if self.index is not None:
+                self.index.index("stop")
             self.runlog.close()
         return summary
 
@@ -210,6 +231,7 @@ def run_live(
                                      mixer=inputs.mixer, meter_config=inputs.meter_config, seams=seams)
         if inputs.mixer is not None:
             runlog.set_metadata(mixer=mixer_metadata(inputs.mixer))
+        parts.open_index(cfg, inputs, loop)
         if cfg.dashboard:
             parts.open_dashboard(cfg, state, loop, on_dashboard)
         plan = DemoStart(parts.plant) if parts.plant is not None else None
