@@ -122,7 +122,8 @@ def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_of
     assert any(e["kind"] == "whatif" and e["reason"] == "AUTO" for e in ev_auto)
     # OFF: not one command on the line but the demo operator's Start, the board keeps its 5 rpm
     off_cmds = [(e["command"], e["source"]) for e in ev_off if e["kind"].startswith("mill_command")]
-    assert off_cmds == [("start", "operator")]
+    # the demo operator's start, and the stop of a run that had the mill at its end (issue 42: run_end)
+    assert off_cmds == [("start", "operator"), ("stop", "run_end")]
     assert not any(e["kind"] == "decision" for e in ev_off)
     rows_off = read_frames(off)
     setpoints = _col(rows_off, "rpm_setpoint")

@@ -283,4 +283,5 @@ def test_run_drive_puts_the_embedded_demo_on_a_drive_emulator(tmp_path: Path) ->
     synced = [e for e in events if e["kind"] == "mill_synced"]
     assert synced and synced[0]["fault"] is None
     cmds = [(e["command"], e["source"]) for e in events if e["kind"].startswith("mill_command")]
-    assert cmds == [("start", "operator")]  # the demo's operator; OFF sends nothing else
+    # the demo's operator; OFF sends nothing else but the stop at the end of a run that had the mill
+    assert cmds == [("start", "operator"), ("stop", "run_end")]
