@@ -116,19 +116,6 @@ CONFIGS = {
 FIELDS = ("level", "rate", "level_sd", "rate_sd", "lo95", "hi95", "ripple", "nis", "meas_sd")
 
 
-CONFIGS = {
-    "default": TrendConfig(),
-    "tight": TrendConfig(meas_sd=0.02, min_meas_sd=0.005, noise_tau_s=2.0, rate_q=1e-3, ripple_q=4e-5,
-                         ripple_harmonic=2.0, gate_d2=6.0, reinit_window_s=0.4, reinit_share=0.5, reinit_min=4,
-                         unsettle_share=0.25, max_rate_per_s=0.3, init_rate_sd=0.05, init_ripple_sd=0.02,
-                         max_dt_s=10.0, settle_s=0.3, settle_band=0.04, settle_band_max=0.08, noise_lag_s=0.5),
-    "loose": TrendConfig(meas_sd=0.1, noise_tau_s=200.0, rate_q=1e-4, ripple_q=0.0, gate_d2=16.0,
-                         reinit_window_s=1.0, reinit_share=0.8, reinit_min=12, unsettle_share=0.5,
-                         max_rate_per_s=2.0, init_rate_sd=0.01, init_ripple_sd=0.1, max_dt_s=60.0,
-                         settle_s=0.0, settle_band=0.06, settle_band_max=0.5, noise_lag_s=2.0),
-}
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_the_kalman_sums_are_filterpys(seed):
     """Random states, covariances, models and measurements: predict, innovation and update agree
@@ -154,7 +141,6 @@ def test_the_kalman_sums_are_filterpys(seed):
     np.testing.assert_allclose(ours.P, ours.P.T, rtol=1e-12, atol=1e-14)  # the Joseph form stays symmetric
 
 
-FIELDS = ("level", "rate", "level_sd", "rate_sd", "lo95", "hi95", "ripple", "nis", "meas_sd")
 
 
 @pytest.mark.parametrize(("name", "seed"), [("default", 0), ("tight", 1), ("loose", 0)])

@@ -24,7 +24,7 @@ from control.motor import MotorConfig
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json, say
 
-if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
+if TYPE_CHECKING:  # the trend bench: loaded by its command only
     from control.limits import Limits
     from control.trendbench import RealFrameMI, SequenceSource, TrendBenchResult
 
