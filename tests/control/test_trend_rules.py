@@ -400,3 +400,39 @@ def test_a_pair_farther_apart_than_the_gate_counts_as_at_the_gate():
     assert not e.accepted
     assert tr.frame_sd**2 == pytest.approx(9.0 * var, rel=1e-12)
     assert 9.0 * var < 0.5 * (0.99 - z[-1]) ** 2  # the glitch's own half square is larger
+
+
+def test_the_pairs_partner_is_the_newest_sample_at_least_noise_lag_s_old():
+    """noise_lag_s 0.5 s, frames 0.75 s apart (too far apart for the frame-to-frame pairs): at 1.5 s
+    the partner is the frame of 0.75 s (the newest at least 0.5 s old), not that of 0 s (1.5 s old,
+    still within noise_lag_s + 1). MI 0.5, 0.6, 0.5: both pairs differ by 0.1, so R is the running
+    mean (0.05^2 + 0.005) / 2, then (2 that + 0.005) / 3 (the frame of 0 s would have added 0)."""
+    tr = MITrend(TrendConfig(noise_lag_s=0.5, gate_d2=1e9))
+    for t, mi in ((0.0, 0.5), (0.75, 0.6), (1.5, 0.5)):
+        e = tr.update(t, mi, 0.0)
+    r = (2 * (0.05**2 + 0.005) / 2 + 0.005) / 3
+    assert e.accepted and tr.frame_sd == 0.05  # no consecutive pair within 0.5 s: D1 keeps its prior
+    assert e.meas_sd**2 == pytest.approx(r, rel=1e-12)
+
+
+def test_a_pair_more_than_noise_lag_s_plus_1_s_apart_is_no_pair():
+    """Two samples 2.5 s apart (noise_lag_s 1 s): a gap, not a pair -- R keeps its prior."""
+    tr = MITrend(TrendConfig(gate_d2=1e9))
+    tr.update(0.0, 0.5)
+    e = tr.update(2.5, 0.7)
+    assert e.accepted and e.meas_sd == 0.05 and tr.frame_sd == 0.05
+
+
+def test_a_rejected_frame_is_no_partner_of_a_pair():
+    """The stationary variance is learned from pairs the gate accepted at both ends (a burst's frames
+    are no samples of the bed). Frames 0.5 s apart, noise_tau_s 0.25 s (each pair replaces the
+    estimates): the pairs 1 s apart of the quiet bed leave R at 0 (0.51 and 0.51); a glitch 1 s before
+    an accepted frame leaves it there, so the variance in use is the last consecutive pair's."""
+    tr = MITrend(TrendConfig(noise_tau_s=0.25))
+    for i in range(20):
+        tr.update(i / 2, 0.5 + 0.01 * (i % 3), 0.0)
+    glitch = tr.update(10.0, 0.99, 0.0)
+    assert not glitch.accepted
+    tr.update(10.5, 0.51, 0.0)
+    e = tr.update(11.0, 0.5, 0.0)  # its partner, 1 s back, is the glitch
+    assert e.accepted and e.meas_sd == pytest.approx(0.01 / math.sqrt(2.0), rel=1e-9)  # |0.5 - 0.51| / sqrt 2
