@@ -436,3 +436,35 @@ def test_a_rejected_frame_is_no_partner_of_a_pair():
     tr.update(10.5, 0.51, 0.0)
     e = tr.update(11.0, 0.5, 0.0)  # its partner, 1 s back, is the glitch
     assert e.accepted and e.meas_sd == pytest.approx(0.01 / math.sqrt(2.0), rel=1e-9)  # |0.5 - 0.51| / sqrt 2
+
+
+@pytest.mark.parametrize(("band", "band_max", "limit"), [(0.1, 0.35, 0.15), (0.3, 0.35, 0.35)])
+def test_a_settled_trend_unsettles_only_past_1_5_times_its_settle_width(band, band_max, limit):
+    """Hysteresis: settled at the first sample (settle_s 0, reinit_min 1, a band of 0.078), the trend
+    stays settled while missing frames widen its band up to ``SETTLE_HYSTERESIS`` (1.5) times the
+    settle width, never past ``settle_band_max``, and unsettles on the first band wider than that."""
+    cfg = TrendConfig(meas_sd=0.02, min_meas_sd=0.02, settle_s=0.0, reinit_min=1, settle_band=band,
+                      settle_band_max=band_max)
+    tr = MITrend(cfg)
+    first = tr.update(0.0, 0.5, 0.0)
+    assert first.settled and first.hi95 - first.lo95 < band
+    out = [tr.update(0.1 * i, math.nan, 0.0) for i in range(1, 400)]
+    widths = [e.hi95 - e.lo95 for e in out]
+    k = next(i for i, e in enumerate(out) if not e.settled)
+    assert widths[k] > limit >= widths[k - 1] and max(widths[:k]) > band  # settled on a band wider than settle_band
+    assert not any(e.settled for e in out[k:])  # and not again while only missing frames come
+
+
+def test_the_rate_and_ripple_densities_scale_with_the_frame_to_frame_variance():
+    """Over a missing frame at rest the rate's variance grows by ``k rate_q dt`` with ``k`` the
+    frame-to-frame variance (at most the one in use) over ``meas_sd^2``: a bed learned quieter than the
+    configured 0.05 (a small k) widens its rate less."""
+    cfg = TrendConfig(noise_tau_s=0.5)
+    tr = MITrend(cfg)
+    for i in range(200):
+        tr.update(i / 10, 0.5 + 0.004 * (i % 3 - 1) + 0.006 * ((i // 7) % 2), 0.0)
+    e0 = tr.estimate(19.9)
+    e1 = tr.update(20.0, math.nan, 0.0)
+    k = min(e0.meas_sd**2, max(cfg.min_meas_sd**2, tr.frame_sd**2)) / cfg.meas_sd**2
+    assert tr.frame_sd < e0.meas_sd and k < 0.1  # the case: D1 below R, both below the configured noise
+    assert e1.rate_sd**2 - e0.rate_sd**2 == pytest.approx(k * cfg.rate_q * 0.1, rel=1e-6)
