@@ -468,3 +468,22 @@ def test_the_rate_and_ripple_densities_scale_with_the_frame_to_frame_variance():
     k = min(e0.meas_sd**2, max(cfg.min_meas_sd**2, tr.frame_sd**2)) / cfg.meas_sd**2
     assert tr.frame_sd < e0.meas_sd and k < 0.1  # the case: D1 below R, both below the configured noise
     assert e1.rate_sd**2 - e0.rate_sd**2 == pytest.approx(k * cfg.rate_q * 0.1, rel=1e-6)
+
+
+def test_no_pair_shorter_than_noise_lag_s_enters_the_stationary_variance():
+    """Half a second of a bed alternating 0.5 / 0.52 at 30 fps: the frame-to-frame variance follows
+    it, but no sample is 1 s old yet, so R keeps its prior 0.05^2 and the variance in use is that."""
+    tr = MITrend(TrendConfig(gate_d2=1e9))
+    out = [tr.update(i / 30, 0.5 + 0.02 * (i % 2), 0.0) for i in range(15)]
+    assert all(e.meas_sd == 0.05 for e in out) and tr.frame_sd < 0.04
+
+
+def test_after_a_gap_the_next_frame_pairs_with_the_one_after_the_gap():
+    """A gap past noise_lag_s + 1 s is no pair, but the frame after the gap starts the next ones:
+    0.5 s later the frame-to-frame variance is the running mean with that pair ((0.05^2 + 0.02^2 / 2) / 2)."""
+    tr = MITrend(TrendConfig(gate_d2=1e9, noise_tau_s=1e9))
+    tr.update(0.0, 0.5)
+    tr.update(2.5, 0.5)  # 2.5 s: no consecutive pair (> noise_lag_s) and no pair 1 s apart (> 2 s)
+    assert tr.frame_sd == 0.05
+    tr.update(3.0, 0.52)
+    assert tr.frame_sd**2 == pytest.approx((0.05**2 + 0.02**2 / 2) / 2, rel=1e-12)
