@@ -247,7 +247,7 @@ class MITrend:
 
     def __init__(self, config: TrendConfig | None = None) -> None:
         self.config = config or TrendConfig()
-        self.kf = self.engine(np.zeros(5), np.eye(5))  # set by the first valid sample
+        self.kf: Kalman  # made by the first valid sample (nothing reads it before)
         self.n_reinit = 0
         self.reset()
 

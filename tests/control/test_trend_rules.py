@@ -455,19 +455,46 @@ def test_a_settled_trend_unsettles_only_past_1_5_times_its_settle_width(band, ba
     assert not any(e.settled for e in out[k:])  # and not again while only missing frames come
 
 
-def test_the_rate_and_ripple_densities_scale_with_the_frame_to_frame_variance():
+@pytest.mark.parametrize("bed", ["quiet", "slow wave"])
+def test_the_rate_and_ripple_densities_scale_with_the_frame_to_frame_variance(bed):
     """Over a missing frame at rest the rate's variance grows by ``k rate_q dt`` with ``k`` the
-    frame-to-frame variance (at most the one in use) over ``meas_sd^2``: a bed learned quieter than the
-    configured 0.05 (a small k) widens its rate less."""
+    frame-to-frame variance (at least ``min_meas_sd^2``, at most the one in use) over ``meas_sd^2``.
+    A quiet bed learned below the configured 0.05 widens its rate less; a bed that swings between
+    0.4 and 0.6 every second (frames alike, pairs 1 s apart not) is scaled by its frame-to-frame
+    variance, not by the larger one in use."""
     cfg = TrendConfig(noise_tau_s=0.5)
     tr = MITrend(cfg)
     for i in range(200):
-        tr.update(i / 10, 0.5 + 0.004 * (i % 3 - 1) + 0.006 * ((i // 7) % 2), 0.0)
+        wave = 0.006 * ((i // 7) % 2) if bed == "quiet" else 0.2 * ((i // 10) % 2)
+        tr.update(i / 10, 0.4 + 0.004 * (i % 3 - 1) + wave, 0.0)
     e0 = tr.estimate(19.9)
     e1 = tr.update(20.0, math.nan, 0.0)
     k = min(e0.meas_sd**2, max(cfg.min_meas_sd**2, tr.frame_sd**2)) / cfg.meas_sd**2
-    assert tr.frame_sd < e0.meas_sd and k < 0.1  # the case: D1 below R, both below the configured noise
+    assert tr.frame_sd < e0.meas_sd  # the case: D1 below R
+    if bed == "slow wave":
+        assert tr.frame_sd**2 < 0.004 < e0.meas_sd**2
     assert e1.rate_sd**2 - e0.rate_sd**2 == pytest.approx(k * cfg.rate_q * 0.1, rel=1e-6)
+
+
+def test_the_stationary_variance_is_an_exponential_mean_with_the_frame_gap_as_weight():
+    """A constant bed, frames 0.5 s apart, noise_tau_s 2 s: every pair 1 s apart is 0, so R shrinks by
+    (1 - a) per pair, a = max(0.5 / 2, 1 / (pairs + 1)): 1/2, 1/3, then 1/4. The frame-to-frame pairs
+    start one frame earlier (one pair more, one factor 3/4 more), so the variance in use is R."""
+    tr = MITrend(TrendConfig(noise_tau_s=2.0))
+    for i in range(8):  # 0 ... 3.5 s: pairs 1 s apart at 1.0, 1.5, ..., 3.5 s (six)
+        e = tr.update(i / 2, 0.5, 0.0)
+    assert e.meas_sd**2 == pytest.approx(0.05**2 * (1 / 2) * (2 / 3) * 0.75**4, rel=1e-12)
+    assert tr.frame_sd**2 == pytest.approx(e.meas_sd**2 * 0.75, rel=1e-12)
+
+
+def test_a_fresh_or_reset_trend_has_no_accepted_data():
+    tr = MITrend()
+    assert tr.accepted_s == 0.0
+    for i in range(40):
+        tr.update(i / 10, 0.5, 0.0)
+    assert tr.accepted_s == pytest.approx(3.9)
+    tr.reset()
+    assert tr.accepted_s == 0.0
 
 
 def test_no_pair_shorter_than_noise_lag_s_enters_the_stationary_variance():
