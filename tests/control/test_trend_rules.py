@@ -498,10 +498,11 @@ def test_a_fresh_or_reset_trend_has_no_accepted_data():
 
 
 def test_no_pair_shorter_than_noise_lag_s_enters_the_stationary_variance():
-    """Half a second of a bed alternating 0.5 / 0.52 at 30 fps: the frame-to-frame variance follows
-    it, but no sample is 1 s old yet, so R keeps its prior 0.05^2 and the variance in use is that."""
+    """Half a second of a bed alternating 0.5 / 0.52 at 30 fps (from 10 s on the clock): the
+    frame-to-frame variance follows it, but no sample is 1 s old yet, so R keeps its prior 0.05^2 and
+    the variance in use is that."""
     tr = MITrend(TrendConfig(gate_d2=1e9))
-    out = [tr.update(i / 30, 0.5 + 0.02 * (i % 2), 0.0) for i in range(15)]
+    out = [tr.update(10.0 + i / 30, 0.5 + 0.02 * (i % 2), 0.0) for i in range(15)]
     assert all(e.meas_sd == 0.05 for e in out) and tr.frame_sd < 0.04
 
 
