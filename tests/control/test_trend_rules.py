@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from control.errors import ControlError
-from control.trend import MITrend, MovingAverage, TrendConfig, config_from_window, estimate_meas_sd, moving_average
+from control.trend import Z95, MITrend, MovingAverage, TrendConfig, config_from_window, estimate_meas_sd, moving_average
 
 SQRT2_Z75 = 0.6744897501960817 * math.sqrt(2.0)  # MAD of the difference of two N(0, 1) draws
 
@@ -561,3 +561,37 @@ def test_the_reinit_share_is_reached_at_exactly_that_share():
         assert tr.update(float(i), 0.5 + 0.01 * (i % 3 - 1), 0.0).accepted
     step = [tr.update(30.0 + k, 0.95, 0.0) for k in range(3)]
     assert [e.reinit for e in step] == [False, True, False] and step[1].level == 0.95
+
+
+def test_the_band_takes_in_the_rejected_median_from_unsettle_share_of_a_full_window():
+    """reinit_min 4, unsettle_share 0.5 (re-init at 0.75), one frame a second: the window is the last
+    4 samples. A rejection in a window not yet full (3 samples after the start) leaves the band alone;
+    in a full one, 1 of 4 leaves it alone, 2 of 4 (exactly the share) take the rejected median in."""
+    cfg = TrendConfig(reinit_min=4, unsettle_share=0.5, reinit_share=0.75, meas_sd=0.01, min_meas_sd=0.01)
+    tr = MITrend(cfg)
+
+    def plain(e) -> bool:  # the band is the level's own 95 % band
+        return e.hi95 - e.lo95 == pytest.approx(2 * Z95 * e.level_sd, rel=1e-9)
+
+    tr.update(0.0, 0.5, 0.0)
+    tr.update(1.0, 0.5, 0.0)
+    early = tr.update(2.0, 0.9, 0.0)  # rejected, 1 of 3
+    assert not early.accepted and plain(early)
+    for i in range(3, 30):
+        assert tr.update(float(i), 0.5, 0.0).accepted
+    one = tr.update(30.0, 0.9, 0.0)
+    two = tr.update(31.0, 0.9, 0.0)
+    assert not one.accepted and plain(one)
+    assert not two.accepted and not two.reinit and two.hi95 == 0.9 and two.lo95 < 0.5
+
+
+def test_rejections_are_still_counted_when_a_gap_restarts_the_trend():
+    """Two rejected samples, then 40 s without a valid one (past max_dt_s): the trend is empty again but
+    the count of consecutive rejections is what it was until a valid sample comes."""
+    tr = MITrend()
+    for i in range(60):
+        tr.update(i / 30, 0.5, 0.0)
+    tr.update(2.0, 0.95, 0.0)
+    tr.update(2.1, 0.95, 0.0)
+    e = tr.update(42.0, math.nan, 0.0)
+    assert not e.valid and e.rejections == 2 and math.isnan(e.nis) and math.isnan(e.ripple)
