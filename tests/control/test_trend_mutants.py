@@ -314,3 +314,25 @@ def test_a_pair_exactly_noise_lag_s_plus_1_s_apart_is_still_a_pair():
     e = tr.update(2.0, 0.7)
     assert e.accepted and tr.frame_sd == 0.05
     assert e.meas_sd**2 == pytest.approx((0.05**2 + 0.2**2 / 2) / 2, rel=1e-9)
+
+
+def test_the_engine_holds_its_own_float_copies():
+    """Made from integer lists or a caller's array, the engine neither truncates what the trend
+    writes into it (the projection) nor shares the caller's memory."""
+    x0 = np.array([2, 1, 0, 0, 0])
+    kf = Kalman(x0, np.eye(5, dtype=int))
+    project(kf, 0.5)
+    assert list(kf.x) == [1.0, 0.5, 0.0, 0.0, 0.0] and list(x0) == [2, 1, 0, 0, 0]
+
+
+def test_the_reported_ripple_is_the_measured_component_of_the_pair():
+    """A drum at 10 rpm whose MI swings 0.06 cos(omega t) about 0.5: the reported ripple follows that
+    swing (the pair's first component, the one in the measurement), not the quarter-turn-late other."""
+    w = 2 * math.pi * 10 / 60
+    rng = np.random.default_rng(8)
+    tr = MITrend()
+    out = [tr.update(i / 30, 0.5 + 0.06 * math.cos(w * i / 30) + rng.normal(0, 0.005), 10.0) for i in range(900)]
+    late = out[600:]
+    swing = np.array([0.06 * math.cos(w * e.t_s) for e in late])
+    assert np.corrcoef([e.ripple for e in late], swing)[0, 1] > 0.9
+    assert max(abs(e.level - 0.5) for e in late) < 0.02
