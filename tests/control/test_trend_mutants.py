@@ -336,3 +336,61 @@ def test_the_reported_ripple_is_the_measured_component_of_the_pair():
     swing = np.array([0.06 * math.cos(w * e.t_s) for e in late])
     assert np.corrcoef([e.ripple for e in late], swing)[0, 1] > 0.9
     assert max(abs(e.level - 0.5) for e in late) < 0.02
+
+
+def test_the_first_update_by_hand():
+    """At rest, the second sample 1/30 s after the first: the prediction gives P00' = R + dt^2 init_rate_sd^2
+    + rate_q dt^3 / 3 and (white noise, no pair yet) P44' = R; the measurement sees level + e + v, so the
+    gain on the level is P00' / (P00' + P44' + min_meas_sd^2) and the level moves by that times the
+    innovation. One accepted sample more counts once."""
+    c = TrendConfig()
+    tr = MITrend(c)
+    e0 = tr.update(0.0, 0.5, 0.0)
+    assert (e0.t_s, e0.level, e0.n_since_init, e0.accepted, e0.reinit) == (0.0, 0.5, 1, True, True)
+    dt, r = 1 / 30, c.meas_sd**2
+    e1 = tr.update(dt, 0.56, 0.0)
+    p00 = r + dt**2 * c.init_rate_sd**2 + c.rate_q * dt**3 / 3
+    assert e1.level == pytest.approx(0.5 + p00 / (p00 + r + c.min_meas_sd**2) * 0.06, rel=1e-12)
+    assert e1.accepted and not e1.reinit and e1.n_since_init == 2
+
+
+@pytest.mark.parametrize("z", [1.3, -0.2])
+def test_a_first_sample_outside_0_1_starts_the_level_at_the_bound(z):
+    e = MITrend().update(0.0, z, 0.0)
+    assert e.level == min(1.0, max(0.0, z)) and e.lo95 >= 0.0 and e.hi95 <= 1.0
+
+
+def test_before_the_first_valid_sample_the_estimate_is_empty_but_timed():
+    e = MITrend().update(2.5, math.nan, 5.0)
+    assert e.t_s == 2.5 and e.accepted is False and e.reinit is False and not e.valid and not e.settled
+
+
+def test_consecutive_rejections_are_counted():
+    tr = MITrend()
+    for i in range(60):
+        tr.update(i / 30, 0.5 + 0.01 * (i % 3 - 1), 0.0)
+    out = [tr.update(2.0 + k / 30, 0.95, 0.0) for k in range(3)]
+    assert [e.rejections for e in out] == [1, 2, 3] and not any(e.accepted for e in out)
+
+
+def test_the_reinit_share_is_reached_at_exactly_that_share():
+    """reinit_min 4, share 0.5, one frame a second (the 0.6 s window holds one: the last 4 count):
+    after a step the 2nd rejected sample makes 2 of 4, exactly the share: re-initialised there."""
+    cfg = TrendConfig(reinit_min=4, reinit_share=0.5, unsettle_share=0.5, gate_d2=9.0)
+    tr = MITrend(cfg)
+    for i in range(30):
+        assert tr.update(float(i), 0.5 + 0.01 * (i % 3 - 1), 0.0).accepted
+    step = [tr.update(30.0 + k, 0.95, 0.0) for k in range(3)]
+    assert [e.reinit for e in step] == [False, True, False] and step[1].level == 0.95
+
+
+def test_rejections_are_still_counted_when_a_gap_restarts_the_trend():
+    """Two rejected samples, then 40 s without a valid one (past max_dt_s): the trend is empty again but
+    the count of consecutive rejections is what it was until a valid sample comes."""
+    tr = MITrend()
+    for i in range(60):
+        tr.update(i / 30, 0.5, 0.0)
+    tr.update(2.0, 0.95, 0.0)
+    tr.update(2.1, 0.95, 0.0)
+    e = tr.update(42.0, math.nan, 0.0)
+    assert not e.valid and e.rejections == 2 and math.isnan(e.nis) and math.isnan(e.ripple)
