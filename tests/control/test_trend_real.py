@@ -97,12 +97,12 @@ def test_the_occluded_pools_are_a_dark_object_over_the_mixed_bed(frames_mi):
 @pytest.mark.parametrize("fps", [10.0, 15.0, 30.0])
 def test_occluded_bursts_keep_the_trend_within_0_05_of_the_clean_bed(frames_mi, fps):
     """Issue 38, item 4: the mixed bed under a dark object over a third of the drum for 6 frames
-    every 45 (the bench's ``real-occluded``, 10 draws). The trend stays within 0.05 of the clean
+    every 45 (the bench's ``real-occluded``, 10 draws; 4 at 30 fps). The trend stays within 0.05 of the clean
     bed's median after the bench's warm-up (150 frames) and never re-initialises onto a burst.
     With reinit_min 8 a 6-frame burst reached the re-init share at 10 and 15 fps (the window's
     8-10 samples): 0.10-0.13 off in 3 of the 20 draws there; at 30 fps 0.022."""
     clean = float(np.median(frames_mi.mixed))
-    for seed in range(10):
+    for seed in range(10 if fps < 20 else 4):
         seq = next(s for s in real_sequences(frames_mi, seed, fps=fps) if s.name == "real-occluded")
         tr = MITrend(trend_config())
         est = [tr.update(t, m, r) for t, m, r in zip(seq.t_s, seq.measured, seq.rpm, strict=True)]
