@@ -98,9 +98,28 @@ def test_frames_from_the_past_are_ignored_and_nan_frames_do_not_count():
     assert back.mixed and back.changed == ""
 
 
-def test_block_sd_is_the_sample_sd_of_the_finite_values():
-    assert block_sd([1.0, 2.0, 3.0, math.nan]) == pytest.approx(1.0)
-    assert math.isnan(block_sd([1.0]))
+def test_block_sd_is_1_4826_times_the_median_absolute_deviation_of_the_finite_values():
+    """Known answers: 1, 2, 4 (median 2, deviations 1, 0, 2: MAD 1); an even count takes the middle
+    pair's mean (1, 2, 4, 10: median 3, deviations 2, 1, 1, 7: MAD 1.5); NaN and inf are no values."""
+    assert block_sd([1.0, 2.0, 4.0, math.nan, math.inf]) == pytest.approx(1.482602218505602, rel=1e-12)
+    assert block_sd([1.0, 2.0, 4.0, 10.0]) == pytest.approx(1.5 * 1.482602218505602, rel=1e-12)
+    assert block_sd([0.3, 0.5]) == pytest.approx(0.1 * 1.482602218505602, rel=1e-12)
+    assert math.isnan(block_sd([1.0])) and math.isnan(block_sd([math.nan, 1.0]))
+
+
+def test_block_sd_is_the_sd_of_normal_mi_and_one_odd_frame_in_26_cannot_move_it():
+    """On normal MI (sd 0.01) it estimates the sd; one frame in 26 at 0.56 on a bed at 0.97 moves
+    the sample sd to ~0.08 (past the 0.05 limit: issue 38's batch that never mixed) and this one by
+    less than 10 %. Half the block segregated (a transition) is no mixed block."""
+    rng = np.random.default_rng(11)
+    mixed = 0.97 + rng.normal(0.0, 0.01, 130)
+    assert block_sd(mixed) == pytest.approx(0.01, rel=0.15)
+    odd = mixed.copy()
+    odd[13::26] = 0.56
+    assert float(np.std(odd, ddof=1)) > 0.07
+    assert block_sd(odd) == pytest.approx(block_sd(mixed), rel=0.1)
+    half = np.concatenate([mixed[:65], 0.4 + rng.normal(0.0, 0.01, 65)])
+    assert block_sd(half) > 0.2
 
 
 @pytest.mark.parametrize("bad", [dict(target_mi=1.5), dict(band=0.0), dict(dwell_s=-1), dict(block_sd_max=0.0),

@@ -21,7 +21,7 @@ from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json, say
 from twin.config import load_checked_config
 
-if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
+if TYPE_CHECKING:  # the trend bench: loaded by its command only
     from control.limits import Limits
     from control.trendbench import RealFrameMI, SequenceSource, TrendBenchResult
 
@@ -223,6 +223,8 @@ REAL_FRAMES = Path(__file__).resolve().parents[2] / "tests" / "data" / "real-dru
 BLEND_PARTNERS = 4  # mixed frames blended with the segregated one (drift and segregated pools)
 SEGREGATED_BLENDS = (0.05, 0.1)  # mixed share of the segregated pool's near-copies
 DRIFT_BLENDS = tuple(round(0.15 + 0.05 * i, 2) for i in range(12))  # 0.15 ... 0.7: the drift's levels
+OCCLUDER_AT = ((0.0, 0.0), (-0.25, 0.0), (0.25, 0.0), (0.0, -0.25), (0.0, 0.25))
+"""Centres of the dark object of the occluded bursts: the bed's centroid plus these offsets (drum radii)."""
 
 
 def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> RealFrameMI:
@@ -231,7 +233,9 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
     pools: the lowest-MI frame is the segregated one, frames more than 0.05 below the median
     are the mix in progress (only in the looped sequence), the rest are mixed; the drift
     and the segregated pool's near-copies are blends (cv2.addWeighted) of the segregated
-    frame with the first ``BLEND_PARTNERS`` mixed frames."""
+    frame with the first ``BLEND_PARTNERS`` mixed frames; the occluded pools are the mixed frames
+    with a near-black disc of a third of the drum's area over the bed (centred on the bed's
+    centroid plus each of ``OCCLUDER_AT``), the frames the meter flags left out."""
     import cv2
 
     from control.trendbench import RealFrameMI
@@ -267,11 +271,28 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
         return tuple(mi(cv2.addWeighted(frames[seg], 1.0 - alpha, p, alpha, 0.0), f"a blend of {seg}")
                      for p in partners)
 
+    def occluded(at: tuple[float, float]) -> tuple[float, ...]:
+        out = []
+        for n in mixed:
+            r = meter.measure(frames[n])
+            if r.roi is None:  # (a valid reading, as the mixed frames' are, has its drum)
+                continue
+            n_px = sum(c.n_px for c in r.classes)
+            bed = (sum(c.cx_px * c.n_px for c in r.classes) / n_px, sum(c.cy_px * c.n_px for c in r.classes) / n_px)
+            img = frames[n].copy()
+            centre = (round(bed[0] + at[0] * r.roi.r_px), round(bed[1] + at[1] * r.roi.r_px))
+            cv2.circle(img, centre, round(r.roi.r_px / math.sqrt(3.0)), (20, 20, 20), -1)
+            o = meter.measure(img)
+            if o.valid and math.isfinite(o.mi):
+                out.append(float(o.mi))
+        return tuple(out)
+
     return RealFrameMI(
         segregated=(raw[seg], *(v for a in SEGREGATED_BLENDS for v in blends(a))),
         mixed=tuple(raw[n] for n in mixed),
         looped=tuple(raw[n] for n in names),
         drift=tuple(blends(a) for a in DRIFT_BLENDS),
+        occluded=tuple(p for p in (occluded(at) for at in OCCLUDER_AT) if p),
     )
 
 

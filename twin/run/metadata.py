@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from sim.mixer import Mixer
 
-PACKAGES = ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "viser", "numba", "filterpy", "pyserial",
+PACKAGES = ("drumtwin", "numpy", "opencv-python-headless", "pymunk", "viser", "numba", "pyserial", "sqlalchemy",
             "pymodbus")
 
 
