@@ -358,7 +358,8 @@ class _EndpointChange(Record):
     producer: ClassVar[str] = "control.endpoint"
     mixing_time_s: float | None = opt("s", "mixing time (run time since which the trend holds its plateau)")
     plateau_mi: float | None = opt("", "the plateau the trend holds")
-    block_sd: float | None = opt("", "moving-block spread of the raw MI: 1.4826 x its median absolute deviation (an sd that one odd frame cannot move)")
+    block_sd: float | None = opt("", "moving-block spread of the raw MI: 1.4826 x its median absolute deviation "
+                                 "(an sd that one odd frame cannot move)")
     reason: str = unit("", "why", default="")
 
 
