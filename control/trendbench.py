@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from operator import attrgetter
 
 import numpy as np
 
@@ -259,26 +260,16 @@ class FilterScore:
 
 
 class _Headline:
-    """The headline numbers of a score with a ``kalman`` and an ``ma`` :class:`FilterScore`."""
+    """The headline numbers of a score with a ``kalman`` and an ``ma`` :class:`FilterScore`, read
+    through to them (``kalman_rmse`` is ``kalman.rmse``; ``as_dict`` names every metric so)."""
 
     kalman: FilterScore
     ma: FilterScore
 
-    @property
-    def kalman_rmse(self) -> float:
-        return self.kalman.rmse
-
-    @property
-    def ma_rmse(self) -> float:
-        return self.ma.rmse
-
-    @property
-    def kalman_lag_s(self) -> float:
-        return self.kalman.lag_s
-
-    @property
-    def ma_lag_s(self) -> float:
-        return self.ma.lag_s
+    kalman_rmse = property(attrgetter("kalman.rmse"))
+    ma_rmse = property(attrgetter("ma.rmse"))
+    kalman_lag_s = property(attrgetter("kalman.lag_s"))
+    ma_lag_s = property(attrgetter("ma.lag_s"))
 
 
 @dataclass(frozen=True)

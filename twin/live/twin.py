@@ -3,7 +3,7 @@
 As soon as the camera has a frame, the twin is seeded from it (``sim.from_image``) with
 the paper's materials and kept in step with run time at the mill's actual rpm, rendered
 (``sim.render``) and measured with a vision ``Meter`` like the camera. Calibration runs
-beside it, in a worker process of its own (``sim.whatif.make_pool``; a converged
+beside it, in a worker process of its own (``sim.pool.make_pool``; a converged
 calibration takes tens of seconds): once ``CALIBRATION_WINDOW_S`` of camera slope angles
 are in, their median is the target of ``sim.calibrate``, and the result is applied to the
 running twin when it arrives. ``Recalibrate``/``Reseed`` commands are served between steps. It reads only the
@@ -297,7 +297,7 @@ class TwinWorker:
         if self._closed:
             raise RuntimeError("the twin worker is closed")
         if self._pool is None:
-            from sim.whatif import make_pool
+            from sim.pool import make_pool
             from twin.live.whatif import short_pool_tempdir
 
             short_pool_tempdir()
@@ -306,7 +306,7 @@ class TwinWorker:
 
     def close(self) -> None:
         """End the calibration process (a running calibration is abandoned)."""
-        from sim.whatif import close_pool
+        from sim.pool import close_pool
 
         self._closed = True
         pool, self._pool = self._pool, None

@@ -5,7 +5,7 @@ the supervisor's :class:`PredictionRequest` (a newer one supersedes one not star
 it waits for the twin's first state), ``poll`` hands a finished :class:`PredictionResult`
 back once. ``submit`` takes an operator's study (a ``RunStudy`` command). One thread serves
 both, one study at a time, from the twin's newest state (:class:`TwinInfo`); the studies
-themselves run in a local process pool (``sim.whatif.make_pool``) or on a Dask cluster
+themselves run in a local process pool (``sim.pool.make_pool``) or on a Dask cluster
 (``--scheduler``), so they never compete with the loop for the GIL.
 """
 
@@ -146,7 +146,7 @@ class WhatIfWorker:
                 self._cancelled = True
                 pool, self._pool = self._pool, None
         if running:
-            from sim.whatif import close_pool
+            from sim.pool import close_pool
 
             close_pool(pool)
         return waiting or running
@@ -244,7 +244,7 @@ class WhatIfWorker:
         if self._closed:
             raise RuntimeError("the what-if worker is closed")
         if self._pool is None:
-            from sim.whatif import make_pool
+            from sim.pool import make_pool
 
             short_pool_tempdir()
             self._pool = make_pool(self.workers)
@@ -320,7 +320,7 @@ class WhatIfWorker:
 
     def close(self) -> None:
         """Shut the worker processes down (a running study is abandoned: it fails at once)."""
-        from sim.whatif import close_pool
+        from sim.pool import close_pool
 
         self._closed = True
         pool, self._pool = self._pool, None
