@@ -4,9 +4,7 @@ viser 1.1's React/Mantine DOM in chromium)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
-from tests.waiting import wait_until as _wait_until
 from twin.dashboard.ratebench import IMG_SELECTOR as IMG  # camera and twin frames, in panel order
 
 
@@ -26,11 +24,6 @@ def plot_pixels(page) -> dict[str, str]:
                 return [t ? t.innerText : '', s.length + ':' + h]; })""",
         )
     )
-
-
-def wait_until(pred: Callable[[], bool], timeout_s: float, what: str, poll_s: float = 0.1) -> None:
-    """``tests.waiting.wait_until`` at the dashboard tests' 0.1 s poll."""
-    _wait_until(pred, timeout_s, what, poll_s)
 
 
 def slider(page):

@@ -35,8 +35,8 @@ from tests.twin.dashboard_helpers import (
     slider_enabled,
     slider_value,
     wait_for_label,
-    wait_until,
 )
+from tests.waiting import wait_until
 from twin.dashboard import Dashboard, axis_range, numbers_markdown, parse_rpm_list
 from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origin_allowed, tokens_match
 from twin.dashboard.ratebench import check_bench_args

@@ -13,7 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from tests.twin.dashboard_helpers import button, input_by_label, wait_until
+from tests.twin.dashboard_helpers import button, input_by_label
+from tests.waiting import wait_until
 from twin.dashboard import Dashboard, numbers_markdown
 from twin.live.commands import SwapClasses
 from twin.live.snapshots import CameraInfo, Latest
