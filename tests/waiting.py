@@ -16,7 +16,7 @@ def wait_until(pred: Callable[[], bool], timeout_s: float, what: str, poll_s: fl
     while time.monotonic() < end:
         if pred():
             return
-        time.sleep(poll_s)
+        time.sleep(poll_s)  # the one poll of the suite
     if pred():
         return
     raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
