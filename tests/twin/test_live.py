@@ -436,7 +436,6 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         slider,
         slider_enabled,
         slider_value,
-        wait_until,
     )
 
     cfg = RunConfig(

@@ -36,9 +36,7 @@ MIXED_RPM = 45.0  # the demo plant's bed stays mixed at 45 rpm (MI ~0.95); at 5 
 
 OFF_SCRIPT = """
 import sys
-from tests.waiting import wait_until
 from twin.config import RunConfig
-from twin.records import DecisionMade, FrameReading, Record
 from twin.run.main import run_live
 cfg = RunConfig(dashboard=False, duration_s=600.0, speed={speed}, case="C", seed=0, mode="off",
                 start_rpm={rpm}, log_dir=sys.argv[1]).resolved()
