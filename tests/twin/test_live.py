@@ -384,9 +384,9 @@ def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: 
         csv = tmp_path / "run" / "frames.csv"
         wait_until(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
         os.killpg(proc.pid, signal.SIGINT)
-        if presses == 2:  # at once, as an impatient second press: while the run stops (a press after the
-            # process has ended its run lands in the interpreter's exit, where Python's own default handling
-            time.sleep(0.05)  # is back). Real time: the operator's second press, 50 ms after the first
+        if presses == 2:  # an impatient second press while the run stops (a press after the process has
+            # ended its run lands in the interpreter's exit, where Python's own default handling is back)
+            time.sleep(0.05)  # real time: the operator's second press, 50 ms after the first
             os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
