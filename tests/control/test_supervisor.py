@@ -5,7 +5,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -73,11 +72,24 @@ def test_limits_include_the_critical_speed_it_is_given():
             worked_config(**bad)
 
 
-def test_control_has_no_critical_speed_formula_of_its_own():
-    """One critical-speed function (sim.recipe.DrumSpec.critical_rpm): control never repeats it."""
-    control = Path(__file__).resolve().parents[2] / "control"
-    for path in control.glob("*.py"):
-        assert "42.3" not in path.read_text(), path
+def test_a_runs_supervisor_caps_rpm_at_the_share_of_its_drums_critical_speed():
+    """One critical-speed function (``sim.recipe.DrumSpec.critical_rpm``): the run's supervisor
+    (``twin.run.settings.supervisor_config``, the one path from a drum to control's limits) caps
+    MANUAL and AUTO at ``max_critical_frac`` of the critical speed of the drum it is given, for a
+    small, the paper's and a large drum. A supervisor that kept the paper's drum's cap, or a
+    second formula on the way (another constant, another rounding), fails here."""
+    from sim.recipe import DrumSpec
+    from twin.run.settings import Seams, supervisor_config
+
+    caps = []
+    for d_m in (0.1, 0.3, 1.0):
+        crit = DrumSpec(diameter_m=d_m).critical_rpm
+        cfg = supervisor_config(Seams(limits={"max_rpm": 500.0}), crit)
+        cap = cfg.limits.max_critical_frac * crit
+        assert cfg.limits.rpm_range == (cfg.limits.min_rpm, cap), d_m
+        assert Supervisor(cfg).set_manual_rpm(1000.0) == cap
+        caps.append(cap)
+    assert caps[0] > caps[1] > caps[2]  # a smaller drum turns faster
 
 
 def test_no_action_when_well_mixed():

@@ -29,6 +29,7 @@ from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from tests.waiting import wait_until
 from twin.config import RunConfig
+from twin.records import FrameReading, Record
 from twin.run.main import run_live
 from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames, read_metadata
@@ -78,23 +79,17 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-_wait = wait_until
-
-
 @pytest.fixture(scope="session")  # session: xdist may interleave other modules' tests in the group
 def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     """Short demo runs (Case C, seed 0, 5 rpm) in AUTO (tuned to act at once) and OFF."""
     base = tmp_path_factory.mktemp("auto_vs_off")
 
     def until_the_board_reads_15_rpm(loop, plant, dash) -> None:
-        def watch() -> None:
-            while not loop.stop_event.is_set():
-                if loop.mill_box.get().setpoint_rpm >= 15.0:
-                    loop.stop_event.wait(1.0)
-                    loop.stop_event.set()
-                time.sleep(0.1)
+        def on_record(rec: Record) -> None:  # after the run log's subscriber: the row is written
+            if isinstance(rec, FrameReading) and rec.rpm_setpoint is not None and rec.rpm_setpoint >= 15.0:
+                loop.stop_event.set()
 
-        threading.Thread(target=watch, daemon=True).start()
+        loop.events.bus.subscribe(on_record)
 
     runs: tuple[tuple[str, Seams, float, Any], ...] = (
         ("auto", QUICK_AUTO, 80.0, until_the_board_reads_15_rpm),
@@ -165,7 +160,7 @@ def tcp_mill():
     emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
     port = emu.open_tcp(0)
     emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
-    _wait(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
+    wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
     try:
         yield emu, f"socket://127.0.0.1:{port}"
     finally:
@@ -323,28 +318,30 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
 
     def body(loop, plant) -> None:
         mill = loop.mill_box.get
-        _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
-        _wait(lambda: plant.emulator.motor.running, 40, "the demo operator's start")  # (late on a loaded machine)
+        wait_until(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
+        wait_until(lambda: plant.emulator.motor.running, 40, "the demo operator's start")  # (late on a loaded machine)
         plant.emulator.disconnect()
-        _wait(lambda: not mill().connected, 10, "the loop to see the link down")
-        _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+        wait_until(lambda: not mill().connected, 10, "the loop to see the link down")
+        wait_until(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
         report["alarm_link"] = list(loop.state.alarms)
-        _wait(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
+        wait_until(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
         plant.emulator.reconnect()
-        _wait(lambda: mill().connected, 20, "the link to come back")
-        time.sleep(1.0)
+        wait_until(lambda: mill().connected, 20, "the link to come back")
+        t_back = loop.now_s()  # four supervisor ticks of run time with the link back: nothing restarts the drive
+        wait_until(lambda: loop.now_s() >= t_back + 4 * cfg.supervisor_period_s, 30, "four ticks after the link")
         report["motor_after_reconnect"] = plant.emulator.motor
         loop.controls.start_mill()  # the operator
-        _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
-        _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
+        wait_until(lambda: plant.emulator.motor.running, 10, "the operator's start")
+        wait_until(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
         t_pause = loop.now_s()
         plant.camera_paused.set()
-        _wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
+        wait_until(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
         report["safe_with_alarm"] = loop.supervisor.safe
-        time.sleep(1.0)
+        t_alarm = loop.now_s()  # four supervisor ticks of run time without frames: no rpm moves
+        wait_until(lambda: loop.now_s() >= t_alarm + 4 * cfg.supervisor_period_s, 30, "four ticks without frames")
         report["pause"] = (t_pause, loop.now_s())
         plant.camera_paused.clear()
-        _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
+        wait_until(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
 
     run_scripted(cfg, body, seams=seams)
     events = read_events(tmp_path / "run")
@@ -386,11 +383,12 @@ def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: 
     )
     try:
         csv = tmp_path / "run" / "frames.csv"
-        _wait(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
+        wait_until(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
         os.killpg(proc.pid, signal.SIGINT)
-        if presses == 2:  # at once, as an impatient second press: while the run stops (a press after the
-            time.sleep(0.05)  # process has ended its run lands in the interpreter's exit, where Python's own
-            os.killpg(proc.pid, signal.SIGINT)  # default handling is back)
+        if presses == 2:  # an impatient second press while the run stops (a press after the process has
+            # ended its run lands in the interpreter's exit, where Python's own default handling is back)
+            time.sleep(0.05)  # real time: the operator's second press, 50 ms after the first
+            os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
@@ -410,11 +408,8 @@ def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     )
     try:
         csv = tmp_path / "run" / "frames.csv"
-        end = time.monotonic() + 60
-        while time.monotonic() < end and not (csv.exists() and len(read_frames(csv)) > 40):
-            time.sleep(0.2)
-        time.sleep(1.0)
-        kill_wall = time.time()
+        wait_until(lambda: csv.exists() and len(read_frames(csv)) > 40, 60, "40 rows in the run log")
+        kill_wall = time.time()  # while the run writes on: the kill lands between rows or in one
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -442,7 +437,6 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         slider,
         slider_enabled,
         slider_value,
-        wait_until,
     )
 
     cfg = RunConfig(

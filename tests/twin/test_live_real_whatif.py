@@ -6,14 +6,13 @@ the decision quotes them."""
 from __future__ import annotations
 
 import math
-import threading
-import time
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from twin.config import RunConfig
+from twin.records import DecisionMade, Record
 from twin.run.main import run_live
 from twin.run.settings import Seams
 from twin.runlog import read_events
@@ -34,16 +33,11 @@ def test_auto_decides_on_the_dem_twins_predictions(tmp_path: Path) -> None:
     log = tmp_path / "auto"
 
     def until_a_decision_quotes_the_twin(loop, plant, dash) -> None:
-        def watch() -> None:
-            end = time.monotonic() + 300
-            while not loop.stop_event.is_set() and time.monotonic() < end:
-                if any(e["kind"] == "decision" and e["decision"] in ("move", "hold") and e.get("predictions")
-                       for e in read_events(log)):
-                    loop.stop_event.wait(1.0)
-                    loop.stop_event.set()
-                time.sleep(0.5)
+        def on_record(rec: Record) -> None:  # after the run log's subscriber: the decision is written
+            if isinstance(rec, DecisionMade) and rec.decision in ("move", "hold") and rec.predictions:
+                loop.stop_event.set()
 
-        threading.Thread(target=watch, daemon=True).start()
+        loop.events.bus.subscribe(on_record)
 
     cfg = RunConfig(dashboard=False, duration_s=600.0, speed=4.0, case="C", seed=0, mode="auto", log_dir=log,
                     ).resolved()

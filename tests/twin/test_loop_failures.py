@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import errno
 import threading
-import time
 from pathlib import Path
 
 import pytest
 
 from control.protocol import MillStatus
 from tests.twin.test_mill_worker import FakeLink
+from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.live.faults import NO_FAULTS, FaultHooks
 from twin.run.loop import LiveLoop
@@ -29,15 +29,6 @@ class FullDisk(RunLog):
         if self.full:
             raise OSError(errno.ENOSPC, "No space left on device")
         super()._write(fh, text)
-
-
-def _wait(pred, timeout_s: float) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 @pytest.fixture
@@ -64,7 +55,7 @@ def _loop(tmp_path: Path, log: RunLog, faults: FaultHooks = NO_FAULTS) -> tuple[
     link = FakeLink(MillStatus(12.0, 12.0, True, None))  # a running board
     cfg = RunConfig(dashboard=False, mode="manual", log_dir=tmp_path / "run").resolved()
     loop = LiveLoop(cfg, iter(()), link, log, seams=Seams(faults=faults)).start()
-    assert _wait(lambda: loop.mill_box.get().connected, 5.0)
+    wait_until(lambda: loop.mill_box.get().connected, 5.0, "the mill worker's first read of the board")
     return loop, link
 
 
@@ -78,7 +69,7 @@ def test_a_full_disk_ends_the_run_and_stops_the_mill(tmp_path: Path, thread_erro
     try:
         log.full = True
         loop.controls.set_manual_rpm(20.0)  # the operator's event cannot be written
-        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its log"
+        wait_until(loop.stop_event.is_set, 5.0, "the run to end without its log")
     finally:
         loop.stop()
         log.close()
@@ -109,7 +100,7 @@ def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
         if worker == "supervisor":
             loop.controls.set_manual_rpm(20.0)  # its next tick, at once
         # the mill: its next poll, within 0.1 s
-        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its worker"
+        wait_until(loop.stop_event.is_set, 5.0, "the run to end without its worker")
     finally:
         loop.stop()
         log.close()
@@ -135,13 +126,15 @@ def test_a_hung_supervisor_ends_the_run_and_stops_the_mill(tmp_path: Path, monke
     hang = Armed(lambda: release.wait(20.0))
     loop, link = _loop(tmp_path, log, FaultHooks(supervisor_tick=hang))
     try:
-        assert not _wait(loop.stop_event.is_set, 1.5), "a healthy supervisor is not a stall"
+        # real time: the stall watch measures the wall clock, and a healthy supervisor must pass
+        # through its loop for longer than the (patched) 1 s stall time without ending the run
+        assert not loop.stop_event.wait(1.5), "a healthy supervisor is not a stall"
         hang.armed.set()
         loop.controls.set_manual_rpm(20.0)  # its next pass hangs in tick
         # 15 s: the stop comes ~1 s after the hang (the stall time) on a quiet machine; a loaded
         # one (a 5 s wait failed once at load 5-8) may take longer. Still under the hang's 20 s,
         # so a loop without the watch fails here
-        assert _wait(loop.stop_event.is_set, 15.0), "the run went on with a hung supervisor"
+        wait_until(loop.stop_event.is_set, 15.0, "the run to end with a hung supervisor")
     finally:
         release.set()
         loop.stop()

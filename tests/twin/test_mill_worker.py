@@ -6,6 +6,7 @@ import pytest
 
 from control.errors import MillRefused
 from control.protocol import MillStatus
+from tests.waiting import wait_until
 from twin.live.commands import SetRpm, StartMill, StopMill
 from twin.live.mill import MillWorker
 from twin.live.snapshots import Latest, MillSnapshot
@@ -256,7 +257,6 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
     (a crashed earlier run, a front panel) kept turning although nobody asked this run to
     move it. Now it only reads until the operator or AUTO commands: the board's watchdog
     stops the motor, and the worker reports the WDOG fault."""
-    import time
 
     from control.device import DeviceConfig
     from control.driver import MillClient
@@ -270,10 +270,7 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
                           reconnect_wait_s=0.2)
         sink, box = Sink(), Latest(MillSnapshot())
         w = MillWorker(link, sink, box, now_s=lambda: 0.0)
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline and not (box.get().fault == "WDOG"):
-            w.cycle()
-            time.sleep(0.05)
+        wait_until(lambda: w.cycle().fault == "WDOG", 5, "the board's watchdog to trip, read by the worker")
         assert box.get().connected and box.get().fault == "WDOG" and not emu.motor.running
         assert emu.applied == [] and "mill_fault" in sink.faults
     finally:
@@ -282,7 +279,6 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
 
 def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
     """The same worker on the real driver and the emulator's board over a TCP link."""
-    import time
 
     from control.device import DeviceConfig
     from control.driver import MillClient
@@ -294,9 +290,7 @@ def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
     port = emu.open_tcp(0)
     try:
         emu.set_motor(setpoint_rpm=8.0, actual_rpm=8.0, running=True)
-        deadline = time.monotonic() + 5
-        while emu.motor.fault != "WDOG" and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog to trip (nobody feeds it)")
         link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1,
                           reconnect_wait_s=0.2)
         sink, box = Sink(), Latest(MillSnapshot())
@@ -319,10 +313,7 @@ def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
         assert not box.get().connected and "mill_link" in sink.faults
         w.submit(SetRpm(20.0, epoch=old_epoch))  # decided before the link came back
         emu.reconnect()
-        deadline = time.monotonic() + 10
-        while not box.get().connected and time.monotonic() < deadline:
-            w.cycle()
-            time.sleep(0.05)
+        wait_until(lambda: w.cycle().connected, 10, "the worker to read the board again")
         w.cycle()
         assert box.get().connected and box.get().epoch == old_epoch + 1
         assert emu.motor.setpoint_rpm == 8.0 and "SET" not in [a.cmd for a in emu.applied]

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli import assert_one_line_error, cli
+from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.errors import TwinError
 from twin.runlog import (
@@ -62,16 +63,15 @@ def test_reader_drops_a_cut_off_last_line(tmp_path: Path) -> None:
 
 _WRITER = textwrap.dedent(
     """
-    import sys, time
+    import sys
     from twin.runlog import RunLog
     log = RunLog(sys.argv[1])
     log.event("start", 0.0)
     i = 0
     print("ready", flush=True)
-    while True:
+    while True:  # flat out: the kill lands anywhere in a row's write
         log.frame({"t_s": i * 0.01, "frame": i, "mi": 0.5})
         i += 1
-        time.sleep(0.01)
     """
 )
 
@@ -84,7 +84,8 @@ def test_csv_survives_kill_9(tmp_path: Path) -> None:
     )
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        time.sleep(2.0)
+        csv_path = tmp_path / "frames.csv"
+        wait_until(lambda: csv_path.read_bytes().count(b"\n") > 60, 30, "the writer's first 60 rows")
         kill_wall = time.time()
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
@@ -197,6 +198,16 @@ def _gone(pid: int) -> bool:
         return True
 
 
+def _cpu_ticks(pid: int) -> int:
+    """User + system CPU of process ``pid`` in clock ticks (-1 once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            fields_ = fh.read().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return -1
+    return int(fields_[11]) + int(fields_[12])
+
+
 @pytest.mark.timeout(60)
 def test_whatif_workers_die_with_a_killed_parent_and_leave_no_temp_files() -> None:
     proc = subprocess.Popen([sys.executable, "-c", _STUDY], stdout=subprocess.PIPE, text=True)
@@ -205,14 +216,14 @@ def test_whatif_workers_die_with_a_killed_parent_and_leave_no_temp_files() -> No
         *pids, tmp = proc.stdout.readline().split()
         workers = [int(p) for p in pids]
         assert len(workers) == 3 and Path(tmp).is_dir()  # two workers and the fork server
-        time.sleep(0.5)  # the study is running
+        start = [_cpu_ticks(p) for p in workers[:2]]
+        wait_until(lambda: all(_cpu_ticks(p) > t0 + 2 for p, t0 in zip(workers[:2], start, strict=True)), 30,
+                   "both workers computing the study")
         assert not any(_gone(p) for p in workers)
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
-        end = time.monotonic() + 10
-        while time.monotonic() < end and not (all(_gone(p) for p in workers) and not Path(tmp).exists()):
-            time.sleep(0.1)
-        assert [p for p in workers if not _gone(p)] == []
+        wait_until(lambda: all(_gone(p) for p in workers) and not Path(tmp).exists(), 10,
+                   "the workers and the fork server's directory to go with their parent")
         assert not Path(tmp).exists()  # the fork server's socket directory is removed
     finally:
         if proc.poll() is None:

@@ -234,7 +234,6 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
     controls the motor passes ``heartbeat_s``. A started motor with a silent default
     client is stopped by the board's watchdog (0.3 s here)."""
     import threading
-    import time
 
     from control.driver import MillClient
 
@@ -247,7 +246,6 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
             c.start()
             assert emu.motor.running
             assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
-            time.sleep(0.3)  # the watchdog's time, then it trips on the emulator's next tick
             wait_until(lambda: not emu.motor.running and emu.motor.fault is not None, 10.0,
                        "the watchdog to stop the motor of a silent host")
 
@@ -262,10 +260,10 @@ def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -
     from control.emulator import PTY_DIR_PREFIX
 
     env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd())}
-    code = ("import time; from control.emulator import MillEmulator; e = MillEmulator(); "
-            "print(e.open_pty(), flush=True); time.sleep(60)")
-    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
-             for _ in range(11)]
+    code = ("import sys; from control.emulator import MillEmulator; e = MillEmulator(); "
+            "print(e.open_pty(), flush=True); sys.stdin.read()")  # lives until killed or its stdin closes
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                              env=env) for _ in range(11)]
     links = [Path(p.stdout.readline().strip()) for p in procs]  # type: ignore[union-attr]
     assert all(link.is_symlink() for link in links)
     alive = procs.pop()
@@ -445,7 +443,6 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
     """Another host sets the board to 55 rpm (limits 2-40 here): the mill worker reads it
     again (a new epoch, no stale belief), the supervisor worker alarms; in AUTO the
     supervisor brings it to 40 rpm at once, in OFF it keeps its hands off."""
-    import time
 
     from control.decision import Mode
     from control.driver import MillClient
@@ -474,13 +471,16 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
             if mode == "auto":
                 assert emu.motor.setpoint_rpm == 40.0
                 assert any(d["rpm"] == 40.0 for d in sink.kinds("decision"))
-                t = 3.0
-                while "mill_above_limits" in sink.faults and t < 20.0:  # the motor slows down (real time)
-                    time.sleep(0.1)
+                t = [3.0]
+
+                def step() -> bool:  # the motor slows down in real time: read it, tick the supervisor
                     mill.cycle()
-                    advance(b, sup, t, t + 0.5)
-                    t += 0.5
-                assert "mill_above_limits" not in sink.faults and emu.motor.actual_rpm <= 40.5
+                    advance(b, sup, t[0], t[0] + 0.5)
+                    t[0] += 0.5
+                    return "mill_above_limits" not in sink.faults
+
+                wait_until(step, 20.0, "the fault to clear as the motor slows to 40 rpm")
+                assert emu.motor.actual_rpm <= 40.5
             else:
                 assert emu.motor.setpoint_rpm == 55.0 and sink.kinds("decision") == []
         finally:
@@ -537,7 +537,6 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
     10 s of run time and the supervisor is safe with the twin stale."""
     import dataclasses
     import math
-    import time
 
     from twin.live.faults import FaultHooks
     from twin.live.mismatch import MismatchMonitor, MismatchTolerance
@@ -560,14 +559,10 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
         # the twin goes wrong once it is evidence (past its spin-up, ``warmup_s`` simulated since
         # it was seeded) and has agreed a whole median window: on a busy machine it seeds late
         settled = MismatchTolerance().warmup_s + MismatchMonitor().window_s
-        end = time.monotonic() + 120
-        while time.monotonic() < end and not (loop.now_s() > 15.0 and loop.twin_box.get().age_s > settled):
-            time.sleep(0.1)
+        wait_until(lambda: loop.now_s() > 15.0 and loop.twin_box.get().age_s > settled, 120, "a settled twin")
         report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
         report["t_wrong"] = loop.now_s()
-        end = time.monotonic() + 60
-        while time.monotonic() < end and not loop.supervisor.safe:
-            time.sleep(0.05)
+        wait_until(lambda: loop.supervisor.safe, 120, "the safe state after the twin went wrong")
         report["t_safe"] = loop.now_s()
         report["safe_reason"] = loop.supervisor.supervisor.safe_reason
 

@@ -20,6 +20,7 @@ import pytest
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from tests.cli import cli
+from tests.waiting import wait_until
 from twin.errors import EXIT_WORKER_CRASHED
 from twin.live.faults import FaultHooks, Hook
 from twin.run import main as run_main
@@ -61,9 +62,7 @@ def _video(path: Path, n: int) -> Path:
 
 def _start_mill(loop: LiveLoop, plant: object, dash: object) -> None:
     """The operator presses Start once the board has been read (the run then controls it)."""
-    end = time.monotonic() + 20.0
-    while not loop.mill_box.get().connected and time.monotonic() < end:
-        time.sleep(0.02)
+    wait_until(lambda: loop.mill_box.get().connected, 20.0, "the board to be read")
     loop.controls.start_mill()
 
 
