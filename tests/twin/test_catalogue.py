@@ -49,10 +49,10 @@ def test_a_failed_run_and_an_unmixed_one_say_so(tmp_path: Path) -> None:
 
 def _writer(run_dir: Path) -> subprocess.Popen[bytes]:
     """A process that writes a run's start and then hangs, as a run killed mid-write would."""
-    code = ("import sys, time; from pathlib import Path; from tests.catalogue_runs import RunSpec, make_run;"
+    code = ("import signal, sys; from pathlib import Path; from tests.catalogue_runs import RunSpec, make_run;"
             "from twin.runlog import RunLog;"
             "make_run(Path(sys.argv[1]), RunSpec(stopped=False, mixing_time_s=None));"
-            "open(Path(sys.argv[1]) / 'ready', 'w').close(); time.sleep(600)")
+            "open(Path(sys.argv[1]) / 'ready', 'w').close(); signal.pause()")
     return subprocess.Popen([sys.executable, "-c", code, str(run_dir)], cwd=Path(__file__).parents[2])
 
 
