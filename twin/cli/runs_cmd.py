@@ -9,13 +9,19 @@
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Sequence
+import functools
+import inspect
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from twin.cli.app import app, bench_app, print_json, say
 from twin.errors import TwinError
+
+if TYPE_CHECKING:
+    from twin.catalogue.store import RunFilter
 
 runs_app = typer.Typer(help="The run catalogue: list, show, tag, note, golden, rebuild.")
 app.add_typer(runs_app, name="runs")
@@ -60,6 +66,68 @@ def parse_rpm_range(text: str) -> tuple[float | None, float | None]:
     return bounds
 
 
+
+FILTER_OPTIONS: tuple[inspect.Parameter, ...] = tuple(
+    inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=kind)
+    for name, kind, option in (
+        ("rig", str, typer.Option(None, "--rig", help="Only this rig (the config's name; 'demo' for the demo).")),
+        ("mode", str, typer.Option(None, "--mode", help="Only runs in this mode: off, manual or auto.")),
+        ("tag", list[str], typer.Option([], "--tag", help="Only runs with this tag: key or key=value (repeatable).")),
+        ("since", str, typer.Option(None, "--since", help="Started on or after this date (YYYY-MM-DD[THH:MM]).")),
+        ("until", str, typer.Option(None, "--until", help="Started before this date (YYYY-MM-DD[THH:MM]).")),
+        ("mixed", bool, typer.Option(None, "--mixed/--not-mixed", help="Only batches that reached (or missed) "
+                                     "their endpoint.")),
+        ("rpm", str, typer.Option(None, "--rpm", help="Only runs whose rpm went into LO:HI.")),
+        ("ended", str, typer.Option(None, "--ended", help="Only runs that ended so: running, clean, failed, "
+                                    "killed.")),
+        ("last", int, typer.Option(None, "--last", min=1, max=1_000_000, help="At most this many (the newest).")),
+    )
+)
+"""The run filter's options, one definition for ``runs list``, ``report`` and ``compare``
+(:func:`filter_options` adds them to a command)."""
+
+
+def run_filter(rig: str | None = None, mode: str | None = None, tag: Sequence[str] = (), since: str | None = None,
+               until: str | None = None, mixed: bool | None = None, rpm: str | None = None,
+               ended: str | None = None, last: int | None = None) -> RunFilter | None:
+    """The ``RunFilter`` of the filter options (None: none of them given); bad values are one line."""
+    from control.decision import Mode
+    from twin.catalogue.store import RunFilter
+    from twin.catalogue.summary import ENDED
+
+    if ended is not None and ended not in ENDED:
+        raise TwinError(f"--ended {ended!r}: one of {', '.join(ENDED)}")
+    modes = [m.value for m in Mode]
+    if mode is not None and mode not in modes:
+        raise TwinError(f"--mode {mode!r}: one of {', '.join(modes)}")
+    if rig is not None and not rig.strip():
+        raise TwinError("--rig: give the rig's name (the config's name; 'demo' for the demo)")
+    if all(v is None for v in (rig, mode, since, until, mixed, rpm, ended, last)) and not tag:
+        return None
+    lo, hi = parse_rpm_range(rpm) if rpm is not None else (None, None)
+    return RunFilter(rig=rig, mode=mode, tags=parse_tags(tag),
+                     since_s=parse_date(since, "--since") if since is not None else None,
+                     until_s=parse_date(until, "--until") if until is not None else None,
+                     mixed=mixed, rpm_lo=lo, rpm_hi=hi, ended=ended, last=last)
+
+
+def filter_options(command: Callable[..., None]) -> Callable[..., None]:
+    """Give ``command`` the filter options (:data:`FILTER_OPTIONS`): it is called with
+    ``run_filter`` (:func:`run_filter` of them) in their place."""
+    names = [p.name for p in FILTER_OPTIONS]
+    sig = inspect.signature(command)  # typer reads the command's own types from its annotations
+    own = [p for p in sig.parameters.values() if p.name != "run_filter"]
+
+    @functools.wraps(command)
+    def with_filter(**kwargs: Any) -> None:
+        chosen = {k: kwargs.pop(k) for k in names}
+        command(**kwargs, run_filter=run_filter(**chosen))
+
+    with_filter.__signature__ = sig.replace(parameters=[*own, *FILTER_OPTIONS])  # type: ignore[attr-defined]
+    with_filter.__annotations__ = {k: v for k, v in command.__annotations__.items() if k != "run_filter"}
+    return with_filter
+
+
 def _when(t: float | None) -> str:
     return "-" if t is None else dt.datetime.fromtimestamp(t).strftime("%Y-%m-%d %H:%M")
 
@@ -83,35 +151,20 @@ def summary_line(s: object) -> str:
 
 
 @runs_app.command("list")
+@filter_options
 def runs_list(
-    rig: str = typer.Option(None, "--rig", help="Only this rig (the config's name; 'demo' for the demo)."),
-    mode: str = typer.Option(None, "--mode", help="Only runs in this mode: off, manual or auto."),
-    tag: list[str] = typer.Option([], "--tag", help="Only runs with this tag: key or key=value (repeatable)."),
-    since: str = typer.Option(None, "--since", help="Started on or after this date (YYYY-MM-DD[THH:MM])."),
-    until: str = typer.Option(None, "--until", help="Started before this date (YYYY-MM-DD[THH:MM])."),
-    mixed: bool = typer.Option(None, "--mixed/--not-mixed", help="Only batches that reached (or missed) "
-                               "their endpoint."),
-    rpm: str = typer.Option(None, "--rpm", help="Only runs whose rpm went into LO:HI."),
-    ended: str = typer.Option(None, "--ended", help="Only runs that ended so: running, clean, failed, killed."),
-    last: int = typer.Option(None, "--last", min=1, help="At most this many (the newest)."),
     as_json: bool = typer.Option(False, "--json", help="Print the runs as JSON (stdout)."),
     catalogue: str = CATALOGUE_OPT,
     runs_dir: Path = RUNS_DIR_OPT,
+    *,
+    run_filter: RunFilter | None,
 ) -> None:
     """The runs, newest first (one line each; * marks a rig's golden batch)."""
     from twin.catalogue.store import Catalogue, RunFilter
-    from twin.catalogue.summary import ENDED
 
-    if ended is not None and ended not in ENDED:
-        raise TwinError(f"--ended {ended!r}: one of {', '.join(ENDED)}")
-    lo, hi = parse_rpm_range(rpm) if rpm else (None, None)
-    f = RunFilter(rig=rig, mode=mode, tags=parse_tags(tag),
-                  since_s=parse_date(since, "--since") if since else None,
-                  until_s=parse_date(until, "--until") if until else None,
-                  mixed=mixed, rpm_lo=lo, rpm_hi=hi, ended=ended, last=last)
     with Catalogue.open(catalogue, runs_dir) as cat:
         cat.reconcile()
-        found = cat.list(f)
+        found = cat.list(run_filter or RunFilter())
     if as_json:
         print_json([s.as_json() for s in found])
         return
