@@ -122,7 +122,9 @@ def test_the_history_panel_says_what_there_is() -> None:
     md = history_markdown(RigHistory("ready", "pmma", runs, golden(0.9)), Panel(t_s=30.0, trend_mi=0.8))
     assert "Deviation now: **-0.100**" in md and "behind the golden batch" in md
     md = history_markdown(RigHistory("ready", "pmma", runs, golden(0.9)), Panel(t_s=30.0, trend_mi=0.88))
-    assert "**-0.020**" in md and "within the spread" in md
+    assert "**-0.020**" in md and "within the rig's usual spread" in md
+    md = history_markdown(RigHistory("ready", "pmma", runs, golden(0.9)), Panel(t_s=30.0, trend_mi=0.95))
+    assert "**+0.050**" in md and "ahead of the golden batch" in md
     down = RigHistory("unavailable", "x", message="disk on fire")
     assert "could not be read (disk on fire)" in history_markdown(down, Panel())
 

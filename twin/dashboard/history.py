@@ -71,7 +71,8 @@ def history_markdown(h: RigHistory, panel: Panel) -> str:
     if d is None:
         lines.append("Deviation: – (no trend yet, or past the golden batch's end).")
     else:
-        state = "**behind the golden batch** by more than the rig's usual spread" if d.behind else "within the spread"
+        state = ("**behind the golden batch** by more than the rig's usual spread" if d.behind else
+                 "ahead of the golden batch" if d.deviation > d.spread else "within the rig's usual spread")
         lines.append(f"Deviation now: **{d.deviation:+.3f}** (trend {d.mi:.3f}, golden {d.golden_mi:.3f} at "
                      f"{d.t_s:.0f} s; usual spread ±{d.spread:.3f}): {state}.")
     return "\n".join(lines)

@@ -229,7 +229,8 @@ class Layout:
             seen["twin"] = snap.twin_seq
         self._alarm.content = alarms_html(snap.alarms)
         self._numbers.content = numbers_markdown(snap.panel)
-        if plots and snap.history_seq != seen["hist"] and len(snap.history["t_s"]) >= 2:
+        fresh = snap.history_seq != seen["hist"] or snap.rig_history_seq != seen.get("rig")  # new frames or golden
+        if plots and fresh and len(snap.history["t_s"]) >= 2:
             h = {k: forward_fill(v) for k, v in snap.history.items()}
             t = h["t_s"]
             self._mi_plot.data = (t, golden_column(snap.rig_history, t), h["mi"], h["trend_mi"], h["trend_lo95"],
@@ -243,7 +244,7 @@ class Layout:
                     plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": rng}}
                     self._y_ranges[id(plot)] = rng
                 plot.data = (t, *ys)
-            seen["hist"] = snap.history_seq
+            seen["hist"], seen["rig"] = snap.history_seq, snap.rig_history_seq
             pushed = True
         if plots:
             self.history.push(snap)
