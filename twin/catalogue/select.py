@@ -48,7 +48,8 @@ class Lookup:
             if "://" not in where and not Path(where).expanduser().is_file():  # opening it would make one
                 raise CatalogueError(f"no run catalogue at {where}")
             self._cat = Catalogue.open(self.url, self.runs_dir, create=False)
-            self._cat.reconcile()
+            with contextlib.suppress(CatalogueError):  # read-only or full: the index as it is still answers
+                self._cat.reconcile()
         return self._cat
 
     def where(self) -> str:
