@@ -25,6 +25,7 @@ class RunSpec:
     failure: str | None = None
     frames: int = 5
     uid: str | None = None
+    energy_j: float | None = None
 
 
 def frame(t_s: float, mi: float, rpm: float) -> FrameReading:
@@ -51,7 +52,8 @@ def make_run(directory: Path, spec: RunSpec = RunSpec(), *, process: dict[str, o
     if spec.mixing_time_s is not None:
         log.record(Mixed(t_s=spec.mixing_time_s + 5, mixing_time_s=spec.mixing_time_s, plateau_mi=spec.final_mi))
     if spec.stopped:
-        log.record(RunStop(t_s=60.0, frames=spec.frames, workers_alive=(), failure=spec.failure))
+        log.record(RunStop(t_s=60.0, frames=spec.frames, workers_alive=(), failure=spec.failure,
+                           energy_j=spec.energy_j))
     log.close()
     return directory
 

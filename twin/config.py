@@ -162,6 +162,10 @@ class RunConfig:
             raise TwinError(
                 f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}"
             )
+        if self.catalogue is not None:  # a catalogue that cannot be used later is a warning; this is a typo
+            from twin.catalogue.store import check_url
+
+            check_url(self.catalogue)
         if self.mill is not None and not self.mill.strip():
             raise TwinError("--mill must not be empty")
         if self.camera is not None and self.video is not None:

@@ -253,3 +253,15 @@ def test_a_catalogue_on_a_full_disk_is_one_line_and_loses_no_run_folder(tmp_path
     assert len(lines) == 1 and lines[0].startswith("error:") and "full" in lines[0], p.stderr
     assert sorted(f.name for f in (runs / "a").iterdir()) == ["events.jsonl", "frames.csv", "metadata.json"]
     assert len(listed(runs)) == 1  # the folder is intact and indexes elsewhere
+
+
+def test_rebuild_never_moves_a_directory_or_a_file_it_does_not_own_by_mistake(tmp_path: Path) -> None:
+    """Only a catalogue FILE that cannot be read is kept aside by rebuild: a directory given as
+    the catalogue is refused in one line and left where it is (a sweep once lost its fixture
+    folder to this)."""
+    runs = tmp_path / "runs"
+    make_run(runs / "a")
+    folder = tmp_path / "important"
+    (folder / "keep").mkdir(parents=True)
+    assert_one_line_error(cli("runs", "rebuild", "--runs-dir", runs, "--catalogue", folder), "is a directory")
+    assert (folder / "keep").is_dir() and not list(tmp_path.glob("important.unreadable-*"))

@@ -438,6 +438,8 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         slider_enabled,
         slider_value,
     )
+    from tests.twin.test_dashboard_history import golden_pixels, mi_canvas
+    from twin.dashboard.history import NO_HISTORY
 
     cfg = RunConfig(
         dashboard=True, duration_s=10_000, speed=2.0, mode="auto", port=_free_port(), log_dir=tmp_path / "run"
@@ -463,6 +465,8 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         page.goto(dash.url)
         page.wait_for_selector(IMG)
         wait_until(lambda: len(image_srcs(page)) >= 2, 30, "camera and twin images")
+        page.get_by_text(NO_HISTORY).wait_for()  # issue 40: the rig's first run: no history, no golden curve
+        assert not golden_pixels(mi_canvas(page)[0]).any()
         imgs, plots = image_srcs(page), plot_pixels(page)
         wait_until(lambda: image_srcs(page)[0] != imgs[0], 15, "a new camera frame in the browser")
         wait_until(lambda: plot_pixels(page)["Mixing index"] != plots["Mixing index"], 15, "the MI plot to update")
@@ -491,6 +495,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     events = read_events(tmp_path / "run")
     assert any(e["kind"] == "operator" and e.get("action") == "manual_rpm" for e in events)
     assert any(e["kind"] == "decision" and e["decision"] == "manual" for e in events)
+    assert not any(e["kind"] == "slower_than_golden" for e in events)
 
 
 @LIVE

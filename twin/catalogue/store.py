@@ -84,6 +84,42 @@ def _engine_url(url: str) -> tuple[sa.URL, Path | None]:
     return parsed, None
 
 
+def check_url(url: str) -> None:
+    """A one-line ``CatalogueError`` for a ``--catalogue`` no catalogue can be at, before anything
+    runs: a scheme other than SQLite's or PostgreSQL's, a directory, a path under a regular file.
+    (A file that is corrupt or a server that is down is found when it is used.)"""
+    _sa_url, path = _engine_url(url)
+    if path is None:
+        return
+    if path.is_dir():
+        raise CatalogueError(f"--catalogue {path} is a directory: give the catalogue's file")
+    parent = next((q for q in path.parents if q.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise CatalogueError(f"--catalogue {path}: {parent} is not a directory")
+
+
+def runs_root_of(runs_dir: Path | None) -> Path:
+    """The folder of the run folders: ``--runs-dir`` (which must be a folder: a typo is no new,
+    empty catalogue), else ``runs``."""
+    if runs_dir is None:
+        return Path(DEFAULT_RUNS_ROOT)
+    if not runs_dir.is_dir():
+        raise CatalogueError(f"--runs-dir {runs_dir} is not a folder (the folder of the run folders)")
+    return runs_dir
+
+
+def open_for_runs(url: str | None, runs_dir: Path | None) -> Catalogue:
+    """The catalogue a ``drumtwin runs`` command uses: ``url`` (checked), else the one beside the
+    runs, whose folder must exist."""
+    root = runs_root_of(runs_dir)
+    if url is None and not os.environ.get(CATALOGUE_ENV) and not root.is_dir():
+        raise CatalogueError(f"no folder of runs at {root} (the catalogue is beside the run folders): "
+                             "give --runs-dir or --catalogue")
+    resolved = resolve_url(url, root)
+    check_url(resolved)
+    return Catalogue(resolved, root)
+
+
 def _unusable(where: str, exc: BaseException) -> CatalogueError:
     """The one line of a database failure: a full disk or a read-only place says so; anything
     else (corrupt, truncated, not a database) names ``runs rebuild``."""
@@ -115,8 +151,7 @@ class Catalogue:
     def _make_engine(self) -> sa.Engine:
         if self.sqlite_path is None:
             return sa.create_engine(self._sa_url, pool_pre_ping=True, connect_args={"connect_timeout": 5})
-        if self.sqlite_path.is_dir():
-            raise CatalogueError(f"--catalogue {self.sqlite_path} is a directory: give the catalogue's file")
+        check_url(str(self.sqlite_path))
         self.sqlite_path.parent.mkdir(parents=True, exist_ok=True)
         engine = sa.create_engine(self._sa_url, poolclass=sa.pool.NullPool, connect_args={"timeout": 15})
         sa.event.listen(engine, "connect", lambda dbapi_conn, _rec: schema.sqlite_pragmas(dbapi_conn))
@@ -289,6 +324,8 @@ class Catalogue:
 
     def get(self, run: str) -> RunSummary:
         """One run by its id, a unique prefix of it, its folder's path or its folder's name."""
+        if not run.strip():
+            raise CatalogueError("give a run: its id (or a prefix of it) or its folder ('drumtwin runs list')")
         r = schema.runs.c
         which = [r.id == run, r.id.startswith(run, autoescape=True), r.path.endswith(os.sep + run, autoescape=True)]
         if os.sep in run or Path(run).is_dir():
@@ -371,12 +408,13 @@ def rebuild(url: str | None, runs_root: Path | str = DEFAULT_RUNS_ROOT, roots: S
     deleted; the new index is built in a temporary file and put in place atomically. A
     catalogue of a newer schema is refused (upgrade drumtwin)."""
     resolved = resolve_url(url, runs_root)
+    check_url(resolved)  # never a directory or a path under a file: only a regular file is kept aside
     _sa_url, path = _engine_url(resolved)
     if path is None:
         with Catalogue(resolved, runs_root) as cat:
             return cat.rebuild(roots, progress), None
     moved: str | None = None
-    if path.exists():
+    if path.is_file():
         try:
             Catalogue(resolved, runs_root, create=False).close()
         except CatalogueError as exc:

@@ -85,7 +85,7 @@ def _number(value: Any) -> float | None:
     """A finite float of a JSON or CSV value, else None."""
     try:
         x = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # an int no float holds is no number either
         return None
     return x if math.isfinite(x) else None
 

@@ -16,13 +16,18 @@ import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.errors import TwinError
 from twin.report import figures
+from twin.report.batch import batch_html
+from twin.report.cells import fmt, table
 from twin.report.events import text
 from twin.report.frames import PLOTS
 from twin.report.load import RunData, check_dir, load_run
+
+if TYPE_CHECKING:
+    from twin.catalogue.select import Batch
 
 SECTIONS: tuple[tuple[str, str], ...] = (
     ("summary", "Summary"),
@@ -43,20 +48,6 @@ OVERVIEW_BUCKETS = 200
 """Points a run's trend gets in the all-runs plot (min/max of 200 buckets)."""
 MAX_TEXT = 200_000
 """Characters of a run's configuration or versions shown (a metadata.json can be large)."""
-
-
-def fmt(v: Any, spec: str = ".3f") -> str:
-    if isinstance(v, bool) or v is None:
-        return "–" if v is None else str(v)
-    if isinstance(v, (int, float)):
-        return format(v, spec) if abs(v) <= 1e300 else "–"  # not NaN, inf or an int no float holds
-    return html.escape(str(v))
-
-
-def table(rows: Sequence[Sequence[Any]], head: Sequence[str] = ()) -> str:
-    h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table>{'<tr>' + h + '</tr>' if h else ''}{body}</table>"
 
 
 def _img(section: str, idx: int, uri: str, alt: str) -> str:
@@ -183,6 +174,7 @@ img.plot{width:100%;height:auto;border:1px solid #eee}
 table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ddd;padding:2px 6px;text-align:left}
 pre{font-size:11px;max-height:300px;overflow:auto;background:#fafafa}
 .note{color:#b71c1c;font-weight:bold} .mixed{color:#1b5e20;font-size:16px} .none{color:#757575}
+.golden-mark{color:#f57f17}
 """
 
 ALL_RUNS_HEAD = ("run", "run dir", "mode", "frames", "run time s", "final trend MI", "decisions", "faults",
@@ -200,11 +192,12 @@ def all_runs_row(run: RunData) -> tuple[str, ...]:
 
 
 def page(title: str, labels: Sequence[str], columns: Sequence[dict[str, str]],
-         all_runs: tuple[Sequence[Sequence[str]], str] | None = None) -> str:
+         all_runs: tuple[Sequence[Sequence[str]], str] | None = None, batches: str = "") -> str:
     """The whole report: ``labels`` of every run; ``columns``: the sections of the runs shown in
-    detail; ``all_runs``: the rows and the overview plot of a report of many runs."""
+    detail; ``all_runs``: the rows and the overview plot of a report of many runs; ``batches``:
+    the batch table's section (``twin.report.batch``)."""
     parts = [f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-             f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+             f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>", batches]
     if all_runs is None:
         parts.append(f"<p>{len(labels)} run(s): " + ", ".join(html.escape(x) for x in labels) + "</p>")
     else:
@@ -258,11 +251,12 @@ def check_out(out: Path | str) -> Path:
 
 
 def write_report(run_dirs: Sequence[Path | str], out: Path | str, title: str = "drumtwin report",
-                 labels: Sequence[str] | None = None, detailed: int = MAX_DETAILED,
+                 labels: Sequence[str] | None = None, detailed: int = MAX_DETAILED, batch: Batch | None = None,
                  ) -> tuple[Path, dict[str, dict[str, Any]]]:
     """Read the runs one at a time and write the report to ``out`` (atomically: a temporary file,
     then renamed); returns it and each run's endpoint and time-to-mix check by label. More runs
-    than ``detailed``: the "All runs" table and plot, and the sections of the first ``detailed``."""
+    than ``detailed``: the "All runs" table and plot, and the sections of the first ``detailed``.
+    ``batch``: the catalogue's summaries of the runs, in order: a batch table first."""
     if not run_dirs:
         raise TwinError("give at least one run dir")
     target = check_out(out)
@@ -283,7 +277,8 @@ def write_report(run_dirs: Sequence[Path | str], out: Path | str, title: str = "
                 curves.append((run.label, *trend.coarser(OVERVIEW_BUCKETS)))
         del run
     all_runs = (rows, figures.overview(curves)) if many else None
-    text_ = page(title, [lab for lab, _ in specs], columns, all_runs)
+    labels_ = [lab for lab, _ in specs]
+    text_ = page(title, labels_, columns, all_runs, batch_html(labels_, batch) if batch is not None else "")
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
         tmp.write_text(text_, encoding="utf-8")

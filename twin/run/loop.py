@@ -268,6 +268,12 @@ class LiveLoop:
         self._spawn("drumtwin-watch", self._watch)
         return self
 
+    def run_beside(self, name: str, job: Callable[[threading.Event], None]) -> None:
+        """A one-off job of the run on its own thread ``drumtwin-<name>`` (the rig's history read
+        from the catalogue): started now, given the run's stop event, joined by :meth:`stop`. No
+        worker: nothing depends on it, and it catches what it meets itself."""
+        self._spawn(f"drumtwin-{name}", lambda: job(self.stop_event))
+
     def _spawn(self, name: str, target: Callable[[], None]) -> None:
         """Start ``target`` on a daemon thread of the run (joined by :meth:`stop`)."""
         th = threading.Thread(target=target, name=name, daemon=True)

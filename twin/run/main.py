@@ -19,7 +19,7 @@ from twin.live.mill import MillLink
 from twin.records import CatalogueUnavailable, MillState, Record
 from twin.run.loop import LiveLoop, Summary
 from twin.run.metadata import mixer_metadata, versions
-from twin.run.settings import RunInputs, Seams, mill_url, resolve_inputs
+from twin.run.settings import RunInputs, Seams, endpoint_config, mill_url, resolve_inputs
 from twin.state import LiveState
 
 if TYPE_CHECKING:
@@ -139,22 +139,41 @@ class _Parts:
             runlog.set_metadata(plant=asdict(self.plant.config), mill_url="emulator pty")
         return runlog
 
-    def open_index(self, cfg: RunConfig, inputs: RunInputs, loop: LiveLoop) -> None:
+    def open_index(self, cfg: RunConfig, inputs: RunInputs, loop: LiveLoop) -> str:
         """The run in the catalogue: its rig and process in ``metadata.json``, then registered
-        (running); a catalogue that cannot be written is a warning and a record, not an end."""
+        (running); a catalogue that cannot be written is a warning and a record, not an end.
+        Returns the rig's name."""
         from twin.catalogue.hook import RunIndexer, run_metadata
 
         assert self.runlog is not None
         from twin.runlog import to_jsonable
 
         mixer = mixer_metadata(inputs.mixer) if inputs.mixer is not None else None
-        loop.events.metadata(**run_metadata(cfg.meter_config, mixer, to_jsonable(inputs.classes)))
+        meta = run_metadata(cfg.meter_config, mixer, to_jsonable(inputs.classes))
+        loop.events.metadata(**meta)
 
         def unavailable(message: str) -> None:
             loop.events.publish(CatalogueUnavailable(t_s=loop.now_s(), message=message))
 
-        self.index = RunIndexer(cfg.catalogue, self.runlog.paths.directory, unavailable)
-        self.index.index("start")
+        self.index = index = RunIndexer(cfg.catalogue, self.runlog.paths.directory, unavailable)
+        index.index("start")
+        return str(meta["rig"]["name"])
+
+    def open_history(self, cfg: RunConfig, seams: Seams, loop: LiveLoop, rig: str) -> None:
+        """The rig's history read once on a thread of the run (``twin.catalogue.history``): the
+        dashboard's panel and the golden batch, which a ``GoldenWatch`` on the run's bus compares
+        each frame with (``slower_than_golden``; the spread's floor and the dwell are the
+        endpoint's ``exit_band`` and ``exit_dwell_s``, ``twin.live.golden``)."""
+        from twin.catalogue.history import HistoryJob
+        from twin.live.golden import GoldenWatch
+
+        assert self.runlog is not None and self.index is not None
+        ends, index = endpoint_config(cfg, seams), self.index
+        watch = GoldenWatch(loop.events.publish, ends.exit_dwell_s)
+        loop.events.bus.subscribe(watch.record)
+        job = HistoryJob(cfg.catalogue, self.runlog.paths.directory.parent, rig, lambda: index.id, ends.exit_band,
+                         loop.state.set_rig_history, watch.set_golden)
+        loop.run_beside("history", job.run)
 
     def open_dashboard(self, cfg: RunConfig, state: LiveState, loop: LiveLoop,
                        on_dashboard: Callable[[str], None] | None) -> None:
@@ -231,7 +250,7 @@ def run_live(
                                      mixer=inputs.mixer, meter_config=inputs.meter_config, seams=seams)
         if inputs.mixer is not None:
             runlog.set_metadata(mixer=mixer_metadata(inputs.mixer))
-        parts.open_index(cfg, inputs, loop)
+        parts.open_history(cfg, seams, loop, parts.open_index(cfg, inputs, loop))
         if cfg.dashboard:
             parts.open_dashboard(cfg, state, loop, on_dashboard)
         plan = DemoStart(parts.plant) if parts.plant is not None else None
