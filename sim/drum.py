@@ -278,10 +278,12 @@ class FixedStepTwin:
     def _params_changed(self) -> None:
         raise NotImplementedError
 
-    def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling friction) at run time."""
+    def set_friction(self, mu: float, rolling: float | None = None, end_friction: float | None = None) -> None:
+        """Change sliding friction (and rolling friction, and the end plates' friction: a calibration's
+        ``sim.calibrate.Calibration.twin_kwargs``) at run time; None keeps that one as it is."""
         rolling = self.params.rolling if rolling is None else float(rolling)
-        params = replace(self.params, friction=float(mu), rolling=rolling)
+        end = self.params.end_friction if end_friction is None else float(end_friction)
+        params = replace(self.params, friction=float(mu), rolling=rolling, end_friction=end)
         _check_params(params)
         self.params = params
         self._params_changed()

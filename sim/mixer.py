@@ -10,6 +10,8 @@ next to the colour classes::
     fill = 0.5                 # share of the cross-section the bed covers (at random packing)
     rotation = "ccw"           # as the camera sees it: "ccw" (surface rises to the right) or "cw"
     density_kg_m3 = 1180       # drum material (not used by the physics yet)
+    end_friction = 0.02        # optional: the end plates' friction (``sim.drum``'s law; default the wall's);
+                               # a monolayer's is calibrated (``sim.calibrate``), which may write it here
 
     [drum.baffles]             # optional: lifters on the wall, turning with the drum
     count = 4
@@ -123,7 +125,8 @@ class Mixer:
 
     ``fill``: share of the drum's cross-section the bed covers at random packing;
     ``direction``: +1 counter-clockwise as the camera sees it, -1 clockwise;
-    ``monolayer``: a quasi-2D drum one particle thick (the end plates touch every particle).
+    ``monolayer``: a quasi-2D drum one particle thick (the end plates touch every particle);
+    ``end_friction``: the end plates' friction its twins start with (None: the engines' default, the wall's).
     """
 
     drum: DrumSpec
@@ -133,6 +136,7 @@ class Mixer:
     monolayer: bool = False
     baffles: Baffles | None = None
     notes: tuple[str, ...] = field(default=(), compare=False)
+    end_friction: float | None = None
 
     @property
     def all_round(self) -> bool:
@@ -304,7 +308,7 @@ def paper_mixer() -> Mixer:
 
 # ------------------------------------------------------------------ parsing
 SHAPE_KINDS: tuple[str, ...] = ("disc", "sphere", "polygon", "pellet", "cut_disc", "vertices", "traced")
-_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles"}
+_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles", "end_friction"}
 _BAFFLE_KEYS = {"count", "height_mm", "thickness_mm"}
 _PARTICLE_KEYS = {"name", "shape", "diameter_mm", "density_kg_m3", "share", "count", "thickness_mm", "sides",
                   "width_mm", "corner_mm", "wedge_deg", "vertices_mm", "image", "colour_bgr"}
@@ -569,6 +573,7 @@ def parse_mixer(
     if rotation not in ("ccw", "cw"):
         raise SimError(f"{w}: rotation must be \"ccw\" or \"cw\" as the camera sees it (got {rotation!r})")
     rho_drum = _num(w, "density_kg_m3", drum_t.get("density_kg_m3", 1180.0), 0.0, 1e5, lo_open=True)
+    end_f = _num(w, "end_friction", drum_t["end_friction"], 0.0, 5.0) if "end_friction" in drum_t else None
     baffles = None
     if "baffles" in drum_t:
         bt = drum_t["baffles"]
@@ -634,7 +639,7 @@ def parse_mixer(
         raise SimError(f"{w}: depth_mm = {depth * 1e3:g} is thinner than the particles ({thickest * 1e3:g} mm; "
                        "give their thickness_mm)")
     mixer = Mixer(DrumSpec(d_m, depth, rho_drum), tuple(kinds), fill=fill, direction=1 if rotation == "ccw" else -1,
-                  monolayer=monolayer, baffles=baffles)
+                  monolayer=monolayer, baffles=baffles, end_friction=end_f)
     check_fits(mixer, source)
     return mixer
 
@@ -697,6 +702,8 @@ def mixer_to_toml(mixer: Mixer, notes: Mapping[str, str] | None = None) -> str:
     out.append(line("fill", _f(mixer.fill), "drum"))
     out.append(line("rotation", '"ccw"' if mixer.direction > 0 else '"cw"', "drum"))
     out.append(line("density_kg_m3", _f(mixer.drum.density_kg_m3), "drum"))
+    if mixer.end_friction is not None:
+        out.append(line("end_friction", _f(mixer.end_friction), "drum"))
     if mixer.baffles is not None:
         b = mixer.baffles
         out += ["", "[drum.baffles]", line("count", str(b.count), "drum.baffles"),
