@@ -62,7 +62,7 @@ DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
 MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
 DEFAULT_STIFFNESS_N_M = 2800.0  # normal stiffness of the lightest pair (docs/validation.md, section 2)
-STEPS_PER_CONTACT = 4  # default step = the contact time (every pair's) / this (section 3)
+STEPS_PER_CONTACT = 8  # default step = the contact time (every pair's) / this: converged over calibration's box (section 3)
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
 SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
