@@ -68,7 +68,7 @@ class Twin(Protocol):
         """New setpoint; the drum ramps to it at the acceleration limit. Above critical: SimError."""
         ...
 
-    def set_friction(self, mu: float, rolling: float | None = None, end_friction: float | None = None) -> None:
+    def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
         """Sliding (and rolling, and end-plate) friction at run time; None keeps that one."""
         ...
 

@@ -79,7 +79,7 @@ def test_a_monolayers_range_runs_the_plane_without_plates_then_the_plates_at_the
     lo, hi = reachable_range(5.0, mixer=MONO)
     plane_calls = [(0.05, 0.0, 0.0)] + [(f, 1.0, 0.0) for f in HIGH_EDGE]
     assert PLATE_EDGE == (0.5, 1.0)
-    assert field.calls == plane_calls + [(1.0, 1.0, pytest.approx(0.5 * E_MAX)), (1.0, 1.0, pytest.approx(E_MAX))]
+    assert field.calls == [*plane_calls, (1.0, 1.0, pytest.approx(0.5 * E_MAX)), (1.0, 1.0, pytest.approx(E_MAX))]
     assert (lo, hi) == pytest.approx((20.0, plane(1.0, 1.0) + 12.0))
 
 
@@ -117,8 +117,7 @@ def test_plates_that_do_not_steepen_the_bed_leave_the_range_to_the_plane(field):
 
 def test_plates_whose_bed_stands_lower_at_the_most_friction_take_the_best_of_the_edge(field):
     field.plates = lambda e: 20.0 * min(e, E_MAX - e) / E_MAX  # +10 deg at half the most, 0 at the most
-    lo, hi = reachable_range(5.0, mixer=MONO)
-    assert hi == pytest.approx(plane(1.0, 1.0) + 10.0)
+    assert reachable_range(5.0, mixer=MONO)[1] == pytest.approx(plane(1.0, 1.0) + 10.0)
     cal = calibrate(plane(1.0, 1.0) + 5.0, 5.0, mixer=MONO)  # half way up the leg to half the most
     assert cal.path == PLATES and cal.end_friction == pytest.approx(0.25 * E_MAX, rel=1e-9)
 
@@ -135,7 +134,8 @@ def test_each_end_of_the_range_names_the_friction_that_would_have_to_leave_its_r
                                     "where a monolayer turns with its plates")
     with pytest.raises(SimError) as deep:
         calibrate(89.0, 5.0, mixer=paper_mixer())
-    assert str(deep.value).endswith("(sliding friction 0.05-1, rolling friction 0-1): it needs rolling friction above 1")
+    assert str(deep.value).endswith("(sliding friction 0.05-1, rolling friction 0-1): "
+                                    "it needs rolling friction above 1")
     with pytest.raises(SimError, match=r"rolling friction 0-1\): it needs rolling friction above 1$"):
         calibrate(89.0, 5.0, mixer=MONO, end_friction=0.0)  # plates fixed by the caller: not searched
 

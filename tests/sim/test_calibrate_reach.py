@@ -86,7 +86,6 @@ def test_a_70_deg_target_on_a_monolayer_rig_exits_2_naming_the_plates():
 def test_the_ranges_cover_real_rigs_at_both_ends_of_the_speeds(rpm):
     from sim.calibrate import RANGE_TOL_DEG, reachable_range
     from sim.mixer import paper_mixer
-
     from sim.validation_pymunk import rig
 
     kw = {"spin_up_s": 2.0, "window_s": 4.0}
