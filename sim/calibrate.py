@@ -200,8 +200,9 @@ class _Runs:
     def __call__(self, f: float, r: float, e: float | None = None) -> Run:
         kw = self.twin_kw if e is None else {**self.twin_kw, "end_friction": e}
         s, c = twin_surface(f, r, self.rpm, **kw)
-        e_eff = SimParams(friction=f, rolling=r, wall_friction=kw.get("wall_friction"),
-                          end_friction=kw.get("end_friction")).end_mu
+        mixer, end = kw.get("mixer"), kw.get("end_friction")
+        end = mixer.end_friction if end is None and mixer is not None else end  # as make_twin resolves it
+        e_eff = SimParams(friction=f, rolling=r, wall_friction=kw.get("wall_friction"), end_friction=end).end_mu
         run = (f, r, e_eff, abs(s) if math.isfinite(s) else math.nan)
         self.history.append(run)
         self.curv[run] = c

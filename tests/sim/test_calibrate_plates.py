@@ -156,3 +156,10 @@ def test_a_slow_drum_turns_a_quarter_turn_before_each_runs_slope_counts(field):
     calibrate(30.0, 2.0, mixer=MONO, spin_up_s=1.0)
     spins = field.spins
     assert spins[:2 * 6] == [pytest.approx(7.5)] * 12 and set(spins[12:]) == {1.0}
+
+
+def test_a_deep_drums_own_plate_friction_is_kept_and_reported(field):
+    deep = replace(paper_mixer(), end_friction=0.1)  # e.g. a [drum] end_friction in the config
+    cal = calibrate(30.0, 5.0, mixer=deep)
+    assert all(e is None for _, _, e in field.calls)  # the twin takes the mixer's (make_twin)
+    assert cal.end_friction == 0.1 and cal.end_friction_max == 0.0
