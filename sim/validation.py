@@ -80,12 +80,13 @@ def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 4, 5, 8, 10, 20, 40), 
 
 
 def step_box(points=((0.25, 0.1), (0.154, 0.489), (1.0, 0.0), (0.5, 1.0)), seeds=tuple(range(12)),
-             divisors=(1, 2, 4), rpm: float = 5.0, window_s: float = 10.0) -> list[dict]:
+             steps_per_contact=(4, 8, 16), rpm: float = 5.0, window_s: float = 10.0) -> list[dict]:
     """The step's convergence over the calibration's box, not only at the paper's materials: the mean slope
-    (and its standard error over ``seeds``) at the default step divided by each of ``divisors``, at each
+    (and its standard error over ``seeds``) at the contact time over each of ``steps_per_contact``, at each
     (sliding, rolling) point, for the paper bed and for a monolayer of discs without plate friction
     (``configs/pmma-cutdisc.toml`` with round discs, the plates' friction 0: the plane a monolayer is searched in)."""
     from sim.calibrate import twin_surface
+    from sim.drum import STEPS_PER_CONTACT
     from sim.engine import make_twin
     from sim.validation_pymunk import rig
 
@@ -95,10 +96,11 @@ def step_box(points=((0.25, 0.1), (0.154, 0.489), (1.0, 0.0), (0.5, 1.0)), seeds
                           make_twin(rig(cut=False), settle_s=0.0).substep_s())}
     out = []
     for bed, (kw, dt) in beds.items():
+        t_c = dt * STEPS_PER_CONTACT  # the bed's contact time, s
         for f, r in points:
-            for d in divisors:
-                v = [abs(twin_surface(f, r, rpm, seed=s, window_s=window_s, dt_s=dt / d, **kw)[0]) for s in seeds]
-                out.append({"bed": bed, "friction": f, "rolling": r, "dt_ms": dt / d * 1e3,
+            for k in steps_per_contact:
+                v = [abs(twin_surface(f, r, rpm, seed=s, window_s=window_s, dt_s=t_c / k, **kw)[0]) for s in seeds]
+                out.append({"bed": bed, "friction": f, "rolling": r, "steps_per_contact": k, "dt_ms": t_c / k * 1e3,
                             "slope_deg": float(np.mean(v)), "sem_deg": float(np.std(v, ddof=1) / np.sqrt(len(v)))})
     return out
 
