@@ -63,7 +63,7 @@ DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
 MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
 DEFAULT_STIFFNESS_N_M = 2800.0  # normal stiffness of the lightest pair (docs/validation.md, section 2)
-STEPS_PER_CONTACT = 4  # default step = the contact time (every pair's) / this (section 3)
+STEPS_PER_CONTACT = 8  # default step = the contact time (every pair's) / this: converged over the calibration box
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
 SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
@@ -240,10 +240,12 @@ class FixedStepTwin:
     def _params_changed(self) -> None:
         raise NotImplementedError
 
-    def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling friction) at run time."""
+    def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
+        """Change sliding friction (and rolling friction, and the end plates' friction: a calibration's
+        ``sim.calibrate.Calibration.twin_kwargs``) at run time; None keeps that one as it is."""
         rolling = self.params.rolling if rolling is None else float(rolling)
-        params = replace(self.params, friction=float(mu), rolling=rolling)
+        end = self.params.end_friction if end_friction is None else float(end_friction)
+        params = replace(self.params, friction=float(friction), rolling=rolling, end_friction=end)
         _check_params(params)
         self.params = params
         self._params_changed()

@@ -10,6 +10,8 @@ The config holds them next to the colour classes::
     fill = 0.5                 # share of the cross-section the bed covers (at random packing)
     rotation = "ccw"           # as the camera sees it: "ccw" (surface rises to the right) or "cw"
     density_kg_m3 = 1180       # drum material (not used by the physics yet)
+    end_friction = 0.02        # optional: the end plates' friction (``sim.drum``'s law; default the wall's);
+                               # a monolayer's is calibrated (``sim.calibrate``), which may write it here
 
     [drum.baffles]             # optional: lifters on the wall, turning with the drum
     count = 4
@@ -59,7 +61,7 @@ from vision.errors import VisionError
 from vision.shapes import trace_outline
 
 SHAPE_KINDS: tuple[str, ...] = ("disc", "sphere", "polygon", "pellet", "cut_disc", "vertices", "traced")
-_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles"}
+_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles", "end_friction"}
 _BAFFLE_KEYS = {"count", "height_mm", "thickness_mm"}
 _PARTICLE_KEYS = {"name", "shape", "diameter_mm", "density_kg_m3", "share", "count", "thickness_mm", "sides",
                   "width_mm", "corner_mm", "wedge_deg", "vertices_mm", "image", "colour_bgr"}
@@ -175,8 +177,9 @@ def parse_mixer(
     if depth < thickest * (1.0 - 1e-9):
         raise SimError(f"{w}: depth_mm = {depth * 1e3:g} is thinner than the particles ({thickest * 1e3:g} mm; "
                        "give their thickness_mm)")
+    end_f = _num(w, "end_friction", drum_t["end_friction"], 0.0, 5.0) if "end_friction" in drum_t else None
     mixer = Mixer(DrumSpec(d_m, depth, rho_drum), tuple(kinds), fill=fill, direction=direction,
-                  monolayer=monolayer, baffles=baffles)
+                  monolayer=monolayer, baffles=baffles, end_friction=end_f)
     check_fits(mixer, source)
     return mixer
 
@@ -305,6 +308,8 @@ def mixer_to_toml(mixer: Mixer, notes: Mapping[str, str] | None = None) -> str:
     out.append(line("fill", _f(mixer.fill), "drum"))
     out.append(line("rotation", '"ccw"' if mixer.direction > 0 else '"cw"', "drum"))
     out.append(line("density_kg_m3", _f(mixer.drum.density_kg_m3), "drum"))
+    if mixer.end_friction is not None:
+        out.append(line("end_friction", _f(mixer.end_friction), "drum"))
     if mixer.baffles is not None:
         b = mixer.baffles
         out += ["", "[drum.baffles]", line("count", str(b.count), "drum.baffles"),

@@ -92,7 +92,8 @@ class Mixer:
 
     ``fill``: share of the drum's cross-section the bed covers at random packing;
     ``direction``: +1 counter-clockwise as the camera sees it, -1 clockwise;
-    ``monolayer``: a quasi-2D drum one particle thick (the end plates touch every particle).
+    ``monolayer``: a quasi-2D drum one particle thick (the end plates touch every particle);
+    ``end_friction``: the end plates' friction its twins start with (None: the engines' default, the wall's).
     """
 
     drum: DrumSpec
@@ -102,6 +103,7 @@ class Mixer:
     monolayer: bool = False
     baffles: Baffles | None = None
     notes: tuple[str, ...] = field(default=(), compare=False)
+    end_friction: float | None = None
 
     @property
     def all_round(self) -> bool:

@@ -272,17 +272,21 @@ def calibrate_cmd(
     engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path, after the range runs (1..40)"),
-    spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
+    spin_up_s: float | None = typer.Option(None, "--spin-up-s", help="simulated start-up of each twin run, s "
+                                                                      "(default: 3 s or a quarter turn if longer)"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
     end_friction: float | None = typer.Option(None, "--end-friction",
                                               help="friction of the drum's end plates in the twin runs, kept "
-                                                   "fixed (default: the wall's; 0: none, e.g. a monolayer rig)"),
+                                                   "fixed (default: the wall's in a deep drum; a monolayer's is "
+                                                   "calibrated)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
-    """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
+    """Fit the twin's sliding and rolling friction (and a monolayer's end-plate friction) to a measured
+    free-surface slope (and curvature).
 
-    Prints the slopes the twin can reach at this rpm; a target outside them is an error.
+    Prints the slopes the twin can reach at this rpm; a target outside them is an error naming the
+    friction that would have to leave its range.
     """
     from sim.calibrate import calibrate
     from sim.drum import check_rpm
@@ -297,7 +301,8 @@ def calibrate_cmd(
     check_rpm(rpm, mixer.drum)
     check_number("--rpm", rpm, 0.0, mixer.drum.critical_rpm, lo_open=True)
     check_number("--max-evals", max_evals, 1, 40, integer=True)
-    check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
+    if spin_up_s is not None:
+        check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     sim_kw: dict[str, Any] = _step_options(dt_ms, end_friction)  # spread into calibrate(...)
     if curvature is not None:
@@ -321,7 +326,8 @@ def calibrate_cmd(
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
            "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source,
-           "engine": checked.engine, "end_friction": end_friction}
+           "engine": checked.engine, "end_friction": cal.end_friction,
+           "end_friction_max": cal.end_friction_max}
     if as_json:
         print_json(out)
     else:
@@ -329,6 +335,7 @@ def calibrate_cmd(
             f"reachable at {rpm:g} rpm: {cal.range_deg[0]:.1f}-{cal.range_deg[1]:.1f} deg; "
             f"target slope {target:.1f} deg -> twin {cal.twin_slope_deg:.1f} deg "
             f"(residual {cal.residual_deg:+.2f}) with friction {cal.friction:.3f}, rolling {cal.rolling:.3f}"
+            + (f", end plates {cal.end_friction:.4f}" if cal.end_friction_max > 0 else "")
         )
 
 

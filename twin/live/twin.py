@@ -281,13 +281,14 @@ class TwinWorker:
         self.calibration = cal
         self.sink.publish(Calibrated(
             t_s=t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
-            twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - wall0,
+            end_friction=cal.end_friction, twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg,
+            took_s=time.monotonic() - wall0,
         ))
         self.sink.metadata(calibration=cal)
         self.sink.publish(TwinStatus(t_s=t, state="running"))
         self.sink.publish(FaultCleared(t_s=t, fault="calibration", message="calibrated"))
         if self.sim is not None:
-            self.sim.set_friction(cal.friction, cal.rolling)
+            self.sim.set_friction(**cal.twin_kwargs())  # sliding, rolling and the end plates' (a monolayer's)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
         self.sink.publish(FaultRaised(t_s=t, fault="calibration", message=f"calibration failed: {exc}"))
@@ -340,6 +341,8 @@ class TwinWorker:
             except SimError as exc:  # an engine that cannot place from a frame: a fresh bed, said in the log
                 sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
                 how = f"recipe case ({exc})"
+        if cal is not None:  # the end plates' friction too (a monolayer's is calibrated)
+            sim.set_friction(**cal.twin_kwargs())
         if self.renderer is None:
             self.renderer = Renderer(sim.drum, s.size_px)
             self.meter = Meter(roi=self.renderer.roi, classes=s.classes)

@@ -334,6 +334,7 @@ class Calibrated(Record):
     rpm: float = unit("rpm", "speed it was calibrated at")
     friction: float = unit("", "sliding friction coefficient")
     rolling: float = unit("", "rolling friction coefficient")
+    end_friction: float | None = opt("", "the end plates' friction (a monolayer's is calibrated; sim.calibrate)")
     twin_slope_deg: float = unit("deg", "the calibrated twin's slope")
     residual_deg: float = unit("deg", "twin minus target")
     took_s: float = unit("s", "wall time")
