@@ -1,7 +1,7 @@
 """Smoke tests of the whole live loop: the embedded demo (hidden plant + mill emulator on a
 pty + the real serial driver) and a recorded video against the emulator on TCP. The rules
 themselves are tested on the workers with fakes (test_workers.py, test_mill_worker.py);
-here they are checked once end to end. The README's AUTO-vs-OFF numbers come from its
+here they are checked once end to end. The AUTO-vs-OFF numbers (docs/measurements.md) come from its
 commands (220 s runs), not from these short runs."""
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_of
 
 @LIVE
 def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
-    """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from two run logs."""
+    """``drumtwin compare`` makes the AUTO-vs-OFF figure (docs/measurements.md) from two run logs."""
     png = tmp_path / "auto-vs-off.png"
     r = cli("compare", f"AUTO={auto_and_off['auto']}", f"OFF={auto_and_off['off']}", "--plot", png)
     assert r.code == 0, r.err
