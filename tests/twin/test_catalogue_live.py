@@ -53,6 +53,7 @@ def test_two_runs_at_once_land_in_one_catalogue_beside_them_and_on_a_server(
                   f"--log {runs / 'c'} --catalogue {url}", f"--log {runs / 'd'} --catalogue {url} --mode off")
     _finish(procs)
     beside = _listed("--runs-dir", runs, "--catalogue", runs / "catalogue.sqlite")
+    (tmp_path / "elsewhere").mkdir()
     on_server = _listed("--runs-dir", tmp_path / "elsewhere", "--catalogue", url)  # the server alone
     assert set(on_server) == {"c", "d"}
     assert {"a", "b"} <= set(beside)

@@ -151,12 +151,16 @@ def test_runs_not_found_and_filters_that_match_nothing_are_one_line_errors(runs,
     assert_one_line_error(cli("report", "--runs-dir", runs, "--out", out), "give at least one run")
     assert_one_line_error(cli("report", "--rpm", "fast", "--runs-dir", runs, "--out", out), "--rpm")
     empty = tmp_path / "elsewhere"
+    empty.mkdir()
     assert_one_line_error(cli("report", "r1", "--runs-dir", empty, "--out", out), "no run catalogue")
-    assert not empty.exists() and not out.exists()  # a look-up makes no catalogue (and no folder for one)
+    assert not any(empty.iterdir()) and not out.exists()  # a look-up makes no catalogue
+    typo = cli("report", "r1", "--runs-dir", tmp_path / "typo", "--out", out)
+    assert_one_line_error(typo, "--runs-dir", "not a folder")
 
 
 def test_folders_without_a_catalogue_get_the_table_without_golden_batches(runs, tmp_path) -> None:
     out = tmp_path / "r.html"
+    (tmp_path / "none").mkdir()  # a folder of runs without a catalogue
     r = cli("report", runs / "r1", runs / "r2", "--runs-dir", tmp_path / "none", "--out", out)
     assert r.code == 0, r.err
     rows = tables(out)["batch-runs"][1:]
