@@ -244,7 +244,10 @@ def outline_of(mask: np.ndarray) -> Outline | None:
         return None
     p = c.reshape(-1, 2).astype(float)
     hull_idx = cv2.convexHull(c, returnPoints=False)
-    defects = cv2.convexityDefects(c, hull_idx) if len(hull_idx) > 3 else None
+    try:
+        defects = cv2.convexityDefects(c, hull_idx) if len(hull_idx) > 3 else None
+    except cv2.error:  # a contour that touches itself (a one-pixel neck): its hull indices are not monotonic
+        defects = None
     rim = np.ones(len(p), dtype=bool)
     far = None
     if defects is not None and len(defects):

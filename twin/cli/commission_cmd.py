@@ -4,6 +4,7 @@ checked (``twin.commission``), and ``drumtwin bench commission``."""
 from __future__ import annotations
 
 import time
+from enum import StrEnum
 from pathlib import Path
 
 import typer
@@ -20,8 +21,8 @@ def commission_cmd(
     source: list[str] = typer.Argument(..., help="Frames of the rig turning: a folder, images or a video."),
     drum_diameter_mm: float = typer.Option(..., "--drum-diameter-mm", help="The drum's inner diameter (mm)."),
     rpm: float = typer.Option(..., "--rpm", help="The drum's speed in the frames (rpm)."),
-    out: Path | None = typer.Option(None, "--out", help="Folder to write mixer.toml and report.html into (new, "
-                                    "or empty); default commission-YYYYmmdd-HHMMSS."),
+    out: Path | None = typer.Option(None, "--out", help="A new folder to write mixer.toml and report.html into; "
+                                    "default commission-YYYYmmdd-HHMMSS."),
     drum_depth_mm: float | None = typer.Option(None, "--drum-depth-mm", help="The end plates' distance (mm); "
                                                "default a monolayer drum (one particle thick)."),
     rotation: float | None = typer.Option(None, "--camera-rotation-deg", help="How far the camera is turned "
@@ -64,36 +65,41 @@ def commission_cmd(
         raise typer.Exit(code)
 
 
+class BenchRig(StrEnum):
+    notched = "notched"  # issue 39's rig: 25 discs across, notched and round (pymunk)
+    notched_small = "notched-small"  # the same discs in a 150 mm drum (about 60: the tests' rig)
+    discs = "discs"  # a small drum of round discs (DEM): a quick run of every step
+
+
 @bench_app.command("commission")
 def bench_commission(
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
-    rig: str = typer.Option("notched", "--rig", help="notched (issue 39's shaped rig, pymunk) or a folder of "
-                            "frames with --drum-diameter-mm and --rpm."),
-    drum_diameter_mm: float = typer.Option(250.0, "--drum-diameter-mm", help="With a folder: its drum (mm)."),
-    rpm: float = typer.Option(5.0, "--rpm", help="With a folder: its speed (rpm)."),
+    rig: BenchRig = typer.Option(BenchRig.notched, "--rig", help="The rendered rig to commission."),
 ) -> None:
-    """CPU time of commissioning a rig (one core): issue 39's rendered rig of notched and round discs
-    (pymunk), or a folder of frames; each step's wall and CPU time."""
+    """CPU time of commissioning a rendered rig of known answer (one core; each step's wall and CPU
+    time): issue 39's notched and round discs (pymunk), or a small one. A rig's own frames: run
+    ``drumtwin commission``, which prints its time too."""
     import tempfile
 
     from twin.commission.checks import failed
-    from twin.commission.rigs import RigRun, film, notched_rig, write_frames
+    from twin.commission.rigs import RigRun, disc_rig, film, notched_rig, write_frames
     from twin.commission.steps import Given, commission
 
+    mixer, run = {BenchRig.notched: (notched_rig(), RigRun()),
+                  BenchRig.notched_small: (notched_rig(drum_mm=150.0), RigRun(size_px=640, frames=16)),
+                  BenchRig.discs: (disc_rig(), RigRun(size_px=480, frames=12))}[rig]
     with tempfile.TemporaryDirectory() as tmp:
-        if rig == "notched":
-            t0 = time.process_time()
-            write_frames(film(notched_rig(), RigRun()), Path(tmp) / "rig")
-            say(f"bench commission: the rig filmed ({time.process_time() - t0:.1f} s CPU)")
-            folder = str(Path(tmp) / "rig")
-        else:
-            folder = rig
-        c = commission(Given((folder,), drum_diameter_mm, rpm), _progress)
+        t0 = time.process_time()
+        write_frames(film(mixer, run), Path(tmp) / "rig")
+        filmed_s = time.process_time() - t0
+        say(f"bench commission: the {rig.value} rig filmed, {run.frames} frames ({filmed_s:.1f} s CPU)")
+        c = commission(Given((str(Path(tmp) / "rig"),), mixer.drum.diameter_m * 1e3, run.rpm), _progress)
     bad = [k.name for k in failed(c.checks)]
-    res = {"rig": rig, "frames": len(c.frames.images), "cpu_s": c.cpu_s, "wall_s": c.wall_s, "failed": bad,
-           "steps": {t.step: {"wall_s": t.wall_s, "cpu_s": t.cpu_s} for t in c.times}}
+    res = {"rig": rig.value, "frames": len(c.frames.images), "cpu_s": c.cpu_s, "wall_s": c.wall_s,
+           "filming_cpu_s": filmed_s, "failed": bad, "steps": {t.step: {"wall_s": t.wall_s, "cpu_s": t.cpu_s}
+                                                              for t in c.times}}
     if json_out:
         print_json(res)
         return
-    say(f"commissioning {rig}: {res['cpu_s']:.1f} s CPU, {res['wall_s']:.1f} s wall; failed checks: "
+    say(f"commissioning the {rig.value} rig: {c.cpu_s:.1f} s CPU, {c.wall_s:.1f} s wall; failed checks: "
         f"{', '.join(bad) or 'none'}")

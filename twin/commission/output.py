@@ -53,10 +53,10 @@ def default_out(now: float | None = None) -> Path:
 
 
 def check_out(out: Path) -> Path:
-    """``--out`` as it will be written: a folder that does not exist yet (or is empty) in a folder that
-    does. Anything else is a one-line ``TwinError`` before any work."""
-    if out.exists() and not (out.is_dir() and not any(out.iterdir())):
-        raise TwinError(f"--out {out} exists and is not an empty folder: give a new folder (nothing is overwritten)")
+    """``--out`` as it will be written: a folder that does not exist yet, in a folder that does.
+    Anything else is a one-line ``TwinError`` before any work (nothing is ever overwritten)."""
+    if out.exists() or out.is_symlink():
+        raise TwinError(f"--out {out} exists: give a new folder (nothing is overwritten)")
     if not out.absolute().parent.is_dir():
         raise TwinError(f"--out: folder {out.absolute().parent} does not exist")
     return out
@@ -75,9 +75,7 @@ def write_outputs(c: Commission, out: Path) -> tuple[Path, Path]:
         tmp.chmod(0o777 & ~mask)  # a folder as any other the user makes (mkdtemp's is private)
         (tmp / MIXER_TOML).write_text(text, encoding="utf-8")
         (tmp / REPORT_HTML).write_text(page, encoding="utf-8")
-        if out.is_dir():  # an empty folder given: replaced by the written one
-            out.rmdir()
-        os.replace(tmp, out)
+        os.rename(tmp, out)  # refused if --out appeared meanwhile (a folder with files, or a file)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise TwinError(f"cannot write --out {out}: {exc.strerror or exc}") from None

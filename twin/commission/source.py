@@ -8,7 +8,6 @@ radius). Frames without a drum in a source that has some are left out and named 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -40,10 +39,10 @@ def _thin(kept: list, step: int, cap: int) -> tuple[list, int]:
     return kept, step
 
 
-def read_frames(spec: str | Sequence[str], max_frames: int = MAX_FRAMES) -> list[tuple[str, np.ndarray]]:
+def read_frames(spec: str | Sequence[str], max_frames: int = MAX_FRAMES) -> tuple[list[tuple[str, np.ndarray]], int]:
     """Up to ``max_frames`` (name, BGR image) of ``spec`` spread evenly over it (every frame read once,
-    every ``step``-th kept, ``step`` doubled when full). Unreadable frames are left out; none readable,
-    or a grayscale frame, is a ``VisionError``."""
+    every ``step``-th kept, ``step`` doubled when full) and how many frames it had. Unreadable frames
+    are left out; none readable, or a grayscale frame, is a ``VisionError``."""
     from vision.sources import open_source
 
     kept: list[tuple[str, np.ndarray]] = []
@@ -63,7 +62,7 @@ def read_frames(spec: str | Sequence[str], max_frames: int = MAX_FRAMES) -> list
     if not kept:
         raise VisionError(bad[0] if len(bad) == 1 else f"no readable frame in {spec}" + (
             f" ({len(bad)} could not be read)" if bad else ""))
-    return kept
+    return kept, n
 
 
 def same_rig(names: Sequence[str], sizes: Sequence[tuple[int, int]], rois: Sequence[DrumROI]) -> None:
@@ -78,18 +77,20 @@ def same_rig(names: Sequence[str], sizes: Sequence[tuple[int, int]], rois: Seque
     rm, mx, my = float(np.median(r)), float(np.median(cx)), float(np.median(cy))
     off = np.maximum(np.abs(r - rm), np.hypot(cx - mx, cy - my)) / rm
     if off.max() >= SAME_RIG:
-        i = int(np.argmax(off))
+        i = int(np.argmax(off >= SAME_RIG))  # the first frame of the other rig
         raise VisionError(f"frames of two rigs (or camera set-ups): the drum in {names[i]} is {100 * off[i]:.0f}% "
                           f"of its radius from the others' (radius {r[i]:.0f} px against {rm:.0f}); commission one "
                           "rig at a time")
 
 
-def rig_frames(spec: str | Sequence[str], roi: DrumROI | None = None, max_frames: int = MAX_FRAMES) -> RigFrames:
-    """The rig's frames (``read_frames``) with each one's drum (``roi`` for every frame, else found
-    per frame); see the module doc for what is refused."""
-    got = read_frames(spec, max_frames)
+def with_drums(named: Sequence[tuple[str, np.ndarray]], roi: DrumROI | None = None,
+               total: int | None = None) -> RigFrames:
+    """Frames (name, BGR image) with each one's drum (``roi`` for every frame, else found per frame);
+    see the module doc for what is refused. ``total``: how many frames the source had."""
     images, names, rois, skipped = [], [], [], []
-    for name, img in got:
+    for name, img in named:
+        if not (isinstance(img, np.ndarray) and img.ndim == 3 and img.shape[2] == 3):
+            raise VisionError(f"{name} is not a colour frame: commissioning needs colour frames")
         try:
             r = roi if roi is not None else detect_drum(img)
         except VisionError as exc:
@@ -100,12 +101,16 @@ def rig_frames(spec: str | Sequence[str], roi: DrumROI | None = None, max_frames
         rois.append(r)
     if not images:
         why = skipped[0].split(": ", 1)[1] if skipped else "no frames"
-        raise VisionError(f"no drum found in any of the {len(got)} frames ({why}); pass --roi cx,cy,r if the "
+        raise VisionError(f"no drum found in any of the {len(named)} frames ({why}); pass --roi cx,cy,r if the "
                           "drum is there")
     same_rig(names, [im.shape[:2] for im in images], rois)
-    if not math.isfinite(float(np.median([q.r_px for q in rois]))):
-        raise VisionError("no drum radius could be measured")
-    return RigFrames(images, names, rois, len(got), skipped)
+    return RigFrames(images, names, rois, len(named) if total is None else total, skipped)
 
 
-__all__ = ["MAX_FRAMES", "SAME_RIG", "RigFrames", "read_frames", "rig_frames", "same_rig"]
+def rig_frames(spec: str | Sequence[str], roi: DrumROI | None = None, max_frames: int = MAX_FRAMES) -> RigFrames:
+    """The rig's frames of a source (``read_frames``) with each one's drum (``with_drums``)."""
+    named, total = read_frames(spec, max_frames)
+    return with_drums(named, roi, total)
+
+
+__all__ = ["MAX_FRAMES", "SAME_RIG", "RigFrames", "read_frames", "rig_frames", "same_rig", "with_drums"]

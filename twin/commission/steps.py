@@ -26,11 +26,14 @@ from twin.commission.measure import FrameMeasure, Summary, measure_frame, summar
 from twin.commission.source import MAX_FRAMES, RigFrames, rig_frames
 from twin.commission.twin_check import TWIN_RUN, TwinFrames, run_twin
 from twin.errors import TwinError
+from vision.colours import ColourClass
 from vision.config import MeterConfig
 from vision.errors import VisionError
 from vision.roi import DrumROI
 
 MIN_SLOPE_FRAMES = 5  # frames with a free surface the camera's slope needs, at least
+MIN_CHROMA_APART = 5.0  # two classes whose mean colours (CIELAB a, b) are closer are one material in light and
+# shade (one colour of particles: 0.6 apart on a rendered white bed; the PMMA rig's blue/white 64, teal/white 25)
 CENSUS_FRAMES = 24  # frames the census measures (the first of the frames kept, spread over the source)
 CALIBRATE: dict[str, Any] = {}
 """Keyword arguments of the one calibration call (``calibrate_twin``): ``sim.calibrate.calibrate``'s
@@ -129,10 +132,12 @@ def calibrate_twin(mixer: Mixer, target_slope_deg: float, rpm: float, engine: st
 
 
 class _Clock:
-    """Each step's wall and CPU time, reported as it ends."""
+    """Each step's wall and CPU time, reported as it ends; held back until ``accept`` (the input is
+    known good): bad input is one line, never a step's progress before it."""
 
     def __init__(self, progress: Progress) -> None:
         self.progress, self.times = progress, []  # type: tuple[Progress, list[StepTime]]
+        self._held: list[tuple[str, str]] | None = []
         self._t = (time.perf_counter(), time.process_time())
 
     def done(self, step: str, message: str) -> None:
@@ -140,16 +145,42 @@ class _Clock:
         t = StepTime(step, w - self._t[0], c - self._t[1])
         self.times.append(t)
         self._t = (w, c)
-        self.progress(step, f"{message} ({t.wall_s:.1f} s, {t.cpu_s:.1f} s CPU)")
+        line = (step, f"{message} ({t.wall_s:.1f} s, {t.cpu_s:.1f} s CPU)")
+        if self._held is None:
+            self.progress(*line)
+        else:
+            self._held.append(line)
+
+    def accept(self) -> None:
+        """The input is good: the steps held back are reported, and each later one as it ends."""
+        for line in self._held or ():
+            self.progress(*line)
+        self._held = None
+
+
+def _chroma(c: ColourClass) -> np.ndarray:
+    """A learned class's mean colour's (a, b) in CIELAB (its components weighted)."""
+    w = np.array([k.weight for k in c.lab], dtype=float)
+    m = np.array([k.mean_lab for k in c.lab], dtype=float)
+    return (w[:, None] * m).sum(axis=0)[1:] / w.sum()
 
 
 def _classes(g: Given, fr: RigFrames) -> MeterConfig:
-    """The colour classes learned from the frames; one class only is bad input."""
+    """The colour classes learned from the frames; one class only (or classes of one colour, lighter and
+    darker: one material in light and shade) is bad input."""
     from vision.suggest import suggest_classes
 
     cfg = suggest_classes(fr.images, rois=fr.rois, camera_rotation_deg=g.camera_rotation_deg)
+    cs = [c for c in cfg.counted if c.lab]
+    names = ", ".join(c.name for c in cfg.counted)
     if len(cfg.counted) < 2:
-        raise VisionError(f"one colour class only in the frames ({', '.join(c.name for c in cfg.counted)}): "
+        raise VisionError(f"one colour class only in the frames ({names}): commissioning needs two kinds of "
+                          "particles that differ in colour")
+    gap = min((float(np.hypot(*(_chroma(a) - _chroma(b)))) for i, a in enumerate(cs) for b in cs[i + 1:]),
+              default=math.inf)
+    if gap < MIN_CHROMA_APART:
+        raise VisionError(f"one colour of particles in the frames: the classes learned ({names}) differ in "
+                          f"lightness only ({gap:.1f} apart in colour), one material in light and shade; "
                           "commissioning needs two kinds of particles that differ in colour")
     return cfg
 
@@ -181,13 +212,15 @@ def _twin_checks(cam: Summary, tw: Summary, names: Sequence[str], calibrated: bo
     return out
 
 
-def commission(g: Given, progress: Progress) -> Commission:
-    """Run every step on the frames of ``g`` (see the module doc)."""
+def commission(g: Given, progress: Progress, frames: RigFrames | None = None) -> Commission:
+    """Run every step on the frames of ``g`` (``frames``: already read, e.g. from a live camera; see the
+    module doc)."""
     from twin.suggest_mixer import suggest_mixer
 
     check_given(g)
     clock = _Clock(progress)
-    fr = rig_frames(list(g.source) if len(g.source) > 1 else g.source[0], g.roi, g.max_frames)
+    fr = frames if frames is not None else rig_frames(list(g.source) if len(g.source) > 1 else g.source[0], g.roi,
+                                                      g.max_frames)
     clock.done("drum", f"{len(fr.images)} frames with a drum (of {fr.total} read), radius "
                        f"{np.median([r.r_px for r in fr.rois]):.0f} px")
     cfg = _classes(g, fr)
@@ -208,6 +241,7 @@ def commission(g: Given, progress: Progress) -> Commission:
         raise VisionError(f"too few frames to measure a slope: {summ.slopes} of {len(cam)} frames show a free "
                           f"surface, commissioning needs {MIN_SLOPE_FRAMES} (a longer video, or more frames)")
     clock.done("light", f"camera: slope {summ.slope_deg:.1f} deg, MI {summ.mi:.3f} on {summ.mixed} mixed frames")
+    clock.accept()
     c = Commission(g, fr, cfg, cam, summ, mixed, sug, sug.mixer, target_slope_deg=summ.slope_deg)
     c.checks = _setup_checks(c)
     cal, friction, err = calibrate_twin(sug.mixer, summ.slope_deg, g.rpm, g.engine)
