@@ -52,7 +52,8 @@ def test_commissioning_the_real_pmma_frames_passes_every_check(commission_pmma: 
     page = (out / "report.html").read_text()
     assert "250 mm (given" in page and "5 rpm (given" in page  # the frames carry neither number
     if r.code != 0 and waits_on_calibration(r):
-        pytest.xfail("waits on the calibration reaching a monolayer rig (issue 39 item 3): " + "; ".join(check_lines(r)))
+        pytest.xfail("waits on the calibration reaching a monolayer rig (issue 39 item 3): "
+                     + "; ".join(check_lines(r)))
     assert r.code == 0, r.err[-3000:]
     assert "Every check passed" in page and 'class="fail"' not in page
     assert not check_lines(r)
