@@ -36,8 +36,9 @@ MIN_CHROMA_APART = 5.0  # two classes whose mean colours (CIELAB a, b) are close
 # shade (one colour of particles: 0.6 apart on a rendered white bed; the PMMA rig's blue/white 64, teal/white 25)
 CENSUS_FRAMES = 24  # frames the census measures (the first of the frames kept, spread over the source)
 CALIBRATE: dict[str, Any] = {}
-"""Keyword arguments of the one calibration call (``calibrate_twin``): ``sim.calibrate.calibrate``'s
-own defaults today."""
+"""Keyword arguments of the one calibration call (``calibrate_twin``): ``sim.calibrate.calibrate``'s own
+defaults today (a longer window does not help: one seed's bed differs from another's by 1-3 deg of slope,
+docs/commissioning.md)."""
 
 Progress = Callable[[str, str], None]
 """``progress(step, message)``: a step's name and what it did (with its time)."""
