@@ -11,10 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
+from vision.bed import bed_cover, spread_ratios
 from vision.census import (
     CIRCLES_MIN,
     ClassSize,
-    bed_cover,
     census,
     circle_census,
     circle_diameters_px,
@@ -24,7 +24,6 @@ from vision.census import (
     particle_edges,
     run_diameter_px,
     single_particle_crops,
-    spread_ratios,
 )
 
 GAP_GRAY, DARK_GRAY = 12, 30  # the background between particles; a class's dark, bled gaps

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision.census import bed_cover, spread_ratios
+from vision.bed import bed_cover, spread_ratios
 from vision.config import MeterConfig
 from vision.meter import Meter, Reading, gravity_matrix
 from vision.roi import DrumROI, roi_bbox, roi_mask
