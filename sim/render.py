@@ -31,7 +31,7 @@ BACKGROUND_BGR = (22, 20, 18)
 INSIDE_BGR = (34, 30, 28)
 RIM_BGR = (150, 150, 150)
 _SHIFT = 3  # sub-pixel bits for cv2.circle
-DRAW_INSET_PX = 0.4  # OpenCV's filled circles and polygons reach this far past their outline: each particle
+DRAW_INSET_PX = 0.3  # OpenCV's filled circles and polygons reach 0.3-0.5 px past their outline: each particle
 # is drawn this much smaller, so it covers its own area (a 36 px disc drawn as is covered 4 % more)
 _MARGIN = 0.06  # fraction of the image left around the rim
 

@@ -47,12 +47,12 @@ def _crops(v: np.ndarray, d_px: float, n: int = 16, seed: int = 0) -> list[np.nd
 @pytest.mark.parametrize("d_px", [33.0, 44.0])
 def test_a_shallow_notch_is_seen_with_its_opening_and_depth(d_px: float) -> None:
     """Issue 39's particle: a 90-degree wedge cut to 40 % of the radius (5 % of the disc's area: a disc by
-    area and solidity) is a notched disc, its opening and depth within 10 %, the disc's diameter within 3 %."""
+    area and solidity) is a notched disc, its opening and depth within 10 %, the disc's diameter within 0.8 px."""
     got = particle_shape(_crops(_outline_m("notched_disc", notch_deg=90.0, notch_depth=0.4), d_px), d_px)
     assert got.kind == "notched_disc", got.how
     assert got.notch_deg == pytest.approx(90.0, rel=0.10)
     assert got.notch_depth == pytest.approx(0.4, rel=0.10)
-    assert got.diameter_px == pytest.approx(d_px, rel=0.03) and got.sized
+    assert abs(got.diameter_px - d_px) <= 0.8 and got.sized  # within a pixel's edge
     assert "notch of" in got.how
 
 
@@ -68,7 +68,7 @@ def test_a_disc_has_no_notch_however_it_is_drawn() -> None:
         outlines = [outline_of(c) for c in crops]
         assert all(o is not None and o.notch_depth < NOTCH_MIN_DEPTH for o in outlines)
         got = particle_shape(crops, d_px)
-        assert got.kind == "disc" and got.outline_px is None and got.diameter_px == pytest.approx(d_px, rel=0.03)
+        assert got.kind == "disc" and got.outline_px is None and abs(got.diameter_px - d_px) <= 0.8  # a pixel's edge
 
 
 def test_an_elongated_particle_is_a_pellet_and_a_hexagon_a_polygon() -> None:
