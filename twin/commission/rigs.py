@@ -21,7 +21,8 @@ from sim.render import Realism, Renderer
 
 TEAL_BGR = (150, 130, 20)
 WHITE_BGR = (225, 225, 220)
-RIM_PX = 3  # the drum's rim in the rigs' frames (px): the edge of an acrylic drum, not the dashboard's bold ring
+WALL_SHARE = 0.025  # the drum's wall in the rigs' frames, a share of its radius: an acrylic drum's (7 px at 640 px,
+# 11 at 1024), which the camera's drum finder keeps out (``vision.roi.detect_drum``'s inset)
 CAMERA = Realism(noise_sd=3.0, blur_px=0.8, gradient=0.08, drift_amp=0.0, glare=0, perspective=0.0,
                  jpeg_quality=92, drop_prob=0.0)
 """The rigs' camera: mild sensor noise, defocus, a lighting falloff and JPEG, no glare, tilt or
@@ -72,7 +73,8 @@ def film(mixer: Mixer, run: RigRun = RigRun(), camera: Realism | None = CAMERA) 
     from sim.probe import probe
 
     sim = make_twin(mixer, None, case="C", seed=run.seed, rpm=run.rpm, friction=run.friction, rolling=run.rolling)
-    ren = Renderer(sim.drum, run.size_px, camera, rim_px=RIM_PX)
+    wall_px = round(WALL_SHARE * 0.44 * run.size_px)  # the renderer's radius is 44 % of the frame, less the wall
+    ren = Renderer(sim.drum, run.size_px, camera, rim_px=wall_px)
     out = []
     for smp in probe(sim, run.frames * run.every_s, run.every_s, spin_up_s=run.spin_up_s, include_start=False):
         img = ren.render(smp.particles, smp.sim_t_s)
