@@ -1,10 +1,12 @@
-"""A particle's outline as the camera sees it: traced from a picture, and round or not.
+"""A particle's outline as the camera sees it: traced from a picture, and what shape it is.
 
 Pure functions of images and polygons (``trace_outline`` reads one file). Outlines are (k, 2)
 polygons in px, y up, counter-clockwise. ``particle_shape`` decides from the single particles
-of a class in the frames (``vision.census.single_particle_crops``) whether they are discs or
-something else, with thresholds tuned on the real PMMA frames of tests/data; the twin turns its
-answer into its own shape (``sim.mixer.shape_from_crops``).
+of a class in the frames (``vision.census.single_particles_at``) what they are: discs, discs with a
+notch (a convexity defect: its depth and opening), elongated pellets, polygons, or their traced
+outline; outlines too rough to read (a class map at a size the camera barely resolves) fall back to
+the coarse area test tuned on the real PMMA frames of tests/data. The twin turns the answer into its
+own shape (``sim.mixer.shape_from_traced``; docs/commissioning.md).
 
 The polygon helpers (area, centroid, simplicity) hold for any unit: the twin's mixer uses them
 on outlines in metres.
@@ -125,20 +127,6 @@ def trace_particle(g: np.ndarray, where: str = "traced shape", what: str = "the 
 
 
 # ------------------------------------------------------------------ what a particle's outline is
-def outline_roundness(v: np.ndarray) -> tuple[float, float]:
-    """(fill, solidity) of a polygon (k, 2): its area over its circumscribed circle's (about its
-    centroid; a disc ~1, a 90-degree cut disc 0.75, a hexagon 0.83) and over its convex hull's
-    (a disc or any convex shape 1, a 90-degree cut disc 0.82)."""
-    import cv2
-
-    v = np.asarray(v, dtype=float)
-    area = abs(polygon_area(v))
-    r = 0.5 * circumscribed_diameter(v)
-    hull = cv2.convexHull(v.astype(np.float32)).reshape(-1, 2).astype(float)
-    hull_area = abs(polygon_area(hull))
-    return (area / (math.pi * r * r) if r > 0 else 0.0, area / hull_area if hull_area > 0 else 0.0)
-
-
 def mask_fill(mask: np.ndarray) -> float:
     """A particle mask's area over the circle of its 98th-percentile pixel distance from its
     centroid (+ half a pixel): 0.94 for a disc of 22 px, 0.65 for a 90-degree cut disc (its centroid
@@ -415,7 +403,6 @@ __all__ = [
     "mask_fill",
     "outline_kind",
     "outline_of",
-    "outline_roundness",
     "particle_shape",
     "polygon_area",
     "polygon_centroid",

@@ -13,6 +13,7 @@ from typing import Any
 from twin.commission import figures
 from twin.commission.checks import STEPS, TOLERANCES, Check
 from twin.commission.steps import Commission
+from twin.commission.twin_check import TWIN_RUN, seeds_spread
 from twin.report.build import CSS, fmt, table
 
 SECTIONS: tuple[tuple[str, str], ...] = (
@@ -140,7 +141,8 @@ def _twin(c: Commission) -> str:
         ("MI, eq. 4 (camera: its mixed frames)", f"{cs.mi:.4f} ({cs.mixed} frames)", f"{ts.mi:.4f}"),
         *[(f"spread ratio {html.escape(k.name)}", f"{a:.4f}", f"{b:.4f}")
           for k, a, b in zip(c.cfg.counted, cs.ratios, ts.ratios, strict=True)],
-        ("frames", str(cs.frames), str(ts.frames))]
+        ("frames", str(cs.frames), f"{ts.frames} ({len(TWIN_RUN.seeds)} runs of {TWIN_RUN.window_s:g} s; their "
+                                   f"own median slopes spread {seeds_spread(c.twin.measures):.2f} deg)")]
     return _img("twin", figures.image_uri(figures.side_by_side(cam, c.twin.frame)), "camera and twin") + table(
         rows, ("", "camera", "twin"))
 

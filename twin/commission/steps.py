@@ -25,7 +25,6 @@ from twin.commission import checks as ck
 from twin.commission.measure import FrameMeasure, Summary, measure_frame, summarize
 from twin.commission.source import MAX_FRAMES, RigFrames, rig_frames
 from twin.commission.twin_check import TWIN_RUN, TwinFrames, run_twin
-from twin.errors import TwinError
 from vision.colours import ColourClass
 from vision.config import MeterConfig
 from vision.errors import VisionError
@@ -260,10 +259,5 @@ def commission(g: Given, progress: Progress, frames: RigFrames | None = None) ->
     return c
 
 
-def bad_input(exc: BaseException) -> bool:
-    """True for the errors that mean bad input (one line, exit 2, nothing written)."""
-    return isinstance(exc, (VisionError, SimError, TwinError, OSError))
-
-
-__all__ = ["CALIBRATE", "CENSUS_FRAMES", "MIN_SLOPE_FRAMES", "Commission", "Given", "StepTime", "bad_input",
+__all__ = ["CALIBRATE", "CENSUS_FRAMES", "MIN_SLOPE_FRAMES", "Commission", "Given", "StepTime",
            "calibrate_twin", "check_given", "commission"]
