@@ -15,7 +15,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -212,6 +212,11 @@ def _twin_checks(cam: Summary, tw: Summary, names: Sequence[str], calibrated: bo
     return out
 
 
+def _too_short(slopes: int, frames: int) -> NoReturn:
+    raise VisionError(f"too few frames to measure a slope: {slopes} of {frames} frames show a free surface, "
+                      f"commissioning needs {MIN_SLOPE_FRAMES} (a longer video, or more frames)")
+
+
 def commission(g: Given, progress: Progress, frames: RigFrames | None = None) -> Commission:
     """Run every step on the frames of ``g`` (``frames``: already read, e.g. from a live camera; see the
     module doc)."""
@@ -221,6 +226,8 @@ def commission(g: Given, progress: Progress, frames: RigFrames | None = None) ->
     clock = _Clock(progress)
     fr = frames if frames is not None else rig_frames(list(g.source) if len(g.source) > 1 else g.source[0], g.roi,
                                                       g.max_frames)
+    if len(fr.images) < MIN_SLOPE_FRAMES:  # too short whatever the frames show: said before any learning
+        _too_short(len(fr.images), len(fr.images))
     clock.done("drum", f"{len(fr.images)} frames with a drum (of {fr.total} read), radius "
                        f"{np.median([r.r_px for r in fr.rois]):.0f} px")
     cfg = _classes(g, fr)
@@ -238,8 +245,7 @@ def commission(g: Given, progress: Progress, frames: RigFrames | None = None) ->
     mixed = ck.mixed_frames([m.mi for m in cam])
     summ = summarize(cam, mixed)
     if summ.slopes < MIN_SLOPE_FRAMES:
-        raise VisionError(f"too few frames to measure a slope: {summ.slopes} of {len(cam)} frames show a free "
-                          f"surface, commissioning needs {MIN_SLOPE_FRAMES} (a longer video, or more frames)")
+        _too_short(summ.slopes, len(cam))
     clock.done("light", f"camera: slope {summ.slope_deg:.1f} deg, MI {summ.mi:.3f} on {summ.mixed} mixed frames")
     clock.accept()
     c = Commission(g, fr, cfg, cam, summ, mixed, sug, sug.mixer, target_slope_deg=summ.slope_deg)
