@@ -68,8 +68,8 @@ class Twin(Protocol):
         """New setpoint; the drum ramps to it at the acceleration limit. Above critical: SimError."""
         ...
 
-    def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
-        """Sliding (and rolling, and end-plate) friction at run time; None keeps that one."""
+    def set_friction(self, mu: float, rolling: float | None = None) -> None:
+        """Sliding (and rolling) friction at run time."""
         ...
 
     def particles(self) -> Any:
@@ -151,18 +151,30 @@ def make_twin(
     **kwargs: Any,
 ) -> Twin:
     """A fresh twin of ``mixer`` on ``engine`` (``engine_for``): placed by ``case`` (A/B/C) from
-    ``seed``, turning at ``rpm``; ``friction``/``rolling`` None: the engine's defaults. ``kwargs``
-    go to the engine (e.g. ``settle_s``, ``dt_s``, ``end_friction``: default the mixer's ``end_friction``)."""
+    ``seed``, turning at ``rpm``; ``friction``/``rolling`` None: the mixer's calibrated friction
+    (``mixer.friction``), else the engine's defaults. ``kwargs`` go to the engine (e.g. ``settle_s``,
+    ``dt_s``, ``end_friction``)."""
     name = engine_for(mixer, engine)
     cls = twin_class(name)
-    if kwargs.get("end_friction") is None and mixer.end_friction is not None:
-        kwargs["end_friction"] = float(mixer.end_friction)
+    friction, rolling = _calibrated(mixer, friction, rolling, kwargs)
     if friction is not None:
         kwargs["friction"] = float(friction)
     if rolling is not None:
         kwargs["rolling"] = float(rolling)
     twin: Twin = cls(case=case, seed=seed, rpm=rpm, mixer=mixer, **kwargs)
     return twin
+
+
+def _calibrated(mixer: Mixer, friction: float | None, rolling: float | None,
+                kwargs: dict[str, Any]) -> tuple[float | None, float | None]:
+    """The friction a twin of ``mixer`` takes: what the caller gave, else the mixer's calibrated
+    (``mixer.friction``; its end plates' into ``kwargs`` unless given there)."""
+    cal = mixer.friction
+    if cal is None:
+        return friction, rolling
+    if cal.end_plates is not None:
+        kwargs.setdefault("end_friction", cal.end_plates)
+    return (cal.sliding if friction is None else friction), (cal.rolling if rolling is None else rolling)
 
 
 def from_state(state: Any) -> Twin:
@@ -187,29 +199,28 @@ def from_placement(
     seed: int = 0,
     friction: float | None = None,
     rolling: float | None = None,
-    end_friction: float | None = None,
 ) -> Twin:
     """A twin of ``mixer`` on ``engine`` (``engine_for``) whose particles the caller placed
     (``sim.from_image``: where the camera sees each class): centres ``pos_m`` (n, 2; m, drum frame)
     at the engines' placement size (``sim.placement.SHRINK``) without overlaps, class indices
     ``classes`` (n,), angles ``angle_rad`` (n,; rad); inflated, settled for ``settle_s`` with the
-    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: defaults;
-    ``end_friction`` None: the mixer's ``end_friction``, else the engines' default (the wall's)."""
+    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: the
+    mixer's calibrated friction, else the defaults."""
     import numpy as np
 
     from sim.drum import DrumSim, SimParams, SimState, _check_params
 
     name = engine_for(mixer, engine)
     base = SimParams()
-    end = mixer.end_friction if end_friction is None else end_friction
+    ends: dict[str, Any] = {}
+    friction, rolling = _calibrated(mixer, friction, rolling, ends)
     params = SimParams(friction=base.friction if friction is None else float(friction),
                        rolling=base.rolling if rolling is None else float(rolling),
-                       end_friction=None if end is None else float(end))
+                       end_friction=ends.get("end_friction", base.end_friction))
     _check_params(params)
     if name == "pymunk":
         twin: Twin = twin_class(name).from_placement(mixer, pos_m, classes, angle_rad, rpm, settle_s, seed=int(seed),
-                                                     friction=params.friction, rolling=params.rolling,
-                                                     end_friction=params.end_friction)
+                                                     friction=params.friction, rolling=params.rolling)
         return twin
     from sim.mixer import disk_classes
 

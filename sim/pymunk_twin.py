@@ -18,7 +18,8 @@ Model:
 * **Particles**: one DYNAMIC body each; discs are ``Circle``; convex outlines (regular polygon,
   pellet) one ``Poly`` with a corner radius ``CORNER_R`` of the particle's radius (the vertices
   pulled in by it, so the outer size stays); non-convex outlines one body of several convex
-  ``Poly`` pieces (a cut disc: two or three sectors of less than 144 deg; vertices:
+  ``Poly`` pieces (a cut disc or a notched disc: two or three fans from the notch's apex, each
+  seeing less than 144 deg of the rim; vertices:
   ``pymunk.autogeometry.convex_decomposition``). Counts and masses from ``sim.mixer.resolve``
   (``density * area * slab``) and the flat particle's own moment of inertia (2D is the real
   physics of a monolayer).
@@ -155,18 +156,24 @@ def convex_pieces(shape: Shape) -> list[np.ndarray]:
     if shape.kind == "disc":
         return []
     outline = shape_outline_m(shape, segments=PIECE_SEGMENTS)
-    if shape.kind == "cut_disc":
-        # sectors of the disc left after the wedge, each under 144 deg, sharing the apex (outline[0])
-        apex, arc = outline[0], outline[1:]
-        span = 2 * math.pi * (1 - float(shape.wedge_deg or 90.0) / 360.0)
-        k = max(1, math.ceil(span / (0.8 * math.pi) - 1e-9))  # pieces under 144 deg: convex, few pairs
-        idx = np.linspace(0, len(arc) - 1, k + 1).round().astype(int)
-        return [np.vstack([apex, arc[idx[j]: idx[j + 1] + 1]]) for j in range(k)]
+    if shape.kind in ("cut_disc", "notched_disc"):
+        return _fan_pieces(outline[0], outline[1:])
     if _is_convex(outline):
         return [outline]
     closed = [tuple(p) for p in outline] + [tuple(outline[0])]
     hulls = pymunk.autogeometry.convex_decomposition(closed, 1e-3 * shape.radius_m)
     return [np.asarray([(p.x, p.y) for p in h[:-1]]) for h in hulls]
+
+
+def _fan_pieces(apex: np.ndarray, arc: np.ndarray) -> list[np.ndarray]:
+    """A disc with a wedge or notch cut out (the apex inside the disc, the rim's ``arc`` around it) as
+    convex fans sharing the apex, each seeing less than 144 deg of the arc from the apex (convex, few
+    pairs): a cut disc's sectors (the apex at the centre), a notched disc's pieces."""
+    seen = np.unwrap(np.arctan2(arc[:, 1] - apex[1], arc[:, 0] - apex[0]))
+    cum = np.abs(seen - seen[0])
+    k = max(1, math.ceil(float(cum[-1]) / (0.8 * math.pi) - 1e-9))
+    idx = np.rint(np.interp(np.linspace(0.0, float(cum[-1]), k + 1), cum, np.arange(len(arc)))).astype(int)
+    return [np.vstack([apex, arc[idx[j]: idx[j + 1] + 1]]) for j in range(k)]
 
 
 def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:

@@ -31,7 +31,15 @@ from control.emulator import MillEmulator
 from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
-from tests.conftest import BENCH_DASHBOARD_ARGS, BENCH_MEMORY_ARGS, BENCH_TREND_ARGS, BENCH_TWIN_ARGS, BENCHES
+from tests.conftest import (
+    BENCH_DASHBOARD_ARGS,
+    BENCH_MEMORY_ARGS,
+    BENCH_TREND_ARGS,
+    BENCH_TWIN_ARGS,
+    BENCHES,
+    COMMISSION,
+    COMMISSION_PMMA_ARGS,
+)
 from twin.cli import app
 from twin.membench import write_video
 from twin.runlog import RunLog
@@ -220,6 +228,8 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("mill", "start"): [],
     ("mill", "stop"): [],
     ("mill", "check"): [],
+    ("commission",): ["{frames}", *COMMISSION_PMMA_ARGS, "--out", "{out}/commission-{case}"],
+    ("bench", "commission"): ["--rig", "discs", "--json"],  # a small rendered rig of discs: seconds
 }
 GROUP_BASE: dict[tuple[str, ...], list[str]] = {("mill",): ["{mill}"], ("mill", "check"): ["{drive}"]}
 # A value of one option only means something next to another (run --video needs --mill).
@@ -248,6 +258,7 @@ OUTPUTS = {
     ("sim", "csv_out"), ("sim", "video"), ("whatif", "csv_out"), ("whatif", "plot"),
     ("classes", "preview"),
     ("bench", "keep"),
+    ("commission", "out"),
 }
 FLOATS = ["abc", "nan", "inf", "-inf", "1e308", "-1e308"]
 INTS = ["abc", "1.5", "-1", "99999999999999999999"]
@@ -299,7 +310,8 @@ RANGE_VALUES: dict[tuple[str, str], list[str]] = {
     ("sim", "end_friction"): ["-0.5", "5.5"],
 }
 # Parameters whose values are read as images/videos or configs.
-IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames")}
+IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames"),
+                ("commission", "source")}
 
 # (command words, option, value) -> why exit 0 is right. Everything else must be exit 2.
 DOCUMENTED_SUCCESS: dict[tuple[str, str, str], str] = {
@@ -419,11 +431,12 @@ def base_runs() -> dict[str, tuple[str, ...]]:
 # Bases that cannot succeed here or are too slow for every run of the suite.
 NO_CAMERA = "no camera on this machine: the camera cases fail on the camera, by construction"
 BASE_SKIP = {("run", "--camera"): NO_CAMERA}
-SLOW_BASES = ("bench dashboard", "bench memory", "run")
+SLOW_BASES = ("bench dashboard", "bench memory", "run", "commission", "bench commission")
 BASES = base_runs()
 
 
 BENCH_DASHBOARD_BASE = " ".join(("bench", "dashboard", *BENCH_DASHBOARD_ARGS))
+COMMISSION_BASE = next(k for k in BASES if k.startswith("commission "))  # the session's run of the must-show
 # bases whose run is the session's one (tests/conftest.py::cli_once), shared with a bench test
 SHARED_BASES = {" ".join((*cmd, *args)) for cmd, args in (
     (("bench", "trend"), BENCH_TREND_ARGS), (("bench", "memory"), BENCH_MEMORY_ARGS),
@@ -434,6 +447,8 @@ def _base_marks(k: str) -> list[pytest.MarkDecorator]:
     marks = [pytest.mark.slow] if k.startswith(SLOW_BASES) else []
     if k == BENCH_DASHBOARD_BASE:
         marks.append(pytest.mark.xdist_group("live"))  # beside test_live.py's bench test
+    elif k == COMMISSION_BASE:
+        marks.append(COMMISSION)  # beside tests/twin/test_commission.py, which reads the same run
     elif k in SHARED_BASES:
         marks.append(BENCHES)  # beside the bench test that shares its run
     return marks
@@ -449,6 +464,12 @@ def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env, request,
     if key == BENCH_DASHBOARD_BASE:
         p = request.getfixturevalue("bench_dashboard_run")
         assert p.returncode == 0 and "Traceback" not in p.stderr, (p.returncode, p.stderr[-2000:])
+        return
+    if key == COMMISSION_BASE:  # the session's run of the must-show command (its --out the default)
+        from twin.commission.checks import EXIT_FAILED
+
+        r, _ = request.getfixturevalue("commission_pmma")
+        assert r.code in (0, EXIT_FAILED) and "Traceback" not in r.err, (r.code, r.err[-2000:])  # not bad input
         return
     run = cli_once if key in SHARED_BASES else cli
     r = run(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
 import numpy as np
 
 from sim.errors import SimError
-from sim.mixer import Mixer, ParticleKind, Shape, check_fits, mixer_to_toml, shape_from_crops
+from sim.mixer import Mixer, ParticleKind, Shape, check_fits, mixer_to_toml, shape_area_m2, shape_from_traced
 from sim.recipe import MAX_FILL, PACKING_2D, DrumSpec
 from vision.census import (
     SAME_SIZE,
@@ -29,27 +29,56 @@ from vision.census import (
     class_size,
     count_particles,
     particle_body,
+    particle_edges,
     run_diameter_px,
     same_size,
-    single_particle_crops,
     single_particles,
+    single_particles_at,
 )
 from vision.errors import VisionError
-from vision.roi import roi_bbox
+from vision.roi import roi_bbox, roi_mask
+from vision.shapes import particle_shape
 from vision.suggest import drum_labels
 
 SUGGEST_DENSITY_KG_M3 = 1190.0  # PMMA: a camera cannot see density
 CROPS_PER_FRAME = 4  # single particles per class and frame traced for the class's shape
+ROUND_KINDS = ("disc", "notched_disc")  # shapes sized by the census's circles (a shallow notch is still a circle)
+
+
+@dataclass(frozen=True)
+class Traced:
+    """One single particle traced for its class's shape: the frame it is in (an index into the frames
+    given), its crop (boolean) and where the crop's corner lies in that frame (x, y, px)."""
+
+    frame: int
+    crop: np.ndarray
+    x_px: int
+    y_px: int
+
+
+@dataclass(frozen=True)
+class SuggestedMixer:
+    """The twin's mixer measured in the frames: the ``mixer``, a comment per key (``notes``), the
+    ``census`` it came from, each class's traced particles (``traced``, in the census's class order) and
+    the drum's scale (``mm_per_px``)."""
+
+    mixer: Mixer
+    notes: dict[str, str]
+    census: MixerCensus
+    traced: tuple[tuple[Traced, ...], ...]
+    mm_per_px: float
 
 
 @dataclass
 class _Frames:
-    """Per frame: the label map, the gray drum crop, each counted class's particle body, each class's
-    pixels (``cpx``), the ROI's area (``rpx``), each class's single particles' run diameter, the slope."""
+    """Per frame: the label map, the gray drum crop, each counted class's particle body (for counts and
+    runs) and its particles to its gray edges (``edges``: for their outlines), each class's pixels
+    (``cpx``), the ROI's area (``rpx``), each class's single particles' run diameter, the slope."""
 
     labels: list[np.ndarray]
     grays: list[np.ndarray]
     bodies: list[list[np.ndarray]]
+    edges: list[list[np.ndarray]]
     cpx: list[list[int]]
     rpx: list[float]
     runs: list[list[float]]
@@ -57,13 +86,17 @@ class _Frames:
 
 
 def _measure_frames(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[Any], counted: list) -> _Frames:
-    out = _Frames([], [], [], [], [], [], [])
+    out = _Frames([], [], [], [], [], [], [], [])
     names = [c.name for _, c in counted]
+    ids = [j for j, _ in counted]
     for img, roi in zip(frames, rois, strict=True):
         lab = drum_labels(cfg, img, roi)
         x0, y0, x1, y1 = roi_bbox(roi, img.shape[:2])
         gray = cv2.cvtColor(np.ascontiguousarray(img[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY)
         body = [particle_body(lab == j, gray) for j, _ in counted]  # each class's particles without its gaps
+        empty = (lab == 0) & roi_mask(roi, img.shape[:2])[y0:y1, x0:x1]  # the drum's empty part (and its gaps)
+        bg = float(np.median(gray[empty])) if empty.any() else 0.0
+        out.edges.append([particle_edges(lab == j, gray, np.isin(lab, ids) & (lab != j), bg) for j in ids])
         out.labels.append(lab)
         out.grays.append(gray)
         out.bodies.append(body)
@@ -75,28 +108,39 @@ def _measure_frames(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[Any],
     return out
 
 
-def _sizes_and_shapes(cfg: Any, fr: _Frames, counted: list, r_px: float,
-                      px_mm: float) -> tuple[list[ClassSize], list[tuple[Shape, str]]]:
-    """Each class's own size and shape: its circles in the gray frames when its single particles at that
-    size are round, else the run diameter of its single particles (and their traced outline)."""
+def _sizes_and_shapes(cfg: Any, fr: _Frames, counted: list, r_px: float, px_mm: float,
+                      rois: Sequence[Any]) -> tuple[list[ClassSize], list[tuple[Shape, str]], list[tuple[Traced, ...]]]:
+    """Each class's own size, shape and traced particles: its circles in the gray frames when its single
+    particles at that size are round (a disc, or a disc with a notch), else the run diameter of its single
+    particles (and their traced outline)."""
     runs_a = np.asarray(fr.runs, dtype=float).reshape(len(fr.labels), len(counted))
     by_runs = [class_size(np.zeros(0), runs_a[:, i]) for i in range(len(counted))]
     known = [s.diameter_px for s in by_runs if math.isfinite(s.diameter_px)]
     # round particles as circles in the gray frames, up to 1.6x the largest class's runs (a third of the drum)
     circles = (circle_census(fr.grays, fr.labels, len(cfg.classes), [j - 1 for j, _ in counted],
                              min(1.6 * max(known), 2.0 * r_px / 3.0)) if known else [np.zeros(0) for _ in counted])
-    own, shapes = [], []
+    own, shapes, traced = [], [], []
     for i, (_, c) in enumerate(counted):
         cand = class_size(circles[i], runs_a[:, i])
         for size in ([cand, by_runs[i]] if cand.source == "circles" else [by_runs[i]]):
-            crops = [cr for body in fr.bodies for cr in single_particle_crops(body[i], size.diameter_px,
-                                                                              CROPS_PER_FRAME)]
-            shape, how = shape_from_crops(crops, size.diameter_px * px_mm * 1e-3, px_mm, f"class {c.name!r}")
-            if shape.kind == "disc" or size is by_runs[i]:
+            found = [Traced(f, crop, x + _corner(rois[f])[0], y + _corner(rois[f])[1])
+                     for f, edge in enumerate(fr.edges)
+                     for crop, x, y in single_particles_at(edge[i], size.diameter_px, CROPS_PER_FRAME)]
+            traced_shape = particle_shape([t.crop for t in found], size.diameter_px)
+            shape, how = shape_from_traced(traced_shape, size.diameter_px * px_mm * 1e-3, px_mm, f"class {c.name!r}")
+            if shape.kind in ROUND_KINDS or size is by_runs[i]:
                 break
+        if shape.kind in ROUND_KINDS and traced_shape.sized:  # clean outlines: their circle is the size
+            size = ClassSize(traced_shape.diameter_px, "outlines", traced_shape.n)
         own.append(size)
         shapes.append((shape, how))
-    return own, shapes
+        traced.append(tuple(found))
+    return own, shapes, traced
+
+
+def _corner(roi: Any) -> tuple[int, int]:
+    """The drum crop's corner in its frame (px): the label maps are of the drum's box only."""
+    return roi_bbox(roi, (1 << 30, 1 << 30))[:2]
 
 
 def _drum_notes(cen: MixerCensus, r_px: float, px_mm: float, drum_depth_mm: float | None) -> dict[str, str]:
@@ -127,11 +171,12 @@ def _particle_kinds(cen: MixerCensus, shapes: list[tuple[Shape, str]], counted: 
         why = (f"; its own {c.own.diameter_px:.1f} px, the classes within {100 * SAME_SIZE:.0f}%: one size"
                if cen.same_size else "")
         shape, how = shapes[i]
-        if shape.kind == "disc":
-            shape = Shape("disc", d_mm * 1e-3)
-        src = (f"median of {c.own.count} circles in the gray frames" if c.own.source == "circles" else
-               f"median horizontal run / 0.91 of its single particles, {cen.frames} frames")
-        notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px ({src}){why}" if shape.kind == "disc" else
+        if shape.kind in ROUND_KINDS:  # the census's size: the circles' (the classes within SAME_SIZE: one)
+            shape = replace(shape, diameter_m=d_mm * 1e-3)
+        src = {"circles": f"median of {c.own.count} circles in the gray frames",
+               "outlines": f"median circle of {c.own.count} single particles' gray edges"}.get(
+                   c.own.source, f"median horizontal run / 0.91 of its single particles, {cen.frames} frames")
+        notes[f"{w}.diameter_mm"] = (f"{c.diameter_px:.1f} px ({src}){why}" if shape.kind in ROUND_KINDS else
                                      "the traced outline's circumscribed diameter")
         notes[f"{w}.shape"] = how
         notes[f"{w}.share"] = (f"{c.count:.0f} particles per frame x their area; the class's pixel share is "
@@ -151,20 +196,22 @@ def _particle_kinds(cen: MixerCensus, shapes: list[tuple[Shape, str]], counted: 
     return kinds
 
 
-def suggest_mixer_toml(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[Any], drum_diameter_mm: float,
-                       drum_depth_mm: float | None) -> str:
-    """The twin's ``[drum]`` and ``[[particles]]`` tables measured in ``frames`` (the meter config
-    ``cfg``'s classes, the drum ``rois``; see the module doc). A class too small to measure, or a bed
-    that does not fit the drum, is a one-line ``VisionError``."""
+def suggest_mixer(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[Any], drum_diameter_mm: float,
+                  drum_depth_mm: float | None) -> SuggestedMixer:
+    """The twin's mixer measured in ``frames`` (the meter config ``cfg``'s classes, the drum ``rois``;
+    see the module doc). A class too small to measure, or a bed that does not fit the drum, is a
+    one-line ``VisionError``."""
     counted = [(j + 1, c) for j, c in enumerate(cfg.classes) if not c.reject]
     fr = _measure_frames(cfg, frames, rois, counted)
     r_px = float(np.median([r.r_px for r in rois]))
     px_mm = drum_diameter_mm / (2.0 * r_px)
-    own, shapes = _sizes_and_shapes(cfg, fr, counted, r_px, px_mm)
+    own, shapes, traced = _sizes_and_shapes(cfg, fr, counted, r_px, px_mm, rois)
     sizes, _ = same_size([s.diameter_px for s in own])
     cnt = [[count_particles(b, sizes[i], PACKING_2D) for i, b in enumerate(body)] for body in fr.bodies]
+    ratios = [shape_area_m2(replace(sh, diameter_m=1.0)) / (math.pi / 4) if sh.kind in ROUND_KINDS else 1.0
+              for sh, _ in shapes]
     cen = census([c.name for _, c in counted], np.asarray(fr.cpx), np.asarray(fr.rpx), own, np.asarray(cnt),
-                 fr.slopes, r_px, PACKING_2D)
+                 fr.slopes, r_px, PACKING_2D, ratios)
     if not all(math.isfinite(c.diameter_px) for c in cen.classes):
         missing = next(c.name for c in cen.classes if not math.isfinite(c.diameter_px))
         raise VisionError(f"class {missing!r}: too few particle pixels in the frames to measure a size")
@@ -178,9 +225,19 @@ def suggest_mixer_toml(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[An
         check_fits(mixer, "suggested mixer")
     except SimError as exc:
         raise VisionError(str(exc)) from None
-    head = ("# The twin's mixer, measured in the same frames by `drumtwin classes suggest --drum-diameter-mm`;\n"
-            "# edit what is wrong (shape, density, depth).\n")
-    return head + mixer_to_toml(mixer, notes)
+    return SuggestedMixer(mixer, notes, cen, tuple(traced), px_mm)
 
 
-__all__ = ["CROPS_PER_FRAME", "SUGGEST_DENSITY_KG_M3", "suggest_mixer_toml"]
+SUGGEST_HEAD = ("# The twin's mixer, measured in the same frames by `drumtwin classes suggest --drum-diameter-mm`;\n"
+                "# edit what is wrong (shape, density, depth).\n")
+
+
+def suggest_mixer_toml(cfg: Any, frames: Sequence[np.ndarray], rois: Sequence[Any], drum_diameter_mm: float,
+                       drum_depth_mm: float | None) -> str:
+    """``suggest_mixer``'s ``[drum]`` and ``[[particles]]`` tables as TOML, every number commented."""
+    s = suggest_mixer(cfg, frames, rois, drum_diameter_mm, drum_depth_mm)
+    return SUGGEST_HEAD + mixer_to_toml(s.mixer, s.notes)
+
+
+__all__ = ["CROPS_PER_FRAME", "ROUND_KINDS", "SUGGEST_DENSITY_KG_M3", "SUGGEST_HEAD", "SuggestedMixer", "Traced",
+           "suggest_mixer", "suggest_mixer_toml"]

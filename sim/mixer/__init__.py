@@ -13,6 +13,7 @@ from sim.mixer.config import (
 from sim.mixer.model import (
     ROUND_SHAPES,
     Baffles,
+    Friction,
     Mixer,
     ParticleKind,
     ResolvedKind,
@@ -27,6 +28,7 @@ from sim.mixer.model import (
     resolve_counts,
     shape_area_m2,
     shape_from_crops,
+    shape_from_traced,
     shape_outline_m,
     with_counts,
 )
@@ -37,6 +39,7 @@ __all__ = [
     "ROUND_SHAPES",
     "SHAPE_KINDS",
     "Baffles",
+    "Friction",
     "Mixer",
     "ParticleKind",
     "ResolvedKind",
@@ -54,6 +57,7 @@ __all__ = [
     "resolve_counts",
     "shape_area_m2",
     "shape_from_crops",
+    "shape_from_traced",
     "shape_outline_m",
     "with_counts",
 ]

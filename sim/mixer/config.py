@@ -10,23 +10,28 @@ The config holds them next to the colour classes::
     fill = 0.5                 # share of the cross-section the bed covers (at random packing)
     rotation = "ccw"           # as the camera sees it: "ccw" (surface rises to the right) or "cw"
     density_kg_m3 = 1180       # drum material (not used by the physics yet)
-    end_friction = 0.02        # optional: the end plates' friction (``sim.drum``'s law; default the wall's);
-                               # a monolayer's is calibrated (``sim.calibrate``), which may write it here
 
     [drum.baffles]             # optional: lifters on the wall, turning with the drum
     count = 4
     height_mm = 20             # radial length from the wall inwards
     thickness_mm = 4
 
+    [drum.friction]            # optional, each key too: the twin's friction for this rig (`drumtwin commission`
+    sliding = 0.06             # writes its calibration here); particle-particle sliding friction
+    rolling = 0.08             # rolling friction
+    end_plates = 0.03          # the end plates' friction (default: the wall's; a monolayer's is calibrated)
+
     [[particles]]              # one table per colour class, same name as the camera's class
     name = "blue"
-    shape = "disc"             # disc | polygon | pellet | cut_disc | vertices | traced
+    shape = "disc"             # disc | polygon | pellet | cut_disc | notched_disc | vertices | traced
     diameter_mm = 10           # circumscribed diameter (disc, polygon, cut_disc, vertices) or length (pellet)
     density_kg_m3 = 1190
     share = 0.5                # share of the bed's solid area; or count = 120
     # polygon:  sides = 6
     # pellet:   width_mm = 5, corner_mm = 1   (rounded rectangle diameter_mm x width_mm)
     # cut_disc: wedge_deg = 90                 (a disc with a wedge cut out: non-convex)
+    # notched_disc: notch_deg = 90, notch_depth = 0.4   (a V-notch of 90 deg cut from the rim to 0.4 of the
+    #           radius: its apex 0.4 r in from the rim; 1 reaches the centre, a cut disc; non-convex)
     # vertices: vertices_mm = [[x, y], ...]    (a simple polygon about its centroid)
     # traced:   image = "particle.png"         (outline of one particle, pymunk.autogeometry)
     thickness_mm = 5           # monolayer drums: the particle's thickness (default its diameter)
@@ -55,18 +60,22 @@ from typing import Any
 import numpy as np
 
 from sim.errors import SimError, check_number
-from sim.mixer.model import Baffles, Mixer, ParticleKind, Shape, check_fits, polygon_shape
+from sim.mixer.model import Baffles, Friction, Mixer, ParticleKind, Shape, check_fits, polygon_shape
 from sim.recipe import BLUE_BGR, MAX_FILL, RED_BGR, DrumSpec
 from vision.errors import VisionError
 from vision.shapes import trace_outline
 
-SHAPE_KINDS: tuple[str, ...] = ("disc", "sphere", "polygon", "pellet", "cut_disc", "vertices", "traced")
-_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles", "end_friction"}
+SHAPE_KINDS: tuple[str, ...] = ("disc", "sphere", "polygon", "pellet", "cut_disc", "notched_disc", "vertices",
+                                "traced")
+_DRUM_KEYS = {"diameter_mm", "depth_mm", "monolayer", "fill", "rotation", "density_kg_m3", "baffles", "friction"}
 _BAFFLE_KEYS = {"count", "height_mm", "thickness_mm"}
+_FRICTION_KEYS = {"sliding", "rolling", "end_plates"}
+MAX_FRICTION = 5.0  # a friction coefficient, at most (the engines' own bound)
 _PARTICLE_KEYS = {"name", "shape", "diameter_mm", "density_kg_m3", "share", "count", "thickness_mm", "sides",
-                  "width_mm", "corner_mm", "wedge_deg", "vertices_mm", "image", "colour_bgr"}
+                  "width_mm", "corner_mm", "wedge_deg", "notch_deg", "notch_depth", "vertices_mm", "image",
+                  "colour_bgr"}
 _SHAPE_KEYS = {"polygon": {"sides"}, "pellet": {"width_mm", "corner_mm"}, "cut_disc": {"wedge_deg"},
-               "vertices": {"vertices_mm"}, "traced": {"image"}}
+               "notched_disc": {"notch_deg", "notch_depth"}, "vertices": {"vertices_mm"}, "traced": {"image"}}
 MAX_PARTICLE_SHARE_OF_DRUM = 0.25  # a particle's diameter over the drum's, at most
 MIN_PARTICLE_MM = 0.1  # a particle's size (diameter, width, thickness), at least: below ~0.1 mm cohesion
 # outweighs a particle's weight (a powder, not the free-flowing bed the twin's contact laws describe)
@@ -121,6 +130,10 @@ def _parse_shape(where: str, t: Mapping, drum_d_m: float, base_dir: Path | None)
     if kind == "cut_disc":
         wedge = _num(where, "wedge_deg", t.get("wedge_deg", 90.0), 0.0, 180.0, lo_open=True)
         return Shape("cut_disc", d_m, wedge_deg=wedge)
+    if kind == "notched_disc":
+        notch = _num(where, "notch_deg", t.get("notch_deg", 90.0), 0.0, 180.0, lo_open=True)
+        depth = _num(where, "notch_depth", t.get("notch_depth", 0.4), 0.0, 1.0, lo_open=True)
+        return Shape("notched_disc", d_m, notch_deg=notch, notch_depth=depth)
     if kind == "vertices":
         raw = t.get("vertices_mm")
         if not (isinstance(raw, list) and len(raw) >= 3 and all(isinstance(r, list) and len(r) == 2 for r in raw)):
@@ -166,6 +179,7 @@ def parse_mixer(
     w = f"{source} [drum]"
     d_m, monolayer, fill, direction, rho_drum = _parse_drum(w, drum_t)
     baffles = _parse_baffles(f"{source} [drum.baffles]", drum_t["baffles"], d_m) if "baffles" in drum_t else None
+    friction = _parse_friction(f"{source} [drum.friction]", drum_t["friction"]) if "friction" in drum_t else None
     names = None if class_names is None else list(class_names)
     kinds: list[ParticleKind] = []
     for i, t in enumerate(parts):
@@ -177,9 +191,8 @@ def parse_mixer(
     if depth < thickest * (1.0 - 1e-9):
         raise SimError(f"{w}: depth_mm = {depth * 1e3:g} is thinner than the particles ({thickest * 1e3:g} mm; "
                        "give their thickness_mm)")
-    end_f = _num(w, "end_friction", drum_t["end_friction"], 0.0, 5.0) if "end_friction" in drum_t else None
     mixer = Mixer(DrumSpec(d_m, depth, rho_drum), tuple(kinds), fill=fill, direction=direction,
-                  monolayer=monolayer, baffles=baffles, end_friction=end_f)
+                  monolayer=monolayer, baffles=baffles, friction=friction)
     check_fits(mixer, source)
     return mixer
 
@@ -222,6 +235,18 @@ def _parse_baffles(wb: str, bt: object, d_m: float) -> Baffles:
     if count * thick >= math.pi * d_m:
         raise SimError(f"{wb}: {count} baffles of {thick * 1e3:g} mm do not fit on the wall")
     return Baffles(count, height, thick)
+
+
+def _parse_friction(wf: str, ft: object) -> Friction:
+    """The ``[drum.friction]`` table: the calibrated sliding, rolling (and end plates') friction."""
+    if not isinstance(ft, Mapping):
+        raise SimError(f"{wf}: must be a table")
+    _unknown(wf, ft, _FRICTION_KEYS)
+    if not ft:
+        raise SimError(f"{wf}: give sliding, rolling or end_plates (or leave the table out)")
+    sliding, rolling, end = (_num(wf, key, ft[key], 0.0, MAX_FRICTION) if key in ft else None
+                             for key in ("sliding", "rolling", "end_plates"))
+    return Friction(sliding, rolling, end)
 
 
 def _parse_particle(source: str, i: int, t: Mapping, kinds: Sequence[ParticleKind], names: list[str] | None,
@@ -308,13 +333,15 @@ def mixer_to_toml(mixer: Mixer, notes: Mapping[str, str] | None = None) -> str:
     out.append(line("fill", _f(mixer.fill), "drum"))
     out.append(line("rotation", '"ccw"' if mixer.direction > 0 else '"cw"', "drum"))
     out.append(line("density_kg_m3", _f(mixer.drum.density_kg_m3), "drum"))
-    if mixer.end_friction is not None:
-        out.append(line("end_friction", _f(mixer.end_friction), "drum"))
     if mixer.baffles is not None:
         b = mixer.baffles
         out += ["", "[drum.baffles]", line("count", str(b.count), "drum.baffles"),
                 line("height_mm", _f(b.height_m * 1e3), "drum.baffles"),
                 line("thickness_mm", _f(b.thickness_m * 1e3), "drum.baffles")]
+    if mixer.friction is not None:
+        fr = mixer.friction
+        out += ["", "[drum.friction]"] + [line(key, _f(v), "drum.friction") for key, v in (
+            ("sliding", fr.sliding), ("rolling", fr.rolling), ("end_plates", fr.end_plates)) if v is not None]
     for p in mixer.particles:
         w = f"particles.{p.name}"
         s = p.shape
@@ -327,6 +354,9 @@ def mixer_to_toml(mixer: Mixer, notes: Mapping[str, str] | None = None) -> str:
                     line("corner_mm", _f(float(s.corner_m or 0.0) * 1e3), w)]
         elif s.kind == "cut_disc":
             out.append(line("wedge_deg", _f(float(s.wedge_deg or 90.0)), w))
+        elif s.kind == "notched_disc":
+            out += [line("notch_deg", _f(float(s.notch_deg or 90.0)), w),
+                    line("notch_depth", _f(float(s.notch_depth or 0.4)), w)]
         elif s.kind == "vertices":
             pts = ", ".join(f"[{_f(x * 1e3)}, {_f(y * 1e3)}]" for x, y in (s.vertices_m or ()))
             out.append(line("vertices_mm", f"[{pts}]", w))

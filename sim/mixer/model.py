@@ -23,9 +23,16 @@ import numpy as np
 
 from sim.errors import SimError
 from sim.recipe import BLUE_BGR, MAX_FILL, PACKING_2D, PAPER_DRUM, RED_BGR, DiskClass, DrumSpec
-from vision.shapes import circumscribed_diameter, is_simple_polygon, particle_shape, polygon_area, polygon_centroid
+from vision.shapes import (
+    ParticleShape,
+    circumscribed_diameter,
+    is_simple_polygon,
+    particle_shape,
+    polygon_area,
+    polygon_centroid,
+)
 
-ShapeKind = Literal["disc", "polygon", "pellet", "cut_disc", "vertices"]
+ShapeKind = Literal["disc", "polygon", "pellet", "cut_disc", "notched_disc", "vertices"]
 ROUND_SHAPES: tuple[str, ...] = ("disc",)
 
 
@@ -33,10 +40,13 @@ ROUND_SHAPES: tuple[str, ...] = ("disc",)
 class Shape:
     """A particle's outline in its body frame (m), centred on its centroid.
 
-    ``diameter_m``: the circumscribed diameter (disc, polygon, cut_disc, vertices) or the
-    length (pellet). ``sides`` for a regular polygon; ``width_m`` and ``corner_m`` for a
-    pellet (rounded rectangle); ``wedge_deg`` for a cut disc; ``vertices_m`` (k, 2) for a
-    simple polygon given by its vertices (counter-clockwise, about its centroid).
+    ``diameter_m``: the circumscribed diameter (disc, polygon, cut_disc, vertices), the disc's
+    diameter (notched_disc) or the length (pellet). ``sides`` for a regular polygon; ``width_m``
+    and ``corner_m`` for a pellet (rounded rectangle); ``wedge_deg`` for a cut disc (a wedge cut
+    to the centre); ``notch_deg`` and ``notch_depth`` for a notched disc (a V-notch of that
+    opening cut from the rim, its apex ``notch_depth`` of the radius in from the rim: 1 is a cut
+    disc); ``vertices_m`` (k, 2) for a simple polygon given by its vertices (counter-clockwise,
+    about its centroid).
     """
 
     kind: ShapeKind = "disc"
@@ -45,6 +55,8 @@ class Shape:
     width_m: float | None = None
     corner_m: float | None = None
     wedge_deg: float | None = None
+    notch_deg: float | None = None
+    notch_depth: float | None = None
     vertices_m: tuple[tuple[float, float], ...] | None = None
 
     @property
@@ -87,13 +99,25 @@ class Baffles:
 
 
 @dataclass(frozen=True)
+class Friction:
+    """The twin's friction for this rig (``[drum.friction]``; ``drumtwin commission`` writes its
+    calibration here): ``sliding`` and ``rolling`` friction between particles and ``end_plates``
+    (the end plates'; a monolayer's is calibrated). None: the engines' defaults (the plates: the
+    wall's, Taberlet's law of a deep drum). A twin made without friction given takes these."""
+
+    sliding: float | None = None
+    rolling: float | None = None
+    end_plates: float | None = None
+
+
+@dataclass(frozen=True)
 class Mixer:
     """The user's mixer: the drum (``DrumSpec``: diameter, depth), the bed and its rotation.
 
     ``fill``: share of the drum's cross-section the bed covers at random packing;
     ``direction``: +1 counter-clockwise as the camera sees it, -1 clockwise;
     ``monolayer``: a quasi-2D drum one particle thick (the end plates touch every particle);
-    ``end_friction``: the end plates' friction its twins start with (None: the engines' default, the wall's).
+    ``friction``: the contact friction calibrated for this rig (None: the engines' defaults).
     """
 
     drum: DrumSpec
@@ -102,8 +126,13 @@ class Mixer:
     direction: int = 1
     monolayer: bool = False
     baffles: Baffles | None = None
+    friction: Friction | None = None
     notes: tuple[str, ...] = field(default=(), compare=False)
-    end_friction: float | None = None
+
+    @property
+    def end_friction(self) -> float | None:
+        """The end plates' friction its twins start with (``friction.end_plates``; None: the wall's)."""
+        return None if self.friction is None else self.friction.end_plates
 
     @property
     def all_round(self) -> bool:
@@ -122,6 +151,9 @@ def shape_area_m2(shape: Shape) -> float:
         return math.pi * r * r
     if shape.kind == "cut_disc":
         return math.pi * r * r * (1.0 - float(shape.wedge_deg or 0.0) / 360.0)
+    if shape.kind == "notched_disc":
+        apex, half = notch_geometry(shape)
+        return math.pi * r * r - (half * r * r - apex * r * math.sin(half))  # the disc less the notch
     if shape.kind == "pellet":
         w = float(shape.width_m or shape.diameter_m)
         c = min(float(shape.corner_m or 0.0), 0.5 * w, 0.5 * shape.diameter_m)
@@ -157,6 +189,12 @@ def shape_outline_m(shape: Shape, segments: int = 48) -> np.ndarray:
         a = np.linspace(0.5 * wedge, 2 * math.pi - 0.5 * wedge, k)
         pts_arr = np.concatenate([[[0.0, 0.0]], np.stack([r * np.cos(a), r * np.sin(a)], axis=1)])
         return pts_arr - polygon_centroid(pts_arr)
+    if shape.kind == "notched_disc":
+        apex, half = notch_geometry(shape)
+        k = max(8, int(round(segments * (1 - half / math.pi))))
+        a = np.linspace(half, 2 * math.pi - half, k)
+        pts_arr = np.concatenate([[[apex, 0.0]], np.stack([r * np.cos(a), r * np.sin(a)], axis=1)])
+        return pts_arr - polygon_centroid(pts_arr)
     if shape.kind == "vertices":
         v = np.asarray(shape.vertices_m, dtype=float)
         if polygon_area(v) < 0:
@@ -165,6 +203,17 @@ def shape_outline_m(shape: Shape, segments: int = 48) -> np.ndarray:
     raise ValueError(f"unknown shape {shape.kind!r}")
 
 
+
+
+def notch_geometry(shape: Shape) -> tuple[float, float]:
+    """A notched disc's notch about the disc's centre, notch on +x: (the apex's distance from the
+    centre (m), the half-angle (rad) at the centre of the rim the notch takes). The notch's walls
+    are straight lines from the apex at +-``notch_deg``/2 about +x to the rim."""
+    r = shape.radius_m
+    apex = r * (1.0 - float(shape.notch_depth if shape.notch_depth is not None else 0.4))
+    phi = math.radians(0.5 * float(shape.notch_deg if shape.notch_deg is not None else 90.0))
+    t = -apex * math.cos(phi) + math.sqrt(r * r - (apex * math.sin(phi)) ** 2)  # apex + t (cos, sin) on the rim
+    return apex, math.atan2(t * math.sin(phi), apex + t * math.cos(phi))
 
 
 # ------------------------------------------------------------------ resolved view
@@ -277,17 +326,37 @@ def polygon_shape(where: str, v: np.ndarray, d_m: float) -> Shape:
 def shape_from_crops(crops: Sequence[np.ndarray], diameter_m: float, mm_per_px: float,
                      where: str = "traced shape") -> tuple[Shape, str]:
     """A class's particle shape from boolean crops of its single particles in the camera's frames
-    (``vision.census.single_particle_crops``), as ``vision.shapes.particle_shape`` decides it:
-    ``Shape("disc", diameter_m)`` when round, else the median particle's outline as a ``vertices``
-    shape (its circumscribed diameter from the trace at ``mm_per_px``). The second item says how
-    (a comment for the written mixer)."""
+    (``vision.census.single_particle_crops``), as ``vision.shapes.particle_shape`` decides it
+    (``shape_from_traced``)."""
     d_px = diameter_m * 1e3 / mm_per_px if mm_per_px > 0 else math.inf
-    traced = particle_shape(crops, d_px)
+    return shape_from_traced(particle_shape(crops, d_px), diameter_m, mm_per_px, where)
+
+
+def shape_from_traced(traced: ParticleShape, diameter_m: float, mm_per_px: float,
+                      where: str = "traced shape") -> tuple[Shape, str]:
+    """The twin's shape of a class's traced particles (``vision.shapes.ParticleShape``): a ``disc``
+    of ``diameter_m`` (the census's size), a ``notched_disc`` (its circle's diameter, the notch's
+    opening and depth), a ``pellet`` (long and short axis, the corner from its area), a regular
+    ``polygon`` (its corners), else the median particle's outline as a ``vertices`` shape; lengths
+    from the trace at ``mm_per_px``. The second item says how (a comment for the mixer)."""
+    m_px = mm_per_px * 1e-3
     if traced.outline_px is None:
         return Shape("disc", diameter_m), traced.how
     v = traced.outline_px
-    d_m = circumscribed_diameter(v) * mm_per_px * 1e-3
-    return polygon_shape(where, v, d_m), (traced.how + f": not round, the median particle's outline "
+    d_m = (traced.diameter_px if math.isfinite(traced.diameter_px) else circumscribed_diameter(v)) * m_px
+    if traced.kind == "notched_disc":
+        return (Shape("notched_disc", d_m, notch_deg=round(min(max(traced.notch_deg, 1.0), 179.0), 1),
+                      notch_depth=round(min(max(traced.notch_depth, 0.01), 1.0), 3)),
+                traced.how + f": a disc {d_m * 1e3:.3g} mm across with a notch")
+    if traced.kind == "pellet":
+        w_m = traced.width_px * m_px
+        corner = math.sqrt(max(d_m * w_m - abs(polygon_area(v)) * m_px ** 2, 0.0) / (4.0 - math.pi))
+        return (Shape("pellet", d_m, width_m=w_m, corner_m=min(corner, 0.5 * w_m)),
+                traced.how + f": {d_m * 1e3:.3g} x {w_m * 1e3:.3g} mm")
+    if traced.kind == "polygon":
+        return Shape("polygon", d_m, sides=traced.sides), traced.how + f": {d_m * 1e3:.3g} mm across"
+    d_m = circumscribed_diameter(v) * m_px
+    return polygon_shape(where, v, d_m), (traced.how + f": the median particle's outline "
                                                        f"({len(v)} corners, {d_m * 1e3:.3g} mm across)")
 
 

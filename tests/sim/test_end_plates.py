@@ -16,7 +16,7 @@ import pytest
 from sim.calibrate import Calibration
 from sim.engine import from_placement, make_twin
 from sim.errors import SimError
-from sim.mixer import Mixer, ParticleKind, Shape, mixer_to_toml, parse_mixer
+from sim.mixer import Friction, Mixer, ParticleKind, Shape, mixer_to_toml, parse_mixer
 from sim.recipe import DrumSpec
 
 MONO = Mixer(DrumSpec(0.08, 0.003), (ParticleKind("red", Shape("disc", 0.010), count=12, thickness_m=0.003),
@@ -73,19 +73,19 @@ def test_a_twin_seeded_from_a_placement_takes_the_calibrated_plates(mixer):
     pos = np.array([[-0.02, -0.02], [0.02, -0.02]])
     twin = from_placement(mixer, pos, np.array([0, 1]), np.zeros(2), 5.0, settle_s=0.01, end_friction=0.007)
     assert twin.params.end_mu == 0.007
-    carried = from_placement(replace(mixer, end_friction=0.009), pos, np.array([0, 1]), np.zeros(2), 5.0,
-                             settle_s=0.01)
+    carried = from_placement(replace(mixer, friction=Friction(end_plates=0.009)), pos, np.array([0, 1]),
+                             np.zeros(2), 5.0, settle_s=0.01)
     assert carried.params.end_mu == 0.009  # the mixer's, when none is given
 
 
 def test_the_mixers_end_friction_is_its_twins_default_and_round_trips_through_the_toml():
-    table = tomllib.loads(mixer_to_toml(replace(MONO, end_friction=0.012)))
-    assert table["drum"]["end_friction"] == 0.012
+    table = tomllib.loads(mixer_to_toml(replace(MONO, friction=Friction(end_plates=0.012))))
+    assert table["drum"]["friction"] == {"end_plates": 0.012}
     back = parse_mixer(table, ["red", "blue"])
     assert back.end_friction == 0.012
     assert make_twin(back, seed=0, rpm=5.0, settle_s=0.01).params.end_mu == 0.012
     assert make_twin(back, seed=0, rpm=5.0, settle_s=0.01, end_friction=0.0).params.end_mu == 0.0  # the caller's
-    assert "end_friction" not in tomllib.loads(mixer_to_toml(MONO))["drum"]  # not set: not written
-    table["drum"]["end_friction"] = -0.1
-    with pytest.raises(SimError, match=r"\[drum\]: end_friction must be a number in \[0, 5\]"):
+    assert "friction" not in tomllib.loads(mixer_to_toml(MONO))["drum"]  # not set: not written
+    table["drum"]["friction"]["end_plates"] = -0.1
+    with pytest.raises(SimError, match=r"\[drum.friction\]: end_plates must be a number in \[0, 5\]"):
         parse_mixer(table, ["red", "blue"])

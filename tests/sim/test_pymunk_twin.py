@@ -29,8 +29,13 @@ def running() -> PymunkDrumSim:
     return sim
 
 
-def test_cut_disc_pieces_are_convex_and_cover_the_shape() -> None:
-    shape = Shape("cut_disc", 0.010, wedge_deg=90.0)
+@pytest.mark.parametrize("shape", [
+    Shape("cut_disc", 0.010, wedge_deg=90.0),
+    Shape("notched_disc", 0.010, notch_deg=90.0, notch_depth=0.4),  # issue 39's shallow notch
+    Shape("notched_disc", 0.010, notch_deg=30.0, notch_depth=0.1),  # a slit: the apex sees nearly a full turn
+    Shape("notched_disc", 0.010, notch_deg=170.0, notch_depth=0.9),
+], ids=["cut", "notch-90-0.4", "slit", "wide-deep"])
+def test_cut_and_notched_disc_pieces_are_convex_and_cover_the_shape(shape: Shape) -> None:
     pieces = convex_pieces(shape)
     assert len(pieces) >= 2  # non-convex: more than one piece
     for p in pieces:

@@ -18,6 +18,7 @@ from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
 from twin.dashboard.guard import Gatekeeper, client_address
 from twin.dashboard.layout import MODE_LABELS, Layout, parse_rpm_list
+from twin.dashboard.setup import SetupView
 from twin.records import ModeSet, OperatorClamped, OperatorRejected
 from twin.state import Controls, LiveState
 
@@ -33,7 +34,7 @@ class ClientControls:
     """One viewer's control handles (None until its controls are built)."""
 
     authorised: bool
-    handles: list[Disableable] = field(default_factory=list)
+    handles: list[Disableable] = field(default_factory=list)  # disabled for a read-only viewer
     mode: viser.GuiDropdownHandle[str] | None = None
     rpm: viser.GuiSliderHandle[float] | None = None
     status: viser.GuiMarkdownHandle | None = None
@@ -74,9 +75,10 @@ class Viewers:
 
     def __init__(
         self, server: viser.ViserServer, layout: Layout, gate: Gatekeeper, controls: Controls, state: LiveState,
-        limits: Limits,
+        limits: Limits, setup: SetupView | None = None,
     ) -> None:
         self._server = server
+        self.setup = setup
         self.layout = layout
         self.gate = gate
         self.controls = controls
@@ -97,6 +99,9 @@ class Viewers:
         with self.layout.whatif_folder:
             w = self._add_whatif(client.gui, cc)
         cc.handles = [h.mode, h.start, h.stop, h.recal, h.reseed, h.relearn, w.rpms, w.dur, w.run, w.cancel]
+        if self.setup is not None:
+            with self.layout.setup_folder:
+                cc.handles += list(self.setup.build(client.gui, cc.authorised, self._guarded(cc), cc.say, client))
         cc.estop = h.estop
         self._wire(client, cc, h, w)
 
@@ -161,8 +166,9 @@ class Viewers:
             cancel=gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=locked, order=-1),
         )
 
-    def _wire(self, client: viser.ClientHandle, cc: ClientControls, h: _Handles, w: _WhatIfForm) -> None:
-        """Each control's callback: authorisation re-checked, then the loop's ``Controls``."""
+    @staticmethod
+    def _guarded(cc: ClientControls) -> Callable[[Callable[[viser.GuiEvent], None]], Callable[[viser.GuiEvent], None]]:
+        """A callback of ``cc``'s viewer wrapped so that its authorisation is re-checked on every event."""
 
         def guarded(fn: Callable[[viser.GuiEvent], None]) -> Callable[[viser.GuiEvent], None]:
             def cb(event: viser.GuiEvent) -> None:
@@ -174,6 +180,12 @@ class Viewers:
                 fn(event)
 
             return cb
+
+        return guarded
+
+    def _wire(self, client: viser.ClientHandle, cc: ClientControls, h: _Handles, w: _WhatIfForm) -> None:
+        """Each control's callback: authorisation re-checked, then the loop's ``Controls``."""
+        guarded = self._guarded(cc)
 
         @h.mode.on_update
         @guarded

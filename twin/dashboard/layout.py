@@ -131,8 +131,9 @@ def alarms_html(alarms: Sequence[str]) -> str:
 
 
 class Layout:
-    """The shared elements of one viser server (see module doc); ``controls_folder`` and
-    ``whatif_folder`` are where each viewer's own controls go (``twin.dashboard.controls``)."""
+    """The shared elements of one viser server (see module doc); ``controls_folder``,
+    ``whatif_folder`` and ``setup_folder`` are where each viewer's own controls go
+    (``twin.dashboard.controls``); ``plots_panel`` holds the set-up view's tab (``twin.dashboard.setup``)."""
 
     def __init__(self, server: viser.ViserServer, title: str = "drumtwin") -> None:
         self._server = server
@@ -151,7 +152,7 @@ class Layout:
         self._live_panel.dock_left()
         self._live_panel.set_width(420)
 
-        self._plots_panel = gui.add_panel()
+        self.plots_panel = self._plots_panel = gui.add_panel()
         with self._plots_panel.add_tab("Plots"):
             self._numbers = gui.add_markdown(numbers_markdown(Panel()))
             z = np.zeros(1)
@@ -202,6 +203,7 @@ class Layout:
         self._server.gui.main_panel.set_width(340)
         self.controls_folder = gui.add_folder("Controls")
         self.whatif_folder = gui.add_folder("What-if")
+        self.setup_folder = gui.add_folder("Commissioning")
         with self.whatif_folder:
             self._whatif_status = gui.add_markdown("No study yet.")
             self._whatif_plot = gui.add_uplot(

@@ -23,6 +23,8 @@ from twin.run.settings import RunInputs, Seams, endpoint_config, mill_url, resol
 from twin.state import LiveState
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from twin.catalogue.hook import RunIndexer
     from twin.dashboard import Dashboard
     from twin.demo import DemoPlant
@@ -178,13 +180,20 @@ class _Parts:
     def open_dashboard(self, cfg: RunConfig, state: LiveState, loop: LiveLoop,
                        on_dashboard: Callable[[str], None] | None) -> None:
         from twin.dashboard import Dashboard
+        from twin.dashboard.setup import SetupFeed
 
         assert self.runlog is not None  # opened before the loop
+        view = loop.view
 
+        def frame() -> tuple[float | None, np.ndarray | None]:
+            cam = view.camera()  # one snapshot: the raw frame (no overlay) and its run time together
+            return cam.t_s, cam.image
+
+        setup = SetupFeed(frame=frame, rpm=lambda: view.mill().actual_rpm, out_dir=self.runlog.paths.directory)
         self.dash = dash = Dashboard(
             state, loop.controls, host=cfg.host, port=cfg.port, control_token=cfg.control_token,
             update_hz=cfg.dashboard_hz, on_event=loop.events.publish, now_s=loop.now_s,
-            limits=loop.limits, estop_needs_token=cfg.estop_needs_token,
+            limits=loop.limits, estop_needs_token=cfg.estop_needs_token, setup=setup,
         ).start()
         if on_dashboard is not None:
             on_dashboard(dash.url)
