@@ -199,20 +199,21 @@ def from_placement(
     seed: int = 0,
     friction: float | None = None,
     rolling: float | None = None,
+    end_friction: float | None = None,
 ) -> Twin:
     """A twin of ``mixer`` on ``engine`` (``engine_for``) whose particles the caller placed
     (``sim.from_image``: where the camera sees each class): centres ``pos_m`` (n, 2; m, drum frame)
     at the engines' placement size (``sim.placement.SHRINK``) without overlaps, class indices
     ``classes`` (n,), angles ``angle_rad`` (n,; rad); inflated, settled for ``settle_s`` with the
-    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: the
-    mixer's calibrated friction, else the defaults."""
+    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling``/``end_friction``
+    None: the mixer's (``[drum.friction]``), else the engines' defaults (the plates: the wall's)."""
     import numpy as np
 
     from sim.drum import DrumSim, SimParams, SimState, _check_params
 
     name = engine_for(mixer, engine)
     base = SimParams()
-    ends: dict[str, Any] = {}
+    ends: dict[str, Any] = {} if end_friction is None else {"end_friction": end_friction}
     friction, rolling = _calibrated(mixer, friction, rolling, ends)
     params = SimParams(friction=base.friction if friction is None else float(friction),
                        rolling=base.rolling if rolling is None else float(rolling),
@@ -220,7 +221,8 @@ def from_placement(
     _check_params(params)
     if name == "pymunk":
         twin: Twin = twin_class(name).from_placement(mixer, pos_m, classes, angle_rad, rpm, settle_s, seed=int(seed),
-                                                     friction=params.friction, rolling=params.rolling)
+                                                     friction=params.friction, rolling=params.rolling,
+                                                     end_friction=params.end_friction)
         return twin
     from sim.mixer import disk_classes
 

@@ -205,8 +205,8 @@ BAD = {
                                                   'notch_depth = 1.5'), "notch_depth"),
     "notch of another shape": (PMMA.replace('name = "blue"', 'name = "blue"\nnotch_deg = 90'),
                                "notch_deg belongs to shape = 'notched_disc'"),
-    "friction without rolling": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\nsliding = 0.1'),
-                                 "needs rolling"),
+    "an empty friction table": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]'),
+                                "give sliding, rolling or end_plates"),
     "negative friction": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\nsliding = -0.1\n'
                                        'rolling = 0'), "sliding"),
     "end plates' friction out of range": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\n'
