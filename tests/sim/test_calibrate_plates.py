@@ -26,7 +26,7 @@ from sim.calibrate import (
     reachable_range,
 )
 from sim.errors import SimError
-from sim.mixer import Mixer, ParticleKind, Shape, paper_mixer
+from sim.mixer import Friction, Mixer, ParticleKind, Shape, paper_mixer
 from sim.recipe import DrumSpec
 
 # a monolayer of 10 mm discs 3 mm thick: the plates 3 mm apart, r / W = 5 / 3
@@ -159,7 +159,7 @@ def test_a_slow_drum_turns_a_quarter_turn_before_each_runs_slope_counts(field):
 
 
 def test_a_deep_drums_own_plate_friction_is_kept_and_reported(field):
-    deep = replace(paper_mixer(), end_friction=0.1)  # e.g. a [drum] end_friction in the config
+    deep = replace(paper_mixer(), friction=Friction(end_plates=0.1))  # e.g. [drum.friction] end_plates in the config
     cal = calibrate(30.0, 5.0, mixer=deep)
     assert all(e is None for _, _, e in field.calls)  # the twin takes the mixer's (make_twin)
     assert cal.end_friction == 0.1 and cal.end_friction_max == 0.0
