@@ -14,8 +14,13 @@ Imports nothing from ``vision``, ``sim`` or ``twin``. The pieces the application
     ``.step(now_s, SupervisorInputs(...), predictions=None) -> StepResult(decision, request)``
     (``request``: a ``PredictionRequest`` the application answers later with a
     ``PredictionResult`` passed to a following step); ``.set_mode(mode, now_s)``;
-    ``.set_manual_rpm(rpm)``; ``.events``. ``SupervisorConfig(critical_rpm=...)``: the
-    application hands in the drum's critical speed (``sim.recipe.DrumSpec.critical_rpm``).
+    ``.set_manual_rpm(rpm)``; ``.events``. ``control.supervisor_config.SupervisorConfig(limits=
+    Limits(critical_rpm=...))``: its defaults are a run's; the application hands in the drum's
+    critical speed (``sim.recipe.DrumSpec.critical_rpm``). In and out of a step:
+    ``control.decision``; the segregation detector: ``control.segregation``.
+``control.limits``
+    ``Limits`` (the one set of rpm limits and what-if caps), ``simulated_rpm`` (the one cap of a
+    simulated drum).
 ``control.driver``
     ``MillClient(url, *, timeout_s=0.2, retries=5, heartbeat_s=None, ...)``:
     ``.set_rpm(rpm)``, ``.start()``, ``.stop()``, ``.status() -> MillStatus``, ``.heartbeat()``,

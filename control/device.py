@@ -15,9 +15,12 @@ Rules (see ``docs/mill-protocol.md``):
   a frame is dropped silently;
 - a state-changing frame (``SET RUN STP``) with the same sequence number *and* payload as
   the previous one is a resend: the cached reply is sent again and nothing is applied a
-  second time; ``STA``/``HB`` change nothing and are always answered with a fresh
-  status (never from the cache, so another host's request with the same number can
-  never return a stale status);
+  second time, except that a ``STP`` resend still stops a motor found running (started
+  since from the front panel: a stop is never refused); ``STA``/``HB`` change nothing and
+  are always answered with a fresh status (never from the cache, so another host's
+  request with the same number can never return a stale status);
+- ``STP`` is never refused: not with the watchdog off, not before any heartbeat, not after
+  a NAK'd command, not while faulted (only ``STP`` with an argument is not a stop: ``ARG``);
 - ``SET`` takes an absolute setpoint in 0..max rpm (idempotent), ``RUN`` starts (and
   clears a watchdog fault), ``STP`` stops, ``STA``/``HB`` answer with the status;
 - while running, no watchdog-feeding frame for ``watchdog_s`` stops the motor with fault
@@ -97,6 +100,9 @@ class MillDevice:
         key = (frame.seq, frame.payload)
         if key == self._last_key:
             self.counters["resends"] += 1
+            if frame.cmd == p.STP and self.motor.running:  # a stop is never just a cached answer
+                self.motor.running = False
+                self.applied.append(Applied(now_s, frame.seq, frame.cmd, frame.args))
             return self._last_reply
         reply = self._execute(frame, now_s)
         self._last_key, self._last_reply = key, reply

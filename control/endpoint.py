@@ -10,9 +10,10 @@ Two criteria, both on numbers the loop already has, both pure:
   plateau is at least ``target_mi`` (a flat *segregated* bed is a
   plateau too: the target tells the two apart). The **mixing time** is the start of that
   window, ``t_detect - dwell_s``: the first time after which the trend stayed in the band.
-- **Moving-block standard deviation** (MBSD, as NIR blend monitoring does): the sample
-  standard deviation of the raw MI of the last ``block_s`` seconds is at most
-  ``block_sd_max`` (None: not used). Both must hold for ``mixed``.
+- **Moving-block standard deviation** (MBSD, as NIR blend monitoring does): the standard
+  deviation of the raw MI of the last ``block_s`` seconds, estimated robustly (1.4826 x the
+  median absolute deviation: one odd frame, or any minority of them, cannot decide it), is
+  at most ``block_sd_max`` (None: not used). Both must hold for ``mixed``.
 
 Once mixed, the batch is **unmixed** again when the trend falls below the plateau it was
 mixed at by more than ``exit_band`` (or below ``target_mi - band``) for ``exit_dwell_s``
@@ -28,6 +29,7 @@ front (raw MI of a video): one definition for both.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -115,14 +117,20 @@ class EndpointStatus:
     reason: str = ""
 
 
+MAD_TO_SD = 1.482602218505602
+"""1 / the normal distribution's 75th percentile: the median absolute deviation of normal data times
+this is their standard deviation."""
+
+
 def block_sd(values: Iterable[float]) -> float:
-    """Sample standard deviation (ddof 1) of the finite ``values``; NaN for fewer than 2."""
+    """Standard deviation of the finite ``values``, estimated robustly: ``MAD_TO_SD`` x their median
+    absolute deviation from their median (docs/endpoint.md: frames unlike the rest, up to half of
+    them, cannot move it; on normal data it is the sd). NaN for fewer than 2."""
     v = [float(x) for x in values if math.isfinite(x)]
-    n = len(v)
-    if n < 2:
+    if len(v) < 2:
         return math.nan
-    m = sum(v) / n
-    return math.sqrt(sum((x - m) ** 2 for x in v) / (n - 1))
+    med = statistics.median(v)
+    return MAD_TO_SD * statistics.median(abs(x - med) for x in v)
 
 
 class EndpointDetector:

@@ -19,6 +19,17 @@ class MillRefused(ControlError):
         self.reason = reason
 
 
+class SafetyRefused(MillRefused):
+    """This host would not send the command: it would start the motor or raise its speed on a
+    device that cannot be relied on to stop by itself (a drive whose comm-loss trip is
+    disabled, too slow or unreadable). A stop, a lower speed and reads are always sent."""
+
+    def __init__(self, command: str, reason: str) -> None:
+        ControlError.__init__(self, f"refused {command}: {reason}")
+        self.command = command
+        self.reason = reason
+
+
 def check_number(
     name: str, value: float | str, *, above: float | None = None, at_least: float | None = None,
     at_most: float | None = None,

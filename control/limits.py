@@ -8,7 +8,12 @@ dashboard's what-if use the same study sizes.
 rpm range: ``[min_rpm, min(max_rpm, max_critical_frac * critical_rpm)]`` (``critical_rpm``
 None: only ``max_rpm`` limits). What-if: at most ``WHATIF_MAX_S`` simulated seconds per
 run and ``WHATIF_MAX_RUNS`` runs (rpm values x seeds) per study, each rpm in
-``(0, critical_rpm]`` (a twin above critical speed is not a mixer).
+``(0, critical_rpm]`` (a twin above critical speed is not a mixer). A simulated drum that
+follows a measured one (the twin beside the mill, the demo's hidden plant) turns at
+:func:`simulated_rpm`: at most ``SIM_CRITICAL_FRAC`` of its critical speed.
+
+The defaults of :class:`Limits` are the ones a run uses (``drumtwin run``, ``drumtwin mill``);
+only the critical speed comes from the drum (``sim.recipe.DrumSpec.critical_rpm``, handed in).
 """
 
 from __future__ import annotations
@@ -21,6 +26,16 @@ from control.errors import ControlError
 
 WHATIF_MAX_S = 3600.0  # longest simulated run of one what-if job, s
 WHATIF_MAX_RUNS = 2000  # rpm values x seeds of one study
+SIM_CRITICAL_FRAC = 0.95
+"""The highest share of its critical speed a simulated drum is turned at when it follows a
+measured rpm (the twin mirroring the mill, the demo plant following its motor), whatever the
+board does: at critical speed the bed centrifuges (and ``sim`` refuses to run above it)."""
+
+
+def simulated_rpm(rpm: float, critical_rpm: float) -> float:
+    """The rpm a simulated drum runs at to follow the measured ``rpm``: inside
+    ``[0, SIM_CRITICAL_FRAC * critical_rpm]``."""
+    return min(max(float(rpm), 0.0), SIM_CRITICAL_FRAC * float(critical_rpm))
 
 
 @dataclass(frozen=True)
@@ -39,13 +54,14 @@ class RpmCheck:
 
 @dataclass(frozen=True)
 class Limits:
-    """rpm limits of the mill (rpm, rpm/s) and the drum's critical speed (rpm)."""
+    """rpm limits of the mill (rpm, rpm/s) and the drum's critical speed (rpm); the defaults
+    are a run's (the drum's critical speed is handed in)."""
 
-    min_rpm: float = 2.0
+    min_rpm: float = 5.0  # the paper's slowest speed; below it the bed only rolls
     max_rpm: float = 45.0
-    critical_rpm: float | None = None
+    critical_rpm: float | None = None  # the drum's (the application's: sim.recipe); None: max_rpm only
     max_critical_frac: float = 0.6
-    max_rate_rpm_per_s: float = 2.0
+    max_rate_rpm_per_s: float = 4.0  # the setpoint's ramp
 
     def __post_init__(self) -> None:
         for name in ("min_rpm", "max_rpm", "max_critical_frac", "max_rate_rpm_per_s"):
@@ -123,4 +139,4 @@ class Limits:
         return values, duration
 
 
-__all__ = ["WHATIF_MAX_RUNS", "WHATIF_MAX_S", "Limits", "RpmCheck"]
+__all__ = ["SIM_CRITICAL_FRAC", "WHATIF_MAX_RUNS", "WHATIF_MAX_S", "Limits", "RpmCheck", "simulated_rpm"]

@@ -1,4 +1,8 @@
-"""Supervisory rpm controller: segregation detection, AUTO rpm choice, limits, safe state.
+"""Supervisory rpm controller: the mode, AUTO's rpm choice, the ramp, the safe state (pure).
+
+Its settings are ``control.supervisor_config.SupervisorConfig`` (the run's defaults, the
+limits of ``control.limits``), what goes in and out of a step ``control.decision``, the
+segregation detector ``control.segregation``.
 
 The :class:`Supervisor` is a pure state machine:
 ``step(now_s, inputs, predictions=None) -> StepResult(decision, request)``. It never does
@@ -14,20 +18,11 @@ Modes
     (``set_manual_rpm``) inside the limits; watches only the mill link. ``AUTO``: picks
     the rpm itself when the mix segregates; watches mill link, vision and twin.
 
-Segregation detection (on the Kalman trend and the radial factor)
-    *bad* when ``level < seg_level`` or ``rate < seg_rate_per_s`` (falling faster) or
-    ``radial_factor < radial_min`` (``radial_factor`` = the std-weighting factor of eq. 4,
-    i.e. MI(eq. 4) / MI(eq. 3)); *good* when ``level > clear_level`` and
-    ``rate > seg_rate_per_s / 2`` and the radial factor is above ``radial_clear``
-    (hysteresis). The state turns *segregated* after ``detect_dwell_s`` of continuous
-    bad, and *mixed* again after ``clear_dwell_s`` of continuous good.
-
-Settled trend
-    Detection and AUTO act only on a settled trend (``TrendEstimate.settled``: enough
-    accepted frames since the start or the last re-initialisation and a narrow enough
-    band, see ``control.trend``). While it is unsettled the detector's dwell does not run
-    (and restarts once settled) and AUTO neither asks for predictions nor moves; the
-    application logs the unsettled state (``trend_unsettled``/``trend_settled`` events).
+Segregation detection (``control.segregation``)
+    On the Kalman trend and the radial factor, with hysteresis and dwell, on a settled trend
+    only (``TrendEstimate.settled``): while the trend is unsettled AUTO neither asks for
+    predictions nor moves; the application logs the unsettled state
+    (``trend_unsettled``/``trend_settled`` events).
 
 AUTO rpm choice
     With predictions (``Mapping[rpm, predicted MI at now + horizon]``, no older than
@@ -56,15 +51,13 @@ Objective and endpoint (issue 24, ``control.objective``, ``control.endpoint``)
     a mode is set again. OFF and MANUAL never act on the endpoint (the application
     reports it).
 
-Limits
-    Every commanded rpm is inside ``[min_rpm, min(max_rpm, max_critical_frac * n_c)]``
-    with ``n_c`` = ``critical_rpm``, the drum's critical speed, handed in by the
-    application (``sim.recipe.DrumSpec.critical_rpm`` is the one formula; ``None``: only
-    ``max_rpm`` limits). The setpoint moves
-    at most ``max_rate_rpm_per_s`` (ramped in steps every ``ramp_interval_s``, each one a
-    ``ramp`` decision); a ramp from a board found outside the limits (started from its
-    front panel) steps inside them at once; a board found above them in MANUAL or AUTO (at
-    a resync) is brought down to the upper limit that way, even before any decision.
+Limits (``control.limits``: the one set)
+    Every commanded rpm is inside ``limits.rpm_range`` (the drum's critical speed handed in by
+    the application). The setpoint moves at most ``max_rate_rpm_per_s`` (ramped in steps every
+    ``ramp_interval_s``, each one a ``ramp`` decision); a ramp from a board found outside the
+    limits (started from its front panel) steps inside them at once; a board found above them
+    in MANUAL or AUTO (at a resync) is brought down to the upper limit that way, even before
+    any decision.
 
 Board resync
     ``inputs.mill_epoch`` changes whenever the application has (re)read the board after a
@@ -77,317 +70,22 @@ Safe state
     (``inputs.mill_refused`` grew since the last step), the camera ended, no valid MI for
     ``vision_timeout_s`` (the one vision timeout: applications raise their own alarm with
     :meth:`SupervisorConfig.vision_lost`) or the twin not updated for ``twin_timeout_s``
-    (AUTO) -> ``safe_action``: ``HOLD``
-    (keep the setpoint, the device watchdog covers a dead link), ``RAMP`` (ramp to
-    ``safe_rpm``) or ``STOP``. HOLD/RAMP recover by themselves after ``recover_s`` without
-    faults; STOP is latched until the operator sets a mode again.
-
+    (AUTO) -> ``safe_action``: ``HOLD`` (keep the setpoint, the device watchdog covers a dead
+    link), ``RAMP`` (ramp to ``safe_rpm``) or ``STOP``. HOLD/RAMP recover by themselves after
+    ``recover_s`` without faults; STOP is latched until the operator sets a mode again.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping
-from dataclasses import dataclass
-from enum import StrEnum
 from typing import NamedTuple
 
+from control.decision import Action, Decision, Mode, PredictionRequest, PredictionResult, SupervisorInputs
 from control.errors import ControlError
-from control.limits import Limits
-from control.objective import RpmPrediction, check_objective, choose, stale_start
-from control.trend import TrendEstimate
-
-
-class Mode(StrEnum):
-    OFF = "off"
-    MANUAL = "manual"
-    AUTO = "auto"
-
-
-class SafeAction(StrEnum):
-    HOLD = "hold"
-    RAMP = "ramp"
-    STOP = "stop"
-
-
-class Action(StrEnum):
-    """What the application should do with a decision."""
-
-    NONE = "none"  #: nothing to send (mode change, hold, recovery): log it
-    SET_RPM = "set_rpm"  #: send ``Decision.rpm`` as the new setpoint
-    STOP = "stop"  #: stop the motor
-
-
-@dataclass(frozen=True)
-class SupervisorConfig:
-    """Limits, detection thresholds, AUTO tuning and safe-state policy (units in names)."""
-
-    # limits
-    min_rpm: float = 2.0
-    max_rpm: float = 45.0
-    critical_rpm: float | None = None  # the drum's critical speed (rpm), from the application
-    max_critical_frac: float = 0.6
-    max_rate_rpm_per_s: float = 2.0
-    ramp_interval_s: float = 1.0
-    min_change_interval_s: float = 30.0
-    # segregation detection (MI units; rate in MI/s)
-    seg_level: float = 0.5
-    clear_level: float = 0.6
-    seg_rate_per_s: float = -0.01
-    radial_min: float = 0.5
-    radial_clear: float = 0.6
-    detect_dwell_s: float = 5.0
-    clear_dwell_s: float = 5.0
-    # AUTO
-    n_candidates: int = 7
-    horizon_s: float = 60.0
-    move_penalty_per_rpm: float = 0.002
-    min_gain: float = 0.02
-    prediction_max_age_s: float = 30.0
-    prediction_wait_s: float = 20.0
-    fallback_step_rpm: float = 5.0
-    # objective and endpoint (issue 24)
-    objective: str = "plateau"  # plateau | time | energy (control.objective)
-    target_mi: float | None = None  # the target of "time"/"energy" (None: the endpoint's, from the application)
-    objective_min_rel_gain: float = 0.1  # "time"/"energy": move when the best saves this share vs staying
-    stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed
-    # safe state
-    safe_action: SafeAction = SafeAction.HOLD
-    safe_rpm: float = 5.0
-    vision_timeout_s: float = 5.0
-    twin_timeout_s: float | None = 60.0
-    require_twin: bool = False
-    recover_s: float = 5.0
-
-    def __post_init__(self) -> None:
-        self.limits  # noqa: B018 -- validates the rpm limits (control.limits: the one set)
-        if not (math.isfinite(self.vision_timeout_s) and self.vision_timeout_s > 0):
-            raise ControlError(f"vision_timeout_s must be > 0, got {self.vision_timeout_s}")
-        if self.clear_level < self.seg_level:
-            raise ControlError("clear_level must be >= seg_level (hysteresis)")
-        check_objective(self.objective)
-        if self.target_mi is not None and not (math.isfinite(self.target_mi) and 0.0 <= self.target_mi <= 1.0):
-            raise ControlError(f"target_mi must be in [0, 1], got {self.target_mi}")
-        if self.objective != "plateau" and self.target_mi is None:
-            raise ControlError(f"objective {self.objective} needs a target_mi")
-
-    @property
-    def limits(self) -> Limits:
-        """The one set of rpm limits (``control.limits``) these settings describe."""
-        return Limits(self.min_rpm, self.max_rpm, self.critical_rpm, self.max_critical_frac, self.max_rate_rpm_per_s)
-
-    @property
-    def rpm_limits(self) -> tuple[float, float]:
-        """(lowest, highest) rpm the supervisor will ever command."""
-        return self.limits.rpm_range
-
-    def vision_lost(self, now_s: float, last_valid_mi_s: float | None) -> bool:
-        """True when no valid MI has been seen for more than ``vision_timeout_s`` (the one
-        vision timeout of supervisor and application; None = never seen: not lost yet)."""
-        return last_valid_mi_s is not None and now_s - last_valid_mi_s > self.vision_timeout_s
-
-    def clamp(self, rpm: float) -> float:
-        return self.limits.clamp(rpm)
-
-    def candidates(self, current: float | None = None) -> tuple[float, ...]:
-        """Evenly spaced candidate rpms over the limits (plus ``current``), rounded to 0.1."""
-        lo, hi = self.rpm_limits
-        n = max(2, self.n_candidates)
-        c = {round(lo + (hi - lo) * i / (n - 1), 1) for i in range(n)}
-        if current is not None:
-            c.add(round(self.clamp(current), 1))
-        return tuple(sorted(c))
-
-
-@dataclass(frozen=True)
-class SupervisorInputs:
-    """What the supervisor sees each step.
-
-    ``trend``: the latest Kalman estimate; ``actual_rpm``/``setpoint_rpm``/``mill_running``:
-    from the mill status; ``mill_connected``: the link is up; ``mill_epoch``: changes each
-    time the board was (re)read after a link loss or a refusal (the supervisor resyncs);
-    ``mill_refused``: commands the mill refused so far (growing: a fault for one step);
-    ``radial_factor``: MI(eq. 4)/MI(eq. 3) of the latest valid reading (None: not used);
-    ``last_valid_mi_s``: time of the last valid MI; ``camera_ended``: the frame source has
-    ended (vision is lost now, no timeout); ``twin_updated_s``: time the twin last synced
-    (None: no twin); ``twin_doubt``: why the application does not trust the twin now (it
-    disagrees with the camera, its what-if study failed; "" = trusted): AUTO treats a
-    twin in doubt as stale (safe state) until it is trusted again. ``mixed``: the batch is
-    at its endpoint (``control.endpoint``), mixed since ``mixing_time_s``.
-    """
-
-    trend: TrendEstimate | None = None
-    actual_rpm: float | None = None
-    setpoint_rpm: float | None = None
-    mill_connected: bool = True
-    mill_running: bool | None = None
-    mill_epoch: int = 0
-    mill_refused: int = 0
-    radial_factor: float | None = None
-    last_valid_mi_s: float | None = None
-    camera_ended: bool = False
-    twin_updated_s: float | None = None
-    twin_doubt: str = ""
-    mixed: bool = False
-    mixing_time_s: float | None = None
-
-
-@dataclass(frozen=True)
-class PredictionRequest:
-    """Predictions wanted at ``t_s``: MI after ``horizon_s`` for each of ``rpms``
-    (``target_mi``: also the time and energy to reach it, for the "time"/"energy" objectives;
-    ``ramp_rpm_s``: the rate the rpm will be ramped at, so the twin ramps as the mill will;
-    ``from_bed``: start from the bed the camera shows now, not from the running twin's state:
-    a time to the target counts from the start state, and a twin that drifted from the plant
-    predicts the time from another bed)."""
-
-    t_s: float
-    rpms: tuple[float, ...]
-    horizon_s: float
-    target_mi: float | None = None
-    ramp_rpm_s: float | None = None
-    from_bed: bool = False
-
-
-@dataclass(frozen=True)
-class PredictionResult:
-    """Predicted MI after ``horizon_s`` per rpm, for the request made at ``t_s``; ``rows``:
-    per rpm the time and energy to the target too (None: the study gave only MI)."""
-
-    t_s: float
-    horizon_s: float
-    predictions: Mapping[float, float]
-    rows: Mapping[float, RpmPrediction] | None = None
-
-
-@dataclass(frozen=True)
-class Decision:
-    """One supervisor event: when, in which mode, what to do, why, and on what inputs.
-
-    ``kind``: ``mode`` | ``manual`` | ``move`` | ``ramp`` | ``hold`` | ``safe`` |
-    ``recover``; ``rpm``: the setpoint to send now (``SET_RPM``); ``target_rpm``: where a
-    ramp is heading; ``scores``: candidate rpm -> score when predictions were used;
-    ``chosen``: the "time"/"energy" row of the rpm picked (its predicted time s and energy J to
-    the target) and ``prediction_t_s`` when the study it came from was asked (run s).
-    """
-
-    t_s: float
-    mode: Mode
-    action: Action
-    kind: str
-    reason: str
-    rpm: float | None = None
-    target_rpm: float | None = None
-    safe: bool = False
-    inputs: SupervisorInputs | None = None
-    predictions: Mapping[float, float] | None = None
-    scores: Mapping[float, float] | None = None
-    chosen: RpmPrediction | None = None
-    prediction_t_s: float | None = None
-
-    def as_dict(self) -> dict[str, object]:
-        """JSON-ready record (for run logs): the decision and the inputs it was made on."""
-        inp = self.inputs
-        tr = inp.trend if inp is not None else None
-        return {
-            "t_s": self.t_s,
-            "mode": self.mode.value,
-            "action": self.action.value,
-            "kind": self.kind,
-            "reason": self.reason,
-            "rpm": self.rpm,
-            "target_rpm": self.target_rpm,
-            "safe": self.safe,
-            "level": None if tr is None else tr.level,
-            "rate": None if tr is None else tr.rate,
-            "predictions": None if self.predictions is None else {str(k): v for k, v in self.predictions.items()},
-            "predicted_time_to_target_s": None if self.chosen is None else self.chosen.time_to_target_s,
-            "predicted_energy_j": None if self.chosen is None else self.chosen.energy_j,
-            "prediction_t_s": self.prediction_t_s,
-            "inputs": None
-            if inp is None
-            else {
-                "level": None if tr is None else tr.level,
-                "rate": None if tr is None else tr.rate,
-                "level_sd": None if tr is None else tr.level_sd,
-                "trend_settled": None if tr is None else tr.settled,
-                "actual_rpm": inp.actual_rpm,
-                "setpoint_rpm": inp.setpoint_rpm,
-                "mill_connected": inp.mill_connected,
-                "mill_running": inp.mill_running,
-                "mill_epoch": inp.mill_epoch,
-                "mill_refused": inp.mill_refused,
-                "camera_ended": inp.camera_ended,
-                "radial_factor": inp.radial_factor,
-                "last_valid_mi_s": inp.last_valid_mi_s,
-                "twin_updated_s": inp.twin_updated_s,
-                "twin_doubt": inp.twin_doubt,
-                "mixed": inp.mixed,
-                "mixing_time_s": inp.mixing_time_s,
-            },
-        }
-
-
-class SegregationDetector:
-    """Bad/good conditions with hysteresis and dwell (see module docstring)."""
-
-    def __init__(self, config: SupervisorConfig) -> None:
-        self.config = config
-        self.segregated = False
-        self._since: float | None = None  # start of the current opposite-condition stretch
-        self.why = ""
-
-    def reset(self) -> None:
-        self.segregated = False
-        self._since = None
-        self.why = ""
-
-    def bad_reasons(self, trend: TrendEstimate, radial: float | None) -> list[str]:
-        c, r = self.config, []
-        if trend.level < c.seg_level:
-            r.append(f"MI {trend.level:.3f} < {c.seg_level}")
-        if trend.rate < c.seg_rate_per_s:
-            r.append(f"MI falling {trend.rate:+.4f}/s < {c.seg_rate_per_s}/s")
-        if radial is not None and math.isfinite(radial) and radial < c.radial_min:
-            r.append(f"radial factor {radial:.3f} < {c.radial_min}")
-        return r
-
-    def is_good(self, trend: TrendEstimate, radial: float | None) -> bool:
-        c = self.config
-        ok = trend.level > c.clear_level and trend.rate > c.seg_rate_per_s / 2
-        if radial is not None and math.isfinite(radial):
-            ok = ok and radial > c.radial_clear
-        return ok
-
-    def update(self, now_s: float, trend: TrendEstimate | None, radial: float | None) -> bool:
-        """Advance; returns True when the state changed this step."""
-        if trend is None or not trend.valid or not trend.settled:  # decide nothing on an unsettled trend
-            self._since = None
-            return False
-        if not self.segregated:
-            bad = self.bad_reasons(trend, radial)
-            if not bad:
-                self._since = None
-                return False
-            self._since = now_s if self._since is None else self._since
-            if now_s - self._since >= self.config.detect_dwell_s:
-                self.segregated, self._since, self.why = True, None, "; ".join(bad)
-                return True
-            return False
-        if not self.is_good(trend, radial):
-            self._since = None
-            return False
-        self._since = now_s if self._since is None else self._since
-        if now_s - self._since >= self.config.clear_dwell_s:
-            self.segregated, self._since, self.why = False, None, ""
-            return True
-        return False
-
-    @property
-    def suspect(self) -> bool:
-        """Bad conditions seen but the dwell not over yet."""
-        return not self.segregated and self._since is not None
+from control.objective import choose, stale_start
+from control.segregation import SegregationDetector
+from control.supervisor_config import SafeAction, SupervisorConfig
 
 
 class StepResult(NamedTuple):
@@ -447,7 +145,7 @@ class Supervisor:
         self._endpoint_stopped = False
         self._clear_since = self._due_since = self._restudy_t = None
         self.target_rpm = self.commanded_rpm
-        lo, hi = self.config.rpm_limits
+        lo, hi = self.config.limits.rpm_range
         if new is Mode.MANUAL and self.manual_rpm is None and self.commanded_rpm is not None \
                 and lo <= self.commanded_rpm <= hi:
             self.manual_rpm = self.commanded_rpm  # a board outside the limits: no operator rpm until one is given
@@ -458,7 +156,7 @@ class Supervisor:
         rpm = float(rpm)
         if not math.isfinite(rpm):
             raise ControlError(f"manual rpm must be a number, got {rpm}")
-        self.manual_rpm = self.config.clamp(rpm)
+        self.manual_rpm = self.config.limits.clamp(rpm)
         return self.manual_rpm
 
     # -- predictions -------------------------------------------------------------------------
@@ -527,18 +225,21 @@ class Supervisor:
 
     def _resync(self, inputs: SupervisorInputs) -> None:
         """Take the board's state as ours (see "Board resync" in the module doc)."""
-        first = inputs.actual_rpm if inputs.mill_running else inputs.setpoint_rpm
-        if first is None:
-            first = inputs.setpoint_rpm if inputs.setpoint_rpm is not None else inputs.actual_rpm
-        board = first
-        if board is None or not math.isfinite(board):
+        def known(x: float | None) -> float | None:  # a NaN from the board says nothing
+            return x if x is not None and math.isfinite(x) else None
+
+        actual, setpoint = known(inputs.actual_rpm), known(inputs.setpoint_rpm)
+        board = actual if inputs.mill_running else setpoint
+        if board is None:
+            board = setpoint if setpoint is not None else actual
+        if board is None:
             return
         self._epoch = inputs.mill_epoch
         ramping = self._ramping
         self.commanded_rpm = round(float(board), 2)
         if not ramping or self.safe:
             self.target_rpm = self.commanded_rpm
-        lo, hi = self.config.rpm_limits
+        lo, hi = self.config.limits.rpm_range
         if self._mode is not Mode.OFF and self.commanded_rpm > hi:  # found above the limits (another host,
             self.target_rpm = hi  # the front panel): this run controls it, so it is brought inside at once
         if self.manual_rpm is None and self._mode is Mode.MANUAL and lo <= self.commanded_rpm <= hi:
@@ -587,7 +288,7 @@ class Supervisor:
             self.target_rpm = self.commanded_rpm
             return self._emit(now_s, Action.STOP, "safe", f"safe stop: {why}")
         if c.safe_action is SafeAction.RAMP and self.commanded_rpm is not None:
-            self.target_rpm = c.clamp(c.safe_rpm)
+            self.target_rpm = c.limits.clamp(c.safe_rpm)
             first = self._next_setpoint(now_s)
             return self._emit(
                 now_s,
@@ -609,12 +310,12 @@ class Supervisor:
             return None
         assert self.target_rpm is not None and self.commanded_rpm is not None
         diff = self.target_rpm - self.commanded_rpm
-        max_d = c.max_rate_rpm_per_s * c.ramp_interval_s if c.max_rate_rpm_per_s > 0 else abs(diff)
+        max_d = c.limits.max_rate_rpm_per_s * c.ramp_interval_s if c.limits.max_rate_rpm_per_s > 0 else abs(diff)
         nxt = round(self.commanded_rpm + max(-max_d, min(max_d, diff)), 2)
         if abs(self.target_rpm - nxt) < 0.01:
             nxt = self.target_rpm
         # a board found outside the limits (front panel): the first step goes inside them at once
-        nxt = c.clamp(nxt)
+        nxt = c.limits.clamp(nxt)
         self.commanded_rpm, self._last_cmd_s = nxt, now_s
         return nxt
 
@@ -626,7 +327,7 @@ class Supervisor:
         c = self.config
         return self._emit(
             now_s, Action.SET_RPM, kind,
-            f"ramp {nxt:g} rpm toward {self.target_rpm:g} (<= {c.max_rate_rpm_per_s:g} rpm/s)",
+            f"ramp {nxt:g} rpm toward {self.target_rpm:g} (<= {c.limits.max_rate_rpm_per_s:g} rpm/s)",
             rpm=nxt, target_rpm=self.target_rpm,
         )
 
@@ -681,7 +382,8 @@ class Supervisor:
             return None
         if now_s - self._last_eval_s < c.min_change_interval_s:
             return None
-        current = self.commanded_rpm if self.commanded_rpm is not None else c.clamp(inputs.actual_rpm or c.safe_rpm)
+        known = self.commanded_rpm
+        current = known if known is not None else c.limits.clamp(inputs.actual_rpm or c.safe_rpm)
         preds = self.fresh_predictions(now_s)
         if preds is None:
             if self._due_since is None:  # ask once per decision, then wait a bounded time
@@ -702,9 +404,9 @@ class Supervisor:
             return self._choose_objective(now_s, current, preds, why + (f"; {stale} (asked again)" if stale else ""))
         if preds is not None:
             return self._choose(now_s, current, preds, why, inputs)
-        target = c.clamp(current + c.fallback_step_rpm)
+        target = c.limits.clamp(current + c.fallback_step_rpm)
         if abs(target - current) < 1e-6:
-            target = c.clamp(current - c.fallback_step_rpm)
+            target = c.limits.clamp(current - c.fallback_step_rpm)
         return self._start_move(
             now_s, target, "move", f"segregation ({why}); no predictions -> fallback rule {current:g} -> {target:g} rpm"
         )
@@ -712,14 +414,14 @@ class Supervisor:
     def _prediction_request(self, now_s: float, current: float) -> PredictionRequest:
         c = self.config
         return PredictionRequest(now_s, c.candidates(current), c.horizon_s, c.target_mi,
-                                 c.max_rate_rpm_per_s if c.max_rate_rpm_per_s > 0 else None,
+                                 c.limits.max_rate_rpm_per_s if c.limits.max_rate_rpm_per_s > 0 else None,
                                  from_bed=c.objective != "plateau")
 
     def _choose_objective(self, now_s: float, current: float, preds: PredictionResult, why: str) -> Decision:
         """"time"/"energy" (``control.objective.choose``) on the per-rpm rows."""
         c = self.config
         assert preds.rows is not None
-        ch = choose(preds.rows.values(), c.objective, current, c.rpm_limits, c.target_mi,
+        ch = choose(preds.rows.values(), c.objective, current, c.limits.rpm_range, c.target_mi,
                     min_rel_gain=c.objective_min_rel_gain)
         self._last_eval_s, self._restudy_t = now_s, None
         scores = {r: -v for r, v in ch.values.items()}  # higher is better, as the plateau scores
@@ -736,7 +438,7 @@ class Supervisor:
         c = self.config
         plateau_note = "" if c.objective == "plateau" else f"objective {c.objective}: no time/energy rows -> plateau; "
         why = plateau_note + why
-        lo, hi = c.rpm_limits
+        lo, hi = c.limits.rpm_range
         scores: dict[float, float] = {}
         for r, mi in preds.predictions.items():
             r, mi = float(r), float(mi)

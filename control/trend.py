@@ -1,115 +1,57 @@
-"""Kalman trend of the mixing index (filterpy), replacing the paper's moving average.
+"""Kalman trend of the mixing index: the level the supervisor and the endpoint decide on.
 
-State ``x = [level, rate, ripple_c, ripple_s, e]``: the MI level, its rate of change
-(MI/s, a random walk: constant-velocity model), a rotating ripple pair at the
-drum's rotation frequency ``omega = 2*pi*rpm/60 * harmonic`` (rad/s) and the coloured
-measurement noise ``e`` (MI). The bed rolls once per revolution, so vision MI oscillates
-at that frequency; the pair is rotated by ``omega*dt`` each step, with ``omega`` from the
-*actual* rpm passed to ``update`` (it may change at run time). The measurement is
-``MI = level + ripple_c + e + v`` (a drum at rest, rpm 0: ``MI = level + e + v``, the pair
-is not observable), ``v`` a white floor of variance ``min_meas_sd**2``.
+The paper smooths MI with a 150-sample moving average (:class:`MovingAverage`, the baseline);
+camera MI is a level plus things a mean cannot tell from it, so the trend is a Kalman filter:
 
-Why it is built this way (issue 21: real camera MI, not twin MI)
-    Real MI is a mixture of two things the filter must tell apart: isolated wrong frames
-    (glare, a hand, a corrupt or dropped frame: single frames or short bursts far from
-    the level) and real steps (the bed changes within a frame or two when a video starts on
-    another state, or the operator changes the drum). The old filter rejected samples by a
-    gate on the normalised innovation and re-initialised after ``N`` *consecutive*
-    rejections; on a real sequence where a frame near the stuck level comes back now and
-    then, the count never reached ``N`` and the level locked out for good (MI 0.43 on a
-    bed at 0.97). And its rate state grew while the gate slowly opened: overshoot past 1.
+- **State** ``[level, rate, ripple_c, ripple_s, e]``: the MI level; its rate (MI/s, a random
+  walk: constant velocity); a ripple pair turned by ``omega * dt`` each step, ``omega = 2 pi
+  rpm / 60 * ripple_harmonic`` with the drum's *actual* rpm given to ``update`` (the bed rolls
+  once a turn; rpm 0, negative or NaN: at rest, the pair neither turns nor enters the
+  measurement); and ``e``, the bed's coloured noise, AR(1) with ``phi = exp(-dt / tau_e)`` and
+  stationary variance ``R`` (frames a few hundred ms apart show the same bed). Measurement
+  ``MI = level + ripple_c + e + v``, ``v`` white with variance ``min_meas_sd**2``.
+- **Noise learned on line**, with no feedback from the filter's own covariance: ``R`` from pairs
+  ``noise_lag_s`` apart that the gate accepted at both ends (longer than the bed's correlation
+  time, so the level cancels; a rejected frame is no sample of the bed), the frame-to-frame
+  ``D1`` from consecutive valid samples, gated or not (a gate set too narrow cannot trap its
+  own noise), each pair ``(z_i - z_j)^2 / 2`` capped at ``gate_d2`` times the variance in use,
+  exponential means with time constant ``noise_tau_s``. The variance is ``max(R, D1)``; their
+  ratio is the lag-1 correlation, hence ``tau_e``. ``rate_q`` and ``ripple_q`` scale with ``D1``,
+  so the bandwidth stays the reference's. A re-initialisation keeps the noise.
+- **Odd frames versus steps.** A sample whose squared Mahalanobis distance exceeds ``gate_d2`` is
+  rejected (predict only): glare, a hand, a corrupt frame never move the level. A real step is
+  told from a burst by the share of rejections among the valid samples of a window (the last
+  ``reinit_window_s``, never fewer than ``reinit_min``): from ``reinit_share`` of it the level
+  restarts at the rejected samples' median. So a burst of fewer than ``reinit_share *
+  reinit_min`` frames (6 at the defaults, at any frame rate) never re-initialises, an accepted
+  sample now and then cannot lock the level out, and the lag after a step is about
+  ``reinit_share * reinit_window_s`` (at low frame rates ``ceil(reinit_share * reinit_min)``
+  frames). From ``unsettle_share`` of rejections the 95 % band includes their median.
+- **Bounds.** After each step the level is projected into [0, 1] and the rate into
+  ``+-max_rate_per_s`` (a rate at its bound loses its covariances). NaN MI predicts only; a gap
+  longer than ``max_dt_s`` restarts on the next valid sample.
+- **Settled** (decisions wait for it): ``settle_s`` of accepted data and ``reinit_min`` accepted
+  samples since the (re)start, and a band no wider than the settle width (``settle_band``, or one
+  reading's 95 % spread when wider, at most ``settle_band_max``; once settled, up to
+  ``SETTLE_HYSTERESIS`` times that).
 
-    - **Gate + windowed share of rejections.** Each sample is gated by its squared
-      Mahalanobis distance ``d2 = y^2 / S`` (``d2 > gate_d2``: rejected, predict only), so
-      a single glitch never moves the level (a soft Huber/Student-t weight still would,
-      by a bounded amount, on every glitch). Re-initialisation is decided on the *share* of
-      rejected samples among the valid ones of the last ``reinit_window_s``, never fewer
-      than the last ``reinit_min`` (a 10 fps camera has 6 in 0.6 s: with the window in
-      seconds only, the trend could never re-initialise there): at least
-      ``reinit_share`` of at least ``reinit_min`` samples rejected means the process
-      moved; the level restarts at the *median* of the rejected samples of the window
-      (robust to the glitches in between) with rate 0. A burst shorter than
-      ``reinit_share * reinit_window_s`` cannot re-initialise; an accepted sample now and
-      then cannot prevent it (no lock-out). Lag after a real step: about
-      ``reinit_share * reinit_window_s``.
-    - **Honest band, coloured noise (issue: the trend runaway on the demo).** A bed's MI is
-      not white noise about its level: the bed's configuration changes continuously, so
-      frames a few hundred ms apart are strongly correlated (the demo at 10 fps: lag-1
-      autocorrelation 0.80-0.89, structure function flat after ~1 s, sd 0.05-0.07; real
-      camera stills drawn i.i.d.: none). The noise is therefore an AR(1) state,
-      ``e_k+1 = phi e_k + w``, ``phi = exp(-dt/tau_e)``, ``var(w) = R (1 - phi^2)``, so its
-      stationary variance is ``R`` whatever the frame rate. Two statistics are learned on
-      line (half the mean squared difference of a pair: the level cancels, and there is no
-      feedback from the filter's own covariance; time constant ``noise_tau_s``, a running
-      mean at first; each pair capped at ``gate_d2`` times the variance): ``R`` from pairs
-      ``noise_lag_s`` (1 s) apart that end on an accepted sample, longer than the
-      correlation time, and the frame-to-frame ``D1`` from consecutive valid samples, gated
-      or not. The variance in use is ``max(R, D1)``, floored at ``min_meas_sd``: learned from
-      accepted samples only, it could never grow past what its own gate let through (on the
-      real frames' drift pools, spread 0.36-0.45, it learnt 0.009 from the two middle values,
-      gated the others and lost the level for 1.8 s); the cap keeps a glitch's weight to that
-      of a sample at the gate, and a real step (rejected samples close to each other) barely
-      moves ``D1``. Their ratio is the lag-1 correlation ``rho = 1 - D1/max(R, D1)``,
-      hence ``tau_e = -dt1 / ln(rho)`` (``dt1`` the mean frame gap; ``rho <= 0``: white,
-      ``phi = 0``; ``tau_e`` at most ``noise_lag_s``). On i.i.d. MI ``D1 ~ R`` and
-      ``phi ~ 0``: the filter is the white-noise one (the variance that of consecutive pairs,
-      as before). Learned only from
-      consecutive pairs, ``R`` saw a third of the demo's spread (sd 0.02 against 0.06): the
-      3-sigma gate rejected the real wander, the rate state followed the rest and the trend
-      ran to 1.0 and 0.35 on camera MI 0.85-0.92. ``rate_q`` and ``ripple_q`` are given at
-      the reference noise ``meas_sd`` and scale with the frame-to-frame variance ``D1``
-      (white noise: ``R``), so the filter's bandwidth stays that of the reference. A
-      re-initialisation *keeps* the learned noise (it belongs to the camera and the bed, not
-      to the level; the old MAD of 0.6 s of correlated samples underestimated it and each
-      re-init bred the next) and clears only the pairs (a pair across a step is no noise).
-      While rejections pile up but have not yet reached the re-init share (at least
-      ``unsettle_share`` of the window), the reported band ``lo95``/``hi95`` is widened
-      to include the median of the rejected samples: the level may be there, and the
-      supervisor must not act on it.
-    - **Bounded state.** After every predict and update the level is projected into
-      ``[0, 1]`` (MI cannot leave it; the projection is the mode of the Gaussian
-      truncated to the interval) and the rate into ``[-max_rate_per_s, max_rate_per_s]``;
-      a rate at its bound loses the cross-covariance with the level (the projection
-      removes information, never adds it).
-    - **Settled.** ``TrendEstimate.settled``: at least ``settle_s`` seconds of accepted data
-      (the sum of the frame gaps of accepted samples) and ``reinit_min`` accepted samples
-      since the start or the last re-initialisation (the same minimum at 10 fps and 30 fps;
-      30 frames were 3 s at 10 fps; the band then takes what the data need), and a band no wider than the settle
-      width: ``settle_band``, or the 95 % spread of one MI reading ``2 * 1.96 * meas_sd``
-      when that is wider (the level is then known better than any frame tells; an honest
-      band on correlated MI cannot be as narrow as on white MI), never above
-      ``settle_band_max`` (with hysteresis: it unsettles past ``SETTLE_HYSTERESIS`` times
-      that, still at most ``settle_band_max``). Decisions (segregation detection, AUTO
-      what-if requests) wait for it.
-
-    Measured (six demo runs run_time_s0-s5 at 10 fps replayed, against a 3 s centred mean of
-    raw MI; settled share after the first 10 s): old RMSE 0.070-0.206, max 0.27-0.78, settled
-    89-100 % (on a band far too narrow); new RMSE 0.029-0.043, max 0.18-0.33, settled 94-97 %.
-    The reverted first fix (1 s pairs, white noise, MAD at re-init, 30 frames to settle) was
-    settled 10 % of a loaded demo run. ``drumtwin bench trend``: real frames RMSE 0.038,
-    lock-out 1.10 -> 1.00 s, coverage 98.3 -> 97.9 %; synthetic lock-out 1.17 -> 1.53 s.
-
-- NaN MI (missing or invalid frame): predict only; a gap longer than ``max_dt_s``
-  re-initialises on the next valid sample.
-- ``lo95``/``hi95`` is the 95 % band of the *level estimate* (``level +- 1.96 sd``, widened
-  as above, clipped to ``[0, 1]``).
+The arithmetic is :class:`Kalman` (numpy; checked against filterpy's ``KalmanFilter`` by the
+tests). Why each rule, what it replaced and the measurements: docs/validation.md, section 13.
 """
 
 from __future__ import annotations
 
 import math
-import threading
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
 from control.errors import ControlError
 
 Z95 = 1.959963984540054
-SETTLE_HYSTERESIS = 1.5  # a settled trend unsettles when its band exceeds this times settle_band
+SETTLE_HYSTERESIS = 1.5  # a settled trend unsettles when its band exceeds this times the settle width
 
 
 @dataclass(frozen=True)
@@ -143,7 +85,7 @@ class TrendConfig:
     gate_d2: float = 9.0
     reinit_window_s: float = 0.6
     reinit_share: float = 0.6
-    reinit_min: int = 8
+    reinit_min: int = 11
     unsettle_share: float = 0.3
     max_rate_per_s: float = 0.5
     init_rate_sd: float = 0.02
@@ -224,102 +166,106 @@ def config_from_window(mi: Sequence[float] | np.ndarray, base: TrendConfig | Non
     return replace(base, meas_sd=sd, rate_q=base.rate_q * k, ripple_q=base.ripple_q * k)
 
 
-_KF_LOCK = threading.Lock()
+class Kalman:
+    """A linear Kalman filter with a scalar measurement: state ``x`` (n,), covariance ``P`` (n, n).
+
+    The sums of filterpy's ``KalmanFilter.predict``/``update`` (the covariance update in Joseph
+    form: symmetric and positive semi-definite under rounding), written out because the trend
+    gates on the innovation *before* it updates, and because ``filterpy.kalman`` imports scipy
+    (+43 MB of the live run's peak memory, docs/validation.md section 13). The tests compare it
+    with filterpy's class.
+    """
+
+    def __init__(self, x: np.ndarray, P: np.ndarray) -> None:
+        self.x = np.array(x, dtype=float)
+        self.P = np.array(P, dtype=float)
+
+    def predict(self, F: np.ndarray, Q: np.ndarray) -> None:
+        """``x = F x``, ``P = F P F' + Q``."""
+        self.x = F @ self.x
+        self.P = F @ self.P @ F.T + Q
+
+    def innovation(self, z: float, h: np.ndarray, r: float) -> tuple[float, float]:
+        """``y = z - h x`` of a measurement ``z = h x + v`` (``var v = r``) and its variance ``h P h' + r``."""
+        return float(z - h @ self.x), float(h @ self.P @ h + r)
+
+    def update(self, z: float, h: np.ndarray, r: float) -> None:
+        """Fold in ``z``: gain ``k = P h' / s``, ``x += k y``, ``P = (I - k h) P (I - k h)' + r k k'``."""
+        y, s = self.innovation(z, h, r)
+        k = self.P @ h / s
+        self.x = self.x + k * y
+        ikh = np.eye(self.x.size) - np.outer(k, h)
+        self.P = ikh @ self.P @ ikh.T + r * np.outer(k, k)
 
 
-def kalman_filter_class() -> type:
-    """filterpy's ``KalmanFilter`` (the class of ``filterpy/kalman/kalman_filter.py``, unchanged)
-    without the ~60 MB of resident memory its packages' imports cost: ``filterpy.kalman``'s
-    ``__init__`` imports every filter, ``filterpy.common`` imports ``scipy.linalg`` and
-    ``filterpy.stats`` ``scipy.stats``, all for ``logpdf``, which the class calls only for its
-    ``log_likelihood`` (never read here; the first call imports the real ``filterpy.stats``).
-    The module is loaded once under a private name; ``sys.modules`` holds no stand-in afterwards."""
-    import importlib.util
-    import sys
-    import types
+def turning(rpm: float) -> float:
+    """The drum speed the ripple turns with (rpm): ``rpm`` when finite and positive, else 0 (at rest)."""
+    return float(rpm) if math.isfinite(rpm) and rpm > 0 else 0.0
 
-    with _KF_LOCK:
-        name = "control._filterpy_kalman_filter"
-        mod = sys.modules.get(name)
-        if mod is not None:
-            return mod.KalmanFilter
-        spec = importlib.util.find_spec("filterpy")  # found, not imported (its __init__ imports it all)
-        if spec is None or spec.origin is None:
-            raise ModuleNotFoundError("filterpy is not installed", name="filterpy")
-        root = Path(spec.origin).parent
 
-        def load(modname: str, path: Path) -> types.ModuleType:
-            spec = importlib.util.spec_from_file_location(modname, path)
-            assert spec is not None and spec.loader is not None
-            m = importlib.util.module_from_spec(spec)
-            sys.modules[modname] = m
-            spec.loader.exec_module(m)
-            return m
+def transition(dt_s: float, rpm: float, c: TrendConfig, tau_e_s: float, var: float, k: float) -> tuple[np.ndarray,
+                                                                                                     np.ndarray]:
+    """``F`` and ``Q`` of one step of ``dt_s``: constant velocity with the rate a random walk of density
+    ``k * rate_q``, the ripple pair turned by ``omega * dt_s`` (``omega = 2 pi rpm / 60 * ripple_harmonic``,
+    ``rpm`` through :func:`turning`) with a random walk of density ``k * ripple_q`` on each, and the AR(1)
+    noise ``e`` decaying by ``phi = exp(-dt_s / tau_e_s)`` (0 for white noise, ``tau_e_s`` 0) with
+    innovation variance ``var (1 - phi^2)`` (its stationary variance stays ``var``)."""
+    a = 2.0 * math.pi * turning(rpm) / 60.0 * c.ripple_harmonic * dt_s
+    cs, sn = math.cos(a), math.sin(a)
+    phi = math.exp(-dt_s / tau_e_s) if tau_e_s > 0.0 else 0.0
+    F = np.array([[1.0, dt_s, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, cs, sn, 0.0],
+                  [0.0, 0.0, -sn, cs, 0.0], [0.0, 0.0, 0.0, 0.0, phi]])
+    q, qr = c.rate_q * k, c.ripple_q * k
+    Q = np.zeros((5, 5))
+    Q[0, 0], Q[0, 1], Q[1, 0], Q[1, 1] = q * dt_s**3 / 3.0, q * dt_s**2 / 2.0, q * dt_s**2 / 2.0, q * dt_s
+    Q[2, 2] = Q[3, 3] = qr * dt_s
+    Q[4, 4] = var * (1.0 - phi * phi)
+    return F, Q
 
-        helpers = load("control._filterpy_helpers", root / "common" / "helpers.py")  # numpy only
 
-        def logpdf(*args: object, **kwargs: object) -> object:
-            from filterpy.stats import logpdf as real
-
-            return real(*args, **kwargs)
-
-        stats = types.ModuleType("filterpy.stats")
-        stats.logpdf = logpdf  # type: ignore[attr-defined]
-        stand_ins = {"filterpy.stats": stats, "filterpy.common": helpers}
-        saved = {k: sys.modules.get(k) for k in stand_ins}
-        try:
-            sys.modules.update(stand_ins)
-            mod = load(name, root / "kalman" / "kalman_filter.py")
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    sys.modules.pop(k, None)
-                else:
-                    sys.modules[k] = v
-        return mod.KalmanFilter
+def project(kf: Kalman, max_rate_per_s: float) -> None:
+    """The level into [0, 1] (MI cannot leave it: the mode of the Gaussian truncated there) and the rate
+    into ``+-max_rate_per_s``; a rate at its bound loses its covariances (the projection removes
+    information, never adds it)."""
+    x, P = kf.x, kf.P
+    x[0] = min(1.0, max(0.0, float(x[0])))
+    if abs(float(x[1])) > max_rate_per_s:
+        x[1] = math.copysign(max_rate_per_s, float(x[1]))
+        for j in (0, 2, 3, 4):
+            P[1, j] = P[j, 1] = 0.0
 
 
 class MITrend:
-    """Online Kalman trend of MI: ``update(t_s, mi, rpm) -> TrendEstimate``.
+    """Online Kalman trend of MI: ``update(t_s, mi, rpm) -> TrendEstimate`` (see the module doc).
 
-    ``t_s`` (s) must not go backwards; ``mi`` may be NaN; ``rpm`` is the drum's actual
-    speed, which sets the ripple frequency for the step that ends at ``t_s``.
+    ``t_s`` (s) must not go backwards; ``mi`` may be NaN or None (a missing frame); ``rpm`` is
+    the drum's actual speed, which sets the ripple frequency for the step that ends at ``t_s``.
     """
+
+    engine: type[Kalman] = Kalman
+    """The Kalman arithmetic, made with ``(x, P)`` at each (re)initialisation (the tests run filterpy's here)."""
 
     def __init__(self, config: TrendConfig | None = None) -> None:
         self.config = config or TrendConfig()
-        self.kf = kalman_filter_class()(dim_x=5, dim_z=1)
-        self.kf.H = np.array([[1.0, 0.0, 1.0, 0.0, 1.0]])
-        self.kf.R = np.array([[self.config.min_meas_sd**2]])  # the white floor under the AR(1) noise
-        self._t: float | None = None
-        self._init = False
-        self.rejections = 0
+        self.kf: Kalman  # made by the first valid sample (nothing reads it before)
         self.n_reinit = 0
-        self._window: deque[tuple[float, float, bool]] = deque()  # (t_s, mi, rejected) of valid samples
-        self._n_since_init = 0
-        self._accepted_s = 0.0  # seconds of accepted data since the start or the last re-init
-        self._samples: deque[tuple[float, float]] = deque()  # (t_s, mi) valid since (re)init, for the noise
-        self._settled = False
-        self._forget_noise()
-
-    def _forget_noise(self) -> None:
-        c = self.config
-        self._r = c.meas_sd**2  # stationary measurement variance (MI^2), from pairs noise_lag_s apart
-        self._d1 = c.meas_sd**2  # half mean squared difference of consecutive accepted samples (MI^2)
-        self._dt1 = 0.0  # mean time between those samples (s)
-        self._n_lag = self._n_one = 0  # pairs learned from (since reset: the noise outlives a re-init)
+        self.reset()
 
     def reset(self) -> None:
         """Forget everything, the learned noise too; the next valid MI initialises the filter."""
-        self._t = None
+        c = self.config
+        self._t: float | None = None
         self._init = False
         self.rejections = 0
-        self._window.clear()
+        self._window: deque[tuple[float, float, bool]] = deque()  # (t_s, mi, rejected) of valid samples
         self._n_since_init = 0
-        self._accepted_s = 0.0
-        self._samples.clear()
+        self._accepted_s = 0.0  # seconds of accepted data since the start or the last re-init
+        self._samples: deque[tuple[float, float, bool]] = deque()  # (t_s, mi, accepted) for the noise pairs
         self._settled = False
-        self._forget_noise()
+        self._r = c.meas_sd**2  # stationary measurement variance (MI^2), from pairs noise_lag_s apart
+        self._d1 = c.meas_sd**2  # half the mean squared difference of consecutive valid samples (MI^2)
+        self._dt1 = 0.0  # mean time between those samples (s)
+        self._n_lag = self._n_one = 0  # pairs learned from (since reset: the noise outlives a re-init)
 
     @property
     def accepted_s(self) -> float:
@@ -333,14 +279,14 @@ class MITrend:
 
     @property
     def noise_tau_e_s(self) -> float:
-        """Correlation time of the coloured measurement noise (s; 0: white), see the module doc."""
-        c = self.config
+        """Correlation time of the coloured noise (s; 0: white): ``-dt1 / ln(rho)`` with the lag-1
+        correlation ``rho = 1 - D1 / var`` and ``dt1`` the mean frame gap, at most ``noise_lag_s``."""
         if self._n_one == 0 or self._dt1 <= 0.0:
             return 0.0
         rho = 1.0 - self._d1 / self._var()
         if rho <= 0.0:
             return 0.0
-        return min(c.noise_lag_s, -self._dt1 / math.log(min(rho, 1.0 - 1e-12)))
+        return min(self.config.noise_lag_s, -self._dt1 / math.log(min(rho, 1.0 - 1e-12)))
 
     def settle_width(self) -> float:
         """The widest band (MI) a trend settles with: ``settle_band``, or the 95 % spread of one
@@ -349,64 +295,29 @@ class MITrend:
         return min(c.settle_band_max, max(c.settle_band, 2.0 * Z95 * math.sqrt(self._var())))
 
     def _var(self) -> float:
-        """The stationary measurement variance in use (MI^2): the pairs' ``R``, never below the
-        frame-to-frame ``D1`` (white noise) nor ``min_meas_sd**2``, at most 0.25."""
+        """The stationary measurement variance in use (MI^2): ``max(R, D1)``, at least
+        ``min_meas_sd**2``, at most 0.25 (MI's whole range)."""
         return min(0.25, max(self.config.min_meas_sd**2, self._r, self._d1))
 
     def _q_scale(self) -> float:
-        """Factor on ``rate_q``, ``ripple_q`` and the initial rate/ripple variances: they are given at
-        ``meas_sd`` and scale with the frame-to-frame variance (``_d1``, at most the stationary one;
-        white noise: the stationary one), so the filter's bandwidth stays that of the reference."""
+        """Factor on ``rate_q``, ``ripple_q`` and the initial rate/ripple variances, given at ``meas_sd``:
+        the frame-to-frame variance (at most the one in use) over ``meas_sd**2``."""
         c = self.config
         return min(self._var(), max(c.min_meas_sd**2, self._d1)) / c.meas_sd**2
 
     def _initialise(self, z: float) -> None:
         c = self.config
-        r = self._var()
-        self.kf.x = np.array([[min(1.0, max(0.0, z))], [0.0], [0.0], [0.0], [0.0]])
-        k = self._q_scale()
-        self.kf.P = np.diag([r, k * c.init_rate_sd**2, k * c.init_ripple_sd**2, k * c.init_ripple_sd**2, r])
+        r, k = self._var(), self._q_scale()
+        self.kf = self.engine(np.array([min(1.0, max(0.0, z)), 0.0, 0.0, 0.0, 0.0]),
+                              np.diag([r, k * c.init_rate_sd**2, k * c.init_ripple_sd**2, k * c.init_ripple_sd**2, r]))
         self._init = True
         self.rejections = 0
         self._window.clear()
         self._n_since_init = 1
         self._accepted_s = 0.0
         self._samples.clear()
-        if self._t is not None:
-            self._samples.append((self._t, z))
+        self._samples.append((float(self._t), z, True))  # type: ignore[arg-type]  # update sets _t first
         self.n_reinit += 1
-
-    def _project(self) -> None:
-        """Level into [0, 1], rate into +-max_rate_per_s (see the module doc)."""
-        x, m = self.kf.x, self.config.max_rate_per_s
-        x[0, 0] = min(1.0, max(0.0, float(x[0, 0])))
-        if abs(float(x[1, 0])) > m:
-            x[1, 0] = math.copysign(m, float(x[1, 0]))
-            p = self.kf.P
-            p[0, 1] = p[1, 0] = 0.0
-            p[1, 2] = p[2, 1] = p[1, 3] = p[3, 1] = p[1, 4] = p[4, 1] = 0.0
-
-    def _transition(self, dt: float, rpm: float) -> None:
-        c = self.config
-        w = 2.0 * math.pi * max(0.0, float(rpm) if math.isfinite(rpm) else 0.0) / 60.0 * c.ripple_harmonic
-        cs, sn = math.cos(w * dt), math.sin(w * dt)
-        tau = self.noise_tau_e_s
-        phi = math.exp(-dt / tau) if tau > 0.0 else 0.0
-        self.kf.F = np.array(
-            [[1.0, dt, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, cs, sn, 0.0],
-             [0.0, 0.0, -sn, cs, 0.0], [0.0, 0.0, 0.0, 0.0, phi]]
-        )
-        r, k = self._var(), self._q_scale()
-        q, qr = c.rate_q * k, c.ripple_q * k
-        self.kf.Q = np.array(
-            [
-                [q * dt**3 / 3, q * dt**2 / 2, 0.0, 0.0, 0.0],
-                [q * dt**2 / 2, q * dt, 0.0, 0.0, 0.0],
-                [0.0, 0.0, qr * dt, 0.0, 0.0],
-                [0.0, 0.0, 0.0, qr * dt, 0.0],
-                [0.0, 0.0, 0.0, 0.0, r * (1.0 - phi * phi)],
-            ]
-        )
 
     @staticmethod
     def _weight(dt: float, n: int, tau_s: float) -> float:
@@ -414,15 +325,13 @@ class MITrend:
         return max(min(1.0, dt / tau_s), 1.0 / (n + 1))
 
     def _learn_noise(self, t_s: float, z: float, accepted: bool) -> None:
-        """The two noise statistics (see the module doc): the frame-to-frame ``D1`` from
-        consecutive valid samples, gated or not (at most ``noise_lag_s`` apart), and the
-        stationary ``R`` from pairs ``noise_lag_s`` apart that end on an ``accepted`` sample (the
-        partner: the newest valid sample at least that old); each ``(z_i - z_j)^2 / 2``, capped
-        at ``gate_d2`` times the variance in use before this sample (the level cancels; no
-        feedback from the filter's own P), an exponential mean with time constant ``noise_tau_s`` (the weight
-        of a pair: the gap since the previous sample over it), a running mean at first (the
-        configured ``meas_sd**2`` counting once). Pairs never span a re-initialisation (the
-        level stepped there) nor a gap longer than ``noise_lag_s + 1`` s."""
+        """The two noise statistics (module doc): ``D1`` from this sample and the previous valid one
+        (at most ``noise_lag_s`` before), ``R`` from this sample and its partner, the newest valid
+        sample at least ``noise_lag_s`` old, when the gate accepted both. Each pair ``(z_i - z_j)^2 / 2``,
+        capped at ``gate_d2`` times the variance in use before this sample, enters an exponential mean
+        (weight: the gap since the previous sample over ``noise_tau_s``; a running mean at first, the
+        configured ``meas_sd**2`` counting once). No pair spans a re-initialisation or a gap longer
+        than ``noise_lag_s + 1`` s."""
         c = self.config
         acc = self._samples
         cap = c.gate_d2 * self._var()  # a pair farther apart than the gate counts as at the gate
@@ -432,18 +341,17 @@ class MITrend:
             a = self._weight(dt, self._n_one, c.noise_tau_s)
             self._d1 = (1.0 - a) * self._d1 + a * min(0.5 * (z - acc[-1][1]) ** 2, cap)
             self._dt1 = (1.0 - a) * self._dt1 + a * dt if self._n_one > 1 else dt
-        acc.append((t_s, z))
+        acc.append((t_s, z, accepted))
         while len(acc) > 2 and t_s - acc[1][0] >= c.noise_lag_s:  # acc[0]: the newest at least the lag old
             acc.popleft()
         if len(acc) < 2:
             return
-        t0, z0 = acc[0]
-        lag = t_s - t0
-        if lag > c.noise_lag_s + 1.0:  # a gap: this sample starts the next pair
+        t0, z0, ok0 = acc[0]
+        if t_s - t0 > c.noise_lag_s + 1.0:  # a gap: this sample starts the next pair
             while len(acc) > 1:
                 acc.popleft()
             return
-        if lag >= c.noise_lag_s and accepted:
+        if t_s - t0 >= c.noise_lag_s and accepted and ok0:
             self._n_lag += 1
             a = self._weight(t_s - acc[-2][0], self._n_lag, c.noise_tau_s)
             self._r = (1.0 - a) * self._r + a * min(0.5 * (z - z0) ** 2, cap)
@@ -456,8 +364,8 @@ class MITrend:
             w.popleft()
         return len(w), [z for _, z, rej in w if rej]
 
-    def update(self, t_s: float, mi: float, rpm: float = 0.0) -> TrendEstimate:
-        """Advance to ``t_s`` and fold in ``mi`` (NaN: predict only)."""
+    def update(self, t_s: float, mi: float | None, rpm: float = 0.0) -> TrendEstimate:
+        """Advance to ``t_s`` and fold in ``mi`` (NaN or None: predict only)."""
         c = self.config
         t_s = float(t_s)
         z = float(mi) if mi is not None else math.nan
@@ -471,27 +379,24 @@ class MITrend:
             if dt > c.max_dt_s:
                 self._init = False  # too long without data: start over
             elif dt > 0:
-                self._transition(dt, rpm)
-                self.kf.predict()
-                self._project()
+                self.kf.predict(*transition(dt, rpm, c, self.noise_tau_e_s, self._var(), self._q_scale()))
+                project(self.kf, c.max_rate_per_s)
         self._t = t_s
         if math.isfinite(z):
             if not self._init:
                 self._initialise(z)
                 reinit = accepted = True
-            else:
-                # a drum at rest has no rotation ripple: the pair then stays out of the measurement
-                self.kf.H = np.array([[1.0, 0.0, 1.0 if math.isfinite(rpm) and rpm > 0 else 0.0, 0.0, 1.0]])
-                y = z - float((self.kf.H @ self.kf.x)[0, 0])
-                hph = float((self.kf.H @ self.kf.P @ self.kf.H.T)[0, 0])
-                nis = y * y / (hph + float(self.kf.R[0, 0]))
+            else:  # a drum at rest has no rotation ripple: the pair then stays out of the measurement
+                h = np.array([1.0, 0.0, 1.0 if turning(rpm) > 0 else 0.0, 0.0, 1.0])
+                y, s = self.kf.innovation(z, h, c.min_meas_sd**2)
+                nis = y * y / s
                 rejected = nis > c.gate_d2
-                self._learn_noise(t_s, z, not rejected)  # every valid sample (see the doc)
+                self._learn_noise(t_s, z, not rejected)
                 self._window.append((t_s, z, rejected))
                 n, rej = self._window_at(t_s)
                 if not rejected:
-                    self.kf.update(np.array([[z]]))
-                    self._project()
+                    self.kf.update(z, h, c.min_meas_sd**2)
+                    project(self.kf, c.max_rate_per_s)
                     accepted = True
                     self.rejections = 0
                     self._n_since_init += 1
@@ -513,7 +418,7 @@ class MITrend:
             n = math.nan
             return TrendEstimate(t_s, n, n, n, n, n, n, accepted, reinit, n, nis, self.rejections)
         c = self.config
-        x, P = self.kf.x[:, 0], self.kf.P
+        x, P = self.kf.x, self.kf.P
         lvl, rate = float(x[0]), float(x[1])
         lsd, rsd = math.sqrt(max(P[0, 0], 0.0)), math.sqrt(max(P[1, 1], 0.0))
         lo, hi = lvl - Z95 * lsd, lvl + Z95 * lsd

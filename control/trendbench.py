@@ -10,8 +10,9 @@ sources, both named (there is no twin-generated source):
   ``tests/data/real-drum-pmma`` (:class:`RealFrameMI`, measured once by the application
   with the project's meter): steps segregated -> mixed and back, periodic single-frame
   glitches, bursts, dropouts of 1-5 s, a slow drift (blends of the segregated and mixed
-  frames) and the frames looped in file order. Truth is piecewise: each segment's
-  median raw MI.
+  frames), the frames looped in file order, and the mixed bed under a dark object over a
+  third of the drum for 6 frames every 45 (occluded bursts). Truth is piecewise: each
+  segment's median raw MI.
 
 Metrics (both filters run causally over the same samples; scored over ``t >= warmup_s``,
 default one MA window, so the moving average is never scored on a partial window):
@@ -33,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from operator import attrgetter
 
 import numpy as np
 
@@ -114,20 +116,28 @@ class RealFrameMI:
     ``segregated``: the segregated frame and its near-copies (blends with a little of a
     mixed frame); ``mixed``: the mixed frames; ``looped``: every frame in file order (the
     video a user makes by looping the folder); ``drift``: pools from segregated to mixed
-    (blends of the segregated frame with mixed frames at increasing mixed share).
+    (blends of the segregated frame with mixed frames at increasing mixed share);
+    ``occluded``: one pool per position of a dark object over the mixed bed (the mixed
+    frames with it drawn in; frames the meter flags are left out: those are dropouts).
     """
 
     segregated: tuple[float, ...]
     mixed: tuple[float, ...]
     looped: tuple[float, ...]
     drift: tuple[tuple[float, ...], ...]
+    occluded: tuple[tuple[float, ...], ...]
 
     def __post_init__(self) -> None:
-        pools = (self.segregated, self.mixed, self.looped, *self.drift)
+        pools = (self.segregated, self.mixed, self.looped, *self.drift, *self.occluded)
         if not all(len(p) > 0 and all(math.isfinite(v) and 0.0 <= v <= 1.0 for v in p) for p in pools):
             raise ControlError("real-frame MI pools must be non-empty lists of numbers in [0, 1]")
-        if not self.drift:
-            raise ControlError("real-frame MI needs at least one drift level")
+        if not self.drift or not self.occluded:
+            raise ControlError("real-frame MI needs at least one drift level and one occluded position")
+
+
+OCCLUSION_FRAMES = 6
+OCCLUSION_EVERY = 45
+"""The occluded bursts: a dark object over the bed for 6 frames in every 45 (issue 38)."""
 
 
 def compose_sequence(
@@ -169,6 +179,14 @@ def real_sequences(frames: RealFrameMI, seed: int = 0, fps: float = 30.0, rpm: f
             i += k + int(rng.integers(2 * n, 4 * n))
         return out
 
+    def occluded(base: np.ndarray) -> np.ndarray:  # one object position per burst (it is held, not waved)
+        out, i = base.copy(), int(rng.integers(n, 2 * n))
+        while i < out.size:
+            pool = np.asarray(frames.occluded[int(rng.integers(len(frames.occluded)))])
+            out[i : i + OCCLUSION_FRAMES] = rng.choice(pool, min(OCCLUSION_FRAMES, out.size - i))
+            i += OCCLUSION_EVERY
+        return out
+
     def dropouts(base: np.ndarray) -> np.ndarray:
         out, i = base.copy(), int(rng.integers(n, 3 * n))
         while i < out.size - n:
@@ -188,6 +206,7 @@ def real_sequences(frames: RealFrameMI, seed: int = 0, fps: float = 30.0, rpm: f
         compose_sequence("real-dropouts", [dropouts(draw(mix, 30)), dropouts(draw(seg, 30))], fps, rpm),
         compose_sequence("real-drift", [draw(seg, 10), *drift, draw(mix, 20)], fps, rpm),
         compose_sequence("real-looped", [looped], fps, rpm),
+        compose_sequence("real-occluded", [occluded(draw(mix, 60))], fps, rpm),
     ]
 
 
@@ -241,26 +260,16 @@ class FilterScore:
 
 
 class _Headline:
-    """The headline numbers of a score with a ``kalman`` and an ``ma`` :class:`FilterScore`."""
+    """The headline numbers of a score with a ``kalman`` and an ``ma`` :class:`FilterScore`, read
+    through to them (``kalman_rmse`` is ``kalman.rmse``; ``as_dict`` names every metric so)."""
 
     kalman: FilterScore
     ma: FilterScore
 
-    @property
-    def kalman_rmse(self) -> float:
-        return self.kalman.rmse
-
-    @property
-    def ma_rmse(self) -> float:
-        return self.ma.rmse
-
-    @property
-    def kalman_lag_s(self) -> float:
-        return self.kalman.lag_s
-
-    @property
-    def ma_lag_s(self) -> float:
-        return self.ma.lag_s
+    kalman_rmse = property(attrgetter("kalman.rmse"))
+    ma_rmse = property(attrgetter("ma.rmse"))
+    kalman_lag_s = property(attrgetter("kalman.lag_s"))
+    ma_lag_s = property(attrgetter("ma.lag_s"))
 
 
 @dataclass(frozen=True)

@@ -20,18 +20,28 @@
 {
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# The supervisor's pure core is four modules (control/supervisor.py and its settings, step records and
+# segregation detector, split out of it): one guarding set for all four.
+SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
+SUPERVISOR_DESELECT="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
 declare -A TESTS=(
   [vision/mixing.py]="tests/vision/test_mixing.py tests/vision/test_known_answers.py"
   [control/protocol.py]="tests/control/test_protocol.py tests/control/test_protocol_rules.py"
   [control/device.py]="tests/control/test_device.py tests/control/test_device_rules.py"
   [vision/moments.py]="tests/vision/test_moments_pure.py"
-  [control/supervisor.py]="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
+  [control/supervisor.py]="$SUPERVISOR_TESTS"
+  [control/supervisor_config.py]="$SUPERVISOR_TESTS"
+  [control/decision.py]="$SUPERVISOR_TESTS"
+  [control/segregation.py]="$SUPERVISOR_TESTS"
   [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py tests/control/test_trend_mutants.py"
   [sim/calibrate.py]="tests/sim/test_calibrate_rules.py tests/sim/test_calibrate_mutants.py"
 )
 # Tests of those files left out of the fast set (they run the CLI in a subprocess).
 declare -A DESELECT=(
-  [control/supervisor.py]="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
+  [control/supervisor.py]="$SUPERVISOR_DESELECT"
+  [control/supervisor_config.py]="$SUPERVISOR_DESELECT"
+  [control/decision.py]="$SUPERVISOR_DESELECT"
+  [control/segregation.py]="$SUPERVISOR_DESELECT"
 )
 mod=${1:-}
 if [ -z "$mod" ] || [ "$mod" = list ]; then

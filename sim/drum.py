@@ -49,6 +49,7 @@ import numpy as np
 from sim import dem
 from sim.errors import SimError
 from sim.mixer import Mixer, disk_classes
+from sim.placement import SHRINK, place_random
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 CASES = ("A", "B", "C")
@@ -62,14 +63,13 @@ DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
 DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
 MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
 DEFAULT_STIFFNESS_N_M = 2800.0  # normal stiffness of the lightest pair (docs/validation.md, section 2)
-STEPS_PER_CONTACT = 4  # default step = the contact time (every pair's) / this (section 3)
+STEPS_PER_CONTACT = 8  # default step = the contact time (every pair's) / this: converged over the calibration box
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
 SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
 _SETTLE_DAMP_S = 2.0  # velocity damping rate while settling, 1/s
 _INFLATE_S = 0.1  # time to inflate the disks from placement size to full size
 _OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
-_SHRINK = 0.8  # placement size before inflation
 
 
 def _slab_m(classes) -> float:
@@ -225,44 +225,6 @@ def _check_params(p: SimParams) -> None:
         raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
 
 
-def _place(
-    classes: list[DiskClass], case: str, radius_m: float, rng: np.random.Generator
-) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (n, 2) and class indices by random sequential addition at ``_SHRINK`` size."""
-    radii = np.concatenate([np.full(c.count, c.radius_m) for c in classes])
-    cls = np.concatenate([np.full(c.count, k, dtype=np.int64) for k, c in enumerate(classes)])
-    order = np.argsort(-radii, kind="stable")  # largest first
-    small_r = radii * _SHRINK
-    pos = np.zeros((radii.size, 2))
-    placed = np.zeros(radii.size, dtype=bool)
-    gap = 0.02 * radii.max()
-    for i in order:
-        r = small_r[i]
-        k = cls[i]
-        lim = radius_m - radii[i] - gap
-        for _ in range(20000):
-            x, y = rng.uniform(-lim, lim, size=2)
-            if x * x + y * y > lim * lim:
-                continue
-            if case == "A" and len(classes) >= 2 and ((x > -r) if k == 0 else (x < r)):
-                continue  # class 0 (large) left, the others right
-            if case == "B" and len(classes) >= 2 and ((y < r) if k == 0 else (y > -r)):
-                continue  # class 0 (large) on top, the others below
-            if placed.any():
-                d2 = (pos[placed, 0] - x) ** 2 + (pos[placed, 1] - y) ** 2
-                if np.any(d2 < (small_r[placed] + r + gap) ** 2):
-                    continue
-            pos[i] = (x, y)
-            placed[i] = True
-            break
-        else:
-            raise SimError(
-                f"recipe does not fit: could not place {radii.size} disks in the drum "
-                f"(case {case}); lower the fill level or the counts"
-            )
-    return pos, cls
-
-
 class FixedStepTwin:
     """The clock and contact knobs every engine shares: one fixed internal step ``params.dt_s``
     whatever the caller's slicing (the remainder carried), and run-time friction. An engine
@@ -278,10 +240,12 @@ class FixedStepTwin:
     def _params_changed(self) -> None:
         raise NotImplementedError
 
-    def set_friction(self, mu: float, rolling: float | None = None) -> None:
-        """Change sliding friction (and rolling friction) at run time."""
+    def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
+        """Change sliding friction (and rolling friction, and the end plates' friction: a calibration's
+        ``sim.calibrate.Calibration.twin_kwargs``) at run time; None keeps that one as it is."""
         rolling = self.params.rolling if rolling is None else float(rolling)
-        params = replace(self.params, friction=float(mu), rolling=rolling)
+        end = self.params.end_friction if end_friction is None else float(end_friction)
+        params = replace(self.params, friction=float(friction), rolling=rolling, end_friction=end)
         _check_params(params)
         self.params = params
         self._params_changed()
@@ -355,7 +319,7 @@ class DrumSim(FixedStepTwin):
             recipe_used, classes = recipe, tuple(slice_2d(recipe, drum))
         rpm = check_rpm(rpm, drum)
         rng = np.random.default_rng(seed)
-        pos, cls = _place(list(classes), case, drum.radius_m, rng)
+        pos, cls = place_random(classes, case, drum.radius_m, rng)
         n = cls.size
         state = SimState(
             drum=drum, recipe=recipe_used, classes=classes, case=case, seed=int(seed), params=params,
@@ -367,14 +331,14 @@ class DrumSim(FixedStepTwin):
 
     @classmethod
     def from_placement(cls, state: SimState, rpm: float, settle_s: float) -> DrumSim:
-        """A twin from disks placed at ``_SHRINK`` size (``state``): inflated, settled for
+        """A twin from disks placed at ``SHRINK`` size (``state``): inflated, settled for
         ``settle_s`` with the drum at rest, then started at ``rpm`` (what ``__init__`` does)."""
         sim = cls.__new__(cls)
         sim._start(state, check_rpm(rpm, state.drum), settle_s)
         return sim
 
     def _start(self, state: SimState, rpm: float, settle_s: float) -> None:
-        self._build(state, radius_scale=_SHRINK)
+        self._build(state, radius_scale=SHRINK)
         self._settle(settle_s)
         self.t_s = 0.0
         self.n_steps = 0
@@ -549,7 +513,7 @@ class DrumSim(FixedStepTwin):
         per = max(1, int(round(_INFLATE_S / n_grow / h)))
         self._set_prm(gravity=False, damp_s=10 * _SETTLE_DAMP_S)
         for j in range(n_grow):
-            self._rad = self._r * (_SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow)
+            self._rad = self._r * (SHRINK + (1.0 - SHRINK) * (j + 1) / n_grow)
             self._rebuild = True
             self._run(per, count=False)
         self._rad = self._r.copy()

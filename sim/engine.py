@@ -151,16 +151,30 @@ def make_twin(
     **kwargs: Any,
 ) -> Twin:
     """A fresh twin of ``mixer`` on ``engine`` (``engine_for``): placed by ``case`` (A/B/C) from
-    ``seed``, turning at ``rpm``; ``friction``/``rolling`` None: the engine's defaults. ``kwargs``
-    go to the engine (e.g. ``settle_s``, ``dt_s``, ``end_friction``)."""
+    ``seed``, turning at ``rpm``; ``friction``/``rolling`` None: the mixer's calibrated friction
+    (``mixer.friction``), else the engine's defaults. ``kwargs`` go to the engine (e.g. ``settle_s``,
+    ``dt_s``, ``end_friction``)."""
     name = engine_for(mixer, engine)
     cls = twin_class(name)
+    friction, rolling = _calibrated(mixer, friction, rolling, kwargs)
     if friction is not None:
         kwargs["friction"] = float(friction)
     if rolling is not None:
         kwargs["rolling"] = float(rolling)
     twin: Twin = cls(case=case, seed=seed, rpm=rpm, mixer=mixer, **kwargs)
     return twin
+
+
+def _calibrated(mixer: Mixer, friction: float | None, rolling: float | None,
+                kwargs: dict[str, Any]) -> tuple[float | None, float | None]:
+    """The friction a twin of ``mixer`` takes: what the caller gave, else the mixer's calibrated
+    (``mixer.friction``; its end plates' into ``kwargs`` unless given there)."""
+    cal = mixer.friction
+    if cal is None:
+        return friction, rolling
+    if cal.end_plates is not None:
+        kwargs.setdefault("end_friction", cal.end_plates)
+    return (cal.sliding if friction is None else friction), (cal.rolling if rolling is None else rolling)
 
 
 def from_state(state: Any) -> Twin:
@@ -185,24 +199,30 @@ def from_placement(
     seed: int = 0,
     friction: float | None = None,
     rolling: float | None = None,
+    end_friction: float | None = None,
 ) -> Twin:
     """A twin of ``mixer`` on ``engine`` (``engine_for``) whose particles the caller placed
     (``sim.from_image``: where the camera sees each class): centres ``pos_m`` (n, 2; m, drum frame)
-    at the engines' placement size (``sim.drum._SHRINK``) without overlaps, class indices
+    at the engines' placement size (``sim.placement.SHRINK``) without overlaps, class indices
     ``classes`` (n,), angles ``angle_rad`` (n,; rad); inflated, settled for ``settle_s`` with the
-    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling`` None: defaults."""
+    drum at rest and started at ``rpm``, as a fresh twin is. ``friction``/``rolling``/``end_friction``
+    None: the mixer's (``[drum.friction]``), else the engines' defaults (the plates: the wall's)."""
     import numpy as np
 
     from sim.drum import DrumSim, SimParams, SimState, _check_params
 
     name = engine_for(mixer, engine)
     base = SimParams()
+    ends: dict[str, Any] = {} if end_friction is None else {"end_friction": end_friction}
+    friction, rolling = _calibrated(mixer, friction, rolling, ends)
     params = SimParams(friction=base.friction if friction is None else float(friction),
-                       rolling=base.rolling if rolling is None else float(rolling))
+                       rolling=base.rolling if rolling is None else float(rolling),
+                       end_friction=ends.get("end_friction", base.end_friction))
     _check_params(params)
     if name == "pymunk":
         twin: Twin = twin_class(name).from_placement(mixer, pos_m, classes, angle_rad, rpm, settle_s, seed=int(seed),
-                                                     friction=params.friction, rolling=params.rolling)
+                                                     friction=params.friction, rolling=params.rolling,
+                                                     end_friction=params.end_friction)
         return twin
     from sim.mixer import disk_classes
 

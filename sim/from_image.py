@@ -29,15 +29,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sim.drum import _SHRINK, DrumSim, SimParams, SimState, _check_params, check_rpm
+from sim.drum import DrumSim, SimParams, SimState, _check_params, check_rpm
 from sim.engine import from_placement
 from sim.errors import SimError
 from sim.mixer import Mixer, resolve
+from sim.placement import SHRINK, DiscGrid, disc_arrays
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
 _TRIES_PER_DISK = 400  # random candidates per try of the fallbacks
 _CANDIDATES = 2000  # random class pixels a disk chooses the deepest free one of
-_CHUNK = 200  # candidates checked for overlaps at once, deepest first
 
 
 def pixels_to_drum_m(xs_px: np.ndarray, ys_px: np.ndarray, roi, drum: DrumSpec) -> np.ndarray:
@@ -73,22 +73,15 @@ def place_from_labels(
         ys, xs = np.nonzero(mask)
         per_class.append(pixels_to_drum_m(xs.astype(float), ys.astype(float), roi, drum))
         depth_m.append(cv2.distanceTransform(mask, cv2.DIST_L2, 3)[ys, xs] * m_per_px)
-    radii = np.concatenate([np.full(c.count, c.radius_m) for c in classes])
-    cls = np.concatenate([np.full(c.count, k, dtype=np.int64) for k, c in enumerate(classes)])
-    order = np.argsort(-radii, kind="stable")
-    small_r = radii * _SHRINK
-    gap = 0.02 * radii.max()
+    radii, cls, order, gap = disc_arrays(classes)
+    small_r = radii * SHRINK
     pos = np.zeros((radii.size, 2))
-    placed_pos = np.empty((0, 2))
-    placed_r = np.empty(0)
+    grid = DiscGrid(radius_m, small_r, gap)
 
-    def free(p: np.ndarray, r: float, lim: float) -> np.ndarray:
-        """Mask of candidate points inside the wall and clear of the placed disks."""
-        ok = np.hypot(p[:, 0], p[:, 1]) <= lim
-        if placed_r.size and ok.any():
-            d2 = ((p[:, None, :] - placed_pos[None, :, :]) ** 2).sum(-1)
-            ok &= ~np.any(d2 < (placed_r[None, :] + r + gap) ** 2, axis=1)
-        return ok
+    def first_free(p: np.ndarray, r: float, lim: float) -> np.ndarray | None:
+        """The first candidate point inside the wall and clear of the placed disks (None: none is)."""
+        k = grid.first_free(p, r, np.hypot(p[:, 0], p[:, 1]) <= lim)
+        return None if k < 0 else p[k]
 
     def deepest_free(k: int, i: int, r: float, lim: float) -> np.ndarray | None:
         """The free candidate deepest inside class ``k``'s region (depth capped at the radius)."""
@@ -98,12 +91,7 @@ def place_from_labels(
         idx = rng.integers(0, len(pool), size=_CANDIDATES)
         cand = pool[idx] + rng.normal(0.0, 0.1 * radii[i], size=(_CANDIDATES, 2))  # sub-pixel jitter
         by_depth = np.argsort(-np.minimum(depth_m[k][idx], radii[i]), kind="stable")
-        for s in range(0, _CANDIDATES, _CHUNK):
-            chunk = cand[by_depth[s:s + _CHUNK]]
-            ok = free(chunk, r, lim)
-            if ok.any():
-                return chunk[int(np.argmax(ok))]
-        return None
+        return first_free(cand[by_depth], r, lim)
 
     for i in order:
         r = small_r[i]
@@ -114,22 +102,16 @@ def place_from_labels(
             if found is not None or len(pool) == 0:
                 break
             cand = pool[rng.integers(0, len(pool), size=_TRIES_PER_DISK)]
-            cand = cand + rng.normal(0.0, spread * radii[i], size=cand.shape)
-            ok = free(cand, r, lim)
-            if ok.any():
-                found = cand[int(np.argmax(ok))]
+            found = first_free(cand + rng.normal(0.0, spread * radii[i], size=cand.shape), r, lim)
         if found is None:  # anywhere in the drum (random sequential addition)
             for _ in range(50):
-                cand = rng.uniform(-lim, lim, size=(_TRIES_PER_DISK, 2))
-                ok = free(cand, r, lim)
-                if ok.any():
-                    found = cand[int(np.argmax(ok))]
+                found = first_free(rng.uniform(-lim, lim, size=(_TRIES_PER_DISK, 2)), r, lim)
+                if found is not None:
                     break
         if found is None:
             raise SimError(f"could not place {radii.size} disks from the image; the recipe does not fit the drum")
         pos[i] = found
-        placed_pos = np.vstack([placed_pos, found[None, :]])
-        placed_r = np.append(placed_r, r)
+        grid.add(i, found[0], found[1], r)
     return pos, cls
 
 

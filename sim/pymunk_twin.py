@@ -18,7 +18,8 @@ Model:
 * **Particles**: one DYNAMIC body each; discs are ``Circle``; convex outlines (regular polygon,
   pellet) one ``Poly`` with a corner radius ``CORNER_R`` of the particle's radius (the vertices
   pulled in by it, so the outer size stays); non-convex outlines one body of several convex
-  ``Poly`` pieces (a cut disc: two or three sectors of less than 144 deg; vertices:
+  ``Poly`` pieces (a cut disc or a notched disc: two or three fans from the notch's apex, each
+  seeing less than 144 deg of the rim; vertices:
   ``pymunk.autogeometry.convex_decomposition``). Counts and masses from ``sim.mixer.resolve``
   (``density * area * slab``) and the flat particle's own moment of inertia (2D is the real
   physics of a monolayer).
@@ -67,7 +68,6 @@ from numba import njit
 
 from sim.drum import (
     _OVERLAP_BINS,
-    _SHRINK,
     CASES,
     DEFAULT_ACCEL_RPM_S,
     DEFAULT_FRICTION,
@@ -78,12 +78,12 @@ from sim.drum import (
     Particles,
     SimParams,
     _check_params,
-    _place,
     check_rpm,
     rpm_to_rad_s,
 )
 from sim.errors import SimError
 from sim.mixer import Mixer, Shape, resolve, shape_outline_m
+from sim.placement import SHRINK, place_random
 from sim.recipe import G_M_S2, DiskClass, DrumSpec
 
 DEFAULT_DT_S = 0.001  # a bed at least half not round (cut-disc rig): 1 ms = 0.5 ms, 2 ms 1.1 deg low (validation.md 10)
@@ -156,18 +156,24 @@ def convex_pieces(shape: Shape) -> list[np.ndarray]:
     if shape.kind == "disc":
         return []
     outline = shape_outline_m(shape, segments=PIECE_SEGMENTS)
-    if shape.kind == "cut_disc":
-        # sectors of the disc left after the wedge, each under 144 deg, sharing the apex (outline[0])
-        apex, arc = outline[0], outline[1:]
-        span = 2 * math.pi * (1 - float(shape.wedge_deg or 90.0) / 360.0)
-        k = max(1, math.ceil(span / (0.8 * math.pi) - 1e-9))  # pieces under 144 deg: convex, few pairs
-        idx = np.linspace(0, len(arc) - 1, k + 1).round().astype(int)
-        return [np.vstack([apex, arc[idx[j]: idx[j + 1] + 1]]) for j in range(k)]
+    if shape.kind in ("cut_disc", "notched_disc"):
+        return _fan_pieces(outline[0], outline[1:])
     if _is_convex(outline):
         return [outline]
     closed = [tuple(p) for p in outline] + [tuple(outline[0])]
     hulls = pymunk.autogeometry.convex_decomposition(closed, 1e-3 * shape.radius_m)
     return [np.asarray([(p.x, p.y) for p in h[:-1]]) for h in hulls]
+
+
+def _fan_pieces(apex: np.ndarray, arc: np.ndarray) -> list[np.ndarray]:
+    """A disc with a wedge or notch cut out (the apex inside the disc, the rim's ``arc`` around it) as
+    convex fans sharing the apex, each seeing less than 144 deg of the arc from the apex (convex, few
+    pairs): a cut disc's sectors (the apex at the centre), a notched disc's pieces."""
+    seen = np.unwrap(np.arctan2(arc[:, 1] - apex[1], arc[:, 0] - apex[0]))
+    cum = np.abs(seen - seen[0])
+    k = max(1, math.ceil(float(cum[-1]) / (0.8 * math.pi) - 1e-9))
+    idx = np.rint(np.interp(np.linspace(0.0, float(cum[-1]), k + 1), cum, np.arange(len(arc)))).astype(int)
+    return [np.vstack([apex, arc[idx[j]: idx[j + 1] + 1]]) for j in range(k)]
 
 
 def _moment_kg_m2(shape: Shape, mass_kg: float) -> float:
@@ -448,7 +454,7 @@ class PymunkDrumSim(FixedStepTwin):
                               dt_s=dt_s, iterations=iterations)
         disks = [DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer)]
         rng = np.random.default_rng(seed)
-        pos, cls = _place(disks, case, mixer.drum.radius_m, rng)
+        pos, cls = place_random(disks, case, mixer.drum.radius_m, rng)
         angles = rng.uniform(0, 2 * math.pi, cls.size)
         self._start(pos, cls, angles, rpm, 0.0 if case == "B" else settle_s)
 
@@ -485,7 +491,7 @@ class PymunkDrumSim(FixedStepTwin):
         **kwargs: Any,
     ) -> PymunkDrumSim:
         """A twin of ``mixer`` whose particles are placed by the caller (``sim.from_image``: where the
-        camera sees each class): centroids ``pos_m`` (n, 2; m, drum frame) at ``_SHRINK`` of their
+        camera sees each class): centroids ``pos_m`` (n, 2; m, drum frame) at ``SHRINK`` of their
         size without overlaps, class indices ``classes`` (n,), angles ``angle_rad`` (n,; rad). Inflated,
         settled for ``settle_s`` with the drum at rest and started at ``rpm``, as ``__init__`` does;
         ``kwargs`` as ``__init__``'s (``end_friction``, ``dt_s``, ``iterations``, ...). Case "image"."""
@@ -510,7 +516,7 @@ class PymunkDrumSim(FixedStepTwin):
         return sim
 
     def _start(self, pos: np.ndarray, cls: np.ndarray, angles: np.ndarray, rpm: float, settle_s: float) -> None:
-        """Build the space from placed particles (``_SHRINK`` size), inflate and settle, start at ``rpm``."""
+        """Build the space from placed particles (``SHRINK`` size), inflate and settle, start at ``rpm``."""
         self._cls = cls
         self._set_tables()
         self._new_space(pos, angles)
@@ -575,17 +581,17 @@ class PymunkDrumSim(FixedStepTwin):
             pieces = convex_pieces(shape)
             shapes: list[pymunk.Shape]
             if not pieces:
-                shapes = [pymunk.Circle(body, shape.radius_m * _SHRINK)]
+                shapes = [pymunk.Circle(body, shape.radius_m * SHRINK)]
             else:
                 c = CORNER_R * shape.radius_m
                 pull = (shape.radius_m - c) / shape.radius_m
-                shapes = [pymunk.Poly(body, [tuple(p) for p in piece * pull * _SHRINK], radius=c * _SHRINK)
+                shapes = [pymunk.Poly(body, [tuple(p) for p in piece * pull * SHRINK], radius=c * SHRINK)
                           for piece in pieces]
             space.add(body, *shapes)
             self._shapes_of.append(shapes)
             bodies.append(body)
         self._install(space, drum, bodies)
-        self._scale_shapes(_SHRINK)
+        self._scale_shapes(SHRINK)
 
     def _install(self, space: pymunk.Space, drum: pymunk.Body, bodies: list[pymunk.Body]) -> None:
         """Use this space: solver settings, contact coefficients, the batch order of the bodies."""
@@ -682,7 +688,7 @@ class PymunkDrumSim(FixedStepTwin):
         n_grow = 10
         per = max(1, int(round(_INFLATE_S / n_grow / h)))
         for j in range(n_grow):
-            self._scale_shapes(_SHRINK + (1.0 - _SHRINK) * (j + 1) / n_grow)
+            self._scale_shapes(SHRINK + (1.0 - SHRINK) * (j + 1) / n_grow)
             self._run(per, count=False)
         sp.gravity = (0.0, -G_M_S2)
         sp.damping = _SETTLE_DAMPING

@@ -31,6 +31,8 @@ BACKGROUND_BGR = (22, 20, 18)
 INSIDE_BGR = (34, 30, 28)
 RIM_BGR = (150, 150, 150)
 _SHIFT = 3  # sub-pixel bits for cv2.circle
+DRAW_INSET_PX = 0.3  # OpenCV's filled circles and polygons reach 0.3-0.5 px past their outline: each particle
+# is drawn this much smaller, so it covers its own area (a 36 px disc drawn as is covered 4 % more)
 _MARGIN = 0.06  # fraction of the image left around the rim
 
 
@@ -50,12 +52,19 @@ class Realism:
     seed: int = 0
 
 
+def size_for_radius(r_px: float, rim_px: int) -> int:
+    """The square frame size (px) whose drum is ``r_px`` in radius inside a rim of ``rim_px``: a twin
+    rendered at a camera's scale (its particles as many pixels across as the camera sees them)."""
+    return int(round(2.0 * (float(r_px) + rim_px) / (1.0 - 2.0 * _MARGIN)))
+
+
 class Renderer:
-    """Front view of a drum to ``size_px`` images (int = square, or (width, height))."""
+    """Front view of a drum to ``size_px`` images (int = square, or (width, height)); ``rim_px`` the
+    drum rim's width (None: 3.5 % of the image, the dashboard's bold rim; a camera sees a thin one)."""
 
     def __init__(
         self, drum: DrumSpec | DrumSim | PymunkDrumSim, size_px: int | tuple[int, int] = 480,
-        realism: Realism | None = None,
+        realism: Realism | None = None, rim_px: int | None = None,
     ) -> None:
         spec = drum if isinstance(drum, DrumSpec) else getattr(drum, "drum", None)  # a DrumSpec, or any twin's
         if not isinstance(spec, DrumSpec):
@@ -68,7 +77,7 @@ class Renderer:
             raise SimError(f"image size must be 32..8192 px (got {w}x{h})")
         self.drum = spec
         self.width_px, self.height_px = w, h
-        self.rim_px = max(2, int(round(0.035 * min(w, h))))
+        self.rim_px = max(2, int(round(0.035 * min(w, h))) if rim_px is None else int(rim_px))
         self.r_px = (min(w, h) * (1.0 - 2 * _MARGIN)) / 2.0 - self.rim_px
         self.cx_px = (w - 1) / 2.0
         self.cy_px = (h - 1) / 2.0
@@ -113,10 +122,10 @@ class Renderer:
         """BGR frame of ``particles`` (a new array). With realism, a dropped frame gives None."""
         img = self._img
         np.copyto(img, self._base)
-        scale = float(1 << _SHIFT) * self.px_per_m
         xs = np.rint((self.cx_px + particles.x_m * self.px_per_m) * (1 << _SHIFT)).astype(np.int64)
         ys = np.rint((self.cy_px - particles.y_m * self.px_per_m) * (1 << _SHIFT)).astype(np.int64)
-        rs = np.maximum(np.rint(particles.r_m * scale).astype(np.int64), 1 << _SHIFT)
+        rs = np.maximum(np.rint((particles.r_m * self.px_per_m - DRAW_INSET_PX) * (1 << _SHIFT)).astype(np.int64),
+                        1 << _SHIFT)
         colours = [tuple(int(v) for v in c) for c in particles.class_bgr] or [(0, 0, 220), (220, 60, 0)]
         outlines = particles.class_outline_m
         shaped = np.zeros(len(particles), dtype=bool)
@@ -151,7 +160,9 @@ class Renderer:
         """The outline turned by each selected particle's angle about its centre: (n, k, 2) fixed-point px."""
         ang = particles.angle_rad[mask] if particles.angle_rad is not None else np.zeros(int(mask.sum()))
         c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
-        ox, oy = outline_m[None, :, 0], outline_m[None, :, 1]
+        reach = float(np.max(np.hypot(outline_m[:, 0], outline_m[:, 1]))) * self.px_per_m
+        shrink = max(reach - DRAW_INSET_PX, 0.5) / reach if reach > 0 else 1.0  # drawn at its own area (DRAW_INSET_PX)
+        ox, oy = shrink * outline_m[None, :, 0], shrink * outline_m[None, :, 1]
         x_m = particles.x_m[mask][:, None] + c * ox - s * oy
         y_m = particles.y_m[mask][:, None] + s * ox + c * oy
         x, y = self.to_px(x_m, y_m)
@@ -210,4 +221,4 @@ class Renderer:
         return out
 
 
-__all__ = ["Realism", "Renderer"]
+__all__ = ["Realism", "Renderer", "size_for_radius"]

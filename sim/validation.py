@@ -1,7 +1,8 @@
 """Regenerate the numbers and plots of docs/validation.md.
 
-``python -m sim.validation SECTION [OUT_DIR]`` with SECTION one of ``convergence``, ``case-a-long``,
-``cases``, ``plateau``, ``calibration``, ``transfer``, ``branch``, ``all``. Every run is
+``python -m sim.validation SECTION [OUT_DIR]`` with SECTION one of ``convergence``, ``step-box``,
+``cases``, ``case-a-seeds``, ``case-a-long``, ``plateau``, ``calibration``, ``reach``, ``transfer``, ``branch``,
+``power``, ``all``. Every run is
 seeded; each section prints a JSON summary on stdout and writes its plot(s) to OUT_DIR
 (default ``docs/img``). Run it with ``nice`` and one worker on a shared machine.
 """
@@ -12,6 +13,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +25,8 @@ from sim.recipe import PAPER_DRUM, PAPER_RECIPE
 from sim.render import Renderer
 from sim.whatif import WhatIfJob, run_study, summarize
 
-SECTIONS = ("convergence", "cases", "case-a-long", "plateau", "calibration", "transfer", "branch", "power")
+SECTIONS = ("convergence", "step-box", "cases", "case-a-seeds", "case-a-long", "plateau", "calibration", "reach",
+            "transfer", "branch", "power")
 
 
 def _plt():
@@ -76,6 +79,32 @@ def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 4, 5, 8, 10, 20, 40), 
     return {"contact_time_ms": t_c * 1e3, "by_step": by_step, "by_stiffness": by_stiffness}
 
 
+def step_box(points=((0.25, 0.1), (0.154, 0.489), (1.0, 0.0), (0.5, 1.0)), seeds=tuple(range(12)),
+             steps_per_contact=(4, 8, 16), rpm: float = 5.0, window_s: float = 10.0) -> list[dict]:
+    """The step's convergence over the calibration's box, not only at the paper's materials: the mean slope
+    (and its standard error over ``seeds``) at the contact time over each of ``steps_per_contact``, at each
+    (sliding, rolling) point, for the paper bed and for a monolayer of discs without plate friction
+    (``configs/pmma-cutdisc.toml`` with round discs, the plates' friction 0: the plane a monolayer is searched in)."""
+    from sim.calibrate import twin_surface
+    from sim.drum import STEPS_PER_CONTACT
+    from sim.engine import make_twin
+    from sim.validation_pymunk import rig
+
+    beds: dict[str, tuple[dict[str, Any], float]] = {
+        "paper": ({}, DrumSim(settle_s=0.0).substep_s()),
+            "monolayer": ({"mixer": rig(cut=False), "end_friction": 0.0},
+                          make_twin(rig(cut=False), settle_s=0.0).substep_s())}
+    out = []
+    for bed, (kw, dt) in beds.items():
+        t_c = dt * STEPS_PER_CONTACT  # the bed's contact time, s
+        for f, r in points:
+            for k in steps_per_contact:
+                v = [abs(twin_surface(f, r, rpm, seed=s, window_s=window_s, dt_s=t_c / k, **kw)[0]) for s in seeds]
+                out.append({"bed": bed, "friction": f, "rolling": r, "steps_per_contact": k, "dt_ms": t_c / k * 1e3,
+                            "slope_deg": float(np.mean(v)), "sem_deg": float(np.std(v, ddof=1) / np.sqrt(len(v)))})
+    return out
+
+
 def case_curves(case: str, seed: int, duration_s: float, rpm: float = 5.0, every_s: float = 1.0) -> dict:
     """Particle eq. 1 / 3 / 4 and vision eq. 4 against time for one case and seed."""
     sim = DrumSim(case=case, seed=seed, rpm=rpm)
@@ -116,8 +145,9 @@ def snapshots(case: str, times_s: tuple[float, ...], path: Path, seed: int = 0) 
     cv2.imwrite(str(path), np.hstack(imgs))
 
 
-def cases(out_dir: Path, seeds=(0, 1), duration_s: float = 60.0, last_s: float = 20.0) -> dict:
-    """Paper Fig. 5/6 through the same meter: cases A, B, C at 5 rpm, means over the last ``last_s``."""
+def cases(out_dir: Path, seeds=tuple(range(8)), duration_s: float = 60.0, last_s: float = 20.0) -> dict:
+    """Paper Fig. 5/6 through the same meter: cases A, B, C at 5 rpm, means over the last ``last_s`` (and their
+    standard errors over ``seeds``: one seed's 20 s mean scatters by about 0.1, docs/validation.md section 4)."""
     plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
     summary = {}
@@ -136,6 +166,8 @@ def cases(out_dir: Path, seeds=(0, 1), duration_s: float = 60.0, last_s: float =
         summary[case] = {
             k: float(np.mean([np.nanmean(r[k][tail]) for r in runs])) for k in ("mi", "mi_sig", "mi_lin", "mi_vision")
         }
+        summary[case].update({f"{k}_sem": float(np.std([np.nanmean(r[k][tail]) for r in runs], ddof=1)
+                                                 / np.sqrt(len(runs))) for k in ("mi", "mi_sig", "mi_lin")})
         summary[case]["mi_start"] = float(np.mean([r["mi"][0] for r in runs]))
         summary[case]["mi_sig_start"] = float(np.mean([r["mi_sig"][0] for r in runs]))
     axes[0].set_ylabel("MI")
@@ -147,6 +179,30 @@ def cases(out_dir: Path, seeds=(0, 1), duration_s: float = 60.0, last_s: float =
     snapshots("C", (0.0, 20.0, 40.0, duration_s), out_dir / "validation-snapshots-C.png")
     snapshots("A", (0.0, 10.0, 30.0, duration_s), out_dir / "validation-snapshots-A.png")
     return summary
+
+
+def case_a_seeds(seeds=tuple(range(16)), duration_s: float = 60.0, last_s: float = 20.0) -> dict:
+    """Case A at 5 rpm, many seeds: each seed's eq. 4 / 3 / 1 over the last ``last_s`` (particles, 1 s samples),
+    their mean and standard error, and the means of consecutive seed pairs (what a two-seed run reports)."""
+    keys = ("mi", "mi_sig", "mi_lin")
+    per = {}
+    for seed in seeds:
+        sim = DrumSim(case="A", seed=seed, rpm=5.0)
+        rows, d0 = [], None
+        for smp in probe(sim, duration_s, 1.0):
+            m = particle_mi(smp.particles, PAPER_DRUM, d0)
+            if d0 is None:
+                d0 = m.d_px
+                m = particle_mi(smp.particles, PAPER_DRUM, d0)
+            rows.append((smp.t_s, m.mi, m.mi_sigmoid, m.mi_linear))
+        a = np.asarray(rows)
+        tail = a[:, 0] >= duration_s - last_s
+        per[seed] = {k: float(np.nanmean(a[tail, i + 1])) for i, k in enumerate(keys)}
+    v = np.array([[per[s][k] for k in keys] for s in seeds])
+    pairs = [float(np.mean(v[i:i + 2, 0])) for i in range(len(seeds) - 1)]
+    return {"seeds": per, "mean": dict(zip(keys, v.mean(0).tolist(), strict=True)),
+            "sem": dict(zip(keys, (v.std(0, ddof=1) / np.sqrt(len(seeds))).tolist(), strict=True)),
+            "pair_means_eq4": pairs}
 
 
 def case_a_long(seeds=(0, 1, 2, 3), duration_s: float = 120.0, last_s: float = 20.0) -> dict:
@@ -264,6 +320,28 @@ def calibration(rpm: float = 10.0, targets=(20.0, 30.0, 40.0, 45.0, 75.0)) -> li
     return out
 
 
+def reach(rpms=(2.0, 5.0, 10.0, 20.0)) -> list[dict]:
+    """The reachable range per rpm (``sim.calibrate.reachable_range``, seed 0, default windows) of a deep drum
+    (the paper's bed) and of monolayers (the disc/disc variant of ``configs/pmma-cutdisc.toml``, 3 mm discs, and
+    ``configs/pmma-rig.toml``, discs as thick as wide), with the CPU time of each."""
+    import tomllib
+
+    from sim.calibrate import reachable_range
+    from sim.mixer import paper_mixer, parse_mixer
+    from sim.validation_pymunk import rig
+
+    table = tomllib.loads(Path("configs/pmma-rig.toml").read_text())
+    beds = {"paper": paper_mixer(), "discs 3 mm": rig(cut=False),
+            "pmma-rig": parse_mixer(table, [c["name"] for c in table["classes"]])}
+    out = []
+    for name, mixer in beds.items():
+        for rpm in rpms:
+            t0 = time.process_time()
+            lo, hi = reachable_range(rpm, mixer=mixer)
+            out.append({"bed": name, "rpm": rpm, "range_deg": [lo, hi], "cpu_s": time.process_time() - t0})
+    return out
+
+
 def transfer(cal_rpm: float = 10.0, other_rpms=(5.0, 20.0, 40.0), plant: tuple[float, float] = (0.6, 0.3),
              seeds=(0, 1)) -> dict:
     """Calibrate at ``cal_rpm`` to a plant twin with other parameters; compare slopes at other rpm."""
@@ -323,6 +401,12 @@ def main(argv: list[str] | None = None) -> None:
         t0 = time.perf_counter()
         if s == "convergence":
             summary[s] = convergence()
+        elif s == "step-box":
+            summary[s] = step_box()
+        elif s == "case-a-seeds":
+            summary[s] = case_a_seeds()
+        elif s == "reach":
+            summary[s] = reach()
         elif s == "cases":
             summary[s] = cases(out_dir)
         elif s == "case-a-long":
@@ -346,5 +430,5 @@ if __name__ == "__main__":
     main()
 
 
-__all__ = ["SECTIONS", "branch", "calibration", "case_a_long", "case_curves", "cases", "convergence", "main",
-           "plateau", "power", "slope_run", "snapshots", "transfer"]
+__all__ = ["SECTIONS", "branch", "calibration", "case_a_long", "case_a_seeds", "case_curves", "cases", "convergence",
+           "main", "plateau", "power", "reach", "slope_run", "snapshots", "step_box", "transfer"]

@@ -328,52 +328,18 @@ def dem(seeds=(0, 1, 2), rpm: float = 10.0, duration_s: float = 20.0) -> dict:
     return out
 
 
-def pymunk_slope_deg(mixer: Mixer, friction: float, rolling: float, rpm: float, *, seed: int = 0,
-                     spin_up_s: float = 3.0, window_s: float = 5.0) -> float:
-    """Mean free-surface slope magnitude (deg) of a fresh pymunk twin of ``mixer`` (calibration's measure)."""
-    r = series(mixer, rpm, seed, window_s, engine="pymunk", spin_up_s=spin_up_s, every_s=0.1,
-               friction=friction, rolling=rolling, **CONTACT)
-    s = r["slope"][np.isfinite(r["slope"])]
-    return abs(float(np.mean(s))) if s.size else math.nan
-
-
 def calibration(rpm: float = 10.0, targets=(25.0, 32.0, 45.0)) -> dict:
-    """The reachable slope range at 10 rpm on the cut-disc rig (``sim.calibrate``'s corners and
-    high edge) and, for each target, a fit or the one-line error naming the range."""
+    """``sim.calibrate.calibrate`` on the cut-disc rig (pymunk, its plates searched: a monolayer) at
+    ``rpm``: for each target the fit, or the one-line error naming the range, and the CPU time."""
     m = rig(True)
-    cache: dict[tuple[float, float], float] = {}
-
-    def slope(f: float, r: float) -> float:
-        key = (round(f, 6), round(r, 6))
-        if key not in cache:
-            cache[key] = pymunk_slope_deg(m, f, r, rpm)
-        return cache[key]
-
-    s_lo, s_hi, high = cal._range_ends(slope, rpm)
-    out: dict = {"range_deg": [min(s_lo, s_hi), max(s_lo, s_hi)], "high_point": list(high), "fits": {}}
+    out: dict = {"fits": {}}
     for target in targets:
-        lo_b, hi_b = out["range_deg"]
-        if not (lo_b - cal.RANGE_TOL_DEG <= target <= hi_b + cal.RANGE_TOL_DEG):
-            out["fits"][f"{target:g}"] = {"error": f"target slope {target:.1f} deg is outside the twin's reachable "
-                                                   f"range {lo_b:.1f}-{hi_b:.1f} deg at {rpm:g} rpm", "exit": 2}
-            continue
-        lo_u, hi_u, sl, sh = 0.0, 1.0, s_lo, s_hi
-        best = (math.inf, 0.0, 0.0, 0.0)
-        for _ in range(6):  # regula falsi along the diagonal path, as sim.calibrate
-            w = min(max((target - sl) / (sh - sl), 0.15), 0.85)
-            u = lo_u + w * (hi_u - lo_u)
-            f, r = cal.path_point(u, "diagonal", high)
-            s = slope(f, r)
-            best = min(best, (abs(s - target), f, r, s))
-            if abs(s - target) <= 0.5:
-                break
-            if s < target:
-                lo_u, sl = u, s
-            else:
-                hi_u, sh = u, s
-        out["fits"][f"{target:g}"] = {"friction": best[1], "rolling": best[2], "slope_deg": best[3],
-                                      "residual_deg": best[3] - target}
-    out["evaluations"] = len(cache)
+        t0 = time.process_time()
+        try:
+            out["fits"][f"{target:g}"] = cal.calibrate(target, rpm, mixer=m, engine="pymunk").as_dict()
+        except SimError as exc:
+            out["fits"][f"{target:g}"] = {"error": str(exc), "exit": 2}
+        out["fits"][f"{target:g}"]["cpu_s"] = time.process_time() - t0
     return out
 
 
@@ -426,7 +392,6 @@ __all__ = [
     "long_runs",
     "main",
     "plot_baffles",
-    "pymunk_slope_deg",
     "rig",
     "sd_from_one",
     "segregates",

@@ -3,8 +3,9 @@
 Each ``WhatIfJob`` is a pure description (picklable, so it travels to a process pool
 or a Dask worker); ``run_job`` runs one and returns a ``WhatIfResult`` with the MI
 curve, the plateau MI and the regime. ``run_study`` runs many: in this process
-(``workers=1``), on a local process pool (default: all cores), or on an existing Dask
-cluster (``scheduler="tcp://host:port"``, a dead address is a SimError within seconds).
+(``workers=1``), on a local process pool (default: all cores; ``sim.pool``: its workers die
+with this process), or on an existing Dask cluster (``scheduler="tcp://host:port"``, a dead
+address is a SimError within seconds).
 
 Time to mix and drive power (issue 24): a job with a ``target_mi`` reports the time the twin
 takes to reach it from the start state (``time_to_target``: the first time a centred moving
@@ -24,11 +25,10 @@ cataracting; the Froude number ``Fr = omega^2 R / g`` is reported beside it (and
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -38,6 +38,7 @@ from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
 from sim.engine import from_state, make_twin
 from sim.errors import SimError
 from sim.mixer import Mixer
+from sim.pool import close_pool, make_pool
 from sim.power import depth_scale, drive_power_w
 from sim.probe import probe
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe, with_fill
@@ -50,6 +51,7 @@ __all__ = [
     "TARGET_SMOOTH_S",
     "WhatIfJob",
     "WhatIfResult",
+    "close_pool",
     "energy_to",
     "flow_regime",
     "froude",
@@ -404,7 +406,7 @@ def run_study(
         return results  # type: ignore[return-value]
     own = pool is None
     if pool is None:
-        pool = _new_pool(n_workers)
+        pool = make_pool(n_workers)
     try:
         futs = {pool.submit(run_job, j): i for i, j in enumerate(jobs)}
         for fut in as_completed(futs):
@@ -416,99 +418,6 @@ def run_study(
         if own:
             pool.shutdown(wait=True, cancel_futures=True)
     return results  # type: ignore[return-value]
-
-
-def _mp_context():
-    """Fork-server workers with ``sim`` preloaded: thread-safe like spawn, cheap like fork."""
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["sim.whatif"])
-        return ctx
-    return mp.get_context("spawn")
-
-
-def _parent_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # pragma: no cover - a pid reused by another user's process
-        return False
-    return True
-
-
-def _die_with_parent(parent_pid: int, leftover_dir: str | None) -> None:
-    """Pool-worker initializer: the worker ignores SIGINT, and a daemon thread ends it (``os._exit``) as soon as
-    the process that made the pool is gone, even after ``kill -9``, and then removes that
-    process's multiprocessing temp directory (the fork server's listener socket lives
-    there; a killed parent cannot remove it itself).
-
-    Why not ``PR_SET_PDEATHSIG``: a fork-server worker's parent is the fork server,
-    which stays alive as long as any worker does (each worker holds its "alive" pipe),
-    so the signal would never come. The thread waits on a pidfd of the parent (Linux
-    >= 5.3: no polling, no pid reuse) and falls back to polling ``kill(pid, 0)``.
-    """
-    import select
-    import shutil
-    import signal
-    import threading
-
-    # Ctrl-C in a terminal reaches the whole process group: it is the parent's to handle (it
-    # closes the pool); a worker that took it would die with a KeyboardInterrupt traceback
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        pidfd: int | None = os.pidfd_open(parent_pid)
-    except (AttributeError, OSError):
-        pidfd = None
-
-    def watch() -> None:
-        if pidfd is not None:
-            select.select([pidfd], [], [])  # readable once the parent has exited
-        else:
-            while _parent_alive(parent_pid):
-                time.sleep(0.5)
-        if leftover_dir:
-            shutil.rmtree(leftover_dir, ignore_errors=True)
-        os._exit(0)
-
-    if pidfd is None and not _parent_alive(parent_pid):
-        watch()
-    threading.Thread(target=watch, name="whatif-parent-watch", daemon=True).start()
-
-
-def _new_pool(n: int) -> ProcessPoolExecutor:
-    """A process pool whose workers die with this process (see ``_die_with_parent``)."""
-    ctx = _mp_context()
-    leftover = None
-    if ctx.get_start_method() == "forkserver":
-        from multiprocessing import util
-
-        leftover = util.get_temp_dir()  # where the fork server's socket will live
-    return ProcessPoolExecutor(
-        max_workers=n, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(), leftover)
-    )
-
-
-def make_pool(workers: int | None = None) -> Executor:
-    """A reusable local process pool for repeated studies (pass it as ``run_study(..., pool=)``).
-    Its workers exit when this process dies, however it dies."""
-    n = (os.cpu_count() or 1) if workers is None else int(workers)
-    if n < 1:
-        raise SimError(f"workers must be >= 1 (got {workers})")
-    return _new_pool(n)
-
-
-def close_pool(pool: Executor | None) -> None:
-    """End a pool from :func:`make_pool` now: running jobs are abandoned (their worker
-    processes are terminated and joined), queued ones cancelled."""
-    if pool is None:
-        return
-    procs = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
-    for p in procs:
-        p.terminate()
-    pool.shutdown(wait=False, cancel_futures=True)
-    for p in procs:
-        p.join(timeout=2.0)
 
 
 def _mean_sd(vals: Sequence[float]) -> tuple[float, float]:

@@ -140,3 +140,30 @@ def cli_once() -> Callable[..., CliResult]:
         return runs[key]
 
     return run
+
+
+# `drumtwin commission` of the real PMMA frames, issue 39's must-show command (no --out: the default folder,
+# in a working folder of its own), once per session: tests/twin/test_commission.py and the bad-input sweep's
+# base of that command read it. Their users share xdist group "commission" (one worker: one run).
+COMMISSION = pytest.mark.xdist_group("commission")
+COMMISSION_PMMA_ARGS = ["--drum-diameter-mm", "250", "--rpm", "5"]
+
+
+@pytest.fixture(scope="session")
+def commission_pmma(tmp_path_factory: pytest.TempPathFactory) -> tuple[CliResult, Path]:
+    """``drumtwin commission tests/data/real-drum-pmma/images --drum-diameter-mm 250 --rpm 5`` in-process,
+    from an empty working folder: its result and the folder it wrote there (``commission-*``; a path that
+    does not exist when it wrote none)."""
+    from tests.cli import cli
+    from tests.learned import memoised_learning
+
+    cwd = tmp_path_factory.mktemp("commission-pmma")
+    here = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with memoised_learning():
+            r = cli("commission", TEST_DATA / "real-drum-pmma" / "images", *COMMISSION_PMMA_ARGS)
+    finally:
+        os.chdir(here)
+    written = sorted(cwd.glob("commission-*"))
+    return r, written[0] if written else cwd / "commission-none"

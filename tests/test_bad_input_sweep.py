@@ -31,7 +31,15 @@ from control.emulator import MillEmulator
 from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
-from tests.conftest import BENCH_DASHBOARD_ARGS, BENCH_MEMORY_ARGS, BENCH_TREND_ARGS, BENCH_TWIN_ARGS, BENCHES
+from tests.conftest import (
+    BENCH_DASHBOARD_ARGS,
+    BENCH_MEMORY_ARGS,
+    BENCH_TREND_ARGS,
+    BENCH_TWIN_ARGS,
+    BENCHES,
+    COMMISSION,
+    COMMISSION_PMMA_ARGS,
+)
 from twin.cli import app
 from twin.membench import write_video
 from twin.runlog import RunLog
@@ -93,6 +101,24 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+# Mixers a config may describe that no twin can hold (issue 42): (drum mm, particle mm, count per class,
+# by share). Each is refused alike by every command that reads a config (test_a_config_is_refused_alike...).
+HOSTILE_MIXERS: dict[str, tuple[float, float, int, bool]] = {
+    "speck": (250, 1e-9, 122, False),  # particles of 1e-9 mm: `run` ran on with MI NaN
+    "crowd": (10_000, 8.8, 100_000, False),  # 2 x 100,000 discs in a 10 m drum: `sim` hung placing them
+    "fine": (250, 0.5, 50_000, False),  # 2 x 50,000 discs of 0.5 mm: hung as well
+    "fine_few": (250, 0.5, 50, False),  # a few of them: too light for the DEM's step
+    "underflow": (250, 1e-300, 0, True),  # by share: their area underflows to 0 (a division by zero)
+}
+
+
+def _mixer_toml(drum_mm: float, particle_mm: float, count: int, by_share: bool) -> str:
+    """A monolayer drum of the default classes (red and blue), both of one size."""
+    amount = "share = 0.5" if by_share else f"count = {count}"
+    return f"[drum]\ndiameter_mm = {drum_mm}\nmonolayer = true\n" + "".join(
+        f"\n[[particles]]\nname = \"{n}\"\ndiameter_mm = {particle_mm!r}\n{amount}\n" for n in ("red", "blue"))
+
+
 def _truncated(text: str) -> str:
     """``text`` cut inside a value at about 60 %: at the last ``=`` of a line that is no comment
     (a cut inside a comment would leave valid TOML), the value left as an open array."""
@@ -120,7 +146,7 @@ def env(tmp_path_factory):
     write_video(d / "ok.avi", 2.0, size_px=320, fps=10.0)  # a real video: run --mill's cases fail on the mill
     cv2.imwrite(str(d / "synth.png"), drum_frame((320, 320), mix=0.5, seed=1))  # the default red/blue classes
     example = (Path(__file__).resolve().parents[1] / "configs" / "example.toml").read_text()
-    tomls = {
+    tomls = {**{k: _mixer_toml(*v) for k, v in HOSTILE_MIXERS.items()},
         "syntax": "[meter\nroi = \n",
         "deep": "a = " + "[" * 5000 + "]" * 5000 + "\n",
         "unknown_key": "[meter]\nno_such_key = 1\n",
@@ -188,12 +214,22 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("bench", "twin"): BENCH_TWIN_ARGS,  # ... with sim/test_cli.py's
     ("bench", "trend"): ["--sequences", "1", "--real-seeds", "0"],
     ("bench", "link"): ["--requests", "5"],
+    ("bench", "report"): ["--rows", "50", "--runs", "1"],
+    ("bench", "catalogue"): ["--runs", "5"],
+    ("runs", "list"): ["--runs-dir", "{tmp}"],
+    ("runs", "show"): ["okrun", "--runs-dir", "{tmp}"],
+    ("runs", "tag"): ["okrun", "lot=1", "--runs-dir", "{tmp}"],
+    ("runs", "note"): ["okrun", "a note", "--runs-dir", "{tmp}"],
+    ("runs", "golden"): ["okrun", "--runs-dir", "{tmp}"],
+    ("runs", "rebuild"): ["--runs-dir", "{tmp}"],
     ("classes", "suggest"): ["{synth}", "--frames", "1"],
     ("mill", "status"): [],
     ("mill", "set-rpm"): ["10"],
     ("mill", "start"): [],
     ("mill", "stop"): [],
     ("mill", "check"): [],
+    ("commission",): ["{frames}", *COMMISSION_PMMA_ARGS, "--out", "{out}/commission-{case}"],
+    ("bench", "commission"): ["--rig", "discs", "--json"],  # a small rendered rig of discs: seconds
 }
 GROUP_BASE: dict[tuple[str, ...], list[str]] = {("mill",): ["{mill}"], ("mill", "check"): ["{drive}"]}
 # A value of one option only means something next to another (run --video needs --mill).
@@ -221,13 +257,15 @@ OUTPUTS = {
     ("run", "log"), ("compare", "plot"), ("report", "out"), ("mi", "csv_out"), ("mi", "plot"), ("mi", "overlay_video"),
     ("sim", "csv_out"), ("sim", "video"), ("whatif", "csv_out"), ("whatif", "plot"),
     ("classes", "preview"),
+    ("bench", "keep"),
+    ("commission", "out"),
 }
 FLOATS = ["abc", "nan", "inf", "-inf", "1e308", "-1e308"]
 INTS = ["abc", "1.5", "-1", "99999999999999999999"]
 READ_PATHS = ["{missing}", "{dir}", "{empty}", "{garbage}"]
 CONFIGS = ["{missing}", "{dir}", "{garbage}", "{syntax}", "{deep}", "{unknown_key}", "{unknown_table}",
            "{wrong_type}", "{roi_overflow}", "{roi_nan}", "{negative}", "{drum_bad}", "{drum_huge}",
-           "{truncated}", "{classes_bad}"]
+           "{truncated}", "{classes_bad}", *(f"{{{k}}}" for k in HOSTILE_MIXERS)]
 IMAGES = ["{missing}", "{empty}", "{garbage}", "{truncated_jpg}", "{garbage_jpg}", "{garbage_avi}"]
 WRITE_PATHS = ["{under_file}", "{dir}"]
 # Bad values of string options, by option name (a new string option needs an entry).
@@ -252,7 +290,19 @@ STRING_VALUES: dict[str, list[str]] = {
     "source": ["zzz"],
     "runs": ["{missing}", "{file}", "{dir}", "{badrun}", "x={missing}"],
     "title": [],  # free text: no value is bad
+    "label": [""],  # free text, but not none
     "objective": ["fastest", ""],
+    # the run catalogue (issue 40): a file that is no catalogue, a directory, a path under a file, another
+    # database, a server that does not answer
+    "catalogue": ["{garbage}", "{dir}", "{under_file}/c.sqlite", "mysql://x/y", "postgresql://nobody@127.0.0.1:{closed}/x"],
+    "rig": [""],
+    "tag": ["=x", ""],
+    "tags": ["=x", "nokey", ""],
+    "since": ["yesterday", ""],
+    "until": ["yesterday", ""],
+    "ended": ["maybe", ""],
+    "run": ["no-such-run", ""],
+    "text": [],  # free text: no value is bad
 }
 # Bad values of number options beyond FLOATS / INTS: finite numbers outside the option's range.
 RANGE_VALUES: dict[tuple[str, str], list[str]] = {
@@ -260,13 +310,24 @@ RANGE_VALUES: dict[tuple[str, str], list[str]] = {
     ("sim", "end_friction"): ["-0.5", "5.5"],
 }
 # Parameters whose values are read as images/videos or configs.
-IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames")}
+IMAGE_PARAMS = {("mi", "source"), ("calibrate", "source"), ("classes", "source"), ("bench", "frames"),
+                ("commission", "source")}
 
 # (command words, option, value) -> why exit 0 is right. Everything else must be exit 2.
 DOCUMENTED_SUCCESS: dict[tuple[str, str, str], str] = {
-    ("mi", "--config", "{drum_bad}"): "mi reads [meter] and [[classes]]; the mixer's tables are checked "
-    "by the commands that build the twin (sim, calibrate, whatif, run)",
-    ("mi", "--config", "{drum_huge}"): "the same",
+    ("report", "runs", "{badrun}"): "issue 42: a log is read whatever it holds; its start event is readable, "
+    "the rest is skipped and counted in a note on the run (exit 2 only when nothing in the dir is readable)",
+    ("compare", "runs", "{badrun}"): "the same",
+    # issue 40: a catalogue that is found unusable only when used is a warning for a run (it runs and logs,
+    # the folder is indexed later), and report/compare of folders never open one
+    ("run", "--catalogue", "{garbage}"): "a run goes on without its catalogue: a warning and a "
+    "catalogue_unavailable record; 'runs list' indexes its folder later",
+    ("run", "--catalogue", "postgresql://nobody@127.0.0.1:{closed}/x"): "the same",
+    **{(cmd, "--catalogue", v): "a report or comparison of run folders needs no catalogue"
+       for cmd in ("report", "compare") for v in ("{garbage}", "postgresql://nobody@127.0.0.1:{closed}/x")},
+    **{(cmd, "--runs-dir", "{dir}"): "an empty folder of runs is a folder of runs (none listed)"
+       for cmd in ("runs list", "runs rebuild", "report", "compare")},
+    ("runs rebuild", "roots", "{dir}"): "the same",
 }
 
 
@@ -303,6 +364,8 @@ def _values(p: Param) -> list[str]:
     if p.kind == "str":
         if where in IMAGE_PARAMS:
             return IMAGES
+        if p.path == ("runs", "rebuild") and p.name == "catalogue":  # rebuild keeps a corrupt file aside and
+            return [v for v in STRING_VALUES["catalogue"] if v != "{garbage}"]  # makes it anew: exit 0
         return STRING_VALUES[p.name]
     raise AssertionError(f"{' '.join(p.path)} {p.opt or p.name}: no bad values for type {p.kind}")
 
@@ -316,8 +379,8 @@ def sweep_cases() -> list[Case]:
             for value in _values(p):
                 ctx = CONTEXT.get((path, p.name), [])
                 key = (" ".join(path), p.opt or p.name, value)
-                if p.group:  # mill URL ...: the group's own parameter, before the subcommand
-                    head = [path[0], *([value] if p.opt is None else [*group, p.opt, value]), *path[1:]]
+                if p.group:  # mill [OPTIONS] URL ...: the group's own parameter, before the subcommand
+                    head = [path[0], *([value] if p.opt is None else [p.opt, value, *group]), *path[1:]]
                     cases.append(Case((*head, *base), key))
                     continue
                 if p.opt is None:  # a positional argument replaces the base's first one
@@ -345,7 +408,7 @@ def test_every_command_and_option_is_swept() -> None:
     swept = {(c.key[0], c.key[1]) for c in CASES}
     for path, params in tree:
         for p in params:
-            if p.kind != "flag" and p.name != "title":
+            if p.kind != "flag" and p.name not in ("title", "text"):  # free text: no bad value
                 assert (" ".join(path), p.opt or p.name) in swept, p
     assert len(CASES) >= 182, len(CASES)
     assert set(DOCUMENTED_SUCCESS) <= {c.key for c in CASES}, "a documented success that is no case"
@@ -368,11 +431,12 @@ def base_runs() -> dict[str, tuple[str, ...]]:
 # Bases that cannot succeed here or are too slow for every run of the suite.
 NO_CAMERA = "no camera on this machine: the camera cases fail on the camera, by construction"
 BASE_SKIP = {("run", "--camera"): NO_CAMERA}
-SLOW_BASES = ("bench dashboard", "bench memory", "run")
+SLOW_BASES = ("bench dashboard", "bench memory", "run", "commission", "bench commission")
 BASES = base_runs()
 
 
 BENCH_DASHBOARD_BASE = " ".join(("bench", "dashboard", *BENCH_DASHBOARD_ARGS))
+COMMISSION_BASE = next(k for k in BASES if k.startswith("commission "))  # the session's run of the must-show
 # bases whose run is the session's one (tests/conftest.py::cli_once), shared with a bench test
 SHARED_BASES = {" ".join((*cmd, *args)) for cmd, args in (
     (("bench", "trend"), BENCH_TREND_ARGS), (("bench", "memory"), BENCH_MEMORY_ARGS),
@@ -383,6 +447,8 @@ def _base_marks(k: str) -> list[pytest.MarkDecorator]:
     marks = [pytest.mark.slow] if k.startswith(SLOW_BASES) else []
     if k == BENCH_DASHBOARD_BASE:
         marks.append(pytest.mark.xdist_group("live"))  # beside test_live.py's bench test
+    elif k == COMMISSION_BASE:
+        marks.append(COMMISSION)  # beside tests/twin/test_commission.py, which reads the same run
     elif k in SHARED_BASES:
         marks.append(BENCHES)  # beside the bench test that shares its run
     return marks
@@ -399,13 +465,38 @@ def test_each_base_succeeds_so_a_case_fails_on_its_value(key: str, env, request,
         p = request.getfixturevalue("bench_dashboard_run")
         assert p.returncode == 0 and "Traceback" not in p.stderr, (p.returncode, p.stderr[-2000:])
         return
+    if key == COMMISSION_BASE:  # the session's run of the must-show command (its --out the default)
+        from twin.commission.checks import EXIT_FAILED
+
+        r, _ = request.getfixturevalue("commission_pmma")
+        assert r.code in (0, EXIT_FAILED) and "Traceback" not in r.err, (r.code, r.err[-2000:])  # not bad input
+        return
     run = cli_once if key in SHARED_BASES else cli
     r = run(*_expand(BASES[key], env, 20_000 + list(BASES).index(key)))
     assert r.code == 0 and "Traceback" not in r.err, (r.code, r.err[-2000:])
 
 
+CONFIG_CASES = [c for c in CASES if c.key[1] == "--config"]  # test_a_config_is_refused_alike_by_...
+OTHER_CASES = [c for c in CASES if c.key[1] != "--config"]
+CONFIG_READERS = {"run", "sim", "whatif", "calibrate", "mi", "mill status", "mill set-rpm", "mill start", "mill stop",
+                  "mill check", "bench trend"}
+
+
+@pytest.mark.timeout(240)
+@pytest.mark.parametrize("value", CONFIGS)
+def test_a_config_is_refused_alike_by_every_command_that_reads_one(value: str, env) -> None:
+    """Issue 42: one validation for every command that reads a config (``twin.config.load_checked_config``):
+    a bad config, or a mixer no twin can hold (``HOSTILE_MIXERS``), is the same one-line error with exit 2
+    from each of them, before anything runs (`run --config` used to accept what `sim` refused and ran on
+    with MI NaN; `mi` ignored the mixer's tables)."""
+    cases = [c for c in CONFIG_CASES if c.key[2] == value]
+    assert {c.key[0] for c in cases} == CONFIG_READERS, "a command that reads --config is not in the sweep"
+    lines = {c.key[0]: assert_one_line_error(cli(*_expand(c.argv, env, CASES.index(c)))) for c in cases}
+    assert len(set(lines.values())) == 1, lines
+
+
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+@pytest.mark.parametrize("case", OTHER_CASES, ids=[c.id for c in OTHER_CASES])
 def test_bad_input_is_one_line_exit_2_or_a_documented_success(case: Case, env) -> None:
     r = cli(*_expand(case.argv, env, CASES.index(case)))
     assert "Traceback" not in r.err and "Traceback" not in r.out, r.err[-3000:]

@@ -4,28 +4,33 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 
 
 class RunClock:
     """Run time ``now_s() = speed * (monotonic() - start)``, in seconds.
 
     ``sleep_until(t_s)`` waits (in wall time) until the run clock reaches ``t_s`` or
-    ``stop`` is set; returns False when stopped.
+    ``stop`` is set; returns False when stopped. ``monotonic`` is the wall clock (s) it
+    reads, injectable as in ``Rate`` and ``RunView``, so a test moves time instead of
+    sleeping.
     """
 
-    def __init__(self, speed: float = 1.0, stop: threading.Event | None = None) -> None:
+    def __init__(self, speed: float = 1.0, stop: threading.Event | None = None,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
         if not speed > 0:
             raise ValueError(f"speed must be > 0, got {speed}")
         self.speed = float(speed)
         self.stop = stop or threading.Event()
-        self._t0 = time.monotonic()
+        self._monotonic = monotonic
+        self._t0 = monotonic()
 
     def now_s(self) -> float:
-        return (time.monotonic() - self._t0) * self.speed
+        return (self._monotonic() - self._t0) * self.speed
 
     def restart(self) -> None:
         """Make run time 0 now (the run starts when its workers do, not when it was built)."""
-        self._t0 = time.monotonic()
+        self._t0 = self._monotonic()
 
     def wall_s(self, run_s: float) -> float:
         """Wall seconds that ``run_s`` run seconds take."""

@@ -1,5 +1,5 @@
-"""Run configuration of the live loop: one dataclass filled from the CLI (and the
-meter's TOML config through vision's loader)."""
+"""Run configuration of the live loop: one dataclass filled from the CLI; and the one reading of a
+``--config`` TOML for every command (``load_checked_config``)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,14 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from twin.errors import TwinError
 from twin.runlog import default_run_dir
+
+if TYPE_CHECKING:
+    from sim.mixer import Mixer
+    from vision.config import MeterConfig
 
 MODES = ("off", "manual", "auto")
 TOKEN_ENV = "DRUMTWIN_CONTROL_TOKEN"
@@ -104,10 +109,12 @@ class RunConfig:
     dashboard_hz: float = 12.0
     engine: str | None = None  # the twin's engine ("dem" | "pymunk"); None: the mixer's
     objective: str = "plateau"  # AUTO's objective: plateau | time | energy (control.objective)
-    target_mi: float | None = None  # the endpoint's and the objective's target MI (None: twin.loop.LOOP_ENDPOINT)
+    target_mi: float | None = None  # the endpoint's and the objective's target MI (None: LOOP_ENDPOINT's)
     stop_at_endpoint: bool = False  # AUTO stops the mill once the batch is mixed (control.endpoint)
     endpoint: Mapping[str, float] = field(default_factory=dict)  # endpoint settings (control.endpoint.ENDPOINT_KEYS)
     drive: str | None = None  # demo only: the mill is this drive profile's emulator over Modbus RTU
+    catalogue: str | None = None  # run catalogue: a path or postgresql:// URL (None: $DRUMTWIN_CATALOGUE, else
+    #                               the SQLite file beside the run folders: twin.catalogue.store.resolve_url)
 
     @property
     def demo(self) -> bool:
@@ -155,6 +162,10 @@ class RunConfig:
             raise TwinError(
                 f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}"
             )
+        if self.catalogue is not None:  # a catalogue that cannot be used later is a warning; this is a typo
+            from twin.catalogue.store import check_url
+
+            check_url(self.catalogue)
         if self.mill is not None and not self.mill.strip():
             raise TwinError("--mill must not be empty")
         if self.camera is not None and self.video is not None:
@@ -170,10 +181,10 @@ class RunConfig:
 
             if source_kind(str(self.video)) != "video":  # an image replays as one frame of no video
                 raise TwinError(f"--video {self.video} is not a video file (for images: drumtwin mi)")
-        if self.meter_config is not None and not Path(self.meter_config).is_file():
-            raise FileNotFoundError(f"config not found: {self.meter_config}")
         if self.engine is not None and self.engine not in ("dem", "pymunk"):
             raise TwinError(f"--engine must be dem or pymunk, got {self.engine!r}")
+        if self.meter_config is not None:  # the demo's plant and twin stay the paper's, the config is checked
+            load_checked_config(self.meter_config, engine=self.engine, live=True)
         from control.errors import ControlError
         from control.objective import check_objective
 
@@ -203,6 +214,10 @@ class RunConfig:
 
         d = to_jsonable(self)
         d["control_token"] = "***" if self.control_token else None
+        if self.catalogue is not None and "://" in self.catalogue:  # a server URL's password is never written
+            from twin.catalogue.store import hide_password
+
+            d["catalogue"] = hide_password(self.catalogue)
         return d
 
 
@@ -242,3 +257,36 @@ def check_endpoint_options(values: Mapping[str, float]) -> None:
         except ControlError as exc:
             raise TwinError(f"--endpoint-{key.replace('_', '-')}: {exc}") from None
 
+
+
+@dataclass(frozen=True)
+class CheckedConfig:
+    """A ``--config`` as every command reads it: the meter config (``vision.config``; the defaults
+    without a file), the twin's mixer (``sim.mixer``; the paper's when the config has no
+    ``[drum]``), whether the config gave one, and the engine that runs it."""
+
+    meter: MeterConfig
+    mixer: Mixer
+    has_mixer: bool
+    engine: str
+
+
+def load_checked_config(path: Path | None, *, engine: str | None = None, live: bool = False) -> CheckedConfig:
+    """The one validation of a ``--config`` (``run``, ``sim``, ``whatif``, ``calibrate``, ``mi``,
+    ``mill``, ``bench trend``), so a config one command refuses every command refuses, in the same
+    line: the meter's tables (``vision.config.load_config``), the mixer's (``sim.mixer.mixer_from_config``)
+    and a twin of it (``sim.capacity.check_twin``: fits, the particle bound, the engine's step;
+    ``live``: the live twin's bound), ``[endpoint]`` and ``[drive]``. ``engine``: ``--engine``."""
+    from control.modbus.link import drive_hz_per_rpm
+    from sim.capacity import check_twin
+    from sim.mixer import mixer_from_config, paper_mixer
+    from vision.config import load_config
+
+    meter = load_config(path)
+    mixer = mixer_from_config(meter) if path is not None else None
+    source = f"config {meter.source}"
+    name = check_twin(paper_mixer() if mixer is None else mixer, engine, live=live, source=source)
+    if meter.endpoint_table:
+        config_endpoint(meter.endpoint_table, meter.source, {})
+    drive_hz_per_rpm(meter.drive_table, source)
+    return CheckedConfig(meter, paper_mixer() if mixer is None else mixer, mixer is not None, name)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
+from control.limits import simulated_rpm
 from control.modbus.emulator import DriveEmulator
 from control.modbus.profile import load_profile
 from control.motor import MotorConfig
@@ -108,7 +109,7 @@ class DemoPlant:
             if not self.clock.sleep_until(t):
                 return
             rpm = float(self.emulator.motor.actual_rpm)
-            self.sim.set_rpm(min(rpm, self.sim.critical_rpm * 0.95))
+            self.sim.set_rpm(simulated_rpm(rpm, self.sim.critical_rpm))  # the one cap (control.limits)
             dt = t - self.sim.t_s
             if dt > 0:
                 self.sim.step(dt)

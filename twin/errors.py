@@ -16,7 +16,7 @@ class TwinError(ValueError):
 
 
 class RunFailed(TwinError):
-    """A live run that had to end (``twin.loop.LiveLoop.failure``); ``exit_code`` says why:
+    """A live run that had to end (``twin.run.loop.LiveLoop.failure``); ``exit_code`` says why:
     :data:`EXIT_BAD_INPUT` (its inputs or environment: a full disk, no drum in the frames) or
     :data:`EXIT_WORKER_CRASHED`."""
 

@@ -1,58 +1,91 @@
-"""Plots of run logs (matplotlib, files only): MI curves of several runs in one figure."""
+"""``drumtwin compare``: MI curves of several runs in one figure (matplotlib, a PNG file).
+
+Each run is read as the report reads it (``twin.report.load_run``: streamed, bounded, what could
+not be read skipped and counted in its notes) and drawn from its decimated series, one run at a
+time, so neither the length of a log nor the number of runs sets the memory, only the figure:
+each run gets ``POINTS // runs`` buckets (at least ``MIN_BUCKETS``).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from twin.runlog import read_events, read_frames
+from twin.report.events import PLOT_LIMIT
+
+POINTS = 16_000
+"""Buckets (min/max pairs) of a series shared by all the runs of one figure."""
+MIN_BUCKETS = 100
+ANNOTATED = 4
+"""Runs up to which each move is written beside its mark (more: marks only)."""
+COLOURS = ("#1565c0", "#c62828", "#2e7d32", "#6a1b9a")
 
 
-def _series(rows: list[dict], name: str) -> np.ndarray:
-    """One column of run-log rows as floats (None -> NaN)."""
-    return np.array([np.nan if r[name] is None else r[name] for r in rows], dtype=float)
-
-
-def plot_runs(runs: Mapping[str, Path | str], out_png: Path | str, title: str = "") -> Path:
-    """MI (raw, faint) and Kalman trend (bold) against run time for each labelled run dir,
-    with the rpm actually reached below and the AUTO decisions marked; writes ``out_png``."""
+def compare_runs(runs: Sequence[tuple[str, Path | str]], out_png: Path | str, title: str = "") -> tuple[Path, list]:
+    """MI (raw, faint) and Kalman trend (bold) against run time for each ``(label, run dir)``, the
+    rpm actually reached below and the AUTO moves marked; writes ``out_png``. Returns it and, per
+    run, ``(label, summary, notes)``: frames, run time and rpm at the last trend, moves."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from twin.report.load import load_run
+
     fig, (ax, ax2) = plt.subplots(
         2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1.2]}, constrained_layout=True
     )
-    colours = ("#1565c0", "#c62828", "#2e7d32", "#6a1b9a")
-    for i, (label, run_dir) in enumerate(runs.items()):
-        rows = read_frames(run_dir)
-        col = colours[i % len(colours)]
+    buckets = max(MIN_BUCKETS, POINTS // max(1, len(runs)))
+    table: list[tuple[str, dict[str, Any], list[str]]] = []
+    try:
+        for i, (label, run_dir) in enumerate(runs):
+            run = load_run(run_dir, label)
+            _draw(ax, ax2, run, COLOURS[i % len(COLOURS)], buckets, annotate=len(runs) <= ANNOTATED)
+            last = run.frames.last_trend
+            table.append((label, {"frames": run.n_frames, "t_s": run.frames.t_max if last is None else last[0],
+                                  "trend_mi": None if last is None else last[1],
+                                  "rpm_actual": None if last is None else last[2],
+                                  "moves": run.events.n_moves}, run.notes))
+        ax.set_ylabel("mixing index (eq. 4, camera)")
+        ax.set_ylim(0.6, 1.02)
+        ax.grid(alpha=0.3)
+        if len(runs) <= 12:
+            ax.legend(loc="lower left", fontsize=9)
+        if title:
+            ax.set_title(title)
+        ax2.set_ylabel("mill rpm (actual)")
+        ax2.set_xlabel("run time (s)")
+        ax2.grid(alpha=0.3)
+        out = Path(out_png)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=110)
+    finally:
+        plt.close(fig)
+    return out, table
 
-        t = _series(rows, "t_s")
-        ax.plot(t, _series(rows, "mi"), color=col, alpha=0.18, lw=0.8)
-        ax.plot(t, _series(rows, "trend_mi"), color=col, lw=2.2, label=f"{label}: Kalman trend (raw MI faint)")
-        ax2.plot(t, _series(rows, "rpm_actual"), color=col, lw=2, label=label)
-        moves = [e for e in read_events(run_dir) if e["kind"] == "decision" and e.get("decision") == "move"]
-        for e in moves:
-            ax.axvline(e["t_s"], color=col, ls="--", lw=1)
-            ax.annotate(
-                f"{label}: segregation -> {e.get('target_rpm') or e.get('rpm'):g} rpm",
-                (e["t_s"], 0.62), rotation=90, va="bottom", ha="right", fontsize=8, color=col,
-            )
-    ax.set_ylabel("mixing index (eq. 4, camera)")
-    ax.set_ylim(0.6, 1.02)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower left", fontsize=9)
-    if title:
-        ax.set_title(title)
-    ax2.set_ylabel("mill rpm (actual)")
-    ax2.set_xlabel("run time (s)")
-    ax2.grid(alpha=0.3)
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+
+def _draw(ax: Any, ax2: Any, run: Any, col: str, buckets: int, annotate: bool) -> None:
+    """One run's curves and marks."""
+    def series(name: str) -> tuple[np.ndarray, np.ndarray]:
+        s = run.frames.series.get(name)
+        return (np.zeros(0), np.zeros(0)) if s is None else s.coarser(buckets)
+
+    ax.plot(*series("mi"), color=col, alpha=0.18, lw=0.8)
+    ax.plot(*series("trend_mi"), color=col, lw=2.2, label=f"{run.label}: Kalman trend (raw MI faint)")
+    ax2.plot(*series("rpm_actual"), color=col, lw=2, label=run.label)
+    for t, rpm in run.events.marks:
+        if abs(t) > PLOT_LIMIT:
+            continue
+        ax.axvline(t, color=col, ls="--", lw=1)
+        if annotate:
+            what = "?" if rpm is None else f"{rpm:g}"
+            ax.annotate(f"{run.label}: segregation -> {what} rpm", (t, 0.62), rotation=90, va="bottom", ha="right",
+                        fontsize=8, color=col)
+
+
+def plot_runs(runs: Mapping[str, Path | str], out_png: Path | str, title: str = "") -> Path:
+    """:func:`compare_runs` of ``{label: run dir}``: the PNG written."""
+    return compare_runs(list(runs.items()), out_png, title)[0]

@@ -2,9 +2,18 @@
 (decisions, faults, calibrations) and ``metadata.json`` (config, calibration, versions).
 
 The run log is a subscriber of the run's record bus (``twin.records``): :meth:`RunLog.record`
-writes a ``FrameReading`` as a CSV row (columns ``twin.records.FRAME_COLUMNS``) and every
-logged record as one JSONL line ``{"t_s", "wall_s", "kind", **fields}``. The formats are those
-of earlier runs: old run dirs read back the same.
+writes a ``FrameReading`` as a CSV row (columns ``twin.records.FRAME_COLUMNS``, then
+``run_uid``) and every logged record as one JSONL line ``{"t_s", "wall_s", "kind", "run_uid",
+**fields}``.
+
+The log describes itself (after bluesky's event-model): the run's uid (a uuid4, as
+event-model's ``RunStart`` uid) is in every file (``metadata.json``'s ``run_uid``, a last
+``run_uid`` column of ``frames.csv``, a ``run_uid`` key on every ``events.jsonl`` line), and
+``metadata.json`` carries from the start a descriptor of every CSV column and every event
+kind's fields (``descriptors``: dtype, shape, units, source; ``twin.records.descriptors``,
+derived from the record declarations). The readers (``read_*``, streamed and forgiving:
+``twin.runread``) check that the lines belong to the run and read the logs of earlier releases,
+which carry no uid, the same as before.
 
 Every row and every event is written with one ``write`` and flushed to the OS at
 once, so ``kill -9`` of the process loses nothing that was logged; ``fsync`` (for a
@@ -30,19 +39,29 @@ import os
 import secrets
 import threading
 import time
-from collections.abc import Mapping, Sequence
+import uuid
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from twin.descriptors import descriptors
 from twin.errors import TwinError
 from twin.records import FRAME_COLUMNS, FrameReading, Record, event_fields, kind_of, record_of
+from twin.runread import (
+    EVENTS_FILE,
+    FRAMES_FILE,
+    METADATA_FILE,
+    UID_KEY,
+    RunFiles,
+    Skips,
+    events,
+    frame_batches,
+    open_run,
+)
 
-__all__ = ["FRAME_COLUMNS", "RunLog", "read_events", "read_frames", "read_metadata", "read_records", "write_record"]
-
-FRAMES_FILE = "frames.csv"
-EVENTS_FILE = "events.jsonl"
-METADATA_FILE = "metadata.json"
+__all__ = ["EVENTS_FILE", "FRAMES_FILE", "FRAME_COLUMNS", "METADATA_FILE", "RunLog", "Skips", "read_events",
+           "read_frames", "read_metadata", "read_records", "write_record"]
 
 
 def _cell(value: Any) -> str:
@@ -135,7 +154,9 @@ class RunLog:
     ``frame(row)`` takes a mapping with (a subset of) ``FRAME_COLUMNS``;
     ``event(kind, t_s, **fields)`` one JSON line; ``set_metadata(**fields)`` merges
     into ``metadata.json``. Files are line-buffered by hand: one ``write`` + ``flush``
-    per record, ``fsync`` at most every ``fsync_interval_s``.
+    per record, ``fsync`` at most every ``fsync_interval_s``. ``run_uid``: the run's uid
+    (default a fresh uuid4), written into every file; ``metadata.json`` is written at once
+    with it and the descriptors of ``columns`` and of every event kind.
     """
 
     def __init__(
@@ -144,10 +165,12 @@ class RunLog:
         *,
         columns: Sequence[str] = FRAME_COLUMNS,
         fsync_interval_s: float = 1.0,
+        run_uid: str | None = None,
     ) -> None:
         self.paths = RunLogPaths.of(directory)
         _claim(self.paths.directory)
-        self.columns = tuple(columns)
+        self.run_uid = run_uid or str(uuid.uuid4())
+        self.columns = (*(c for c in columns if c != UID_KEY), UID_KEY)
         self.fsync_interval_s = float(fsync_interval_s)
         self._lock = threading.Lock()
         try:  # exclusive: of two runs racing for one directory, exactly one gets it
@@ -155,13 +178,14 @@ class RunLog:
         except FileExistsError:
             raise TwinError(f"--log {self.paths.directory} is being written by another run") from None
         self._events = open(self.paths.events, "x", encoding="utf-8")
-        self._metadata: dict[str, Any] = {}
+        self._metadata: dict[str, Any] = {UID_KEY: self.run_uid, "descriptors": descriptors(self.columns)}
         self._last_sync = time.monotonic()
         self._closed = False
         self.n_frames = 0
         self.n_events = 0
         self._write(self._frames, ",".join(self.columns) + "\n")
         self._sync(force=True)
+        self.set_metadata()
 
     # -- writing -----------------------------------------------------------------
     def _write(self, fh: io.TextIOBase, text: str) -> None:
@@ -180,7 +204,7 @@ class RunLog:
 
     def frame(self, row: Mapping[str, Any]) -> None:
         """Append one frame row (missing columns are empty cells; ``wall_s`` is filled in)."""
-        row = {"wall_s": time.time(), **row}
+        row = {"wall_s": time.time(), **row, UID_KEY: self.run_uid}
         buf = io.StringIO()
         csv.writer(buf, lineterminator="\n").writerow([_cell(row.get(c)) for c in self.columns])
         with self._lock:
@@ -191,9 +215,11 @@ class RunLog:
             self._sync()
 
     def event(self, kind: str, t_s: float, **data: Any) -> dict[str, Any]:
-        """Append one event ``{"t_s", "wall_s", "kind", **data}``; returns it as JSON data."""
+        """Append one event ``{"t_s", "wall_s", "kind", "run_uid", **data}``; returns it as JSON
+        data, as ``read_events`` reads it back (without the uid)."""
+        data.pop(UID_KEY, None)
         record = to_jsonable({"t_s": float(t_s), "wall_s": time.time(), "kind": kind, **data})
-        line = json.dumps(record, allow_nan=False) + "\n"
+        line = json.dumps({**record, UID_KEY: self.run_uid}, allow_nan=False) + "\n"
         with self._lock:
             if self._closed:
                 return record
@@ -210,6 +236,7 @@ class RunLog:
         """Merge ``data`` into ``metadata.json`` (atomic replace)."""
         with self._lock:
             self._metadata.update(data)
+            self._metadata[UID_KEY] = self.run_uid
             text = json.dumps(to_jsonable(self._metadata), indent=2, allow_nan=False) + "\n"
             tmp = self.paths.metadata.with_suffix(".json.tmp")
             with open(tmp, "w", encoding="utf-8") as fh:
@@ -225,7 +252,7 @@ class RunLog:
 
     def close(self) -> None:
         """Flush, fsync and close (idempotent). A flush that fails here (disk full) is not
-        raised again: the write that failed first was (see ``twin.live.records.RunEvents``)."""
+        raised again: the write that failed first was (see ``twin.live.events.RunEvents``)."""
         with self._lock:
             if self._closed:
                 return
@@ -260,77 +287,84 @@ def write_record(log: RecordWriter, rec: Record) -> None:
         log.event(kind_of(rec), rec.t_s, **event_fields(rec))
 
 
-# -- reading (tests, plots, summaries) ------------------------------------------------
-def _parse(value: str) -> Any:
+# -- reading (tests, plots, summaries): twin.runread, as lists -----------------------------------
+def _open(path: Path | str, name: str, skipped: Skips | None) -> tuple[RunFiles, Path]:
+    """The run folder of ``path`` (a run dir, or a file in it read as its ``name``), opened;
+    what is skipped is counted in ``skipped`` when given."""
+    p = Path(path)
+    run = open_run(p if p.is_dir() else p.parent)
+    if skipped is not None:
+        skipped.files.extend(n for n in run.skips.files if n not in skipped.files)
+        run.skips = skipped
+    return run, p / name if p.is_dir() else p
+
+
+_FRAME_KEYS: Mapping[str, Any] = descriptors(FRAME_COLUMNS)["frame"]["data_keys"]  # type: ignore[assignment]
+
+
+def _cell_value(column: str, value: str, skips: Skips) -> Any:
+    """A CSV cell read back: '' -> None; a number by its descriptor as a float (not one: None,
+    counted); a string by its descriptor as it is; an undeclared column a float when it reads as one."""
     if value == "":
         return None
+    key = _FRAME_KEYS.get(column)
+    if key is not None and key["dtype"] == "string":
+        return value
     try:
         return float(value)
     except ValueError:
+        if key is not None:
+            skips.add(FRAMES_FILE, f"{column} not a number", what="cell")
+            return None
         return value
 
 
-def read_frames(path: Path | str) -> list[dict[str, Any]]:
-    """Rows of a ``frames.csv`` (a run dir or the file), numbers as floats.
-
-    A trailing line cut short by a crash (wrong number of cells) is dropped.
-    """
-    p = Path(path)
-    if p.is_dir():
-        p = p / FRAMES_FILE
-    with open(p, encoding="utf-8", newline="") as fh:
-        text = fh.read()
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    elif lines:
-        lines.pop()  # no final newline: the last line was being written
-    reader = csv.reader(lines)
-    header = next(reader, None)
-    if header is None:
-        return []
-    rows = []
-    for cells in reader:
-        if len(cells) != len(header):
-            continue
-        rows.append({h: _parse(c) for h, c in zip(header, cells, strict=True)})
-    return rows
+def iter_frames(path: Path | str, skipped: Skips | None = None) -> Iterator[dict[str, Any]]:
+    """The rows of a ``frames.csv`` (a run dir or the file) one by one, as dicts of its columns
+    (without ``run_uid``), numbers as floats. A row cut off by a crash, of the wrong width or of
+    another run is skipped and counted in ``skipped``."""
+    run, p = _open(path, FRAMES_FILE, skipped)
+    for header, rows in frame_batches(run, p):
+        cols = [(i, h) for i, h in enumerate(header) if h != UID_KEY]
+        for cells in rows:
+            yield {h: _cell_value(h, cells[i], run.skips) for i, h in cols}
 
 
-def read_events(path: Path | str) -> list[dict[str, Any]]:
-    """Events of an ``events.jsonl`` (a run dir or the file); a cut-off last line is dropped."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / EVENTS_FILE
-    out = []
-    with open(p, encoding="utf-8") as fh:
-        for line in fh:
-            if not line.endswith("\n"):
-                break
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-    return out
+def read_frames(path: Path | str, skipped: Skips | None = None) -> list[dict[str, Any]]:
+    """Rows of a ``frames.csv`` (a run dir or the file): :func:`iter_frames` as a list (for a
+    log that fits in memory; ``drumtwin report`` streams)."""
+    return list(iter_frames(path, skipped))
+
+
+def iter_events(path: Path | str, skipped: Skips | None = None) -> Iterator[dict[str, Any]]:
+    """Events of an ``events.jsonl`` (a run dir or the file) one by one, as their JSON objects
+    without the uid; a line that is not an event of this run is skipped and counted."""
+    run, p = _open(path, EVENTS_FILE, skipped)
+    yield from events(run, p)
+
+
+def read_events(path: Path | str, skipped: Skips | None = None) -> list[dict[str, Any]]:
+    """Events of an ``events.jsonl`` (a run dir or the file): :func:`iter_events` as a list."""
+    return list(iter_events(path, skipped))
 
 
 _LINE_KEYS = ("t_s", "wall_s", "kind")  # the JSONL line's own keys beside the record's fields
 
 
-def read_records(path: Path | str) -> list[Record]:
+def read_records(path: Path | str, skipped: Skips | None = None) -> list[Record]:
     """The events of an ``events.jsonl`` (a run dir or the file) as typed records: the one
     place a kind's name is looked up (``twin.records.record_of``). A line of a kind or with a
     field this release does not declare is an ``UntypedEvent`` holding it whole (and a
-    warning); JSON ``null`` stays None (a NaN when it was written)."""
+    warning); JSON ``null`` stays None (a NaN when it was written; a null ``t_s`` is NaN)."""
     return [
-        record_of(str(e["kind"]), float(e["t_s"]), **{k: v for k, v in e.items() if k not in _LINE_KEYS})
-        for e in read_events(path)
+        record_of(str(e["kind"]), math.nan if e.get("t_s") is None else float(e["t_s"]),
+                  **{k: v for k, v in e.items() if k not in _LINE_KEYS})
+        for e in iter_events(path, skipped)
     ]
 
 
-def read_metadata(path: Path | str) -> dict[str, Any]:
-    """The ``metadata.json`` of a run dir (or the file)."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / METADATA_FILE
-    return json.loads(p.read_text(encoding="utf-8"))
+def read_metadata(path: Path | str, skipped: Skips | None = None) -> dict[str, Any]:
+    """The ``metadata.json`` of a run dir (or the file): ``{}`` when it is missing, cannot be
+    read as a JSON object or is of another run (a note in ``skipped``)."""
+    run, _ = _open(path, METADATA_FILE, skipped)
+    return run.metadata

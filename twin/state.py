@@ -3,10 +3,11 @@
 
 It is a subscriber of the run's record bus (``twin.records``): :meth:`LiveState.record` folds
 each record into the plots and the panel (a frozen dataclass, never a dict of strings).
-Images and what-if curves come through ``publish_camera`` / ``publish_twin`` /
-``set_whatif``. The alarms are the messages of the run's one :class:`ActiveFaults`. Readers
-take ``snapshot()``, a consistent copy they can use without holding the lock. Nothing here
-blocks for long: a slow dashboard can never stall the camera thread.
+Images, what-if curves and the rig's history come through ``publish_camera`` /
+``publish_twin`` / ``set_whatif`` / ``set_rig_history``. The alarms are the messages of the
+run's one :class:`ActiveFaults`. Readers take ``snapshot()``, a consistent copy they can use
+without holding the lock. Nothing here blocks for long: a slow dashboard can never stall the
+camera thread.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from twin.live.golden import RigHistory
 from twin.records import (
     FRAME_COLUMNS,
     SERIES,
@@ -45,6 +47,7 @@ FrameRow = FrameReading
 FRAME_ROW_COLUMNS: tuple[str, ...] = FRAME_COLUMNS
 
 HISTORY_LEN = 900
+NO_RIG_HISTORY = RigHistory()  # not read: a dashboard outside a run
 
 
 @dataclass(frozen=True)
@@ -148,10 +151,14 @@ class Snapshot:
     panel: Panel
     alarms: tuple[str, ...]
     whatif: WhatIfView
+    rig_history: RigHistory = NO_RIG_HISTORY  # the rig's earlier runs and golden batch (twin.live.golden)
+    rig_history_seq: int = 0
 
 
 class Controls(Protocol):
-    """What the dashboard may ask of the loop (all return at once)."""
+    """What the dashboard may ask of the loop (all return at once; ``twin.run.operator.Operator``
+    in a run). ``cancel_whatif``: True when there was a study to cancel; ``relearn_classes``:
+    what to tell the operator (Markdown)."""
 
     def set_mode(self, mode: str) -> None: ...
     def set_manual_rpm(self, rpm: float) -> None: ...
@@ -161,6 +168,8 @@ class Controls(Protocol):
     def recalibrate(self) -> None: ...
     def reseed_twin(self) -> None: ...
     def run_whatif(self, rpms: Sequence[float], duration_s: float) -> None: ...
+    def cancel_whatif(self) -> bool: ...
+    def relearn_classes(self) -> str: ...
 
 
 class LiveState:
@@ -179,6 +188,8 @@ class LiveState:
         self._panel = Panel()
         self.faults = faults if faults is not None else ActiveFaults()  # the run's one set of active faults
         self._whatif = WhatIfView()
+        self._rig_history = NO_RIG_HISTORY
+        self._rig_history_seq = 0
 
     def publish_camera(self, image_bgr: np.ndarray) -> None:
         """The newest camera frame (with its overlay drawn)."""
@@ -216,6 +227,12 @@ class LiveState:
         with self._lock:
             self._whatif = view
 
+    def set_rig_history(self, history: RigHistory) -> None:
+        """The rig's earlier runs and golden batch (``twin.catalogue.history``, read once per run)."""
+        with self._lock:
+            self._rig_history = history
+            self._rig_history_seq += 1
+
     @property
     def panel(self) -> Panel:
         with self._lock:
@@ -240,6 +257,8 @@ class LiveState:
                 panel=self._panel,
                 alarms=self.faults.messages(),
                 whatif=self._whatif,
+                rig_history=self._rig_history,
+                rig_history_seq=self._rig_history_seq,
             )
 
 

@@ -19,9 +19,9 @@ and ``share`` are fractions; the rotation is +1 counter-clockwise as the camera 
   the peaks of its distance transform (touching particles keep separate centres) or, when
   more, as many particles as the blob's area holds at the bed's packing (a class that takes
   the gaps between its particles makes one blob of them, with few peaks); the median over frames.
-- **Share**: each class's share of the bed's solid area, ``n_k d_k^2 / sum n_j d_j^2`` (as
-  ``sim.mixer`` counts it); the pixel share (the class's pixels over all classified pixels)
-  beside it as a cross-check.
+- **Share**: each class's share of the bed's solid area, ``n_k a_k / sum n_j a_j`` with ``a_k`` its
+  particle's area (``d_k^2`` times its shape's ratio to a disc; as ``sim.mixer`` counts it); the
+  pixel share (the class's pixels over all classified pixels) beside it as a cross-check.
 - **Fill**: the counted particles' area over the bed's packing fraction (the caller's
   ``packing``: ``sim.recipe.PACKING_2D``) and the drum's area.
 - **Rotation**: the sign of the median free-surface slope.
@@ -44,7 +44,8 @@ PEAK_MIN_R = 0.3  # a distance-transform peak counts as a particle centre from t
 PEAK_SPACING = 0.6  # peaks closer than this many diameters are one particle
 
 CROP_PAD_PX = 2  # background pixels around a particle's crop
-CROP_OPEN_D = 0.25  # a crop's opening (spurs, bridges to neighbours off), in particle diameters
+CROP_OPEN_D = 0.12  # a crop's opening (spurs, bridges to neighbours off), in particle diameters (0.25 rounded a
+# notch's rim corners away: a 90-degree notch read 118 deg; docs/commissioning.md)
 CROP_AREA = (0.4, 1.3)  # a single particle's blob: this many times a disc of the measured diameter
 
 BODY_GRAY = 0.5  # a class's pixels darker than this times its median gray are gaps it took, not particle
@@ -60,10 +61,31 @@ CIRCLE_FRAMES = 8  # frames the circle census searches (100 and more circles a f
 CIRCLE_SCALE_FRAMES = 2  # ... of which the first search for the particles' scale
 CIRCLE_SCALE_MIN = 5  # circles a class needs in that search (fewer: searched again upsampled)
 
-__all__ = ["BODY_GRAY", "CHORD_MEDIAN", "CIRCLES_MIN", "CROP_AREA", "CROP_OPEN_D", "CROP_PAD_PX", "ClassCensus",
-           "ClassSize", "MixerCensus", "census", "circle_census", "circle_diameters_px", "class_size",
-           "count_particles", "particle_body", "rotation_from_slope", "run_diameter_px", "same_size",
-           "single_particle_crops", "single_particles"]
+__all__ = [
+    "BODY_GRAY",
+    "CHORD_MEDIAN",
+    "CIRCLES_MIN",
+    "CROP_AREA",
+    "CROP_OPEN_D",
+    "CROP_PAD_PX",
+    "EDGE_REACH_PX",
+    "ClassCensus",
+    "ClassSize",
+    "MixerCensus",
+    "census",
+    "circle_census",
+    "circle_diameters_px",
+    "class_size",
+    "count_particles",
+    "particle_body",
+    "particle_edges",
+    "rotation_from_slope",
+    "run_diameter_px",
+    "same_size",
+    "single_particle_crops",
+    "single_particles",
+    "single_particles_at",
+]
 
 
 def _lit(values: np.ndarray) -> np.ndarray:
@@ -88,6 +110,28 @@ def particle_body(mask: np.ndarray, gray: np.ndarray) -> np.ndarray:
     out = np.zeros_like(m)
     out[m] = _lit(g[m])
     return out
+
+
+EDGE_REACH_PX = 2  # a class's outline may reach this far past its colour map, to its gray edge
+
+
+def particle_edges(mask: np.ndarray, gray: np.ndarray, others: np.ndarray, background_gray: float) -> np.ndarray:
+    """One class's particles bounded by their gray edges, for tracing their outlines: the pixels within
+    ``EDGE_REACH_PX`` of the class's boolean map that are on the particles' side of the midpoint between
+    the class's median gray and ``background_gray`` (the drum's empty part), less the pixels of the other
+    classes (``others``). A class map's edges are ragged where colour was blurred (a camera's chroma is
+    coarser than its luma: JPEG, Bayer); the gray edge is the particle's own, a neighbour of another
+    colour stays out. Same shapes in and out."""
+    m = np.asarray(mask, dtype=bool)
+    g = np.asarray(gray, dtype=float)
+    if not m.any():
+        return m
+    med = float(np.median(g[m]))
+    thr = 0.5 * (med + float(background_gray))
+    k = 2 * EDGE_REACH_PX + 1
+    near = cv2.dilate(m.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
+    lit = g >= thr if med >= background_gray else g <= thr
+    return np.asarray(near & lit & ~np.asarray(others, dtype=bool))
 
 
 def run_diameter_px(mask: np.ndarray) -> float:
@@ -216,8 +260,11 @@ def _peaks_per_blob(m: np.ndarray, diameter_px: float) -> tuple[np.ndarray, np.n
     """The blobs of a boolean map (labels, 0 the background) and the particle centres
     (``_peaks``' plateaus) each holds."""
     n, blobs = cv2.connectedComponents(m.astype(np.uint8))
-    # a peak is a small plateau: count each blob's peak plateaus, not its peak pixels
-    npk, plateaus = cv2.connectedComponents(_peaks(m, diameter_px).astype(np.uint8))
+    # a peak is a small plateau: count each blob's peak plateaus, not its peak pixels; plateaus closer
+    # than PEAK_SPACING diameters are one particle's (tied maxima: a notched disc's either side of its notch)
+    k = max(1, int(round(0.5 * PEAK_SPACING * diameter_px))) | 1
+    pk = cv2.dilate(_peaks(m, diameter_px).astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    npk, plateaus = cv2.connectedComponents(pk & m.astype(np.uint8))
     per_blob = np.zeros(n, dtype=np.int64)
     if npk > 1:
         first = np.zeros(npk, dtype=np.int64)
@@ -239,12 +286,13 @@ def single_particles(mask: np.ndarray, diameter_px: float) -> np.ndarray:
     return np.asarray(one[blobs])
 
 
-def single_particle_crops(mask: np.ndarray, diameter_px: float, max_n: int = 12) -> list[np.ndarray]:
-    """Boolean crops (``CROP_PAD_PX`` of background around each) of up to ``max_n`` single particles
-    of a boolean class map (blobs of at most one ``_peaks`` centre and ``CROP_AREA`` of a disc of
-    ``diameter_px``; opened by ``CROP_OPEN_D``, holes filled), those whose area is nearest
-    the median single blob's first; blobs touching the map's border are left out. For tracing the
-    particles' outline (the caller's: ``sim.mixer.shape_from_crops``)."""
+def single_particles_at(mask: np.ndarray, diameter_px: float, max_n: int = 12) -> list[tuple[np.ndarray, int, int]]:
+    """Boolean crops of up to ``max_n`` single particles of a boolean class map and where each crop's
+    corner lies in the map (x, y, px): blobs of at most one ``_peaks`` centre and ``CROP_AREA`` of a
+    disc of ``diameter_px``, ``CROP_PAD_PX`` of background around each, opened by ``CROP_OPEN_D``
+    (the largest piece kept), holes filled; those whose area is nearest the median single blob's
+    first; blobs touching the map's border are left out. For tracing the particles' outline
+    (``vision.shapes.particle_shape``) and drawing it where it was found."""
     m = np.asarray(mask, dtype=bool)
     if not (math.isfinite(diameter_px) and diameter_px > 2):
         return []
@@ -282,8 +330,13 @@ def single_particle_crops(mask: np.ndarray, diameter_px: float, max_n: int = 12)
         # holes (highlights, print lines) filled: the outline is the outer boundary
         cnts, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         cv2.drawContours(crop, cnts, -1, 1, thickness=cv2.FILLED)
-        out.append(crop.astype(bool))
+        out.append((crop.astype(bool), int(x) - p, int(y) - p))
     return out
+
+
+def single_particle_crops(mask: np.ndarray, diameter_px: float, max_n: int = 12) -> list[np.ndarray]:
+    """The crops of ``single_particles_at`` (without where they lie)."""
+    return [c for c, _, _ in single_particles_at(mask, diameter_px, max_n)]
 
 
 def same_size(diameters_px: Sequence[float]) -> tuple[list[float], bool]:
@@ -310,8 +363,9 @@ def rotation_from_slope(slope_deg: float) -> int:
 @dataclass(frozen=True)
 class ClassSize:
     """One class's own particle diameter (px) and where it came from: ``"circles"`` (the median
-    of ``count`` circles, ``circle_diameters_px``) or ``"runs"`` (the median over ``count``
-    frames of ``run_diameter_px``); NaN when neither measured it."""
+    of ``count`` circles, ``circle_diameters_px``), ``"outlines"`` (the median circle of ``count``
+    clean traced outlines, ``vision.shapes.particle_shape``) or ``"runs"`` (the median over ``count``
+    frames of ``run_diameter_px``); NaN when none measured it."""
 
     diameter_px: float
     source: str
@@ -356,6 +410,7 @@ class MixerCensus:
     drum_r_px: float
     frames: int
     same_size: bool = False  # the classes' sizes were set to their mean (``same_size``)
+    frame_counts: tuple[float, ...] = ()  # particles per frame, every class together
 
     def diameter_mm(self, k: int, drum_diameter_mm: float) -> float:
         """Class ``k``'s particle diameter (mm), scaled by the drum's diameter."""
@@ -371,6 +426,7 @@ def census(
     slopes_deg: Sequence[float],
     drum_r_px: float,
     packing: float,
+    area_ratios: Sequence[float] | None = None,
 ) -> MixerCensus:
     """The census of ``len(roi_px)`` frames (see the module doc).
 
@@ -378,7 +434,8 @@ def census(
     ``class_px`` its pixels in the drum, ``counts`` its ``count_particles`` (at the size
     after ``same_size``); per frame ``roi_px`` the drum's pixels and ``slopes_deg`` the
     meter's free-surface slope; ``drum_r_px`` the drum's radius (px); ``packing`` the bed's
-    2D packing fraction.
+    2D packing fraction; ``area_ratios`` per class its particle's area over a disc of its size
+    (a notched disc's less than 1; None: discs), for the shares and the fill.
     """
     shape = (len(roi_px), len(names))
     cpx = np.asarray(class_px, dtype=float).reshape(shape)
@@ -387,7 +444,8 @@ def census(
         raise ValueError(f"one size per class: {len(sizes)} sizes for {len(names)} classes")
     diameters, merged = same_size([s.diameter_px for s in sizes])
     n = [float(np.median(cnt[:, k])) for k in range(len(names))]
-    solid = [nk * dk * dk if math.isfinite(dk) else 0.0 for nk, dk in zip(n, diameters, strict=True)]
+    ratios = [1.0] * len(names) if area_ratios is None else [float(a) for a in area_ratios]
+    solid = [nk * dk * dk * ak if math.isfinite(dk) else 0.0 for nk, dk, ak in zip(n, diameters, ratios, strict=True)]
     total = sum(solid)
     pix = float(cpx.sum())
     out = tuple(
@@ -399,4 +457,5 @@ def census(
     fill = 0.25 * math.pi * total / (float(packing) * drum_area) if drum_area > 0 else math.nan
     s = np.asarray([v for v in slopes_deg if math.isfinite(v)], dtype=float)
     slope = float(np.median(s)) if s.size else math.nan
-    return MixerCensus(out, fill, slope, rotation_from_slope(slope), float(drum_r_px), int(len(roi_px)), merged)
+    return MixerCensus(out, fill, slope, rotation_from_slope(slope), float(drum_r_px), int(len(roi_px)), merged,
+                       tuple(float(v) for v in cnt.sum(axis=1)))

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -164,6 +166,15 @@ def _rows(w: str, key: str, v, width: int) -> list[list[float]]:
     return [[float(x) for x in r] for r in v]
 
 
+@contextmanager
+def _named(where: str) -> Iterator[None]:
+    """A ``VisionError`` raised inside is raised again with ``where`` (the file, table, key) in front."""
+    try:
+        yield
+    except VisionError as exc:
+        raise VisionError(f"{where}: {exc}") from None
+
+
 def _parse_class(w: str, c: dict) -> ColourClass:
     unknown = set(c) - _CLASS_KEYS
     if unknown:
@@ -189,19 +200,34 @@ def _parse_class(w: str, c: dict) -> ColourClass:
         weights = [_float(w, "lab_weight", x, 1e-9, 1.0) for x in weights]
         if not len(means) == len(covs) == len(weights):
             raise VisionError(f"{w}: lab_mean, lab_cov and lab_weight need one entry per component")
-        try:
+        with _named(w):
             comps = tuple(LabComponent(tuple(m), tuple(cv), wt) for m, cv, wt in zip(means, covs, weights, strict=True))  # type: ignore[arg-type]
             return ColourClass(c["name"], display_bgr=tuple(bgr), lab=comps, max_distance=max_d, reject=reject)
-        except VisionError as exc:
-            raise VisionError(f"{w}: {exc}") from None
     if "hsv" not in c or not isinstance(c["hsv"], list) or not c["hsv"]:
         raise VisionError(f"{w}: needs hsv = [[[h,s,v],[h,s,v]], ...] (or a learned lab_mean/lab_cov)")
     if reject:
         raise VisionError(f"{w}: reject = true needs a learned class (lab_mean/lab_cov)")
-    try:
+    with _named(w):
         return ColourClass(c["name"], tuple(c["hsv"]), tuple(bgr))
-    except VisionError as exc:
-        raise VisionError(f"{w}: {exc}") from None
+
+
+def _parse_roi(where: str, meter: dict) -> DrumROI | None:
+    """``[meter]``'s manual drum ROI (``roi = [cx, cy, r]`` px, ``roi_kind``, ``half_w_px``/``half_h_px``
+    of a rect), None without one."""
+    if "roi" not in meter:
+        if any(k in meter for k in ("roi_kind", "half_w_px", "half_h_px")):
+            raise VisionError(f"{where}: roi_kind/half_w_px/half_h_px need roi = [cx, cy, r]")
+        return None
+    r = meter["roi"]
+    if not (isinstance(r, list) and len(r) == 3):
+        raise VisionError(f"{where}: roi must be [cx, cy, r] in px, got {r!r}")
+    vals = [_px(where, "roi", v) for v in r]
+    kind = meter.get("roi_kind", "circle")
+    half = [None if k not in meter else _px(where, k, meter[k]) for k in ("half_w_px", "half_h_px")]
+    if kind == "rect" and any(h is not None and h <= 0 for h in half):
+        raise VisionError(f"{where}: half_w_px and half_h_px must be > 0 px, got {half}")
+    with _named(where):
+        return DrumROI(vals[0], vals[1], vals[2], kind, half[0], half[1])
 
 
 def parse_config(text: str, source: str = "<string>") -> MeterConfig:
@@ -240,31 +266,14 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
     island_px = _int(where, "island_px", meter.get("island_px", 0), 0, 10**6)
     light_ref = None
     if "light_reference" in meter:
-        try:
+        with _named(where):
             arr = check_reference(meter["light_reference"], "light_reference")
-        except VisionError as exc:
-            raise VisionError(f"{where}: {exc}") from None
         light_ref = tuple(tuple(float(v) for v in row) for row in arr)
     rot = _float(where, "camera_rotation_deg", meter.get("camera_rotation_deg", 0.0), -360.0, 360.0)
     mirror = meter.get("mirror", False)
     if not isinstance(mirror, bool):
         raise VisionError(f"{where}: mirror must be true or false, got {mirror!r}")
-    roi = None
-    if "roi" in meter:
-        r = meter["roi"]
-        if not (isinstance(r, list) and len(r) == 3):
-            raise VisionError(f"{where}: roi must be [cx, cy, r] in px, got {r!r}")
-        vals = [_px(where, "roi", v) for v in r]
-        kind = meter.get("roi_kind", "circle")
-        half = [None if k not in meter else _px(where, k, meter[k]) for k in ("half_w_px", "half_h_px")]
-        if kind == "rect" and any(h is not None and h <= 0 for h in half):
-            raise VisionError(f"{where}: half_w_px and half_h_px must be > 0 px, got {half}")
-        try:
-            roi = DrumROI(vals[0], vals[1], vals[2], kind, half[0], half[1])
-        except VisionError as exc:
-            raise VisionError(f"{where}: {exc}") from None
-    elif any(k in meter for k in ("roi_kind", "half_w_px", "half_h_px")):
-        raise VisionError(f"{where}: roi_kind/half_w_px/half_h_px need roi = [cx, cy, r]")
+    roi = _parse_roi(where, meter)
     classes = DEFAULT_CLASSES
     if "classes" in data:
         raw = data["classes"]
@@ -278,17 +287,13 @@ def parse_config(text: str, source: str = "<string>") -> MeterConfig:
         if light_ref is None:
             raise VisionError(f"{where}: light_reference_classes needs light_reference")
         n_labels = len(counted_classes(classes)) + 1
-        try:
+        with _named(where):
             arr = check_class_reference(meter["light_reference_classes"], n_labels, "light_reference_classes")
-        except VisionError as exc:
-            raise VisionError(f"{where}: {exc}") from None
         light_cls = tuple(tuple(float(v) for v in row.ravel()) for row in arr)
-    try:
+    with _named(f"config {source}"):
         check_class_set(classes)
         if not is_learned(classes):
             Classifier(classes)  # e.g. too many HSV ranges
-    except VisionError as exc:
-        raise VisionError(f"config {source}: {exc}") from None
     warnings = tuple(
         f"config {source}: HSV ranges of {a!r} and {b!r} overlap; {a!r} wins there (use `drumtwin classes suggest`"
         " for a learned model)" for a, b in overlapping_classes(classes)

@@ -4,8 +4,9 @@ Per frame one compiled pass over the ROI (``vision.moments``) classifies every p
 with the exact BGR lookup table of the colour classes (learned model or HSV boxes) and
 sums each class's pixel count and first and second moments, and the bed's pixels per
 small cell; centroids, spreads and the MI follow from the sums, the free-surface angle
-from the cells (``vision.slope``). The drum is detected, and the ROI's row spans built,
-once per frame size. On a frame with glare (clipped light) the spots and their halos are
+from the cells (``vision.slope``), in gravity's frame when the camera is turned or mirrored
+(``vision.gravity``). The drum is detected, and the ROI's grid, row spans and cells built
+(``vision.grid``), once per frame size. On a frame with glare (clipped light) the spots and their halos are
 filled with the class mix around them (``vision.glare``).
 """
 
@@ -21,9 +22,11 @@ import numpy as np
 from vision.colours import DEFAULT_CLASSES, ColourClass, check_class_set, counted_classes
 from vision.errors import VisionError
 from vision.glare import HALO, RING, glare_fill
+from vision.gravity import from_gravity, gravity_matrix, turn_grid, turn_moments
+from vision.grid import Geometry, build_geometry
 from vision.islands import island_relabel, relabel_moments
 from vision.mixing import mixing_indices
-from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables, row_spans
+from vision.moments import class_tables, frame_moments, kernel_labels, remapped_tables
 from vision.photometric import (
     JUMP,
     REBAKE_AT_ONCE,
@@ -35,8 +38,8 @@ from vision.photometric import (
     sample_means,
     track_light,
 )
-from vision.roi import DrumROI, _mask_in_box, detect_drum, roi_bbox
-from vision.slope import cell_areas, occupancy_shift, slope_from_moments, surface_from_occupancy
+from vision.roi import DrumROI, detect_drum
+from vision.slope import slope_from_moments, surface_from_occupancy
 
 __all__ = ["BED_MODES", "MAX_OUTSIDE", "ClassStats", "Meter", "Reading", "check_meter_numbers", "gravity_matrix"]
 
@@ -103,29 +106,6 @@ class Reading:
             if c.name == name:
                 return c
         raise KeyError(name)
-
-
-@dataclass
-class _Geometry:
-    roi: DrumROI
-    box: tuple[int, int, int, int]  # x0, y0, x1, y1 of the ROI's bounding box, px (x0, y0: the grid's first pixel)
-    first: np.ndarray  # per grid row of the box: first and one-past-last grid column inside the ROI
-    last: np.ndarray
-    roi_px: float  # grid pixels inside the ROI
-    shift: int  # occupancy cells of 2^shift px
-    area: np.ndarray  # grid pixels of the ROI per occupancy cell
-    full_area: float
-    occ: np.ndarray  # bed pixels per cell (filled by the kernel)
-    work: np.ndarray
-    gocc: np.ndarray  # glare pixels per cell (filled by the kernel)
-    outside: float = 0.0  # share of the ROI's area outside the image
-    sample: np.ndarray | None = None  # flat indices of the ROI pixels the light is estimated from
-    cell_off: tuple[int, int] = (0, 0)  # the occupancy cells start this far (px) left of / above box[:2]
-
-    @property
-    def cells_xy(self) -> tuple[int, int]:
-        """Image px of the occupancy grid's corner (may lie left of or above the image)."""
-        return self.box[0] - self.cell_off[0], self.box[1] - self.cell_off[1]
 
 
 class Meter:
@@ -229,7 +209,7 @@ class Meter:
         self._roi = roi
         self._roi_given = roi is not None
         self._rois: dict[tuple[int, int], DrumROI] = {}
-        self._geoms: dict[tuple[int, int], _Geometry] = {}
+        self._geoms: dict[tuple[int, int], Geometry] = {}
         self._shares: list[deque[float]] = [deque(maxlen=self.history) for _ in self.classes]
         self._d0: float | None = None
 
@@ -243,7 +223,7 @@ class Meter:
         """The last light estimate (None without a light reference or before the first frame)."""
         return self._light
 
-    def _track_light(self, flat: np.ndarray, g: _Geometry) -> None:
+    def _track_light(self, flat: np.ndarray, g: Geometry) -> None:
         assert self._light_ref is not None and g.sample is not None
         last = self._accepted
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine,
@@ -287,7 +267,7 @@ class Meter:
             self._roi = None
 
     # -- geometry --------------------------------------------------------------------
-    def _geometry(self, img: np.ndarray, shape_hw: tuple[int, int]) -> _Geometry:
+    def _geometry(self, img: np.ndarray, shape_hw: tuple[int, int]) -> Geometry:
         g = self._geoms.get(shape_hw)
         if g is not None:
             return g
@@ -298,19 +278,7 @@ class Meter:
             if roi is None:
                 roi = self._rois[shape_hw] = detect_drum(img)
         assert roi is not None
-        s = self.stride
-        shift = occupancy_shift(roi.r_px, s)
-        clipped = roi_bbox(roi, shape_hw)
-        box, off = _anchored_grid(clipped, roi, s, 1 << shift)
-        inside = _mask_in_box(roi, box)[::s, ::s]
-        first, last = row_spans(inside)
-        area = cell_areas(inside, s, shift, off)
-        full = float(((1 << shift) + s - 1) // s) ** 2
-        in_view = float(_mask_in_box(roi, clipped).sum())  # the ROI's pixels in the image
-        g = _Geometry(roi, box, first, last, float(inside.sum()), shift, area, full,
-                      np.zeros(area.shape, np.int32), np.empty(2 * area.shape[1] + 5, np.float64),
-                      np.zeros(area.shape, np.int32), max(0.0, 1.0 - in_view / roi.area_px), cell_off=off)
-        self._geoms[shape_hw] = g
+        g = self._geoms[shape_hw] = build_geometry(roi, shape_hw, self.stride)
         return g
 
     # -- per frame -------------------------------------------------------------------
@@ -368,7 +336,7 @@ class Meter:
                 rows[i] = [a + b for a, b in zip(rows[i], d, strict=True)]
         return self._reading(rows, g)
 
-    def _grid_labels(self, img: np.ndarray, g: _Geometry, ia: int, ib: int, ja: int,
+    def _grid_labels(self, img: np.ndarray, g: Geometry, ia: int, ib: int, ja: int,
                      jb: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
         """The kernel's labels of grid rows ``ia:ib`` and columns ``ja:jb`` (0 outside the ROI's
         spans), that window's inside mask, and the image px of its first grid pixel."""
@@ -380,7 +348,7 @@ class Meter:
         inside = (jj[None, :] >= g.first[rows, None]) & (jj[None, :] < g.last[rows, None])  # the spans
         return kernel_labels(sub, self._tables.fine, inside, self.opening), inside, (x0 + ja * s, y0 + ia * s)
 
-    def _island_delta(self, img: np.ndarray, g: _Geometry) -> np.ndarray:
+    def _island_delta(self, img: np.ndarray, g: Geometry) -> np.ndarray:
         """The class moments' change from the island filter (``vision.islands``) over the ROI."""
         k = len(self.classes)
         labels, _, origin = self._grid_labels(img, g, 0, len(g.first), 0, int(g.last.max()))
@@ -388,7 +356,7 @@ class Meter:
         new = island_relabel(labels, k, area, lightness=self._lightness)
         return relabel_moments(labels, new, k, origin, self.stride)
 
-    def _glare_delta(self, img: np.ndarray, g: _Geometry, n_glare: float) -> np.ndarray:
+    def _glare_delta(self, img: np.ndarray, g: Geometry, n_glare: float) -> np.ndarray:
         """``vision.glare.glare_fill`` on the grid window around the frame's glare cells."""
         s = self.stride
         ci, cj = np.nonzero(g.gocc)
@@ -402,7 +370,7 @@ class Meter:
         labels, inside, origin = self._grid_labels(img, g, ia, ib, ja, jb)
         return glare_fill(labels, inside, len(self.classes), origin, s)
 
-    def _reading(self, rows: list[list[float]], g: _Geometry) -> Reading:
+    def _reading(self, rows: list[list[float]], g: Geometry) -> Reading:
         roi = g.roi
         area = float(self.stride * self.stride)
         flags: list[str] = []
@@ -450,7 +418,7 @@ class Meter:
         min_bed = max(1.0, self.min_pixels / area, self.min_share * g.roi_px)
         t = self._gravity
         if t is not None:
-            m10, m01, m20, m11, m02 = _turn_moments(t, m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px)
+            m10, m01, m20, m11, m02 = turn_moments(t, m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px)
         axis = slope_from_moments(m00, m10, m01, m20, m11, m02, roi.cx_px, roi.cy_px, min_px=min_bed)
         image_deg = _NAN
         if m00 >= min_bed:
@@ -459,9 +427,9 @@ class Meter:
                 mid = surf.mid_px
                 image_deg = surf.slope_deg
             else:
-                occ, cell_area, origin = _turn_grid(t, g, g.occ)
+                occ, cell_area, origin = turn_grid(t, g, g.occ)
                 surf = surface_from_occupancy(occ, cell_area, g.full_area, origin, g.shift, roi.r_px)
-                mid, image_deg = _from_gravity(t, surf.mid_px, surf.slope_deg, roi)
+                mid, image_deg = from_gravity(t, surf.mid_px, surf.slope_deg, roi)
             slope, curv = surf.slope_deg, surf.curvature
             if not math.isfinite(slope):
                 flags.append("no_surface:no free surface found (too few surface points)")
@@ -478,87 +446,6 @@ class Meter:
             mix.mi, mix.mi_sigmoid, mix.mi_linear, mix.d_px, mix.dsigma_px, slope, conc, valid,
             tuple(flags), tuple(stats), roi, axis, curv, mid, image_deg,
         )
-
-
-def _anchored_grid(box: tuple[int, int, int, int], roi: DrumROI, step: int,
-                   cell: int) -> tuple[tuple[int, int, int, int], tuple[int, int]]:
-    """The stride grid and the occupancy cells anchored on the drum centre, so that a camera
-    turned by a quarter turn or mirrored samples the same pixels of the drum and bins them
-    into the same cells, turned (the free surface is the same fit, not one on pixels or cells
-    shifted by a fraction): the grid through the pixel nearest the centre (the box's first
-    pixel moved right/down by less than ``step``), cell edges on the pixel edge nearest the
-    centre (the cells start left of/above that pixel by the returned offset, px, less than
-    ``cell``; they may start outside the image when the drum fills it). Before, the box itself
-    was anchored unless that left the image, and the stride grid's phase followed it: on real
-    frames a mirror moved the slope by up to 2.9 deg (0022, 0036, 0064)."""
-    x0, y0, x1, y1 = box
-    px, py = round(roi.cx_px), round(roi.cy_px)  # the pixel nearest the centre
-    gx, gy = x0 + (px - x0) % step, y0 + (py - y0) % step
-    ex, ey = round(roi.cx_px + 0.5), round(roi.cy_px + 0.5)  # pixel index right of / below that edge
-    return (gx, gy, x1, y1), ((gx - ex) % cell, (gy - ey) % cell)
-
-
-def gravity_matrix(camera_rotation_deg: float, mirror: bool) -> np.ndarray | None:
-    """2x2 map of image offsets (px, y down) to gravity's frame, or None for the identity.
-
-    The image is gravity's view mirrored (x -> -x, when ``mirror``), then turned
-    counter-clockwise on screen by ``camera_rotation_deg``; this undoes both."""
-    a = math.radians(camera_rotation_deg % 360.0)
-    if a == 0.0 and not mirror:
-        return None
-    c, s = round(math.cos(a), 12), round(math.sin(a), 12)  # exact 0/1 for multiples of 90 deg
-    turn_back = np.array([[c, -s], [s, c]])  # clockwise on screen by the angle (y down)
-    flip = np.diag([-1.0, 1.0]) if mirror else np.eye(2)
-    return flip @ turn_back
-
-
-def _turn_moments(t: np.ndarray, m00: float, m10: float, m01: float, m20: float, m11: float, m02: float,
-                  cx: float, cy: float) -> tuple[float, float, float, float, float]:
-    """Raw moments of the bed in gravity's frame (about the same drum centre)."""
-    if not m00 > 0:
-        return m10, m01, m20, m11, m02
-    xb, yb = m10 / m00, m01 / m00
-    cov = np.array([[m20 / m00 - xb * xb, m11 / m00 - xb * yb], [m11 / m00 - xb * yb, m02 / m00 - yb * yb]])
-    gx, gy = t @ np.array([xb - cx, yb - cy]) + (cx, cy)
-    cg = t @ cov @ t.T
-    return (m00 * gx, m00 * gy, m00 * (cg[0, 0] + gx * gx), m00 * (cg[0, 1] + gx * gy),
-            m00 * (cg[1, 1] + gy * gy))
-
-
-def _turn_grid(t: np.ndarray, g: _Geometry, occ: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
-    """The occupancy and area cells turned into gravity's frame (same cell size, about the
-    drum centre): exact cell moves for multiples of 90 deg, bilinear otherwise. Returns the
-    cells, their ROI areas and the new grid's origin (px in gravity's frame)."""
-    cs = float(1 << g.shift)
-    roi = g.roi
-    c = np.array([roi.cx_px, roi.cy_px])
-    o = np.array(g.cells_xy) + 0.5 * cs  # centre of cell (0, 0)
-    span = roi.r_px + max(roi.half_w_px or 0.0, roi.half_h_px or 0.0)
-    n = int(math.ceil(2.0 * span / cs)) + 4
-    nominal = c - (0.5 * n) * cs
-    shift = np.round((c + t @ (o - c) - nominal - 0.5 * cs) / cs)  # whole cells: exact for 90 deg turns
-    go = c + t @ (o - c) - shift * cs  # centre of the new cell (0, 0)
-    m = np.hstack([t, shift[:, None]])
-    flags = cv2.INTER_LINEAR
-    area = cv2.warpAffine(g.area.astype(np.float32), m, (n, n), flags=flags, borderValue=0).astype(np.float64)
-    cells = cv2.warpAffine(occ[: g.area.shape[0], : g.area.shape[1]].astype(np.float32), m, (n, n), flags=flags,
-                           borderValue=0).astype(np.float64)
-    return cells, area, (float(go[0] - 0.5 * cs), float(go[1] - 0.5 * cs))
-
-
-def _from_gravity(t: np.ndarray, mid: tuple[float, float], slope_deg: float,
-                  roi: DrumROI) -> tuple[tuple[float, float], float]:
-    """A point and a line angle (deg, y up) of gravity's frame back in the image."""
-    if not (math.isfinite(mid[0]) and math.isfinite(slope_deg)):
-        return (_NAN, _NAN), _NAN
-    inv = np.linalg.inv(t)
-    c = np.array([roi.cx_px, roi.cy_px])
-    p = inv @ (np.array(mid) - c) + c
-    a = math.radians(slope_deg)
-    dx, dy = inv @ np.array([math.cos(a), -math.sin(a)])
-    ang = math.degrees(math.atan2(-dy, dx))
-    ang = ang + 180.0 if ang <= -90.0 else ang - 180.0 if ang > 90.0 else ang
-    return (float(p[0]), float(p[1])), ang
 
 
 def _median(values: deque[float]) -> float:

@@ -201,6 +201,9 @@ def _surface_py(occ, area, full_area, x0, y0, cs, r_px, pts_x, pts_y, res):  # p
     _fit_points(pts_x[:npts], pts_y[:npts], 0.25 * cs, r_px, res)
 
 
+# Over 80 lines because it is a numba kernel (the exception to the 80-line rule), not a Python twin of
+# one: ``_surface_fn`` compiles this very function (``_fit_points``), called by the surface kernel and
+# by ``fit_surface_points``; scalar loops with no temporaries per iteration, as the module's kernels are.
 def _fit_points_py(px, py, floor, r_px, res):  # pragma: no cover - compiled
     """The free surface through its points (image px, y down; 5 or more): robust line over the central chord,
     cubic S-shape; fills res as ``_surface_py`` (``floor``: least residual scale, px)."""

@@ -8,8 +8,17 @@ parameters); ``read(address, count, now_s)`` answers with the live status. The m
 
 Comm-loss trip (the drive's own watchdog): while running, no write to the command, reset
 or setpoint register for the comm-loss time trips the drive when its action is a safe one
-(fault latched, motor ramps to 0 Hz, a run command is ignored until a fault reset); an
-unsafe action (keep running, warn) only counts the event. Reads never feed it.
+(fault latched, a run command is ignored until a fault reset; the motor ramps to 0 Hz when
+the action is one of the profile's ``ramp_actions``, else it coasts: output off at once);
+an unsafe action (keep running, warn) only counts the event. Reads never feed it.
+
+Writes by the book (the Modbus application protocol's exception codes): a register the
+drive does not have, or one it only reports (status, output, fault, identity, the gaps of
+a read block), is exception 2 (illegal data address); a setpoint above ``max_hz`` (the
+word read unsigned: 65535 is 655.35 Hz at 100 counts/Hz, not -0.01 Hz) or a comm-loss
+action or code the profile does not list is exception 3 (illegal data value); nothing of a
+refused write is applied. The status word follows the output: ``decelerating_word`` while
+the output ramps down (when the profile has one), the stopped word only at 0 Hz.
 """
 
 from __future__ import annotations
@@ -77,25 +86,34 @@ class DriveModel:
 
     # -- the drive's front panel (tests, demo) ----------------------------------------------
     def set_fault(self, code: int | None) -> None:
-        """Raise fault ``code`` (motor coasts off) or clear it (None)."""
+        """Raise fault ``code`` (the motor coasts: output off at once) or clear it (None)."""
         if code:
             self.fault_code = int(code)
-            self.motor.running = False
+            self._halt(ramp=False)
         else:
             self.fault_code = 0
+        self._refresh()
+
+    def _halt(self, ramp: bool) -> None:
+        """Stop the motor: ramp down (a stop command, a ramp trip) or coast (output off at once)."""
+        self.motor.running = False
+        if not ramp:
+            self.motor.actual_rpm = 0.0
+
+    def feed(self, now_s: float) -> None:
+        """Restart the comm-loss time (what a write to the command, reset or setpoint does)."""
+        self._last_feed_s = now_s
+        self._lost = False
 
     # -- the bus -------------------------------------------------------------------------
     def write(self, address: int, words: list[int], now_s: float) -> int | None:
-        """Apply a write of ``words`` from ``address``; a Modbus exception code or None."""
+        """Apply a write of ``words`` from ``address``; a Modbus exception code (nothing
+        applied) or None."""
         self.tick(now_s)
+        err = self.write_error(address, words)
+        if err is not None:
+            return err
         p = self.profile
-        for i in range(len(words)):
-            if address + i not in self.regs:
-                return ILLEGAL_ADDRESS
-        for i, w in enumerate(words):
-            a = address + i
-            if a == p.setpoint_register and p.setpoint.to_hz(w) > p.max_hz + 1e-9:
-                return ILLEGAL_VALUE
         for i, w in enumerate(words):
             a = address + i
             old = self.regs[a]
@@ -103,19 +121,36 @@ class DriveModel:
             self.counters["writes"] += 1
             self.writes.append(DriveWrite(now_s, a, w))
             if a in (p.control_register, p.reset_register, p.setpoint_register):
-                self._last_feed_s = now_s
-                self._lost = False
+                self.feed(now_s)
             if a == p.reset_register and p.reset_mask and (w & p.reset_mask) and not (old & p.reset_mask):
                 self.fault_code = 0
             if a == p.setpoint_register:
-                self.motor.setpoint_rpm = max(0.0, p.setpoint.to_hz(w))
+                self.motor.setpoint_rpm = p.setpoint.to_hz(w)
             if a == p.control_register:
                 cmd = p.command_of(w)
                 if cmd == "run" and not self.fault_code:
                     self.motor.running = True
                 elif cmd == "stop":
-                    self.motor.running = False
+                    self._halt(ramp=True)
         self._refresh()
+        return None
+
+    def write_error(self, address: int, words: list[int]) -> int | None:
+        """The exception code a write of ``words`` from ``address`` gets (see module doc),
+        None when the drive takes it (pure)."""
+        p = self.profile
+        cl = p.comm_loss
+        writable = p.writable_registers
+        if any(address + i not in writable or address + i not in self.regs for i in range(len(words))):
+            return ILLEGAL_ADDRESS
+        for i, w in enumerate(words):
+            a = address + i
+            if a == p.setpoint_register and w > p.setpoint.to_counts(p.max_hz):  # unsigned: no reverse
+                return ILLEGAL_VALUE
+            if a == cl.action_register and cl.actions and w not in cl.actions:
+                return ILLEGAL_VALUE
+            if a == cl.code_register and ((w & cl.code_mask) >> cl.code_shift) not in cl.codes:
+                return ILLEGAL_VALUE
         return None
 
     def read(self, address: int, count: int, now_s: float) -> list[int] | int:
@@ -142,7 +177,7 @@ class DriveModel:
                 self.counters["comm_loss_trips"] += 1
                 self.trip_times_s.append(now_s)
                 self.fault_code = self.profile.comm_loss_fault_code
-                self.motor.running = False  # ramps to 0 Hz
+                self._halt(ramp=self.profile.comm_loss_ramps(self.regs))
             else:
                 self.counters["comm_loss_ignored"] += 1
         self._refresh()
@@ -150,7 +185,12 @@ class DriveModel:
     def _refresh(self) -> None:
         p = self.profile
         m = self.motor
-        word = p.running_word if m.running else p.stopped_word
+        if m.running:
+            word = p.running_word
+        elif m.actual_rpm > 0 and p.decelerating_word is not None:  # the output still ramps down
+            word = p.decelerating_word
+        else:
+            word = p.stopped_word
         if self.fault_code and p.tripped_mask:
             word = (word & ~p.tripped_mask) | p.tripped_value
         regs = self.regs

@@ -13,7 +13,8 @@ Usage (in-process, e.g. a test or the demo plant)::
 On a pty there are two: pymodbus's ``ModbusSerialServer`` opens the drive's end, the host
 opens the other, and a small relay thread between the two masters is the RS-485 cable
 (``disconnect()`` unplugs it). Requests to any other unit id are not answered (a drive
-only answers its own address). The server runs in its own asyncio loop in a thread.
+only answers its own address). The server runs in its own asyncio loop in a thread, with
+the framer and decoder of ``control.modbus.server`` (exception codes by the book).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import tempfile
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,11 +42,14 @@ from control.motor import MotorState
 @dataclass
 class DriveFaults:
     """What the emulator injects on the line: ``delay_s`` before each reply (slow replies),
-    ``corrupt_p`` probability that a reply's CRC is wrong, ``mute``: no replies at all."""
+    ``corrupt_p`` probability that a reply's CRC is wrong, ``mute``: no replies at all;
+    ``rewrite``: a drive that answers wrongly (another function code, byte count or echo):
+    called with each reply without its CRC, what it returns is sent with a valid CRC."""
 
     delay_s: float = 0.0
     corrupt_p: float = 0.0
     mute: bool = False
+    rewrite: Callable[[bytes], bytes] | None = None
 
 
 class DriveEmulator:
@@ -158,16 +163,21 @@ class DriveEmulator:
 
     def set_motor(self, *, setpoint_rpm: float | None = None, running: bool | None = None,
                   actual_rpm: float | None = None) -> MotorState:
-        """The front panel / another host: preset the motor (drum rpm) without a bus write."""
+        """The front panel / another host: preset the motor (drum rpm) without a bus write.
+        Starting it restarts the comm-loss time, as that host's run command did."""
         with self._lock:
             m = self.model.motor
+            now = self.now_s()
+            self.model.tick(now)
             if setpoint_rpm is not None:
                 m.setpoint_rpm = min(float(setpoint_rpm) * self.hz_per_rpm, self.profile.max_hz)
             if actual_rpm is not None:
                 m.actual_rpm = min(max(float(actual_rpm) * self.hz_per_rpm, 0.0), self.profile.max_hz)
             if running is not None:
                 m.running = bool(running)
-            self.model.tick(self.now_s())
+                if running:
+                    self.model.feed(now)
+            self.model.tick(now)
         return self.motor
 
     @property
@@ -292,6 +302,8 @@ class DriveEmulator:
         from pymodbus.server import ModbusSerialServer, ModbusTcpServer
         from pymodbus.simulator import DataType, SimData, SimDevice
 
+        from control.modbus.server import by_the_book
+
         self._loop = asyncio.get_running_loop()
         logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # requests to other unit ids: no log spam
         simdata = [
@@ -308,9 +320,9 @@ class DriveEmulator:
             s.bind(("127.0.0.1", tcp_port))
             self._port = s.getsockname()[1]
             s.close()
-            self._server = ModbusTcpServer(device, address=("127.0.0.1", self._port), **common)
+            self._server = by_the_book(ModbusTcpServer(device, address=("127.0.0.1", self._port), **common))
         else:
-            self._server = ModbusSerialServer(device, port=port, baudrate=115200, **common)
+            self._server = by_the_book(ModbusSerialServer(device, port=port, baudrate=115200, **common))
         ticker = asyncio.create_task(self._ticker())
         await self._server.serve_forever(background=True)
         self._ready.set()
@@ -352,6 +364,11 @@ class DriveEmulator:
         if f.mute or not data or data[0] != self.unit:  # a drive answers its own unit id only
             return b""
         self.replies += 1
+        if f.rewrite is not None:
+            from pymodbus.framer import FramerRTU
+
+            body = f.rewrite(data[:-2])
+            data = body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
         if f.corrupt_p > 0 and self._rng.random() < f.corrupt_p and data:
             return data[:-1] + bytes([data[-1] ^ 0xFF])  # the CRC's last byte: a CRC error
         return data

@@ -67,6 +67,8 @@ class CommLoss:
     code_shift: int = 0
     codes: dict[int, tuple[float, str, bool]] = field(default_factory=dict)
     recommended_code: int | None = None
+    ramp_actions: tuple[int, ...] = ()
+    """Actions (or codes) whose trip ramps the motor down; any other trip coasts (output off at once)."""
 
     @property
     def registers(self) -> tuple[int, ...]:
@@ -119,6 +121,7 @@ class DriveProfile:
     comm_loss: CommLoss
     tripped_mask: int = 0
     tripped_value: int = 0
+    decelerating_word: int | None = None  # status word while the output ramps down (None: stopped_word)
     identity: dict[str, int] = field(default_factory=dict)
     emulator_identity: dict[int, int] = field(default_factory=dict)
     accel_hz_per_s: float = 10.0
@@ -167,6 +170,13 @@ class DriveProfile:
         a = values[cl.action_register]
         return CommLossSetting(time_s, cl.actions.get(a, f"action {a}"), a in cl.safe_actions and time_s > 0)
 
+    def comm_loss_ramps(self, values: dict[int, int]) -> bool:
+        """Whether the comm-loss action set in ``values`` ramps the motor down (else it coasts)."""
+        cl = self.comm_loss
+        if cl.code_register is not None:
+            return ((values[cl.code_register] & cl.code_mask) >> cl.code_shift) in cl.ramp_actions
+        return cl.action_register is not None and values[cl.action_register] in cl.ramp_actions
+
     def comm_loss_advice(self, limit_s: float) -> str:
         """What to set on the drive: the parameter(s) and the value(s) for a ``limit_s`` trip."""
         cl = self.comm_loss
@@ -188,6 +198,13 @@ class DriveProfile:
     def status_registers(self) -> tuple[int, ...]:
         """Every register one status read needs."""
         return tuple(sorted({self.status_register, self.readback_register, self.output_register, self.fault_register}))
+
+    @property
+    def writable_registers(self) -> frozenset[int]:
+        """The registers a host may write: command, reset, setpoint and the comm-loss
+        parameters; every other register the drive serves is read-only."""
+        return frozenset({self.control_register, self.reset_register, self.setpoint_register,
+                          *self.comm_loss.registers})
 
     @property
     def all_registers(self) -> tuple[int, ...]:
@@ -269,6 +286,7 @@ def _build(d: dict[str, Any]) -> DriveProfile:
             code_shift=int(cl.get("code_shift", 0)),
             codes={k: (float(v[0]), str(v[1]), bool(v[2])) for k, v in _int_keys(cl["codes"]).items()},
             recommended_code=cl.get("recommended_code"),
+            ramp_actions=tuple(int(a) for a in cl.get("ramp_actions", ())),
         )
     else:
         comm = CommLoss(
@@ -280,6 +298,7 @@ def _build(d: dict[str, Any]) -> DriveProfile:
             safe_actions=tuple(int(a) for a in cl.get("safe_actions", ())),
             recommended_action=cl.get("recommended_action"),
             actions={k: str(v) for k, v in _int_keys(cl.get("actions", {})).items()},
+            ramp_actions=tuple(int(a) for a in cl.get("ramp_actions", ())),
         )
     emu = d.get("emulator", {})
     ident = list(emu.get("identity", []))
@@ -312,6 +331,8 @@ def _build(d: dict[str, Any]) -> DriveProfile:
         stopped_word=_reg(st["stopped_word"], "status.stopped_word"),
         tripped_mask=_reg(st.get("tripped_mask", 0), "status.tripped_mask"),
         tripped_value=_reg(st.get("tripped_value", 0), "status.tripped_value"),
+        decelerating_word=None if "decelerating_word" not in st else _reg(st["decelerating_word"],
+                                                                          "status.decelerating_word"),
         readback_register=_reg(st.get("readback_register", s["register"]), "status.readback_register"),
         output_register=_reg(o["register"], "output.register"),
         output=_scale(o, "output"),

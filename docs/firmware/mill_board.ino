@@ -171,7 +171,8 @@ void handleLine(const char *l, uint8_t n) {
     Serial.write(reply);
     return;
   }
-  if (seq == lastSeq && !strcmp(payload, lastPayload)) {  // resend: same answer, no re-apply
+  if (seq == lastSeq && !strcmp(payload, lastPayload)) {  // resend: same answer, no re-apply,
+    if (isCommand(payload, "STP")) running = false;      // but a stop always stops (never refused)
     Serial.write(lastReply);
     return;
   }

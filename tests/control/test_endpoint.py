@@ -98,9 +98,28 @@ def test_frames_from_the_past_are_ignored_and_nan_frames_do_not_count():
     assert back.mixed and back.changed == ""
 
 
-def test_block_sd_is_the_sample_sd_of_the_finite_values():
-    assert block_sd([1.0, 2.0, 3.0, math.nan]) == pytest.approx(1.0)
-    assert math.isnan(block_sd([1.0]))
+def test_block_sd_is_1_4826_times_the_median_absolute_deviation_of_the_finite_values():
+    """Known answers: 1, 2, 4 (median 2, deviations 1, 0, 2: MAD 1); an even count takes the middle
+    pair's mean (1, 2, 4, 10: median 3, deviations 2, 1, 1, 7: MAD 1.5); NaN and inf are no values."""
+    assert block_sd([1.0, 2.0, 4.0, math.nan, math.inf]) == pytest.approx(1.482602218505602, rel=1e-12)
+    assert block_sd([1.0, 2.0, 4.0, 10.0]) == pytest.approx(1.5 * 1.482602218505602, rel=1e-12)
+    assert block_sd([0.3, 0.5]) == pytest.approx(0.1 * 1.482602218505602, rel=1e-12)
+    assert math.isnan(block_sd([1.0])) and math.isnan(block_sd([math.nan, 1.0]))
+
+
+def test_block_sd_is_the_sd_of_normal_mi_and_one_odd_frame_in_26_cannot_move_it():
+    """On normal MI (sd 0.01) it estimates the sd; one frame in 26 at 0.56 on a bed at 0.97 moves
+    the sample sd to ~0.08 (past the 0.05 limit: issue 38's batch that never mixed) and this one by
+    less than 10 %. Half the block segregated (a transition) is no mixed block."""
+    rng = np.random.default_rng(11)
+    mixed = 0.97 + rng.normal(0.0, 0.01, 130)
+    assert block_sd(mixed) == pytest.approx(0.01, rel=0.15)
+    odd = mixed.copy()
+    odd[13::26] = 0.56
+    assert float(np.std(odd, ddof=1)) > 0.07
+    assert block_sd(odd) == pytest.approx(block_sd(mixed), rel=0.1)
+    half = np.concatenate([mixed[:65], 0.4 + rng.normal(0.0, 0.01, 65)])
+    assert block_sd(half) > 0.2
 
 
 @pytest.mark.parametrize("bad", [dict(target_mi=1.5), dict(band=0.0), dict(dwell_s=-1), dict(block_sd_max=0.0),
@@ -138,7 +157,7 @@ def test_endpoint_settings_replace_the_one_set_of_defaults_and_refuse_bad_values
 def test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_exit_2(tmp_path):
     from tests.cli import assert_one_line_error, cli
     from twin.config import RunConfig, endpoint_options
-    from twin.loop import endpoint_config
+    from twin.run.settings import endpoint_config
 
     opts = endpoint_options(band=0.03, dwell_s=12.0, block_s=None, block_sd_max=0.0)
     assert opts == {"band": 0.03, "dwell_s": 12.0, "block_sd_max": 0.0}
@@ -158,7 +177,7 @@ def test_an_endpoint_table_in_the_config_is_read_under_the_options_and_a_bad_one
     from tests.cli import assert_one_line_error, cli
     from twin.config import RunConfig, config_endpoint
     from twin.errors import TwinError
-    from twin.loop import endpoint_config
+    from twin.run.settings import endpoint_config
     from vision.config import parse_config
 
     example = (Path(__file__).resolve().parents[2] / "configs" / "example.toml").read_text()

@@ -3,8 +3,10 @@ OFF and MANUAL never act on the endpoint (issue 24)."""
 
 from __future__ import annotations
 
-from control.supervisor import Action, Mode, Supervisor, SupervisorConfig, SupervisorInputs
+from control.decision import Action, Mode, SupervisorInputs
+from control.supervisor import Supervisor
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 
 def est(t: float, level: float) -> TrendEstimate:
@@ -28,7 +30,7 @@ def run(sup: Supervisor, t0: float, t1: float, mixed_from: float) -> list:
 
 
 def test_auto_stops_the_mill_once_at_the_endpoint_with_its_reason():
-    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.AUTO)
+    sup = Supervisor(worked_config(stop_at_endpoint=True), mode=Mode.AUTO)
     ds = run(sup, 0.0, 60.0, mixed_from=20.0)
     stops = [d for d in ds if d.action is Action.STOP]
     assert len(stops) == 1
@@ -41,7 +43,7 @@ def test_auto_stops_the_mill_once_at_the_endpoint_with_its_reason():
 
 
 def test_auto_after_the_endpoint_stop_rearms_on_a_mode_change():
-    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.AUTO)
+    sup = Supervisor(worked_config(stop_at_endpoint=True), mode=Mode.AUTO)
     run(sup, 0.0, 30.0, mixed_from=5.0)
     sup.set_mode("auto", 30.0)
     ds = run(sup, 30.0, 40.0, mixed_from=35.0)
@@ -49,19 +51,19 @@ def test_auto_after_the_endpoint_stop_rearms_on_a_mode_change():
 
 
 def test_auto_without_stop_at_endpoint_does_not_stop():
-    sup = Supervisor(SupervisorConfig(), mode=Mode.AUTO)
+    sup = Supervisor(worked_config(), mode=Mode.AUTO)
     assert not [d for d in run(sup, 0.0, 60.0, mixed_from=10.0) if d.action is Action.STOP]
 
 
 def test_manual_only_reports_the_endpoint():
-    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.MANUAL)
+    sup = Supervisor(worked_config(stop_at_endpoint=True), mode=Mode.MANUAL)
     sup.set_manual_rpm(20.0)
     ds = run(sup, 0.0, 60.0, mixed_from=10.0)
     assert not [d for d in ds if d.action is Action.STOP or d.kind == "endpoint"]
 
 
 def test_off_only_reports_the_endpoint():
-    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.OFF)
+    sup = Supervisor(worked_config(stop_at_endpoint=True), mode=Mode.OFF)
     assert run(sup, 0.0, 60.0, mixed_from=10.0) == []
 
 
@@ -69,7 +71,7 @@ def test_after_the_endpoint_stop_auto_still_logs_its_safe_state():
     """After the endpoint stop AUTO returned before its fault checks: a mill link lost, vision
     lost or a stale twin afterwards gave no safe-state decision (nothing logged, ``safe`` False).
     Now the first fault is one ``safe`` decision that sends nothing (the mill is stopped)."""
-    sup = Supervisor(SupervisorConfig(stop_at_endpoint=True), mode=Mode.AUTO)
+    sup = Supervisor(worked_config(stop_at_endpoint=True), mode=Mode.AUTO)
     ds = run(sup, 0.0, 30.0, mixed_from=20.0)
     assert [d.kind for d in ds if d.t_s >= 20.0] == ["endpoint"] and not sup.safe
     out = []

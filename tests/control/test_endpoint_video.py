@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tests.cli import assert_one_line_error, cli
-from twin.loop import trend_config
+from twin.run.settings import trend_config
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "configs" / "pmma-blue-white.toml"
@@ -85,6 +85,49 @@ def test_synthetic_video_mixes_where_the_frames_do(tmp_path):
     assert r.code == 0, r.err
     out = json.loads(r.out)
     assert out["mixing_time_s"] is not None and 5.0 <= out["mixing_time_s"] <= 7.5
+
+
+ODD_FPS = 13  # one frame in 26: one every 2 s; the block (5 s) holds 65 frames, 2-3 of them odd
+ODD_EVERY = 26
+
+
+@pytest.fixture(scope="module")
+def both_sets_by_mi(real_drum_dir):
+    """Every real frame of the run (the blue-labelled and the white-labelled set, 42) at half size with
+    its MI through the project's meter (``CONFIG``), in time order."""
+    from vision.config import load_config
+
+    meter = load_config(CONFIG).make_meter()
+    files = sorted([*(real_drum_dir / "images").glob("*.jpg"),
+                    *(real_drum_dir.parent / "real-drum-pmma-white" / "images").glob("*.jpg")], key=lambda p: p.stem)
+    out = []
+    for p in files:
+        img = cv2.resize(cv2.imread(str(p)), (SIZE, SIZE), interpolation=cv2.INTER_AREA)
+        r = meter.measure(img)
+        assert r.valid, p
+        out.append((p, img, float(r.mi)))
+    assert len(out) == 42
+    return out
+
+
+@pytest.mark.parametrize("segregated", ["real-drum-pmma/images/0002.jpg", "real-drum-pmma-white/images/0001.jpg"])
+def test_one_partly_mixed_frame_in_26_does_not_keep_a_real_batch_from_mixing(both_sets_by_mi, tmp_path, segregated):
+    """Issue 38, item 3: 5 s of the real segregated frame, then the real mixed frames (MI >= 0.93)
+    with one frame in 26 replaced by the real frame of a partly mixed bed (the frame whose MI is
+    nearest 0.56). The block's sample sd counted those frames (0.08 > 0.05: the batch never
+    mixed, although the trend sat at 0.97); the robust block sd does not, and the mixing time is
+    still at the segregated -> mixed transition (5-8 s)."""
+    seg = next(img for p, img, _ in both_sets_by_mi if p.as_posix().endswith(segregated))
+    mixed = [img for _, img, mi in both_sets_by_mi if mi >= 0.93]
+    p_odd, odd, mi_odd = min(both_sets_by_mi, key=lambda f: abs(f[2] - 0.56))
+    assert 0.45 <= mi_odd <= 0.7 and len(mixed) >= 30, (p_odd, mi_odd)
+    n_seg, n_mix = 5 * ODD_FPS, 17 * ODD_FPS
+    tail = [odd if i % ODD_EVERY == ODD_EVERY // 2 else mixed[i % len(mixed)] for i in range(n_mix)]
+    out = mi_json(write_video(tmp_path / "odd.mp4", [seg] * n_seg + tail, ODD_FPS))
+    assert out["frames"] == n_seg + n_mix and out["valid"] == out["frames"]
+    assert out["mi_min"] < 0.45 and 0.6 < out["mi_median"]  # the video is what it says
+    assert out["mixing_time_s"] is not None and 5.0 <= out["mixing_time_s"] <= 8.0, out["endpoint_changes"]
+    assert [c["kind"] for c in out["endpoint_changes"]] == ["mixed"] and out["plateau_mi"] > 0.93
 
 
 def test_endpoint_bad_target_is_one_line(real_frames, tmp_path):

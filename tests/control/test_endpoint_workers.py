@@ -17,7 +17,7 @@ from control.trend import MITrend
 from tests.twin.test_mill_worker import Sink
 from tests.twin.test_workers import Boxes, _reading, sup_worker
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.live.records import StopMill
+from twin.live.commands import StopMill
 from twin.state import LiveState
 
 FPS = 30.0

@@ -9,7 +9,8 @@ import pytest
 
 from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
-from control.supervisor import Supervisor, SupervisorConfig
+from control.supervisor import Supervisor
+from tests.control.supervisor_values import worked_config
 
 
 def test_rpm_range_takes_the_critical_speed_fraction() -> None:
@@ -56,12 +57,12 @@ def test_whatif_caps_are_the_whatif_commands() -> None:
 
 
 def test_supervisor_enforces_the_same_limits() -> None:
-    cfg = SupervisorConfig(min_rpm=5.0, max_rpm=45.0, critical_rpm=60.0, max_critical_frac=0.5)
-    assert cfg.limits == Limits(5.0, 45.0, 60.0, 0.5, cfg.max_rate_rpm_per_s)
-    assert cfg.rpm_limits == cfg.limits.rpm_range == (5.0, 30.0)
+    cfg = worked_config(min_rpm=5.0, max_rpm=45.0, critical_rpm=60.0, max_critical_frac=0.5)
+    assert cfg.limits == Limits(5.0, 45.0, 60.0, 0.5, cfg.limits.max_rate_rpm_per_s)
+    assert cfg.limits.rpm_range == (5.0, 30.0)
     sup = Supervisor(cfg)
     assert sup.set_manual_rpm(100.0) == cfg.limits.check_rpm(100.0).rpm == 30.0
     with pytest.raises(ControlError):
-        SupervisorConfig(min_rpm=50.0, max_rpm=45.0)
+        worked_config(min_rpm=50.0, max_rpm=45.0)
     with pytest.raises(ControlError):
         Limits(min_rpm=5.0, max_rpm=45.0, critical_rpm=5.0, max_critical_frac=0.5)

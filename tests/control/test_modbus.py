@@ -22,10 +22,6 @@ from tests.waiting import wait_until
 MANUAL_10HZ = {"delta-ms300": 1000, "abb-acs": 4000, "siemens-v20": 3277, "invertek-e3": 100, "generic": 1000}
 
 
-def _wait(pred, timeout_s: float, what: str) -> None:
-    wait_until(pred, timeout_s, what, poll_s=0.02)
-
-
 @pytest.fixture
 def drive(request) -> Iterator[DriveEmulator]:
     name = getattr(request, "param", "delta-ms300")
@@ -169,12 +165,12 @@ def test_every_profile_runs_stops_scales_and_decodes_faults(drive: DriveEmulator
         mill.start()
         assert [w.value for w in drive.writes if w.address == p.control_register][-len(p.run_words):] == list(
             p.run_words)
-        _wait(lambda: mill.heartbeat().actual_rpm > 5.0, 10, "the motor ramping up")
+        wait_until(lambda: mill.heartbeat().actual_rpm > 5.0, 10, "the motor ramping up")
         st = mill.heartbeat()
         assert st.running and 0 < st.actual_rpm <= 27.5
         mill.stop()
         assert drive.registers(p.control_register)[0] == p.stop_word
-        _wait(lambda: not mill.status().running, 5, "the stop")
+        wait_until(lambda: not mill.status().running, 5, "the stop")
         drive.set_drive_fault()  # fault word decoding: the profile's code and name
         st = mill.status()
         assert not st.running and st.fault == p.fault_name(p.drive_fault_code) != f"code {p.drive_fault_code}"
@@ -198,7 +194,8 @@ def test_a_third_party_client_writing_the_manuals_registers_sees_the_manuals_beh
         if drive.profile.name == "abb-acs":
             c.write_register(cw, 0x047E, device_id=7)
         assert not c.write_register(cw, run, device_id=7).isError()
-        _wait(lambda: c.read_holding_registers(out, count=1, device_id=7).registers[0] > 5 * per_hz, 10, "the ramp")
+        wait_until(lambda: c.read_holding_registers(out, count=1, device_id=7).registers[0] > 5 * per_hz, 10,
+                   "the ramp")
         assert drive.output_hz > 5.0
     finally:
         c.close()
@@ -227,7 +224,7 @@ def test_the_comm_loss_trip_stops_a_drive_nobody_writes_to_again_and_again(drive
             st = mill.status()
             assert st.running and st.fault is None
             t0 = time.monotonic()
-            _wait(lambda: mill.status().fault is not None, 3, "the comm-loss trip")  # reads do not feed it
+            wait_until(lambda: mill.status().fault is not None, 3, "the comm-loss trip")  # reads do not feed it
             assert time.monotonic() - t0 < trip_s + 0.5
             st = mill.status()
             assert st.fault == p.fault_name(p.comm_loss_fault_code) and not st.running
@@ -270,12 +267,13 @@ def test_a_garbled_slow_or_missing_reply_is_a_timeout(drive: DriveEmulator, faul
     with ModbusMill(url, timeout_s=0.25, retries=1) as mill:
         drive.faults = {"corrupt": DriveFaults(corrupt_p=1.0), "slow": DriveFaults(delay_s=0.6),
                         "mute": DriveFaults(mute=True)}[fault]
+        replies = drive.counters["replies"]
         with pytest.raises(TimeoutError, match="no valid answer"):
             mill.status()
         assert not mill.connected
         drive.faults = DriveFaults()
-        if fault == "slow":  # both slow replies (served one after the other) are on their way: ask after them
-            time.sleep(1.5)
+        if fault == "slow":  # the request and its retry, answered late one after the other: ask after them
+            wait_until(lambda: drive.counters["replies"] >= replies + 2, 10, "the two slow replies")
         assert mill.status().fault is None and mill.connected
 
 
@@ -287,20 +285,23 @@ def test_a_host_that_loses_the_cpu_just_after_a_write_keeps_its_link(drive: Driv
     import types
 
     import serial.serialposix as sp
+    import serial.serialutil
 
     from control.driver import WRITE_TIMEOUT_S
 
     with ModbusMill(drive.mill_url(), timeout_s=0.25, retries=1) as mill:
         port = mill._client.socket
         assert port.write_timeout == WRITE_TIMEOUT_S
-        real_write = sp.os.write
+        real_write, lost_s = sp.os.write, [0.0]
 
         def write_then_lose_the_cpu(fd: int, data: bytes) -> int:
             n = real_write(fd, data)
             if fd == port.fd:
-                time.sleep(0.5)  # all written; the thread runs again 0.5 s later
+                lost_s[0] += 0.5  # all written; the thread runs again 0.5 s later (by pyserial's timers)
             return n
 
+        real_time = serial.serialutil.Timeout.TIME
+        monkeypatch.setattr(serial.serialutil.Timeout, "TIME", staticmethod(lambda: real_time() + lost_s[0]))
         monkeypatch.setattr(sp, "os", types.SimpleNamespace(**{**vars(sp.os), "write": write_then_lose_the_cpu}))
         assert mill.status().fault is None and mill.connected
 
@@ -330,7 +331,7 @@ def test_an_rfc2217_url_reaches_the_drive_through_a_real_rfc2217_server(drive: D
             assert drive.writes == []  # the comm-loss check at connect only read
             mill.set_rpm(25.0)
             mill.start()
-            _wait(lambda: drive.output_hz > 5.0, 10, "the drive to ramp up")
+            wait_until(lambda: drive.output_hz > 5.0, 10, "the drive to ramp up")
             st = mill.heartbeat()
             assert st.setpoint_rpm == 25.0 and st.running and st.fault is None
             assert drive.registers(1) == [10000]  # 25 Hz of the 50 Hz that 20000 means (40002)
@@ -352,6 +353,7 @@ def test_a_late_answer_to_an_earlier_request_is_never_taken_for_this_one(drive: 
     with ModbusMill(drive.mill_url(), timeout_s=0.2, retries=0) as mill:  # (0.05 s failed on a loaded machine)
         mill.set_rpm(5.0)
         drive.faults = DriveFaults(delay_s=0.3)  # each answer lands in the next request's wait
+        asked, replies = mill.stats["requests"], drive.counters["replies"]
         outcomes = []
         for i in range(12):
             try:
@@ -361,5 +363,8 @@ def test_a_late_answer_to_an_earlier_request_is_never_taken_for_this_one(drive: 
                 outcomes.append("timeout")
         assert "timeout" in outcomes  # and nothing but TimeoutError escaped
         drive.faults = DriveFaults()
-        time.sleep(2.0)  # the drive's backlog of slow answers (12 x 0.3 s served against 12 x 0.2 s asked)
+        # the drive's backlog of slow answers (12 x 0.3 s served against 12 x 0.2 s asked): each request
+        # (no retries) is answered once, late
+        wait_until(lambda: drive.counters["replies"] - replies >= mill.stats["requests"] - asked, 10,
+                   "the drive's backlog of slow answers")
         assert mill.status().setpoint_rpm == 5.0

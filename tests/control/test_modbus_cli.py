@@ -45,11 +45,15 @@ def test_check_says_what_to_change_and_exits_2(delta: DriveEmulator) -> None:
     assert d["safe"] is False and d["comm_loss_s"] == 0 and "set Pr.09-03 to 2 s and Pr.09-02 to 1" in d["change"]
 
 
-def test_commands_on_a_drive_with_its_trip_disabled_are_one_line_errors(delta: DriveEmulator) -> None:
+def test_on_a_drive_with_its_trip_disabled_start_and_set_rpm_are_refused_and_status_is_read(
+    delta: DriveEmulator,
+) -> None:
     delta.commission(0.0)
-    for cmd in (("start",), ("set-rpm", "5"), ("status",)):
-        assert_one_line_error(cli("mill", delta.mill_url(), *cmd), "Pr.09-03", "override=comm-loss")
-    assert delta.writes == []
+    for cmd in (("start",), ("set-rpm", "5")):
+        assert_one_line_error(cli("mill", delta.mill_url(), *cmd), "refused", "Pr.09-03", "override=comm-loss")
+    assert delta.writes == []  # refused before anything was written
+    r = cli("mill", delta.mill_url(), "status", "--json")  # reads are never gated (stop: test_stop_never_gated.py)
+    assert r.code == 0 and json.loads(r.out)["running"] is False, r.err
 
 
 def test_mill_commands_on_a_modbus_url(delta: DriveEmulator) -> None:

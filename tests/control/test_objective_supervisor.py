@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import pytest
 
+from control.decision import Action, Mode, PredictionResult, SupervisorInputs
 from control.errors import ControlError
 from control.objective import RpmPrediction
-from control.supervisor import Action, Mode, PredictionResult, Supervisor, SupervisorConfig, SupervisorInputs
+from control.supervisor import Supervisor
+from control.supervisor_config import SupervisorConfig
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 ROWS = {  # faster is sooner, but the power grows as rpm^2: energy favours the slow drum
     5.0: RpmPrediction(5.0, 0.95, 300.0, 0.5 * 300.0, 0.5),
@@ -24,7 +27,7 @@ def est(t: float, level: float) -> TrendEstimate:
 
 def decide(objective: str, level: float = 0.80, rows=ROWS, current: float = 15.0):
     """Step until the first move/hold; the request is answered at once with ``rows``."""
-    sup = Supervisor(SupervisorConfig(objective=objective, target_mi=0.9, min_rpm=5.0, max_rpm=45.0,
+    sup = Supervisor(worked_config(objective=objective, target_mi=0.9, min_rpm=5.0, max_rpm=45.0,
                                       critical_rpm=None, max_critical_frac=1.0, max_rate_rpm_per_s=100.0,
                                       detect_dwell_s=5.0), mode=Mode.AUTO)
     requests = []
@@ -68,16 +71,16 @@ def test_without_rows_the_plateau_scoring_decides_and_says_so():
 
 def test_objective_needs_a_target_and_a_known_name():
     with pytest.raises(ControlError, match="target_mi"):
-        SupervisorConfig(objective="time")
+        worked_config(objective="time")
     with pytest.raises(ControlError, match="objective"):
-        SupervisorConfig(objective="cheapest", target_mi=0.9)
+        worked_config(objective="cheapest", target_mi=0.9)
     assert SupervisorConfig().objective == "plateau" and not SupervisorConfig().stop_at_endpoint
 
 
 def test_run_options_objective_and_target_are_checked_in_one_line(tmp_path):
     from tests.cli import assert_one_line_error, cli
     from twin.config import RunConfig
-    from twin.loop import supervisor_config
+    from twin.run.settings import supervisor_config
 
     assert_one_line_error(cli("run", "--no-dashboard", "--objective", "cheapest", "--log", tmp_path / "a"),
                           "--objective")
@@ -98,7 +101,7 @@ def _stepper(at_once: bool, level: float = 0.80, rate: float = 0.0):
     from dataclasses import replace
 
     rows = {r: replace(v, time_to_target_s=0.0) if at_once and r == 25.0 else v for r, v in ROWS.items()}
-    sup = Supervisor(SupervisorConfig(objective="time", target_mi=0.9, min_rpm=5.0, max_rpm=45.0, critical_rpm=None,
+    sup = Supervisor(worked_config(objective="time", target_mi=0.9, min_rpm=5.0, max_rpm=45.0, critical_rpm=None,
                                       max_critical_frac=1.0, max_rate_rpm_per_s=3.0, detect_dwell_s=5.0),
                      mode=Mode.AUTO)
     decisions, requests = [], []

@@ -5,23 +5,16 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from pathlib import Path
 from typing import Any
 
 import pytest
 
+from control.decision import Action, Mode, PredictionRequest, PredictionResult, SupervisorInputs
 from control.errors import ControlError
-from control.supervisor import (
-    Action,
-    Mode,
-    PredictionRequest,
-    PredictionResult,
-    SafeAction,
-    Supervisor,
-    SupervisorConfig,
-    SupervisorInputs,
-)
+from control.supervisor import Supervisor
+from control.supervisor_config import SafeAction, SupervisorConfig
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 DT = 0.5
 
@@ -65,25 +58,38 @@ def cfg(**kw) -> SupervisorConfig:
         prediction_wait_s=0.0,  # no answer to a request: fall back at once
     )
     base.update(kw)
-    return SupervisorConfig(**base)
+    return worked_config(**base)
 
 
 def test_limits_include_the_critical_speed_it_is_given():
-    c = SupervisorConfig(min_rpm=2, max_rpm=100, critical_rpm=80.0, max_critical_frac=0.5)
-    assert c.rpm_limits == (2, 40.0)
-    assert c.clamp(500) == 40.0 and c.clamp(0) == 2
-    assert SupervisorConfig(min_rpm=2, max_rpm=30).rpm_limits == (2, 30)  # no drum given: max_rpm only
+    c = worked_config(min_rpm=2, max_rpm=100, critical_rpm=80.0, max_critical_frac=0.5)
+    assert c.limits.rpm_range == (2, 40.0)
+    assert c.limits.clamp(500) == 40.0 and c.limits.clamp(0) == 2
+    assert worked_config(min_rpm=2, max_rpm=30).limits.rpm_range == (2, 30)  # no drum given: max_rpm only
     for bad in (dict(seg_level=0.6, clear_level=0.5), dict(critical_rpm=0.0), dict(critical_rpm=math.nan),
                 dict(vision_timeout_s=math.inf)):
         with pytest.raises(ControlError):
-            SupervisorConfig(**bad)
+            worked_config(**bad)
 
 
-def test_control_has_no_critical_speed_formula_of_its_own():
-    """One critical-speed function (sim.recipe.DrumSpec.critical_rpm): control never repeats it."""
-    control = Path(__file__).resolve().parents[2] / "control"
-    for path in control.glob("*.py"):
-        assert "42.3" not in path.read_text(), path
+def test_a_runs_supervisor_caps_rpm_at_the_share_of_its_drums_critical_speed():
+    """One critical-speed function (``sim.recipe.DrumSpec.critical_rpm``): the run's supervisor
+    (``twin.run.settings.supervisor_config``, the one path from a drum to control's limits) caps
+    MANUAL and AUTO at ``max_critical_frac`` of the critical speed of the drum it is given, for a
+    small, the paper's and a large drum. A supervisor that kept the paper's drum's cap, or a
+    second formula on the way (another constant, another rounding), fails here."""
+    from sim.recipe import DrumSpec
+    from twin.run.settings import Seams, supervisor_config
+
+    caps = []
+    for d_m in (0.1, 0.3, 1.0):
+        crit = DrumSpec(diameter_m=d_m).critical_rpm
+        cfg = supervisor_config(Seams(limits={"max_rpm": 500.0}), crit)
+        cap = cfg.limits.max_critical_frac * crit
+        assert cfg.limits.rpm_range == (cfg.limits.min_rpm, cap), d_m
+        assert Supervisor(cfg).set_manual_rpm(1000.0) == cap
+        caps.append(cap)
+    assert caps[0] > caps[1] > caps[2]  # a smaller drum turns faster
 
 
 def test_no_action_when_well_mixed():
@@ -116,7 +122,7 @@ def test_one_move_with_predictions_then_dwell():
     assert "twin predicts" in m.reason and m.inputs.trend.level == 0.4
     assert m.rpm == max(m.scores, key=m.scores.get)  # best score on the candidate grid
     # the penalty matters: the best raw prediction (flat above 20 rpm) is not the furthest move
-    assert 20 <= m.rpm < sup.config.rpm_limits[1]
+    assert 20 <= m.rpm < sup.config.limits.rpm_range[1]
     assert calls and calls[0][1] == sup.config.horizon_s
     # still segregated: nothing more before the minimum dwell between changes
     ds2 = run(sup, 40, 55, level=0.4, predictor=predictor)
@@ -159,13 +165,13 @@ def test_hysteresis_clears_only_above_clear_level():
 def test_rate_limit_ramps_the_setpoint():
     sup = Supervisor(cfg(max_rate_rpm_per_s=2.0, ramp_interval_s=1.0), mode=Mode.AUTO)
     ds = run(sup, 0, 40, level=0.3, predictor=lambda r, h: {x: x / 100 for x in r})
-    assert ds[0].kind == "move" and ds[0].rpm == 7.0 and ds[0].target_rpm == sup.config.rpm_limits[1]
+    assert ds[0].kind == "move" and ds[0].rpm == 7.0 and ds[0].target_rpm == sup.config.limits.rpm_range[1]
     ramps = [d for d in ds if d.kind == "ramp"]
     rpms = [ds[0].rpm] + [d.rpm for d in ramps]
     times = [ds[0].t_s] + [d.t_s for d in ramps]
     assert all(b - a <= 2.0 + 1e-9 for a, b in itertools.pairwise(rpms))
     assert all(tb - ta >= 1.0 - 1e-9 for ta, tb in itertools.pairwise(times))
-    assert rpms[-1] == sup.config.rpm_limits[1]
+    assert rpms[-1] == sup.config.limits.rpm_range[1]
 
 
 def test_predictions_are_asked_once_and_used_when_they_arrive():
@@ -239,7 +245,7 @@ def test_safe_state_on_each_fault(fault, inputs, reason, action):
 
 def test_manual_follows_operator_and_ignores_vision():
     sup = Supervisor(cfg(max_rate_rpm_per_s=100.0), mode=Mode.MANUAL)
-    assert sup.set_manual_rpm(500) == sup.config.rpm_limits[1]
+    assert sup.set_manual_rpm(500) == sup.config.limits.rpm_range[1]
     sup.set_manual_rpm(12.0)
     ds = run(sup, 0, 30, level=0.2, last_valid_mi_s=0.0)  # no vision, segregated: manual does not care
     assert [(d.kind, d.rpm) for d in ds] == [("manual", 12.0)]
@@ -346,7 +352,7 @@ def test_a_ramp_from_a_board_outside_the_limits_commands_only_rpm_inside_them(bo
     asks for an rpm; the ramp then starts inside the limits (a step towards them), never at
     an intermediate rpm outside them."""
     sup = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
-    lo, hi = sup.config.rpm_limits
+    lo, hi = sup.config.limits.rpm_range
     ds = run(sup, 0, 1, level=0.9, setpoint_rpm=board_rpm, actual_rpm=board_rpm, mill_running=True, mill_epoch=1)
     assert [d.rpm for d in ds if d.rpm is not None] == ([hi] if board_rpm > hi else [])
     sup.set_manual_rpm(20.0)
@@ -364,7 +370,7 @@ def test_manual_does_not_adopt_a_board_rpm_outside_the_limits():
     sup = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
     ds = run(sup, 0, 3, level=0.9, setpoint_rpm=60.0, actual_rpm=60.0, mill_running=True, mill_epoch=1)
     ds += run(sup, 3, 8, level=0.9, setpoint_rpm=55.0, actual_rpm=55.0, mill_running=True, mill_epoch=2)
-    hi = sup.config.rpm_limits[1]
+    hi = sup.config.limits.rpm_range[1]
     assert sup.manual_rpm is None and [(d.kind, d.rpm) for d in ds if d.rpm is not None] == [("ramp", hi)] * 2
     below = Supervisor(cfg(max_rate_rpm_per_s=1.0, ramp_interval_s=1.0), mode=Mode.MANUAL)
     ds = run(below, 0, 5, level=0.9, setpoint_rpm=0.5, actual_rpm=0.5, mill_running=True, mill_epoch=1)
@@ -372,3 +378,25 @@ def test_manual_does_not_adopt_a_board_rpm_outside_the_limits():
     inside = Supervisor(cfg(), mode=Mode.MANUAL)
     run(inside, 0, 1, level=0.9, setpoint_rpm=12.0, actual_rpm=12.0, mill_running=True, mill_epoch=1)
     assert inside.manual_rpm == 12.0
+
+
+def test_a_running_board_that_reports_no_actual_speed_is_resynced_from_its_setpoint() -> None:
+    """A board read back running with a NaN actual speed and a known setpoint: the supervisor
+    takes the setpoint as its state at that epoch, so a later read of the same epoch does
+    not resync again and a manual ramp goes on from what it commanded (found by the
+    property test: it used to skip the NaN read and resync from a later setpoint)."""
+    sup = Supervisor(worked_config(min_rpm=5.0, max_rpm=10.0, max_rate_rpm_per_s=1.0), Mode.MANUAL)
+
+    def step(t: float, **inp: Any) -> Any:
+        kw: dict[str, Any] = dict(last_valid_mi_s=t, twin_updated_s=t, mill_connected=True)
+        kw.update(inp)
+        d, _ = sup.step(t, SupervisorInputs(trend=est(t, 0.0), **kw))
+        return d
+
+    step(0.9, actual_rpm=math.nan, setpoint_rpm=4.0, mill_running=True, mill_epoch=1)
+    assert sup.commanded_rpm == 4.0
+    sup.set_manual_rpm(7.0)
+    d = step(1.0, actual_rpm=None, setpoint_rpm=None, mill_epoch=1)
+    assert d is not None and d.rpm == 5.0  # one rate step above the board's 4 rpm, not a jump to 7
+    d = step(2.0, actual_rpm=None, setpoint_rpm=6.5, mill_epoch=1)  # same epoch: no new resync
+    assert d is not None and d.rpm == 6.0

@@ -11,20 +11,13 @@ import math
 
 import pytest
 
+from control.decision import Action, Decision, Mode, PredictionRequest, PredictionResult, SupervisorInputs
 from control.errors import ControlError
 from control.objective import RpmPrediction, choose
-from control.supervisor import (
-    Action,
-    Decision,
-    Mode,
-    PredictionRequest,
-    PredictionResult,
-    SafeAction,
-    Supervisor,
-    SupervisorConfig,
-    SupervisorInputs,
-)
+from control.supervisor import Supervisor
+from control.supervisor_config import SafeAction, SupervisorConfig
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 
 def est(level: float, rate: float = 0.0, settled: bool = True, t: float = 0.0) -> TrendEstimate:
@@ -41,7 +34,7 @@ def inp(level: float = 0.3, rpm: float | None = 10.0, t: float = 0.0, **kw) -> S
 def cfg(**kw) -> SupervisorConfig:
     base: dict = dict(detect_dwell_s=0.0, max_rate_rpm_per_s=100.0, prediction_wait_s=20.0)
     base.update(kw)
-    return SupervisorConfig(**base)
+    return worked_config(**base)
 
 
 def due(
@@ -143,7 +136,7 @@ def test_a_best_a_micro_rpm_from_the_current_one_is_a_move():
 
 
 def test_candidates_exactly_at_the_limits_slack_are_scored():
-    lo, hi = SupervisorConfig().rpm_limits
+    lo, hi = worked_config().limits.rpm_range
     _, d, _ = answer({lo - 1e-9: 0.3, hi + 1e-9: 0.3, 10.0: 0.3})
     assert d is not None and d.scores is not None and set(d.scores) == {lo - 1e-9, hi + 1e-9, 10.0}
 
@@ -159,7 +152,7 @@ def test_without_a_candidate_near_and_a_level_staying_is_worth_nothing():
 
 
 def test_candidates_outside_the_limits_or_without_a_number_are_not_scored():
-    lo, hi = SupervisorConfig().rpm_limits
+    lo, hi = worked_config().limits.rpm_range
     preds = {lo - 1e-8: 0.9, hi + 1e-8: 0.9, lo - 1e-10: 0.31, hi + 1e-10: 0.5, 20.0: math.nan, 10.0: 0.3}
     _, d, _ = answer(preds)
     assert d is not None and d.scores is not None
@@ -849,10 +842,10 @@ def test_a_refusal_reported_at_the_first_step_is_a_fault():
 @pytest.mark.parametrize("bad", [1.5, -0.25, 1.0 + 1e-9, math.inf, math.nan])
 def test_target_mi_outside_zero_to_one_is_refused_with_its_value(bad):
     with pytest.raises(ControlError) as exc:
-        SupervisorConfig(target_mi=bad)
+        worked_config(target_mi=bad)
     assert str(exc.value) == f"target_mi must be in [0, 1], got {bad}"
 
 
 def test_target_mi_at_both_ends_is_allowed():
-    assert SupervisorConfig(target_mi=0.0).target_mi == 0.0
-    assert SupervisorConfig(objective="time", target_mi=1.0).target_mi == 1.0
+    assert worked_config(target_mi=0.0).target_mi == 0.0
+    assert worked_config(objective="time", target_mi=1.0).target_mi == 1.0

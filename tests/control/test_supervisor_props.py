@@ -10,8 +10,10 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from control.supervisor import Action, Mode, PredictionResult, Supervisor, SupervisorConfig, SupervisorInputs
+from control.decision import Action, Mode, PredictionResult, SupervisorInputs
+from control.supervisor import Supervisor
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 RPM = st.floats(0.0, 200.0, allow_nan=False)
 MAYBE_RPM = st.one_of(st.none(), RPM, st.just(math.nan))
@@ -47,9 +49,9 @@ def _trend(t: float, s: dict) -> TrendEstimate:
     rate=st.floats(0.5, 10.0),
 )
 def test_every_command_is_inside_the_limits_and_the_rate(steps, start, critical, max_rpm, rate):
-    config = SupervisorConfig(min_rpm=5.0, max_rpm=max_rpm, critical_rpm=critical, max_rate_rpm_per_s=rate,
+    config = worked_config(min_rpm=5.0, max_rpm=max_rpm, critical_rpm=critical, max_rate_rpm_per_s=rate,
                               prediction_wait_s=2.0, min_change_interval_s=5.0, detect_dwell_s=1.0)
-    lo, hi = config.rpm_limits
+    lo, hi = config.limits.rpm_range
     sup = Supervisor(config, start)
     t, last_cmd, epoch = 0.0, None, None
     mode = start
@@ -95,9 +97,9 @@ def test_every_command_is_inside_the_limits_and_the_rate(steps, start, critical,
 def test_auto_never_targets_a_predicted_rpm_outside_the_limits(predictions, board, critical):
     """A segregated bed in AUTO with the twin's predictions at any rpm (above the limits too),
     the board's state known or not: AUTO's target and every command stay inside the limits."""
-    config = SupervisorConfig(min_rpm=5.0, max_rpm=45.0, critical_rpm=critical, detect_dwell_s=1.0,
+    config = worked_config(min_rpm=5.0, max_rpm=45.0, critical_rpm=critical, detect_dwell_s=1.0,
                               prediction_wait_s=5.0, min_change_interval_s=5.0, min_gain=0.0)
-    lo, hi = config.rpm_limits
+    lo, hi = config.limits.rpm_range
     sup = Supervisor(config, Mode.AUTO)
     flat = {"dt": 0.5, "level": 0.2, "rate": 0.0, "settled": True, "radial": None}
     acted = False
@@ -122,7 +124,7 @@ def test_auto_never_targets_a_predicted_rpm_outside_the_limits(predictions, boar
 def test_switching_to_manual_does_not_adopt_a_board_rpm_below_the_limits():
     """Found by the property above: a board read at 1 rpm (below min 5), then MANUAL: the old code
     took 1 rpm as the operator's and commanded a move to it."""
-    sup = Supervisor(SupervisorConfig(min_rpm=5.0, max_rpm=45.0), Mode.OFF)
+    sup = Supervisor(worked_config(min_rpm=5.0, max_rpm=45.0), Mode.OFF)
     inputs = SupervisorInputs(actual_rpm=1.0, setpoint_rpm=1.0, mill_running=True, mill_epoch=1, last_valid_mi_s=0.0)
     sup.step(0.0, inputs)
     sup.set_mode("manual", 0.1)

@@ -8,9 +8,12 @@ import math
 
 import pytest
 
+from control.decision import Mode, SupervisorInputs
 from control.errors import ControlError
-from control.supervisor import Mode, SegregationDetector, Supervisor, SupervisorConfig, SupervisorInputs
+from control.segregation import SegregationDetector
+from control.supervisor import Supervisor
 from control.trend import TrendEstimate
+from tests.control.supervisor_values import worked_config
 
 
 def est(level: float, rate: float = 0.0, settled: bool = True, t: float = 0.0) -> TrendEstimate:
@@ -18,29 +21,29 @@ def est(level: float, rate: float = 0.0, settled: bool = True, t: float = 0.0) -
 
 
 def test_candidates_are_evenly_spaced_over_the_limits_plus_the_current_rpm():
-    c = SupervisorConfig()  # 2..45 rpm, 7 candidates
+    c = worked_config()  # 2..45 rpm, 7 candidates
     assert c.candidates() == (2.0, 9.2, 16.3, 23.5, 30.7, 37.8, 45.0)
     assert c.candidates(12.34) == (2.0, 9.2, 12.3, 16.3, 23.5, 30.7, 37.8, 45.0)
     assert c.candidates(100.0) == c.candidates() and c.candidates(0.0) == c.candidates()  # clamped first
-    assert SupervisorConfig(n_candidates=1).candidates() == (2.0, 45.0)  # at least both ends
-    crit = SupervisorConfig(critical_rpm=50.0)  # 0.6 of the critical speed: 30 rpm
-    assert crit.rpm_limits == (2.0, 30.0) and max(crit.candidates(40.0)) == 30.0
+    assert worked_config(n_candidates=1).candidates() == (2.0, 45.0)  # at least both ends
+    crit = worked_config(critical_rpm=50.0)  # 0.6 of the critical speed: 30 rpm
+    assert crit.limits.rpm_range == (2.0, 30.0) and max(crit.candidates(40.0)) == 30.0
 
 
 def test_vision_is_lost_strictly_after_the_timeout_and_never_before_the_first_mi():
-    c = SupervisorConfig(vision_timeout_s=5.0)
+    c = worked_config(vision_timeout_s=5.0)
     assert not c.vision_lost(10.0, 5.0) and c.vision_lost(10.0 + 1e-9, 5.0)
     assert not c.vision_lost(1e9, None)
     for bad in (0.0, -1.0, math.inf, math.nan):
         with pytest.raises(ControlError, match="vision_timeout_s"):
-            SupervisorConfig(vision_timeout_s=bad)
+            worked_config(vision_timeout_s=bad)
     with pytest.raises(ControlError, match="clear_level"):
-        SupervisorConfig(seg_level=0.6, clear_level=0.59)
-    SupervisorConfig(seg_level=0.6, clear_level=0.6)  # no hysteresis is allowed
+        worked_config(seg_level=0.6, clear_level=0.59)
+    worked_config(seg_level=0.6, clear_level=0.6)  # no hysteresis is allowed
 
 
 def test_the_operators_rpm_is_clamped_into_the_limits_and_a_non_number_refused():
-    sup = Supervisor(SupervisorConfig(min_rpm=2.0, max_rpm=45.0))
+    sup = Supervisor(worked_config(min_rpm=2.0, max_rpm=45.0))
     assert sup.set_manual_rpm(100.0) == 45.0 and sup.manual_rpm == 45.0
     assert sup.set_manual_rpm(0.5) == 2.0 and sup.manual_rpm == 2.0
     assert sup.set_manual_rpm("12.5") == 12.5  # type: ignore[arg-type]  # (a number as the dashboard sends it)
@@ -51,7 +54,7 @@ def test_the_operators_rpm_is_clamped_into_the_limits_and_a_non_number_refused()
 
 
 def test_bad_conditions_and_their_strict_thresholds():
-    d = SegregationDetector(SupervisorConfig(seg_level=0.5, seg_rate_per_s=-0.01, radial_min=0.5))
+    d = SegregationDetector(worked_config(seg_level=0.5, seg_rate_per_s=-0.01, radial_min=0.5))
     assert d.bad_reasons(est(0.5), None) == []  # at the threshold: not below it
     assert d.bad_reasons(est(0.4999), None) == ["MI 0.500 < 0.5"]
     assert d.bad_reasons(est(0.8, -0.01), None) == []
@@ -62,14 +65,14 @@ def test_bad_conditions_and_their_strict_thresholds():
 
 
 def test_good_conditions_need_all_of_level_rate_and_radial_strictly():
-    d = SegregationDetector(SupervisorConfig(clear_level=0.6, seg_rate_per_s=-0.01, radial_clear=0.6))
+    d = SegregationDetector(worked_config(clear_level=0.6, seg_rate_per_s=-0.01, radial_clear=0.6))
     assert d.is_good(est(0.61), None) and not d.is_good(est(0.6), None)
     assert not d.is_good(est(0.7, -0.005), None) and d.is_good(est(0.7, -0.004), None)  # rate above half seg_rate
     assert not d.is_good(est(0.7), 0.6) and d.is_good(est(0.7), 0.61) and d.is_good(est(0.7), math.nan)
 
 
 def test_detection_and_clearing_wait_their_dwell_and_restart_on_an_interruption():
-    d = SegregationDetector(SupervisorConfig(detect_dwell_s=5.0, clear_dwell_s=3.0))
+    d = SegregationDetector(worked_config(detect_dwell_s=5.0, clear_dwell_s=3.0))
     assert not d.update(0.0, est(0.3), None) and d.suspect and not d.segregated
     assert not d.update(4.5, est(0.3), None) and d.suspect
     assert d.update(5.0, est(0.3), None) and d.segregated and not d.suspect  # at the dwell exactly
@@ -90,7 +93,7 @@ def test_detection_and_clearing_wait_their_dwell_and_restart_on_an_interruption(
 
 
 def test_the_safe_state_faults_of_each_mode():
-    cfg = SupervisorConfig(vision_timeout_s=5.0, twin_timeout_s=60.0)
+    cfg = worked_config(vision_timeout_s=5.0, twin_timeout_s=60.0)
     lost = SupervisorInputs(mill_connected=False)
     for mode in Mode:
         sup = Supervisor(cfg, mode=mode)
@@ -108,16 +111,16 @@ def test_the_safe_state_faults_of_each_mode():
     assert auto.faults(12.0, SupervisorInputs(last_valid_mi_s=12.0, twin_updated_s=12.0,
                                               twin_doubt="twin_mismatch: slope")) == [
         "twin stale: twin_mismatch: slope"]
-    needs = Supervisor(SupervisorConfig(require_twin=True, twin_timeout_s=60.0), mode=Mode.AUTO)
+    needs = Supervisor(worked_config(require_twin=True, twin_timeout_s=60.0), mode=Mode.AUTO)
     needs.step(0.0, SupervisorInputs(last_valid_mi_s=0.0))  # the run starts at 0: the twin is due from there
     assert needs.faults(60.0, SupervisorInputs(last_valid_mi_s=60.0)) == []
     assert needs.faults(61.0, SupervisorInputs(last_valid_mi_s=61.0)) == ["twin stale for 61.0 s"]
-    assert Supervisor(SupervisorConfig(twin_timeout_s=None), mode=Mode.AUTO).faults(
+    assert Supervisor(worked_config(twin_timeout_s=None), mode=Mode.AUTO).faults(
         1e6, SupervisorInputs(last_valid_mi_s=1e6, twin_updated_s=0.0)) == []
 
 
 def test_a_twin_in_doubt_puts_auto_in_the_safe_state_with_the_reason():
-    sup = Supervisor(SupervisorConfig(), mode=Mode.AUTO)
+    sup = Supervisor(worked_config(), mode=Mode.AUTO)
     inp = dict(trend=est(0.9), actual_rpm=5.0, setpoint_rpm=5.0, mill_running=True, last_valid_mi_s=0.0,
                twin_updated_s=0.0)
     sup.step(0.0, SupervisorInputs(**inp))  # type: ignore[arg-type]
@@ -128,14 +131,14 @@ def test_a_twin_in_doubt_puts_auto_in_the_safe_state_with_the_reason():
 
 
 def test_config_edges_and_messages():
-    SupervisorConfig(vision_timeout_s=0.5)
+    worked_config(vision_timeout_s=0.5)
     with pytest.raises(ControlError) as exc:
-        SupervisorConfig(seg_level=0.6, clear_level=0.5)
+        worked_config(seg_level=0.6, clear_level=0.5)
     assert str(exc.value) == "clear_level must be >= seg_level (hysteresis)"
 
 
 def test_a_fresh_or_reset_detector_is_clear_and_says_why_when_it_detects():
-    cfg = SupervisorConfig(detect_dwell_s=1.0, clear_dwell_s=1.0, radial_clear=0.6)
+    cfg = worked_config(detect_dwell_s=1.0, clear_dwell_s=1.0, radial_clear=0.6)
     d = SegregationDetector(cfg)
     assert d.segregated is False and d.why == "" and not d.suspect
     assert d.update(0.0, est(0.9), None) is False  # good, not segregated: no change
@@ -150,7 +153,7 @@ def test_a_fresh_or_reset_detector_is_clear_and_says_why_when_it_detects():
 
 
 def test_the_time_without_mi_or_twin_counts_from_the_first_step():
-    auto = Supervisor(SupervisorConfig(vision_timeout_s=5.0, require_twin=True, twin_timeout_s=60.0), mode=Mode.AUTO)
+    auto = Supervisor(worked_config(vision_timeout_s=5.0, require_twin=True, twin_timeout_s=60.0), mode=Mode.AUTO)
     assert auto.faults(5.0, SupervisorInputs()) == []  # before any step: counted from now
     auto.step(0.0, SupervisorInputs())
     assert auto.faults(5.5, SupervisorInputs(twin_updated_s=5.0)) == ["no valid MI for 5.5 s"]

@@ -2,7 +2,7 @@
 
 Each frame is measured once (classes learned from the frames, as ``classes suggest``
 does); the sequences are composed from those raw MI values at 30 fps. The two issue
-reproductions run with the live loop's own trend settings (``twin.loop.trend_config``).
+reproductions run with the live loop's own trend settings (``twin.run.settings.trend_config``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from control.trend import MITrend, TrendEstimate
 from control.trendbench import RealFrameMI, real_sequences, run_trend_bench
 from tests.learned import memoised_learning
 from twin.cli.control_cmds import real_frame_mi
-from twin.loop import trend_config
+from twin.run.settings import trend_config
 
 FPS = 30.0
 
@@ -76,7 +76,7 @@ def real_bench(frames_mi):
 def test_real_bench_kalman_beats_the_moving_average_on_every_sequence(real_bench):
     names = {s.name for s in real_bench.per_sequence}
     assert names == {"real-step-up", "real-step-down", "real-glitches", "real-bursts", "real-dropouts",
-                     "real-drift", "real-looped"}
+                     "real-drift", "real-looped", "real-occluded"}
     for s in real_bench.per_sequence:
         assert s.kalman.rmse < s.ma.rmse, s.name
         assert s.kalman.lockout_s <= 2.0, s.name
@@ -84,6 +84,31 @@ def test_real_bench_kalman_beats_the_moving_average_on_every_sequence(real_bench
     k, ma = real_bench.kalman, real_bench.ma
     assert k.lag05_s <= 2.0 < ma.lag05_s  # steps: within 0.05 of the new level in <= 2 s
     assert k.overshoot < 0.05
+
+
+def test_the_occluded_pools_are_a_dark_object_over_the_mixed_bed(frames_mi):
+    """Some positions of the object leave a valid reading that is off the mixed bed's MI by
+    more than its own spread (the frames the meter flags are dropouts, not in the pools)."""
+    clean = float(np.median(frames_mi.mixed))
+    assert frames_mi.occluded and all(len(p) > 0 for p in frames_mi.occluded)
+    assert min(min(p) for p in frames_mi.occluded) < clean - 0.1  # a burst the gate must catch
+
+
+@pytest.mark.parametrize("fps", [10.0, 15.0, 30.0])
+def test_occluded_bursts_keep_the_trend_within_0_05_of_the_clean_bed(frames_mi, fps):
+    """Issue 38, item 4: the mixed bed under a dark object over a third of the drum for 6 frames
+    every 45 (the bench's ``real-occluded``, 10 draws; 4 at 30 fps). The trend stays within 0.05 of the clean
+    bed's median after the bench's warm-up (150 frames) and never re-initialises onto a burst.
+    With reinit_min 8 a 6-frame burst reached the re-init share at 10 and 15 fps (the window's
+    8-10 samples): 0.10-0.13 off in 3 of the 20 draws there; at 30 fps 0.022."""
+    clean = float(np.median(frames_mi.mixed))
+    for seed in range(10 if fps < 20 else 4):
+        seq = next(s for s in real_sequences(frames_mi, seed, fps=fps) if s.name == "real-occluded")
+        tr = MITrend(trend_config())
+        est = [tr.update(t, m, r) for t, m, r in zip(seq.t_s, seq.measured, seq.rpm, strict=True)]
+        assert np.isnan(seq.measured).sum() == 0 and (seq.measured < clean - 0.05).sum() >= 10  # bursts there
+        worst = max(abs(e.level - clean) for e in est[150:])
+        assert worst <= 0.05 and tr.n_reinit == 1, (seed, worst, tr.n_reinit)
 
 
 def coverage_ok(res) -> bool:

@@ -108,7 +108,8 @@ def test_a_linear_path_is_solved_by_the_first_regula_falsi_step(field):
     assert (cal.friction, cal.rolling) == pytest.approx((f, r), abs=1e-12)
     assert cal.twin_slope_deg == pytest.approx(30.0, abs=1e-9) and abs(cal.residual_deg) < 1e-9
     assert cal.evaluations == 1 + len(HIGH_EDGE) + 1 and len(cal.history) == 5
-    assert cal.history[4] == pytest.approx((f, r, 30.0))
+    assert cal.history[4] == pytest.approx((f, r, f, 30.0))  # a deep drum's end plates take the wall's friction
+    assert cal.end_friction == pytest.approx(f) and cal.end_friction_max == 0.0
     assert cal.range_deg == pytest.approx((20.0, 45.0)) and cal.path == "diagonal"
     assert cal.target_slope_deg == 30.0 and cal.rpm == 10.0 and cal.target_curvature is None
     assert cal.twin_curvature == pytest.approx(f - r)
@@ -130,7 +131,7 @@ def test_a_convex_path_is_bracketed_step_by_step_and_kept_off_the_ends(field):
     assert w3 < 0.15  # regula falsi would creep: the step is kept 15 % off the bracket's end
     u3 = u2 + 0.15 * (1.0 - u2)
     s3 = 20.0 + 25.0 * u3**2  # 30.10: within 0.4 deg
-    assert [h[2] for h in cal.history[4:]] == pytest.approx([s1, s2, s3], abs=1e-9)
+    assert [h[3] for h in cal.history[4:]] == pytest.approx([s1, s2, s3], abs=1e-9)
     assert cal.history[-1][:2] == pytest.approx(path_point(u3, "diagonal", HIGH), abs=1e-12)
     assert cal.residual_deg == pytest.approx(s3 - 30.0, abs=1e-9) and cal.evaluations == 7
 
@@ -139,7 +140,7 @@ def test_a_target_near_the_top_is_approached_from_below_the_high_end(field):
     cal = calibrate(44.0, 10.0, tol_deg=0.01)
     u1 = 0.85  # (44 - 20) / 25 = 0.96, kept 15 % off the end
     u2 = u1 + (44.0 - (20 + 25 * u1)) / (45.0 - (20 + 25 * u1)) * (1.0 - u1)
-    assert [h[2] for h in cal.history[4:]] == pytest.approx([20 + 25 * u1, 20 + 25 * u2], abs=1e-9)
+    assert [h[3] for h in cal.history[4:]] == pytest.approx([20 + 25 * u1, 20 + 25 * u2], abs=1e-9)
     assert cal.twin_slope_deg == pytest.approx(44.0, abs=1e-9)
 
 
@@ -152,7 +153,7 @@ def test_a_point_above_the_target_moves_the_brackets_high_end(field):
     w2 = min(max((30.0 - 20.0) / (s1 - 20.0), 0.15), 0.85)
     u2 = 0.0 + w2 * (u1 - 0.0)
     s2 = 20.0 + 25.0 * math.sqrt(u2)
-    assert [h[2] for h in cal.history[4:6]] == pytest.approx([s1, s2], abs=1e-9)
+    assert [h[3] for h in cal.history[4:6]] == pytest.approx([s1, s2], abs=1e-9)
     assert abs(cal.residual_deg) <= 0.2
 
 
@@ -160,9 +161,9 @@ def test_the_search_stops_at_its_budget_with_the_best_point_found(field):
     field.slope = lambda f, r: 20.0 + 25.0 * r**6 if f <= 0.5 else 20.0 + 25.0 * r - 3.0
     cal = calibrate(30.0, 10.0, tol_deg=1e-6, max_evals=3)
     assert cal.evaluations == 4 + 3
-    best = min(cal.history, key=lambda h: abs(h[2] - 30.0))
-    assert (cal.friction, cal.rolling, cal.twin_slope_deg) == best
-    assert cal.residual_deg == pytest.approx(best[2] - 30.0) and abs(cal.residual_deg) > 1e-3
+    best = min(cal.history, key=lambda h: abs(h[3] - 30.0))
+    assert (cal.friction, cal.rolling, cal.end_friction, cal.twin_slope_deg) == best
+    assert cal.residual_deg == pytest.approx(best[3] - 30.0) and abs(cal.residual_deg) > 1e-3
 
 
 def test_a_target_within_the_tolerance_of_an_end_needs_no_search(field):
@@ -185,8 +186,9 @@ def test_a_target_just_outside_the_range_calibrates_to_the_end_within_the_grace(
 
 @pytest.mark.parametrize("target", [46.01, 18.99, -46.5, 3.0])
 def test_a_target_beyond_the_grace_is_an_error_naming_the_range_and_the_box(field, target):
+    need = "sliding friction below 0.05" if abs(target) < 20.0 else "rolling friction above 1"
     msg = (f"target slope {abs(target):.1f} deg is outside the twin's reachable range 20.0-45.0 deg at 10 rpm "
-           "(sliding friction 0.05-1, rolling friction 0-1)")
+           f"(sliding friction 0.05-1, rolling friction 0-1): it needs {need}")
     with pytest.raises(SimError) as exc:
         calibrate(target, -10.0)
     assert str(exc.value) == msg
@@ -214,7 +216,7 @@ def test_progress_counts_every_run_against_the_whole_budget(field):
 def test_no_free_surface_mid_search_ends_that_path_with_its_best_point(field):
     field.slope = lambda f, r: math.nan if 0.2 < r < 0.9 else linear(f, r)
     cal = calibrate(30.0, 10.0)
-    assert cal.evaluations == 5 and math.isnan(cal.history[4][2])  # one NaN run, then no more
+    assert cal.evaluations == 5 and math.isnan(cal.history[4][3])  # one NaN run, then no more
     assert (cal.friction, cal.rolling) == (0.05, 0.0)  # 10 deg off, the best of the ends
     assert cal.residual_deg == pytest.approx(-10.0)
 
@@ -286,11 +288,12 @@ def test_a_calibration_as_a_record_has_every_field(field):
     values = (cal.friction, cal.rolling, cal.twin_slope_deg, cal.residual_deg, cal.twin_curvature)
     assert len(set(values)) == len(values)  # a field read from another would show
     assert cal.as_dict() == {
-        "friction": cal.friction, "rolling": cal.rolling, "twin_slope_deg": cal.twin_slope_deg,
-        "residual_deg": cal.residual_deg, "target_slope_deg": 30.0, "rpm": 10.0, "evaluations": cal.evaluations,
-        "range_deg": [20.0, 45.0], "twin_curvature": cal.twin_curvature, "target_curvature": 0.25,
-        "path": cal.path,
+        "friction": cal.friction, "rolling": cal.rolling, "end_friction": cal.friction,
+        "twin_slope_deg": cal.twin_slope_deg, "residual_deg": cal.residual_deg, "target_slope_deg": 30.0,
+        "rpm": 10.0, "evaluations": cal.evaluations, "range_deg": [20.0, 45.0], "twin_curvature": cal.twin_curvature,
+        "target_curvature": 0.25, "path": cal.path, "end_friction_max": 0.0,
     }
+    assert cal.twin_kwargs() == {"friction": cal.friction, "rolling": cal.rolling, "end_friction": cal.friction}
     assert cal.path in ("diagonal", "sliding-first", "rolling-first")
     assert isinstance(cal.as_dict()["range_deg"], list)
 
@@ -325,7 +328,7 @@ def test_a_target_under_one_degree_keeps_its_sign(field):
 def test_an_infinite_slope_is_no_free_surface_too(field):
     field.slope = lambda f, r: -math.inf if 0.2 < r < 0.9 else linear(f, r)
     cal = calibrate(30.0, 10.0)
-    assert cal.evaluations == 5 and math.isnan(cal.history[4][2]) and (cal.friction, cal.rolling) == (0.05, 0.0)
+    assert cal.evaluations == 5 and math.isnan(cal.history[4][3]) and (cal.friction, cal.rolling) == (0.05, 0.0)
 
 
 def test_an_end_exactly_the_tolerance_away_needs_no_search(field):

@@ -14,9 +14,9 @@ from sim.engine import Twin, engine_for, make_twin
 from sim.errors import SimError
 from sim.mixer import (
     Baffles,
+    Friction,
     Shape,
     disk_classes,
-    is_simple_polygon,
     mixer_to_toml,
     paper_mixer,
     parse_mixer,
@@ -25,6 +25,7 @@ from sim.mixer import (
     shape_area_m2,
 )
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, slice_2d
+from vision.shapes import is_simple_polygon
 
 PMMA = """
 [drum]
@@ -117,13 +118,27 @@ shape = "vertices"
 vertices_mm = [[0, 0], [6, 0], [6, 3], [3, 6], [0, 3]]
 diameter_mm = 9
 count = 20
+[[particles]]
+name = "e"
+shape = "notched_disc"
+notch_deg = 60
+notch_depth = 0.25
+diameter_mm = 10
+count = 20
+[drum.friction]
+sliding = 0.06
+rolling = 0.08
+end_plates = 0.3
 """
     m = parse_mixer(_table(text), None)
     assert m.baffles == Baffles(4, 0.015, 0.003) and not m.all_round
     assert engine_for(m) == "pymunk"
+    assert m.particles[4].shape == Shape("notched_disc", 0.010, notch_deg=60.0, notch_depth=0.25)
+    assert m.friction == Friction(0.06, 0.08, 0.3)
     back = parse_mixer(_table(mixer_to_toml(m)), None)
-    assert back.drum == m.drum and back.baffles == m.baffles and back.fill == m.fill
+    assert back.drum == m.drum and back.baffles == m.baffles and back.fill == m.fill and back.friction == m.friction
     for p, q in zip(m.particles, back.particles, strict=True):
+        assert p.shape == q.shape or p.shape.kind == "vertices"
         assert p.shape.kind == q.shape.kind and p.count == q.count
         assert shape_area_m2(q.shape) == pytest.approx(shape_area_m2(p.shape), rel=1e-3)
     v = np.asarray(m.particles[3].shape.vertices_m)
@@ -178,6 +193,24 @@ BAD = {
     "camera class missing": (PMMA, "no \\[\\[particles\\]\\] table for the camera's class 'red'"),
     "polygon with two sides": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "polygon"\nsides = 2'),
                                "sides"),
+    # below 0.1 mm (issue 42: particles of 1e-9 mm passed; by share their area underflowed to a division by 0)
+    "particle of a powder": (PMMA.replace("diameter_mm = 10", "diameter_mm = 1e-9", 1), r"diameter_mm .*\[0.1,"),
+    "particle area underflows": (PMMA.replace("diameter_mm = 10", "diameter_mm = 1e-300", 1), r"\[0.1,"),
+    "pellet of no width": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "pellet"\nwidth_mm = 0.01'),
+                           r"width_mm .*\[0.1,"),
+    "wafer-thin particle": (PMMA.replace("thickness_mm = 4", "thickness_mm = 0.05"), r"thickness_mm .*\[0.1,"),
+    "notch wider than a half turn": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "notched_disc"\n'
+                                                  'notch_deg = 200'), "notch_deg"),
+    "notch deeper than the centre": (PMMA.replace('name = "blue"', 'name = "blue"\nshape = "notched_disc"\n'
+                                                  'notch_depth = 1.5'), "notch_depth"),
+    "notch of another shape": (PMMA.replace('name = "blue"', 'name = "blue"\nnotch_deg = 90'),
+                               "notch_deg belongs to shape = 'notched_disc'"),
+    "an empty friction table": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]'),
+                                "give sliding, rolling or end_plates"),
+    "negative friction": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\nsliding = -0.1\n'
+                                       'rolling = 0'), "sliding"),
+    "end plates' friction out of range": (PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\n'
+                                                       'sliding = 0.1\nrolling = 0\nend_plates = 9'), "end_plates"),
 }
 
 
@@ -260,8 +293,9 @@ def test_single_particle_crops_leave_out_touching_pairs_and_the_border():
 
 @pytest.mark.parametrize(("shape", "kind"), [
     (Shape("disc", 22.0), "disc"),
-    (Shape("cut_disc", 22.0, wedge_deg=90.0), "vertices"),
-    (Shape("pellet", 26.0, width_m=12.0, corner_m=3.0), "vertices"),
+    (Shape("cut_disc", 22.0, wedge_deg=90.0), "notched_disc"),  # a notch to the centre
+    (Shape("notched_disc", 22.0, notch_deg=90.0, notch_depth=0.4), "notched_disc"),
+    (Shape("pellet", 26.0, width_m=12.0, corner_m=3.0), "pellet"),
 ])
 def test_classes_shape_from_its_traced_particles(shape, kind):
     from sim.mixer import shape_area_m2, shape_from_crops
@@ -272,7 +306,18 @@ def test_classes_shape_from_its_traced_particles(shape, kind):
     got, how = shape_from_crops(crops, 0.0088, 0.4)  # 0.4 mm per px
     assert got.kind == kind, how
     assert "traced from" in how
-    if kind == "vertices":  # the outline, in mm: the particle's own area (px area x 0.4^2) within 15 %
+    if kind != "disc":  # the traced shape, in mm: the particle's own area (px area x 0.4^2) within 15 %
         area_mm2 = shape_area_m2(got) * 1e6
         assert area_mm2 == pytest.approx(shape_area_m2(shape) * 0.16, rel=0.15)
-        assert "not round" in how
+
+
+def test_a_twin_takes_the_mixers_calibrated_friction_unless_given_its_own():
+    base = parse_mixer(_table(PMMA), None)
+    m = parse_mixer(_table(PMMA.replace('rotation = "cw"', 'rotation = "cw"\n[drum.friction]\nsliding = 0.07\n'
+                                        'rolling = 0.11\nend_plates = 0.2')), None)
+    twin = make_twin(m, case="C", seed=1, rpm=5.0)
+    assert (twin.params.friction, twin.params.rolling, twin.params.end_friction) == (0.07, 0.11, 0.2)
+    own = make_twin(m, case="C", seed=1, rpm=5.0, friction=0.3, rolling=0.0, end_friction=0.0)
+    assert (own.params.friction, own.params.rolling, own.params.end_friction) == (0.3, 0.0, 0.0)
+    plain = make_twin(base, case="C", seed=1, rpm=5.0)
+    assert plain.params.friction != 0.07  # no calibration: the engine's own defaults

@@ -52,16 +52,21 @@ def _range(err: str) -> tuple[float, float]:
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_calibrate_end_friction_sets_the_plates_of_the_twin_runs(cli_once):
-    # the monolayer rig with the default (Taberlet) plates stands steep over the whole search; without
-    # plate friction (--end-friction 0) the whole range lies below that: the option reaches the twin runs
-    plates = cli_once(*OUTSIDE)
-    assert_one_line_error(plates, "outside the twin's reachable range")
+def test_calibrate_searches_a_monolayers_plates_and_end_friction_fixes_them(cli_once):
+    # the monolayer rig's plates are searched from no plate friction up (issue 39): the default range
+    # starts where --end-friction 0 (plates fixed, not searched) starts and reaches beyond its top; a
+    # fixed plate friction reaches every twin run (its whole range lies higher)
+    searched = cli_once(*OUTSIDE)
+    assert_one_line_error(searched, "outside the twin's reachable range", "needs end-plate friction above")
     none = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", "--end-friction", "0",
                *SHORT)
-    assert_one_line_error(none, "outside the twin's reachable range")
-    (lo_p, hi_p), (lo_0, hi_0) = _range(plates.err), _range(none.err)
-    assert hi_0 < lo_p, (lo_0, hi_0, lo_p, hi_p)
+    assert_one_line_error(none, "outside the twin's reachable range", "needs rolling friction above 1")
+    grip = cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", "--end-friction", "0.02",
+               *SHORT)
+    (lo_s, hi_s), (lo_0, hi_0), (lo_g, _) = _range(searched.err), _range(none.err), _range(grip.err)
+    assert lo_s == pytest.approx(lo_0, abs=0.051)  # the same run: the least-friction corner without plates
+    assert hi_s > hi_0 + 3.0, (hi_s, hi_0)  # the plates take the slope beyond the plane's top
+    assert lo_g > lo_0 + 5.0, (lo_g, lo_0)
     assert lo_0 < 25.0 < hi_0  # the low end of issue 20's 25-45 deg is inside it
     # a value out of [0, 5] is refused before any twin runs
     assert_one_line_error(cli("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "30",

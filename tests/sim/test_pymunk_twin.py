@@ -9,9 +9,10 @@ import pytest
 
 from sim.drum import ContactStats
 from sim.errors import SimError
-from sim.mixer import Baffles, Mixer, ParticleKind, Shape, polygon_area_m2, shape_area_m2
+from sim.mixer import Baffles, Mixer, ParticleKind, Shape, shape_area_m2
 from sim.pymunk_twin import PymunkDrumSim, convex_pieces, radial_spread_m
 from sim.recipe import DrumSpec
+from vision.shapes import polygon_area
 
 
 def _small_rig(cut: bool = True, n: int = 30, baffles: Baffles | None = None, drum_mm: float = 120.0) -> Mixer:
@@ -28,15 +29,20 @@ def running() -> PymunkDrumSim:
     return sim
 
 
-def test_cut_disc_pieces_are_convex_and_cover_the_shape() -> None:
-    shape = Shape("cut_disc", 0.010, wedge_deg=90.0)
+@pytest.mark.parametrize("shape", [
+    Shape("cut_disc", 0.010, wedge_deg=90.0),
+    Shape("notched_disc", 0.010, notch_deg=90.0, notch_depth=0.4),  # issue 39's shallow notch
+    Shape("notched_disc", 0.010, notch_deg=30.0, notch_depth=0.1),  # a slit: the apex sees nearly a full turn
+    Shape("notched_disc", 0.010, notch_deg=170.0, notch_depth=0.9),
+], ids=["cut", "notch-90-0.4", "slit", "wide-deep"])
+def test_cut_and_notched_disc_pieces_are_convex_and_cover_the_shape(shape: Shape) -> None:
     pieces = convex_pieces(shape)
     assert len(pieces) >= 2  # non-convex: more than one piece
     for p in pieces:
         d = np.roll(p, -1, axis=0) - p
         cross = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
         assert np.all(cross >= -1e-12)  # counter-clockwise and convex
-    covered = sum(polygon_area_m2(p) for p in pieces)
+    covered = sum(polygon_area(p) for p in pieces)
     assert covered == pytest.approx(shape_area_m2(shape), rel=0.05)  # the wedge is out, the rest in
 
 
@@ -46,7 +52,7 @@ def test_vertices_shape_is_decomposed() -> None:
     shape = Shape("vertices", 0.014, vertices_m=v)
     pieces = convex_pieces(shape)
     assert len(pieces) >= 2
-    assert sum(polygon_area_m2(p) for p in pieces) == pytest.approx(shape_area_m2(shape), rel=1e-6)
+    assert sum(polygon_area(p) for p in pieces) == pytest.approx(shape_area_m2(shape), rel=1e-6)
 
 
 def test_interface_and_particles(running: PymunkDrumSim) -> None:

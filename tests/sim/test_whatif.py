@@ -13,6 +13,7 @@ import pytest
 
 from sim.errors import SimError
 from sim.whatif import WhatIfJob, flow_regime, froude, froude_regime, regime, run_study, summarize
+from tests.waiting import wait_until
 
 DASK = Path(sys.executable).with_name("dask")
 
@@ -110,13 +111,14 @@ def test_study_on_a_real_dask_scheduler_and_worker():
         procs.append(subprocess.Popen(
             [str(DASK), "worker", addr, "--nthreads", "1", "--no-nanny", "--no-dashboard",
              "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
+        def listening() -> bool:
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
+                return True
             except OSError:
-                time.sleep(0.1)
+                return False
+
+        wait_until(listening, 60, "the Dask scheduler to listen")
         with Client(addr, timeout="30s", set_as_default=False) as c:
             c.wait_for_workers(1, timeout=90)
         jobs = [WhatIfJob(rpm=r, duration_s=0.5, seed=0, sample_s=0.25) for r in (5.0, 20.0)]

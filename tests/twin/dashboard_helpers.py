@@ -3,10 +3,9 @@ viser 1.1's React/Mantine DOM in chromium)."""
 
 from __future__ import annotations
 
+import threading
 import time
-from collections.abc import Callable
 
-from tests.waiting import wait_until as _wait_until
 from twin.dashboard.ratebench import IMG_SELECTOR as IMG  # camera and twin frames, in panel order
 
 
@@ -26,11 +25,6 @@ def plot_pixels(page) -> dict[str, str]:
                 return [t ? t.innerText : '', s.length + ':' + h]; })""",
         )
     )
-
-
-def wait_until(pred: Callable[[], bool], timeout_s: float, what: str, poll_s: float = 0.1) -> None:
-    """``tests.waiting.wait_until`` at the dashboard tests' 0.1 s poll."""
-    _wait_until(pred, timeout_s, what, poll_s)
 
 
 def slider(page):
@@ -148,3 +142,14 @@ def send_message(ws, message_type: str, **fields: object) -> None:
 
     ws.send(msgspec.msgpack.encode({"type": message_type, **fields}))
 
+
+
+def drain_callbacks(server, timeout_s: float = 20.0) -> None:
+    """Return once every callback viser queued on its thread pool before this call (a viewer's
+    connect and disconnect) has run to its end: a task on every one of the pool's threads at once
+    (a barrier) means no earlier task still runs. An event, not a guessed wait."""
+    pool = server._thread_executor
+    barrier = threading.Barrier(pool._max_workers + 1, timeout=timeout_s)
+    for _ in range(pool._max_workers):
+        pool.submit(barrier.wait)
+    barrier.wait()

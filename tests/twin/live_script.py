@@ -7,17 +7,18 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
-from twin.cli.run_cmd import run_live
-from twin.loop import Seams
+from twin.run.main import run_live
+from twin.run.settings import Seams
 
 
 def run_scripted(cfg: Any, body: Callable[[Any, Any], None],
                  before: Callable[[Any, Any], None] | None = None, seams: Seams | None = None) -> None:
     """Run ``cfg`` (a resolved ``RunConfig``) with ``body(loop, plant)`` beside it; ``before(loop,
     plant)`` runs first in the loop's start-up thread (e.g. to wrap a box before the body reads it);
-    ``seams``: the run's test seams (``twin.loop.Seams``)."""
+    ``seams``: the run's test seams (``twin.run.settings.Seams``)."""
     failure: list[BaseException] = []
 
     def on_started(loop: Any, plant: Any, dash: Any) -> None:
@@ -34,6 +35,6 @@ def run_scripted(cfg: Any, body: Callable[[Any, Any], None],
 
         threading.Thread(target=run, daemon=True).start()
 
-    run_live(cfg, progress=False, on_started=on_started, seams=seams)
+    run_live(cfg, replace(seams or Seams(), on_started=on_started))
     if failure:
         raise failure[0]

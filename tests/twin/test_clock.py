@@ -1,10 +1,14 @@
-"""The cadence that paces the camera overlay and the twin's renders."""
+"""The cadence that paces the camera overlay and the twin's renders, and the run clock
+(``--speed``), on a clock the test moves."""
 
 from __future__ import annotations
 
+import threading
+
 import pytest
 
-from twin.clock import Cadence
+from tests.waiting import ManualClock
+from twin.clock import Cadence, RunClock
 
 
 def test_cadence_keeps_its_rate_from_faster_irregular_calls() -> None:
@@ -24,15 +28,31 @@ def test_cadence_drops_missed_ticks_after_a_stall_and_restarts() -> None:
         Cadence(0.0)
 
 
+class RecordingStop(threading.Event):
+    """A stop event whose ``wait`` records the wall seconds asked and returns at once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.waits: list[float | None] = []
+
+    def wait(self, timeout: float | None = None) -> bool:
+        self.waits.append(timeout)
+        return self.is_set()
+
+
 def test_run_clock_restarts_at_zero_and_scales_wall_time() -> None:
-    import time
-
-    from twin.clock import RunClock
-
-    c = RunClock(speed=4.0)
-    time.sleep(0.5)
-    assert c.now_s() >= 2.0
+    wall, stop = ManualClock(), RecordingStop()
+    c = RunClock(speed=4.0, stop=stop, monotonic=wall)
+    assert c.now_s() == 0.0
+    wall.advance(0.5)
+    assert c.now_s() == 2.0  # 0.5 wall s at 4x
     c.restart()
-    assert 0.0 <= c.now_s() < 1.0 and c.wall_s(4.0) == 1.0
+    assert c.now_s() == 0.0 and c.wall_s(4.0) == 1.0
+    wall.advance(0.25)
+    assert c.sleep_until(3.0) and stop.waits == [0.5]  # run 1.0 -> 3.0 is 0.5 wall s at 4x
+    assert c.sleep_until(0.5) and stop.waits == [0.5]  # already past: no wait
+    assert c.sleep(2.0) and stop.waits == [0.5, 0.5]
+    stop.set()
+    assert not c.sleep_until(10.0) and not c.sleep(1.0)  # stopped: False, whatever is left
     with pytest.raises(ValueError):
         RunClock(speed=0.0)

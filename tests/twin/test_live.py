@@ -1,7 +1,7 @@
 """Smoke tests of the whole live loop: the embedded demo (hidden plant + mill emulator on a
 pty + the real serial driver) and a recorded video against the emulator on TCP. The rules
 themselves are tested on the workers with fakes (test_workers.py, test_mill_worker.py);
-here they are checked once end to end. The README's AUTO-vs-OFF numbers come from its
+here they are checked once end to end. The AUTO-vs-OFF numbers (docs/measurements.md) come from its
 commands (220 s runs), not from these short runs."""
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,10 @@ from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
 from tests.waiting import wait_until
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
-from twin.loop import Seams
+from twin.records import FrameReading, Record
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames, read_metadata
 from vision.synthetic import drum_frame
 
@@ -60,7 +62,8 @@ def _predict(jobs):
 # at most 15 rpm (the plant stays cheap to simulate).
 QUICK_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 20.0,
-                "min_change_interval_s": 60.0, "max_rpm": 15.0},
+                "min_change_interval_s": 60.0},
+    limits={"max_rpm": 15.0},
     calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
     whatif_study=_predict,
 )
@@ -76,23 +79,17 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-_wait = wait_until
-
-
 @pytest.fixture(scope="session")  # session: xdist may interleave other modules' tests in the group
 def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     """Short demo runs (Case C, seed 0, 5 rpm) in AUTO (tuned to act at once) and OFF."""
     base = tmp_path_factory.mktemp("auto_vs_off")
 
     def until_the_board_reads_15_rpm(loop, plant, dash) -> None:
-        def watch() -> None:
-            while not loop.stop_event.is_set():
-                if loop.mill_box.get().setpoint_rpm >= 15.0:
-                    loop.stop_event.wait(1.0)
-                    loop.stop_event.set()
-                time.sleep(0.1)
+        def on_record(rec: Record) -> None:  # after the run log's subscriber: the row is written
+            if isinstance(rec, FrameReading) and rec.rpm_setpoint is not None and rec.rpm_setpoint >= 15.0:
+                loop.stop_event.set()
 
-        threading.Thread(target=watch, daemon=True).start()
+        loop.events.bus.subscribe(on_record)
 
     runs: tuple[tuple[str, Seams, float, Any], ...] = (
         ("auto", QUICK_AUTO, 80.0, until_the_board_reads_15_rpm),
@@ -101,7 +98,7 @@ def auto_and_off(tmp_path_factory) -> dict[str, Path]:
     for mode, seams, duration, hook in runs:
         cfg = RunConfig(dashboard=False, duration_s=duration, speed=SPEED, case="C", seed=0, mode=mode,
                         log_dir=base / mode).resolved()
-        run_live(cfg, progress=False, on_started=hook, seams=seams)
+        run_live(cfg, replace(seams, on_started=hook))
     return {"auto": base / "auto", "off": base / "off"}
 
 
@@ -120,7 +117,8 @@ def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_of
     assert any(e["kind"] == "whatif" and e["reason"] == "AUTO" for e in ev_auto)
     # OFF: not one command on the line but the demo operator's Start, the board keeps its 5 rpm
     off_cmds = [(e["command"], e["source"]) for e in ev_off if e["kind"].startswith("mill_command")]
-    assert off_cmds == [("start", "operator")]
+    # the demo operator's start, and the stop of a run that had the mill at its end (issue 42: run_end)
+    assert off_cmds == [("start", "operator"), ("stop", "run_end")]
     assert not any(e["kind"] == "decision" for e in ev_off)
     rows_off = read_frames(off)
     setpoints = _col(rows_off, "rpm_setpoint")
@@ -130,7 +128,7 @@ def test_auto_moves_the_mill_over_serial_and_off_keeps_its_hands_off(auto_and_of
 
 @LIVE
 def test_compare_command_plots_both_runs(auto_and_off, tmp_path: Path) -> None:
-    """``drumtwin compare`` makes the README's AUTO-vs-OFF figure from two run logs."""
+    """``drumtwin compare`` makes the AUTO-vs-OFF figure (docs/measurements.md) from two run logs."""
     png = tmp_path / "auto-vs-off.png"
     r = cli("compare", f"AUTO={auto_and_off['auto']}", f"OFF={auto_and_off['off']}", "--plot", png)
     assert r.code == 0, r.err
@@ -162,7 +160,7 @@ def tcp_mill():
     emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
     port = emu.open_tcp(0)
     emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
-    _wait(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
+    wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
     try:
         yield emu, f"socket://127.0.0.1:{port}"
     finally:
@@ -178,7 +176,7 @@ def test_run_never_starts_a_mill_it_did_not_command(tcp_mill, tmp_path: Path, mo
     video = _video(tmp_path / "v.avi")
     cfg = RunConfig(video=video, mill=url, dashboard=False, duration_s=3.0, mode=mode,
                     log_dir=tmp_path / "run").resolved()
-    run_live(cfg, progress=False)
+    run_live(cfg)
     left = [t.name for t in threading.enumerate() if t.name.startswith(("drumtwin-", "mill-heartbeat"))]
     assert left == []  # the root joined every worker; the mill client has no thread of its own
     m = emu.motor
@@ -320,28 +318,30 @@ def test_link_loss_and_camera_stall_end_to_end(tmp_path: Path) -> None:
 
     def body(loop, plant) -> None:
         mill = loop.mill_box.get
-        _wait(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
-        _wait(lambda: plant.emulator.motor.running, 40, "the demo operator's start")  # (late on a loaded machine)
+        wait_until(lambda: mill().connected and loop.frames_box.get().n_frames > 20, 40, "a running loop")
+        wait_until(lambda: plant.emulator.motor.running, 40, "the demo operator's start")  # (late on a loaded machine)
         plant.emulator.disconnect()
-        _wait(lambda: not mill().connected, 10, "the loop to see the link down")
-        _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+        wait_until(lambda: not mill().connected, 10, "the loop to see the link down")
+        wait_until(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
         report["alarm_link"] = list(loop.state.alarms)
-        _wait(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
+        wait_until(lambda: plant.emulator.motor.fault == "WDOG", 10, "the board's watchdog")
         plant.emulator.reconnect()
-        _wait(lambda: mill().connected, 20, "the link to come back")
-        time.sleep(1.0)
+        wait_until(lambda: mill().connected, 20, "the link to come back")
+        t_back = loop.now_s()  # four supervisor ticks of run time with the link back: nothing restarts the drive
+        wait_until(lambda: loop.now_s() >= t_back + 4 * cfg.supervisor_period_s, 30, "four ticks after the link")
         report["motor_after_reconnect"] = plant.emulator.motor
-        loop.start_mill()  # the operator
-        _wait(lambda: plant.emulator.motor.running, 10, "the operator's start")
-        _wait(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
+        loop.controls.start_mill()  # the operator
+        wait_until(lambda: plant.emulator.motor.running, 10, "the operator's start")
+        wait_until(lambda: not loop.supervisor.safe, 30, "recovery from the safe state")
         t_pause = loop.now_s()
         plant.camera_paused.set()
-        _wait(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
+        wait_until(lambda: any("camera" in a for a in loop.state.alarms), 20, "a camera alarm")
         report["safe_with_alarm"] = loop.supervisor.safe
-        time.sleep(1.0)
+        t_alarm = loop.now_s()  # four supervisor ticks of run time without frames: no rpm moves
+        wait_until(lambda: loop.now_s() >= t_alarm + 4 * cfg.supervisor_period_s, 30, "four ticks without frames")
         report["pause"] = (t_pause, loop.now_s())
         plant.camera_paused.clear()
-        _wait(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
+        wait_until(lambda: not any("camera" in a for a in loop.state.alarms), 20, "the camera alarm to clear")
 
     run_scripted(cfg, body, seams=seams)
     events = read_events(tmp_path / "run")
@@ -383,11 +383,12 @@ def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: 
     )
     try:
         csv = tmp_path / "run" / "frames.csv"
-        _wait(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
+        wait_until(lambda: csv.exists() and len(read_frames(csv)) > 30, 60, "frames in the run log")
         os.killpg(proc.pid, signal.SIGINT)
-        if presses == 2:  # at once, as an impatient second press: while the run stops (a press after the
-            time.sleep(0.05)  # process has ended its run lands in the interpreter's exit, where Python's own
-            os.killpg(proc.pid, signal.SIGINT)  # default handling is back)
+        if presses == 2:  # an impatient second press while the run stops (a press after the process has
+            # ended its run lands in the interpreter's exit, where Python's own default handling is back)
+            time.sleep(0.05)  # real time: the operator's second press, 50 ms after the first
+            os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
@@ -407,11 +408,8 @@ def test_run_csv_survives_kill_9(tmp_path: Path) -> None:
     )
     try:
         csv = tmp_path / "run" / "frames.csv"
-        end = time.monotonic() + 60
-        while time.monotonic() < end and not (csv.exists() and len(read_frames(csv)) > 40):
-            time.sleep(0.2)
-        time.sleep(1.0)
-        kill_wall = time.time()
+        wait_until(lambda: csv.exists() and len(read_frames(csv)) > 40, 60, "40 rows in the run log")
+        kill_wall = time.time()  # while the run writes on: the kill lands between rows or in one
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -439,8 +437,9 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         slider,
         slider_enabled,
         slider_value,
-        wait_until,
     )
+    from tests.twin.test_dashboard_history import golden_pixels, mi_canvas
+    from twin.dashboard.history import NO_HISTORY
 
     cfg = RunConfig(
         dashboard=True, duration_s=10_000, speed=2.0, mode="auto", port=_free_port(), log_dir=tmp_path / "run"
@@ -453,7 +452,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
 
     def runner() -> None:
         try:
-            run_live(cfg, progress=False, on_started=on_started)
+            run_live(cfg, Seams(on_started=on_started))
         finally:
             done.set()
 
@@ -466,6 +465,8 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         page.goto(dash.url)
         page.wait_for_selector(IMG)
         wait_until(lambda: len(image_srcs(page)) >= 2, 30, "camera and twin images")
+        page.get_by_text(NO_HISTORY).wait_for()  # issue 40: the rig's first run: no history, no golden curve
+        assert not golden_pixels(mi_canvas(page)[0]).any()
         imgs, plots = image_srcs(page), plot_pixels(page)
         wait_until(lambda: image_srcs(page)[0] != imgs[0], 15, "a new camera frame in the browser")
         wait_until(lambda: plot_pixels(page)["Mixing index"] != plots["Mixing index"], 15, "the MI plot to update")
@@ -473,12 +474,12 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
         choose_mode(page, "MANUAL")
         wait_until(lambda: loop.mode_name == "manual", 10, "MANUAL mode in the loop")
         wait_until(lambda: slider_enabled(page), 10, "the rpm slider to enable")
-        enforced = loop.supervisor.supervisor.config.rpm_limits  # the run's supervisor, as the loop built it
+        enforced = loop.supervisor.supervisor.config.limits.rpm_range  # the run's supervisor, as the loop built it
         assert float(slider(page).get_attribute("aria-valuemax")) == pytest.approx(enforced[1], abs=1e-9)
         drag_slider_to(page, 0.2)
         wait_until(lambda: abs(slider_value(page) - 5.0) > 5, 10, "the slider to move")
         wanted = slider_value(page)
-        clamp = loop.supervisor.supervisor.config.clamp
+        clamp = loop.supervisor.supervisor.config.limits.clamp
         wait_until(
             lambda: abs(plant.emulator.motor.setpoint_rpm - clamp(wanted)) < 0.05,
             30,
@@ -494,6 +495,7 @@ def test_browser_sees_live_dashboard_and_drives_the_mill(page, tmp_path: Path) -
     events = read_events(tmp_path / "run")
     assert any(e["kind"] == "operator" and e.get("action") == "manual_rpm" for e in events)
     assert any(e["kind"] == "decision" and e["decision"] == "manual" for e in events)
+    assert not any(e["kind"] == "slower_than_golden" for e in events)
 
 
 @LIVE

@@ -22,9 +22,11 @@ from control.modbus.emulator import DriveEmulator, DriveFaults
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_script import run_scripted
-from tests.twin.test_live import QUICK_AUTO, SPEED, _free_port, _video, _wait
-from twin.cli.run_cmd import run_live
+from tests.twin.test_live import QUICK_AUTO, SPEED, _free_port, _video
+from tests.waiting import wait_until
 from twin.config import RunConfig
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events
 
 # the whole-loop tests share one worker, group "live" (see test_live.py: two loops at once on two cores
@@ -57,16 +59,16 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
         mill = loop.mill_box.get
         emu = plant.emulator
         assert isinstance(emu, DriveEmulator)
-        _wait(lambda: mill().connected and mill().setpoint_rpm >= 15.0, 150, "AUTO to set 15 rpm")
+        wait_until(lambda: mill().connected and mill().setpoint_rpm >= 15.0, 150, "AUTO to set 15 rpm")
         report["setpoint_counts"] = emu.registers(DELTA.setpoint_register)[0]
-        _wait(lambda: emu.output_hz > 10.0, 20, "the drive ramping towards 15 Hz")
+        wait_until(lambda: emu.output_hz > 10.0, 20, "the drive ramping towards 15 Hz")
         for fault in (DriveFaults(corrupt_p=1.0), DriveFaults(mute=True)):
             emu.faults = fault
-            _wait(lambda: not mill().connected, 10, "the loop to see the link down")
-            _wait(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
+            wait_until(lambda: not mill().connected, 10, "the loop to see the link down")
+            wait_until(lambda: loop.supervisor.safe, 10, "the supervisor's safe state")
             report.setdefault("alarms", []).append(list(loop.state.alarms))
             emu.faults = DriveFaults()
-            _wait(lambda: mill().connected, 10, "the link back")
+            wait_until(lambda: mill().connected, 10, "the link back")
 
     run_scripted(cfg, body, seams=QUICK_AUTO)
     assert report["setpoint_counts"] == 1500  # 15 rpm x 1 Hz/rpm x 100 counts/Hz: the manual's Hz x 100
@@ -92,11 +94,11 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
     seen: dict = {}
 
     def another_host(loop, plant, dash) -> None:
-        _wait(lambda: loop.mill_box.get().connected, 10, "the loop to read the drive")
+        wait_until(lambda: loop.mill_box.get().connected, 10, "the loop to read the drive")
         delta.set_motor(setpoint_rpm=10.0, actual_rpm=10.0, running=True)
         seen["t_s"], seen["reads"] = loop.now_s(), delta.counters["reads"]
 
-    run_live(cfg, progress=False, on_started=another_host)
+    run_live(cfg, Seams(on_started=another_host))
     assert delta.writes == []  # OFF: not one write on the bus
     m = delta.motor
     assert not m.running and m.fault == "CE1" and delta.counters["comm_loss_trips"] == 1
@@ -135,24 +137,25 @@ def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
         return next((m.group(1) for ln in list(lines) if (m := re.search(r"dashboard on (http://\S+)", ln))), None)
 
     try:
-        _wait(lambda: dashboard_url() is not None or proc.poll() is not None, 120, "the run's dashboard")
-        _wait(lambda: delta.counters["reads"] > 10 or proc.poll() is not None, 120, "the run to poll the drive")
+        wait_until(lambda: dashboard_url() is not None or proc.poll() is not None, 120, "the run's dashboard")
+        wait_until(lambda: delta.counters["reads"] > 10 or proc.poll() is not None, 120, "the run to poll the drive")
         assert proc.poll() is None, "".join(lines)[-2000:]
         assert delta.writes == [] and not delta.motor.running  # connected, read only: nothing moved
         page.goto(dashboard_url())
         button(page, "Start mill").click(no_wait_after=True, timeout=60_000)  # the operator's start
-        _wait(lambda: delta.output_hz > 8.0 or proc.poll() is not None, 60, "the run to start the drive")
+        wait_until(lambda: delta.output_hz > 8.0 or proc.poll() is not None, 60, "the run to start the drive")
         assert proc.poll() is None, "".join(lines)[-2000:]
-        time.sleep(set_s + 0.5)  # longer than the trip time: only the run's keep-alive writes hold it
+        time.sleep(set_s + 0.5)  # real time: longer than the drive's own 2 s comm-loss timer, which only the run's
+        # keep-alive writes (from another process) hold off
         assert delta.motor.running and delta.fault_code == 0 and delta.trip_times_s == []
         kill_s = delta.now_s()
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
-        _wait(lambda: delta.trip_times_s != [], set_s + 3.0, "the comm-loss trip")
+        wait_until(lambda: delta.trip_times_s != [], set_s + 3.0, "the comm-loss trip")
         stop_s = delta.trip_times_s[0] - kill_s
         assert 0.0 < stop_s <= set_s + 1.0, stop_s
         assert delta.fault_code == DELTA.comm_loss_fault_code and not delta.motor.running
-        _wait(lambda: delta.output_hz == 0.0, 5.0, "the ramp to stop")
+        wait_until(lambda: delta.output_hz == 0.0, 5.0, "the ramp to stop")
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -226,14 +229,15 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
     the re-read is dropped, the first exchange after the link is back is a read."""
     from control.modbus.link import ModbusMill
     from tests.twin.test_mill_worker import Sink
+    from twin.live.commands import SetRpm, StartMill
     from twin.live.mill import MillWorker
-    from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill
+    from twin.live.snapshots import Latest, MillSnapshot
 
     emu = DriveEmulator(DELTA, unit=1, comm_loss_s=1.0)
     emu.open_pty()
     try:
         emu.set_motor(setpoint_rpm=8.0, actual_rpm=8.0, running=True)
-        _wait(lambda: emu.motor.fault == "CE1", 5, "the comm-loss trip of a drive nobody controls")
+        wait_until(lambda: emu.motor.fault == "CE1", 5, "the comm-loss trip of a drive nobody controls")
         link = ModbusMill(emu.mill_url(), timeout_s=0.3, retries=1)
         sink, box = Sink(), Latest(MillSnapshot())
         w = MillWorker(link, sink, box, now_s=lambda: 0.0)
@@ -258,7 +262,7 @@ def test_the_mill_workers_rules_hold_on_the_modbus_link_over_a_pty() -> None:
         assert not box.get().connected and "mill_link" in sink.faults
         w.submit(SetRpm(20.0, epoch=old_epoch))
         emu.reconnect()
-        _wait(lambda: w.cycle().connected, 10, "the link back")
+        wait_until(lambda: w.cycle().connected, 10, "the link back")
         w.cycle()
         assert box.get().epoch == old_epoch + 1
         assert sink.kinds("mill_command_dropped")[-1]["rpm"] == 20.0
@@ -281,4 +285,5 @@ def test_run_drive_puts_the_embedded_demo_on_a_drive_emulator(tmp_path: Path) ->
     synced = [e for e in events if e["kind"] == "mill_synced"]
     assert synced and synced[0]["fault"] is None
     cmds = [(e["command"], e["source"]) for e in events if e["kind"].startswith("mill_command")]
-    assert cmds == [("start", "operator")]  # the demo's operator; OFF sends nothing else
+    # the demo's operator; OFF sends nothing else but the stop at the end of a run that had the mill
+    assert cmds == [("start", "operator"), ("stop", "run_end")]

@@ -6,22 +6,23 @@ the decision quotes them."""
 from __future__ import annotations
 
 import math
-import threading
-import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
-from twin.loop import Seams
+from twin.records import DecisionMade, Record
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events
 
 pytestmark = pytest.mark.xdist_group("live")  # (see test_live.py)
 
 REAL_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,
-                "min_change_interval_s": 60.0, "max_rpm": 15.0, "horizon_s": 6.0, "n_candidates": 2},
+                "min_change_interval_s": 60.0, "horizon_s": 6.0, "n_candidates": 2},
+    limits={"max_rpm": 15.0},
     calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
 )
 
@@ -32,20 +33,15 @@ def test_auto_decides_on_the_dem_twins_predictions(tmp_path: Path) -> None:
     log = tmp_path / "auto"
 
     def until_a_decision_quotes_the_twin(loop, plant, dash) -> None:
-        def watch() -> None:
-            end = time.monotonic() + 300
-            while not loop.stop_event.is_set() and time.monotonic() < end:
-                if any(e["kind"] == "decision" and e["decision"] in ("move", "hold") and e.get("predictions")
-                       for e in read_events(log)):
-                    loop.stop_event.wait(1.0)
-                    loop.stop_event.set()
-                time.sleep(0.5)
+        def on_record(rec: Record) -> None:  # after the run log's subscriber: the decision is written
+            if isinstance(rec, DecisionMade) and rec.decision in ("move", "hold") and rec.predictions:
+                loop.stop_event.set()
 
-        threading.Thread(target=watch, daemon=True).start()
+        loop.events.bus.subscribe(on_record)
 
     cfg = RunConfig(dashboard=False, duration_s=600.0, speed=4.0, case="C", seed=0, mode="auto", log_dir=log,
                     ).resolved()
-    run_live(cfg, progress=False, on_started=until_a_decision_quotes_the_twin, seams=REAL_AUTO)
+    run_live(cfg, replace(REAL_AUTO, on_started=until_a_decision_quotes_the_twin))
     events = read_events(log)
     studies = [e for e in events if e["kind"] == "whatif" and e["reason"] == "AUTO"]
     assert studies, sorted({e["kind"] for e in events})

@@ -6,15 +6,17 @@ from __future__ import annotations
 
 import errno
 import threading
-import time
 from pathlib import Path
 
 import pytest
 
 from control.protocol import MillStatus
 from tests.twin.test_mill_worker import FakeLink
+from tests.waiting import wait_until
 from twin.config import RunConfig
-from twin.loop import LiveLoop
+from twin.live.faults import NO_FAULTS, FaultHooks
+from twin.run.loop import LiveLoop
+from twin.run.settings import Seams
 from twin.runlog import RunLog, read_events
 
 
@@ -29,15 +31,6 @@ class FullDisk(RunLog):
         super()._write(fh, text)
 
 
-def _wait(pred, timeout_s: float) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return False
-
-
 @pytest.fixture
 def thread_errors(monkeypatch) -> list[BaseException | None]:
     """Exceptions that escape a thread (each printed a traceback on the run's stderr)."""
@@ -46,11 +39,23 @@ def thread_errors(monkeypatch) -> list[BaseException | None]:
     return seen
 
 
-def _loop(tmp_path: Path, log: RunLog) -> tuple[LiveLoop, FakeLink]:
+class Armed:
+    """A fault hook (``twin.live.faults``) that does nothing until the test arms it, then runs ``fault``."""
+
+    def __init__(self, fault) -> None:
+        self.fault = fault
+        self.armed = threading.Event()
+
+    def __call__(self, now_s: float) -> None:
+        if self.armed.is_set():
+            self.fault()
+
+
+def _loop(tmp_path: Path, log: RunLog, faults: FaultHooks = NO_FAULTS) -> tuple[LiveLoop, FakeLink]:
     link = FakeLink(MillStatus(12.0, 12.0, True, None))  # a running board
     cfg = RunConfig(dashboard=False, mode="manual", log_dir=tmp_path / "run").resolved()
-    loop = LiveLoop(cfg, iter(()), link, log).start()
-    assert _wait(lambda: loop.mill_box.get().connected, 5.0)
+    loop = LiveLoop(cfg, iter(()), link, log, seams=Seams(faults=faults)).start()
+    wait_until(lambda: loop.mill_box.get().connected, 5.0, "the mill worker's first read of the board")
     return loop, link
 
 
@@ -63,8 +68,8 @@ def test_a_full_disk_ends_the_run_and_stops_the_mill(tmp_path: Path, thread_erro
     loop, link = _loop(tmp_path, log)
     try:
         log.full = True
-        loop.set_manual_rpm(20.0)  # the operator's event cannot be written
-        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its log"
+        loop.controls.set_manual_rpm(20.0)  # the operator's event cannot be written
+        wait_until(loop.stop_event.is_set, 5.0, "the run to end without its log")
     finally:
         loop.stop()
         log.close()
@@ -77,24 +82,25 @@ def test_a_full_disk_ends_the_run_and_stops_the_mill(tmp_path: Path, thread_erro
 @pytest.mark.timeout(30)
 @pytest.mark.parametrize("worker", ["supervisor", "mill"])
 def test_a_crashed_supervisor_or_mill_worker_ends_the_run_and_stops_the_mill(
-    tmp_path: Path, worker: str, monkeypatch
+    tmp_path: Path, worker: str
 ) -> None:
     """A crashed supervisor left the mill worker feeding the watchdog of a running mill with
     nobody deciding; a crashed mill worker left a snapshot that still said 'connected'.
     Either way the run now ends, logs why, and stops the mill."""
     log = RunLog(tmp_path / "run")
-    loop, link = _loop(tmp_path, log)
 
-    def boom(*args, **kwargs):
+    def boom() -> None:
         raise RuntimeError("bug")
 
+    bug = Armed(boom)
+    loop, link = _loop(tmp_path, log, FaultHooks(supervisor_tick=bug) if worker == "supervisor"
+                       else FaultHooks(mill_cycle=bug))
     try:
+        bug.armed.set()
         if worker == "supervisor":
-            monkeypatch.setattr(loop.supervisor, "tick", boom)
-            loop.set_manual_rpm(20.0)
-        else:
-            monkeypatch.setattr(loop.mill, "cycle", boom)  # its next poll, within 0.1 s
-        assert _wait(loop.stop_event.is_set, 5.0), "the run went on without its worker"
+            loop.controls.set_manual_rpm(20.0)  # its next tick, at once
+        # the mill: its next poll, within 0.1 s
+        wait_until(loop.stop_event.is_set, 5.0, "the run to end without its worker")
     finally:
         loop.stop()
         log.close()
@@ -112,20 +118,23 @@ def test_a_hung_supervisor_ends_the_run_and_stops_the_mill(tmp_path: Path, monke
     """A supervisor that hangs (no crash for the guard to see) left the mill worker feeding
     the watchdog of a running mill with nobody deciding. The loop's watch now ends the run
     once the supervisor has not passed through its loop for the stall time."""
-    import twin.loop
+    import twin.run.loop
 
-    monkeypatch.setattr(twin.loop, "SUPERVISOR_STALL_S", 1.0)
+    monkeypatch.setattr(twin.run.loop, "SUPERVISOR_STALL_S", 1.0)
     log = RunLog(tmp_path / "run")
-    loop, link = _loop(tmp_path, log)
     release = threading.Event()
+    hang = Armed(lambda: release.wait(20.0))
+    loop, link = _loop(tmp_path, log, FaultHooks(supervisor_tick=hang))
     try:
-        assert not _wait(loop.stop_event.is_set, 1.5), "a healthy supervisor is not a stall"
-        monkeypatch.setattr(loop.supervisor, "tick", lambda now_s: release.wait(20.0))
-        loop.set_manual_rpm(20.0)  # its next pass hangs in tick
+        # real time: the stall watch measures the wall clock, and a healthy supervisor must pass
+        # through its loop for longer than the (patched) 1 s stall time without ending the run
+        assert not loop.stop_event.wait(1.5), "a healthy supervisor is not a stall"
+        hang.armed.set()
+        loop.controls.set_manual_rpm(20.0)  # its next pass hangs in tick
         # 15 s: the stop comes ~1 s after the hang (the stall time) on a quiet machine; a loaded
         # one (a 5 s wait failed once at load 5-8) may take longer. Still under the hang's 20 s,
         # so a loop without the watch fails here
-        assert _wait(loop.stop_event.is_set, 15.0), "the run went on with a hung supervisor"
+        wait_until(loop.stop_event.is_set, 15.0, "the run to end with a hung supervisor")
     finally:
         release.set()
         loop.stop()

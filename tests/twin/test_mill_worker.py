@@ -6,8 +6,10 @@ import pytest
 
 from control.errors import MillRefused
 from control.protocol import MillStatus
+from tests.waiting import wait_until
+from twin.live.commands import SetRpm, StartMill, StopMill
 from twin.live.mill import MillWorker
-from twin.live.records import Latest, MillSnapshot, SetRpm, StartMill, StopMill
+from twin.live.snapshots import Latest, MillSnapshot
 from twin.records import FaultCleared, FaultRaised, FrameReading, Record, UntypedEvent, event_fields, kind_of
 from twin.state import LiveState
 
@@ -255,7 +257,6 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
     (a crashed earlier run, a front panel) kept turning although nobody asked this run to
     move it. Now it only reads until the operator or AUTO commands: the board's watchdog
     stops the motor, and the worker reports the WDOG fault."""
-    import time
 
     from control.device import DeviceConfig
     from control.driver import MillClient
@@ -269,10 +270,7 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
                           reconnect_wait_s=0.2)
         sink, box = Sink(), Latest(MillSnapshot())
         w = MillWorker(link, sink, box, now_s=lambda: 0.0)
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline and not (box.get().fault == "WDOG"):
-            w.cycle()
-            time.sleep(0.05)
+        wait_until(lambda: w.cycle().fault == "WDOG", 5, "the board's watchdog to trip, read by the worker")
         assert box.get().connected and box.get().fault == "WDOG" and not emu.motor.running
         assert emu.applied == [] and "mill_fault" in sink.faults
     finally:
@@ -281,7 +279,6 @@ def test_a_mill_left_running_by_another_host_stops_on_its_watchdog_over_tcp() ->
 
 def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
     """The same worker on the real driver and the emulator's board over a TCP link."""
-    import time
 
     from control.device import DeviceConfig
     from control.driver import MillClient
@@ -293,9 +290,7 @@ def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
     port = emu.open_tcp(0)
     try:
         emu.set_motor(setpoint_rpm=8.0, actual_rpm=8.0, running=True)
-        deadline = time.monotonic() + 5
-        while emu.motor.fault != "WDOG" and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog to trip (nobody feeds it)")
         link = MillClient(f"socket://127.0.0.1:{port}", heartbeat_s=None, timeout_s=0.5, retries=1,
                           reconnect_wait_s=0.2)
         sink, box = Sink(), Latest(MillSnapshot())
@@ -318,10 +313,7 @@ def test_the_rules_end_to_end_against_the_emulator_over_tcp() -> None:
         assert not box.get().connected and "mill_link" in sink.faults
         w.submit(SetRpm(20.0, epoch=old_epoch))  # decided before the link came back
         emu.reconnect()
-        deadline = time.monotonic() + 10
-        while not box.get().connected and time.monotonic() < deadline:
-            w.cycle()
-            time.sleep(0.05)
+        wait_until(lambda: w.cycle().connected, 10, "the worker to read the board again")
         w.cycle()
         assert box.get().connected and box.get().epoch == old_epoch + 1
         assert emu.motor.setpoint_rpm == 8.0 and "SET" not in [a.cmd for a in emu.applied]
@@ -406,13 +398,13 @@ def test_a_refused_command_puts_the_supervisor_in_its_safe_state_over_tcp() -> N
     """Every refused command ends in the safe state: MANUAL asks for 40 rpm, the board's drive
     tops out at 20 rpm and answers NAK,RANGE; the supervisor used to resync and try again,
     never safe. Now: a ``mill_refused`` event and a safe decision naming the refusal."""
+    from control.decision import Mode
     from control.device import DeviceConfig
     from control.driver import MillClient
     from control.emulator import MillEmulator
     from control.motor import MotorConfig
-    from control.supervisor import Mode
     from tests.twin.test_workers import Boxes, sup_worker
-    from twin.live.records import SetManualRpm
+    from twin.live.commands import SetManualRpm
 
     emu = MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=20.0)), seed=4)
     port = emu.open_tcp(0)
@@ -445,7 +437,7 @@ def test_a_new_board_fault_is_logged_even_while_another_one_is_active() -> None:
     """The board's fault changed from WDOG to DRIVE: the ``mill_fault`` fault was already
     raised (the run's sink logs a fault once until cleared), so the DRIVE fault left no
     event. Each new fault code is an event."""
-    from twin.live.records import RunEvents
+    from twin.live.events import RunEvents
     from twin.state import LiveState
 
     class Log:

@@ -17,7 +17,7 @@ import pytest
 from control.trend import MITrend
 from tests.twin.test_workers import Boxes, _reading
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.live.records import RunEvents
+from twin.live.events import RunEvents
 from twin.records import (
     FRAME_COLUMNS,
     KINDS,
@@ -62,7 +62,7 @@ def test_the_docs_list_every_record_kind_with_its_fields_and_units() -> None:
 
 
 SINK_METHODS = {"publish", "metadata"}
-"""What ``twin.live.records.EventSink`` offers: typed records and the run's metadata."""
+"""What ``twin.live.events.EventSink`` offers: typed records and the run's metadata."""
 
 
 def _calls(tree: ast.Module) -> list[ast.Call]:
@@ -78,7 +78,7 @@ def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> No
     dashboard, ``RunEvents.fault``); a new one fails here."""
     import inspect
 
-    from twin.live.records import EventSink
+    from twin.live.events import EventSink
 
     record_classes = {cls.__name__ for cls in KINDS.values()} | {"MillRefusedRecord", "MillMismatchRecord", "change"}
     bad, built = [], 0
@@ -102,13 +102,27 @@ def test_every_producer_constructs_its_record_no_kind_is_named_by_string() -> No
     assert built >= 60  # the scan sees the producers (a broken scan would pass vacuously)
     methods = {n for n, _ in inspect.getmembers(EventSink, inspect.isfunction) if not n.startswith("_")}
     assert methods == SINK_METHODS  # no event(kind, **fields), fault(key, ...) by name
-    import re
 
-    from control.endpoint import EndpointDetector  # the kinds it hands the process worker by name
 
-    changes = set(re.findall(r"\"(mixed|unmixed)\"", inspect.getsource(EndpointDetector)))
-    assert changes == {"mixed", "unmixed"} and changes <= set(KINDS)
-    assert (Mixed.kind, Unmixed.kind) == ("mixed", "unmixed")  # the process worker maps the names to these
+def test_the_endpoints_changes_are_logged_as_mixed_and_unmixed_records(tmp_path: Path) -> None:
+    """``control.endpoint`` names its changes by string (control cannot import twin's records);
+    the process worker turns them into the typed ``Mixed`` / ``Unmixed`` records. A bed that
+    mixes (MI 0.95) and then segregates (MI 0.5) logs one ``mixed`` event with the detector's
+    numbers, then one ``unmixed``: a change mapped to the wrong record, or to none, fails here."""
+    b = Boxes("auto")
+    b.mill_at(10.0)
+    with RunLog(tmp_path / "run") as log:
+        pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, RunEvents(log, LiveState()))
+        for i in range(450):  # 45 s at 10 fps: mixed for 30 s, then segregated
+            t = i / 10.0
+            pw.process(CameraReading(t, i, _reading((0.95 if t < 30.0 else 0.5) + 0.005 * (-1) ** i)))
+    ends = [e for e in read_events(tmp_path / "run") if e["kind"] in (Mixed.kind, Unmixed.kind)]
+    assert [e["kind"] for e in ends] == ["mixed", "unmixed"], ends
+    mixed, unmixed = ends
+    assert mixed["t_s"] < 30.0 and mixed["mixing_time_s"] < mixed["t_s"] and mixed["plateau_mi"] > 0.9
+    assert unmixed["t_s"] > 30.0 and unmixed.get("mixing_time_s") is None and "plateau" in unmixed["reason"]
+    rows = read_frames(tmp_path / "run")
+    assert [r["mixed"] for r in rows if r["t_s"] in (mixed["t_s"], unmixed["t_s"])] == [1.0, 0.0]
 
 
 def test_an_unregistered_kind_is_read_back_whole_and_warned(tmp_path: Path, caplog) -> None:
@@ -162,7 +176,8 @@ def test_report_and_compare_read_a_run_log_of_the_previous_release(tmp_path: Pat
     from twin.report import build_report, load_run
 
     run = load_run(PREVIOUS)
-    assert len(run.frames) == 120 and {e["kind"] for e in run.events} >= {"decision", "mill_command"}
+    assert run.n_frames == 120 and set(run.events.counts) >= {"decision", "mill_command"}
+    assert run.notes == []  # no uid to check (a log of an earlier release): nothing skipped, nothing to say
     out = build_report([PREVIOUS], tmp_path / "report.html")
     html = out.read_text(encoding="utf-8")
     assert "runlog-previous" in html and "decision" in html
@@ -182,9 +197,9 @@ def test_compare_prints_labels_and_paths_with_brackets_whole(tmp_path: Path) -> 
     assert "run[a]" in r.out and f"plot written to {png}" in r.err and png.is_file()
 
 
-OTHER_CSVS = ("twin/cli/vision_cmds.py", "twin/cli/sim_cmds.py", "tests/vision/test_cli.py")
-"""The CLI modules that write CSVs of their own (``drumtwin mi``, ``sim`` studies), not frames.csv,
-and the test of ``drumtwin mi``'s CSV header."""
+OTHER_CSVS = ("twin/cli/sim_cmds.py",)
+"""The CLI modules that write CSVs of their own (``sim`` studies), not frames.csv (``drumtwin mi``
+writes frames.csv's columns: ``twin.cli.mi_cmd``)."""
 
 
 def test_the_csv_schema_is_defined_once() -> None:
@@ -212,28 +227,35 @@ def test_the_csv_schema_is_defined_once() -> None:
     assert set(SERIES) <= set(FRAME_COLUMNS) and "rpm_actual" in SERIES
 
 
-def test_the_active_fault_set_is_defined_once() -> None:
-    """Only ``ActiveFaults`` keeps active faults: no other class in twin/ holds a set or dict
-    attribute named for alarms, faults or active keys (the old code kept them twice:
-    ``RunEvents._active`` and ``LiveState._alarms``)."""
-    holders = []
-    for path, tree in _modules():
-        for cls in (n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)):
-            for node in ast.walk(cls):
-                targets = node.targets if isinstance(node, ast.Assign) else (
-                    [node.target] if isinstance(node, ast.AnnAssign) else [])
-                value = getattr(node, "value", None)
-                for t in targets:
-                    if not (isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) and t.value.id == "self"):
-                        continue
-                    if not any(w in t.attr.lower() for w in ("alarm", "fault", "active")):
-                        continue
-                    is_container = isinstance(value, (ast.Set, ast.Dict)) or (
-                        isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
-                        and value.func.id in ("set", "dict"))
-                    if is_container and cls.name != "ActiveFaults":
-                        holders.append((str(path.relative_to(ROOT)), cls.name, t.attr))
-    assert holders == []
+def test_the_active_faults_the_log_and_the_dashboard_agree_through_any_sequence(tmp_path: Path) -> None:
+    """One set of active faults (``ActiveFaults``, the sink's and the dashboard state's): through a
+    seeded run of raises and clears of three faults, repeats included, the dashboard shows exactly
+    the messages of the active faults (each its first), the log has one ``fault`` event per
+    inactive -> active and one ``recovered`` per active -> inactive, and the count agrees. A second
+    copy kept beside it (the old code kept ``RunEvents._active`` and ``LiveState._alarms``) drifts
+    on a repeat or on the clear of an inactive fault, and fails here."""
+    import random
+
+    rng = random.Random(7)
+    state = LiveState()
+    active: dict[str, str] = {}
+    expect: list[tuple[str, float, str]] = []
+    with RunLog(tmp_path / "run") as log:
+        events = RunEvents(log, state)
+        for i in range(200):
+            key, t = rng.choice(("mill_link", "camera_stopped", "vision_lost")), float(i)
+            if rng.random() < 0.5:
+                events.publish(FaultRaised(t_s=t, fault=key, message=f"{key} lost at {i}"))
+                if key not in active:
+                    active[key] = f"{key} lost at {i}"
+                    expect.append(("fault", t, key))
+            else:
+                events.publish(FaultCleared(t_s=t, fault=key, message="back"))
+                if active.pop(key, None) is not None:
+                    expect.append(("recovered", t, key))
+            assert sorted(state.alarms) == sorted(active.values()) and events.active() == set(active), i
+    assert [(e["kind"], e["t_s"], e["fault"]) for e in read_events(tmp_path / "run")] == expect
+    assert events.n_faults == sum(kind == "fault" for kind, _, _ in expect) > 10
 
 
 def test_a_fault_is_raised_once_and_the_dashboard_shows_the_same_set(tmp_path: Path) -> None:
@@ -287,12 +309,12 @@ def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: P
 
 
 def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and_the_mill() -> None:
-    """The demo's start (``twin.loop.DemoStart``): nothing is started before the mill worker's
+    """The demo's start (``twin.run.main.DemoStart``): nothing is started before the mill worker's
     first connected ``MillState`` record; then the front panel, then the operator's Start."""
     import threading
 
-    from twin.loop import DemoStart
     from twin.records import Bus, MillState
+    from twin.run.main import DemoStart
 
     calls: list[str] = []
 
@@ -300,11 +322,13 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
         def start_drive(self) -> None:
             calls.append("drive")
 
-    class Loop:
-        stop_event = threading.Event()
-
+    class Controls:
         def start_mill(self) -> None:
             calls.append("start")
+
+    class Loop:
+        stop_event = threading.Event()
+        controls = Controls()
 
     bus = Bus()
     plan = DemoStart(Plant(), connect_timeout_s=30.0)  # type: ignore[arg-type]
@@ -320,14 +344,14 @@ def test_the_demo_start_plan_waits_for_the_mill_record_then_starts_the_drive_and
 
 
 def test_run_config_has_no_untyped_bag() -> None:
-    """Test seams are the typed ``twin.loop.Seams``, not a ``RunConfig.extra`` dict."""
+    """Test seams are the typed ``twin.run.settings.Seams``, not a ``RunConfig.extra`` dict."""
     from twin.config import RunConfig
-    from twin.loop import Seams
+    from twin.run.settings import Seams
 
     assert "extra" not in {f.name for f in fields(RunConfig)}
     assert {f.name for f in fields(Seams)} >= {"supervisor", "calibrate", "whatif_study", "mismatch", "on_started"}
     with pytest.raises(TypeError):  # a misspelt supervisor setting is refused, not ignored
-        from twin.loop import supervisor_config
+        from twin.run.settings import supervisor_config
 
         supervisor_config(Seams(supervisor={"seg_levle": 0.9}))
 
@@ -363,8 +387,8 @@ def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
     a decision's JSON form is ``control.supervisor.Decision.as_dict`` (pinned by control's tests).
     The record declares exactly its keys (``kind`` as ``decision``) and its JSONL line is that
     dict, so a key added in control fails here instead of crashing the supervisor worker."""
+    from control.decision import Action, Decision, Mode, SupervisorInputs
     from control.objective import RpmPrediction
-    from control.supervisor import Action, Decision, Mode, SupervisorInputs
 
     full = Decision(1.0, Mode.AUTO, Action.SET_RPM, "move", "why", rpm=12.0, target_rpm=15.0,
                     inputs=SupervisorInputs(mill_connected=True), predictions={5.0: 0.3},
@@ -381,14 +405,81 @@ def test_the_decision_record_declares_exactly_the_keys_control_writes() -> None:
         assert set(want) - set(line) <= {f.name for f in fields(DecisionMade) if f.metadata.get("optional")}
 
 
-def test_the_dashboard_plots_read_exactly_the_plot_series_of_the_frame_record() -> None:
+def test_the_dashboard_plots_draw_every_plot_series_of_the_frame_record() -> None:
     """The plots' history (``Snapshot.history``) is keyed by ``SERIES``, the ``FrameReading`` fields
-    marked ``plot`` (derived, not declared again). Every key the layout reads from it is one of
-    them, and it draws them all: a renamed field or a misspelt key fails here, not at run time."""
-    tree = ast.parse((TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8"))
-    read = {n.slice.value for n in ast.walk(tree) if isinstance(n, ast.Subscript) and isinstance(n.value, ast.Name)
-            and n.value.id == "h" and isinstance(n.slice, ast.Constant)}
-    assert "snap.history.items()" in (TWIN / "dashboard" / "layout.py").read_text(encoding="utf-8")
-    assert read == set(SERIES)
+    marked ``plot`` (derived, not declared again). Two frames whose every series has a value of its
+    own, pushed through the real layout on a viser server: each series is drawn exactly once,
+    against the frames' times. A renamed field or a misspelt key (a KeyError), a series left out
+    or drawn twice fails here, not at run time."""
+    import numpy as np
+    import viser
+
+    from twin.dashboard.layout import Layout
+
+    assert set(LiveState().snapshot().history) == set(SERIES)
+    values = {k: 0.05 * (i + 1) for i, k in enumerate(SERIES) if k != "t_s"}
     state = LiveState()
-    assert set(state.snapshot().history) == set(SERIES)
+    for i, t in enumerate((1.0, 2.0)):
+        state.record(FrameReading(t_s=t, frame=i, mi_sigmoid=0.8, mi_linear=0.8, d_px=3.0, dsigma_px=1.0,
+                                  concentration=0.5, valid=True, trend_rate=0.0, mode="auto", flags=(),
+                                  **values))  # type: ignore[arg-type]
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        layout = Layout(server)
+        assert layout.push(state.snapshot(), {"camera": None, "twin": None, "hist": None}, plots=True)
+        plots = [p.data for p in (layout._mi_plot, layout._rpm_plot, layout._slope_plot)]
+    finally:
+        server.stop()
+    drawn = []
+    mi_t, golden, *mi_rest = plots[0]  # the MI plot's first series: the golden batch's curve (dashboard.history)
+    assert np.isnan(golden).all()  # no rig history here: nothing drawn for it
+    for t, *ys in [(mi_t, *mi_rest), *plots[1:]]:
+        assert np.array_equal(t, [1.0, 2.0])
+        for y in ys:
+            assert len(y) == 2 and y[0] == y[1]
+            drawn.append(float(y[0]))
+    assert sorted(drawn) == sorted(values.values())
+
+
+def test_the_descriptors_are_derived_from_the_record_declarations() -> None:
+    """Issue 41 item 6: each logged kind's descriptor lists exactly its fields (then the run log's
+    wall_s and run_uid) with the unit declared beside the field and a source (the field's own, else
+    its class's producer): a field added, renamed or given another unit is described without a
+    second table. A record class declared here is described the same way."""
+    from collections.abc import Mapping
+    from dataclasses import dataclass
+
+    from twin.descriptors import LOG_KEYS, data_keys, descriptors
+    from twin.records import Record, opt, unit
+
+    desc = descriptors(FRAME_COLUMNS)
+    assert set(desc) == {"frame"} | {k for k, c in KINDS.items() if c.logged and c is not FrameReading}
+    for kind, cls in KINDS.items():
+        if not cls.logged:
+            continue
+        keys = desc[kind]["data_keys"]
+        assert list(keys) == [f.name for f in fields(cls)] + list(LOG_KEYS), kind
+        for f in fields(cls):
+            assert keys[f.name]["units"] == f.metadata["unit"], (kind, f.name)
+            assert keys[f.name]["source"] == (f.metadata.get("source") or cls.producer) != "", (kind, f.name)
+            assert keys[f.name].get("optional", False) == bool(f.metadata.get("optional")), (kind, f.name)
+
+    @dataclass(frozen=True, kw_only=True)
+    class Probe(Record):
+        producer = "a test"
+        depth_mm: float = unit("mm", "how deep")
+        counts: Mapping[str, int] | None = opt("", "by name")
+        names: tuple[str, ...] = unit("", "some names", source="elsewhere")
+
+    got = data_keys(Probe)
+    assert got["depth_mm"] == {"dtype": "number", "shape": [], "units": "mm", "source": "a test", "doc": "how deep"}
+    assert got["counts"]["dtype"] == "object" and got["counts"]["optional"] is True
+    assert got["names"]["dtype"] == "array" and got["names"]["source"] == "elsewhere"
+    assert data_keys(Probe, csv=True)["names"]["dtype"] == "string"  # one ';'-joined cell in a CSV
+
+    @dataclass(frozen=True, kw_only=True)
+    class Odd(Record):
+        blob: bytes = unit("", "no JSON type")
+
+    with pytest.raises(TypeError, match="blob"):
+        data_keys(Odd)

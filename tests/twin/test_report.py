@@ -129,11 +129,11 @@ def test_report_of_auto_off_and_killed_runs_in_chromium(page, runs, tmp_path):
             assert n > (100 if sid == "events" else 300), (sid, i, n)  # events: a few markers
     assert page.locator("img#plot-energy-0").count() == 1 and page.locator("img#plot-energy-1").count() == 0
     assert data_pixels(page.locator("img#plot-energy-0").screenshot()) > 300
-    # endpoint: the live event of the AUTO run, an offline replay of the OFF run's raw MI
+    # endpoint: the live event of the AUTO run; the OFF run logged none: its frames' mixed column
     end0 = page.locator('section[data-section="endpoint"][data-run="0"]').inner_text()
     assert "MIXED" in end0 and "60.0 s" in end0 and "source: live" in end0
     end1 = page.locator('section[data-section="endpoint"][data-run="1"]').inner_text()
-    assert "offline" in end1
+    assert "mixed column" in end1 and "Not mixed" in end1
     energy0 = page.locator('section[data-section="energy"][data-run="0"]').inner_text()
     assert "150.0" in energy0 and "750.0" in energy0 and "Drive energy used" in energy0
     assert "12.50" in energy0 and "to MI 0.9" in energy0
@@ -165,8 +165,9 @@ def test_blank_plot_counts_no_data_pixels(page, tmp_path):
 
 def test_killed_run_reads_back_what_was_logged(runs):
     run = load_run(runs["killed"])
-    assert len(run.frames) == 400 and not run.clean_stop
-    assert math.isclose(run.series("t_s")[-1], 39.9)
+    assert run.n_frames == 400 and not run.clean_stop
+    assert math.isclose(run.frames.t_max, 39.9)
+    assert "1 line of frames.csv skipped: cut off at the end (no newline: the run was writing it)" in run.notes
 
 
 def test_report_bad_input_is_one_line_exit_2(runs, tmp_path):

@@ -14,8 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +21,12 @@ import pytest
 
 from tests.cli import cli
 from tests.twin.test_report import data_pixels, open_report
-from twin.cli.run_cmd import run_live
+from tests.waiting import wait_until
 from twin.config import RunConfig
+from twin.records import DecisionMade, FrameReading, Record
 from twin.report.build import SECTIONS
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames
 
 pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]
@@ -35,11 +36,11 @@ MIXED_RPM = 45.0  # the demo plant's bed stays mixed at 45 rpm (MI ~0.95); at 5 
 
 OFF_SCRIPT = """
 import sys
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
+from twin.run.main import run_live
 cfg = RunConfig(dashboard=False, duration_s=600.0, speed={speed}, case="C", seed=0, mode="off",
                 start_rpm={rpm}, log_dir=sys.argv[1]).resolved()
-run_live(cfg, progress=False)
+run_live(cfg)
 """
 
 
@@ -53,21 +54,19 @@ def auto_run(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("endpoint") / "auto"
 
     def end_after_the_stop(loop, plant, dash) -> None:
-        def watch() -> None:
-            stop_t: float | None = None
-            while not loop.stop_event.is_set():
-                if stop_t is None and (d / "events.jsonl").exists():
-                    stop_t = next((e["t_s"] for e in read_events(d)
-                                   if e["kind"] == "decision" and e["decision"] == "endpoint"), None)
-                if stop_t is not None and loop.now_s() >= stop_t + AFTER_STOP_S:
-                    loop.stop_event.set()
-                loop.stop_event.wait(0.2)
+        stop_t: list[float] = []  # the endpoint decision's run time
 
-        threading.Thread(target=watch, daemon=True).start()
+        def on_record(rec: Record) -> None:  # on the publishing worker's thread, as records come
+            if isinstance(rec, DecisionMade) and rec.decision == "endpoint":
+                stop_t.append(rec.t_s)
+            elif isinstance(rec, FrameReading) and stop_t and rec.t_s >= stop_t[0] + AFTER_STOP_S:
+                loop.stop_event.set()
+
+        loop.events.bus.subscribe(on_record)
 
     cfg = RunConfig(dashboard=False, duration_s=40.0, speed=SPEED, case="C", seed=0, mode="auto",
                     start_rpm=MIXED_RPM, stop_at_endpoint=True, log_dir=d).resolved()
-    run_live(cfg, progress=False, on_started=end_after_the_stop)
+    run_live(cfg, Seams(on_started=end_after_the_stop))
     return d
 
 
@@ -77,14 +76,15 @@ def killed_off_run(tmp_path_factory) -> Path:
     code = OFF_SCRIPT.format(speed=SPEED, rpm=MIXED_RPM)
     proc = subprocess.Popen([sys.executable, "-c", code, str(d)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    def rows() -> int:
+        return len(read_frames(d)) if (d / "frames.csv").exists() else 0
+
     try:
-        end = time.monotonic() + 240.0
-        while time.monotonic() < end and proc.poll() is None:
-            ev = d / "events.jsonl"
-            if ev.exists() and any(e["kind"] == "mixed" for e in read_events(ev)):
-                break
-            time.sleep(0.5)
-        time.sleep(2.0)  # a few more rows after the event
+        wait_until(lambda: proc.poll() is not None or (
+            (d / "events.jsonl").exists() and any(e["kind"] == "mixed" for e in read_events(d))), 240,
+            "the OFF run's mixed event")
+        at_mixed = rows()
+        wait_until(lambda: proc.poll() is not None or rows() >= at_mixed + 20, 60, "20 more rows after the event")
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
     finally:

@@ -10,11 +10,13 @@ import sys
 import textwrap
 import threading
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import pytest
 
 from tests.cli import assert_one_line_error, cli
+from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.errors import TwinError
 from twin.runlog import (
@@ -45,7 +47,7 @@ def test_rows_events_metadata_round_trip(tmp_path: Path) -> None:
     meta = read_metadata(tmp_path / "run")
     assert meta["config"]["seed"] == 3 and meta["calibration"]["friction"] == 0.4
     header = (tmp_path / "run" / "frames.csv").read_text().splitlines()[0].split(",")
-    assert tuple(header) == FRAME_COLUMNS
+    assert tuple(header) == (*FRAME_COLUMNS, "run_uid")  # the run uid last (twin.runlog)
 
 
 def test_reader_drops_a_cut_off_last_line(tmp_path: Path) -> None:
@@ -61,16 +63,15 @@ def test_reader_drops_a_cut_off_last_line(tmp_path: Path) -> None:
 
 _WRITER = textwrap.dedent(
     """
-    import sys, time
+    import sys
     from twin.runlog import RunLog
     log = RunLog(sys.argv[1])
     log.event("start", 0.0)
     i = 0
     print("ready", flush=True)
-    while True:
+    while True:  # flat out: the kill lands anywhere in a row's write
         log.frame({"t_s": i * 0.01, "frame": i, "mi": 0.5})
         i += 1
-        time.sleep(0.01)
     """
 )
 
@@ -83,7 +84,8 @@ def test_csv_survives_kill_9(tmp_path: Path) -> None:
     )
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        time.sleep(2.0)
+        csv_path = tmp_path / "frames.csv"
+        wait_until(lambda: csv_path.read_bytes().count(b"\n") > 60, 30, "the writer's first 60 rows")
         kill_wall = time.time()
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
@@ -196,6 +198,16 @@ def _gone(pid: int) -> bool:
         return True
 
 
+def _cpu_ticks(pid: int) -> int:
+    """User + system CPU of process ``pid`` in clock ticks (-1 once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            fields_ = fh.read().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return -1
+    return int(fields_[11]) + int(fields_[12])
+
+
 @pytest.mark.timeout(60)
 def test_whatif_workers_die_with_a_killed_parent_and_leave_no_temp_files() -> None:
     proc = subprocess.Popen([sys.executable, "-c", _STUDY], stdout=subprocess.PIPE, text=True)
@@ -204,15 +216,104 @@ def test_whatif_workers_die_with_a_killed_parent_and_leave_no_temp_files() -> No
         *pids, tmp = proc.stdout.readline().split()
         workers = [int(p) for p in pids]
         assert len(workers) == 3 and Path(tmp).is_dir()  # two workers and the fork server
-        time.sleep(0.5)  # the study is running
+        start = [_cpu_ticks(p) for p in workers[:2]]
+        wait_until(lambda: all(_cpu_ticks(p) > t0 + 2 for p, t0 in zip(workers[:2], start, strict=True)), 30,
+                   "both workers computing the study")
         assert not any(_gone(p) for p in workers)
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
-        end = time.monotonic() + 10
-        while time.monotonic() < end and not (all(_gone(p) for p in workers) and not Path(tmp).exists()):
-            time.sleep(0.1)
-        assert [p for p in workers if not _gone(p)] == []
+        wait_until(lambda: all(_gone(p) for p in workers) and not Path(tmp).exists(), 10,
+                   "the workers and the fork server's directory to go with their parent")
         assert not Path(tmp).exists()  # the fork server's socket directory is removed
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_every_file_carries_the_run_uid_and_metadata_describes_every_column(tmp_path: Path) -> None:
+    """Issue 41 item 6: the uid in the three files; metadata.json's descriptors (dtype, shape,
+    units, source) of every frames.csv column, in the header's order, and of each event kind."""
+    import csv
+    import json
+
+    from twin.records import FrameReading, OperatorAction
+
+    with RunLog(tmp_path / "run", run_uid="a-uid") as log:
+        log.frame({"t_s": 0.5, "mi": 0.8, "flags": ("few_red", "glare"), "valid": True})
+        log.frame({"t_s": 0.6, "mi": 0.81})
+        log.record(OperatorAction(t_s=1.0, action="whatif", rpms=(5.0, 10.0)))
+        assert read_metadata(tmp_path / "run")["run_uid"] == "a-uid"  # from the start, before any set_metadata
+    d = tmp_path / "run"
+    with open(d / "frames.csv", newline="") as fh:  # a plain CSV reader reads it
+        rows = list(csv.DictReader(fh))
+    assert [r["run_uid"] for r in rows] == ["a-uid", "a-uid"] and rows[0]["flags"] == "few_red;glare"
+    lines = [json.loads(ln) for ln in (d / "events.jsonl").read_text().splitlines()]
+    assert [ln["run_uid"] for ln in lines] == ["a-uid"]
+    meta = json.loads((d / "metadata.json").read_text())
+    keys = meta["descriptors"]["frame"]["data_keys"]
+    assert list(keys) == list(rows[0]) == [*FRAME_COLUMNS, "run_uid"]
+    for f in fields(FrameReading):  # derived from the declarations: the same units, the producer's source
+        assert keys[f.name]["units"] == f.metadata["unit"] and keys[f.name]["source"] == f.metadata["source"]
+    assert (keys["mi"]["dtype"], keys["frame"]["dtype"], keys["valid"]["dtype"]) == ("number", "integer", "boolean")
+    assert keys["flags"]["dtype"] == keys["mode"]["dtype"] == "string" and keys["t_s"]["shape"] == []
+    assert keys["wall_s"]["units"] == "s" and keys["run_uid"]["dtype"] == "string"
+    op = meta["descriptors"]["operator"]
+    assert op["file"] == "events.jsonl" and op["data_keys"]["rpms"] == {
+        "dtype": "array", "shape": [None], "units": "rpm", "source": "operator", "doc": "what-if speeds",
+        "optional": True}
+    assert meta["descriptors"]["decision"]["data_keys"]["predictions"]["dtype"] == "object"
+    assert "camera_rate" not in meta["descriptors"]  # a dashboard-only record is not in the log
+    assert read_events(d) == [{k: v for k, v in lines[0].items() if k != "run_uid"}]  # the reader checks it, drops it
+
+
+def test_lines_of_another_run_are_skipped_and_counted(tmp_path: Path) -> None:
+    """Two runs' files put together: the uid of the majority of the files is the run's; a line or a
+    metadata.json of the other run is a note, never data."""
+    from twin.runlog import Skips
+
+    for name in ("a", "b"):
+        with RunLog(tmp_path / name, run_uid=f"uid-{name}") as log:
+            log.frame({"t_s": 1.0, "mi": 0.5})
+            log.event("start", 0.0)
+    a, b = tmp_path / "a", tmp_path / "b"
+    with open(a / "frames.csv", "a") as fh:  # b's rows appended to a's
+        fh.writelines((b / "frames.csv").read_text().splitlines(keepends=True)[1:] * 3)
+    with open(a / "events.jsonl", "a") as fh:
+        fh.write((b / "events.jsonl").read_text())
+    skips = Skips()
+    assert [r["t_s"] for r in read_frames(a, skips)] == [1.0] and len(read_events(a, skips)) == 1
+    assert skips.notes() == ["3 lines of frames.csv skipped: of another run (this run's run_uid is uid-a...)",
+                             "1 line of events.jsonl skipped: of another run (this run's run_uid is uid-a...)"]
+    (b / "metadata.json").write_bytes((a / "metadata.json").read_bytes())  # a's metadata in b's folder
+    skips = Skips()
+    assert read_metadata(b, skips) == {} and len(read_frames(b, skips)) == 1
+    assert skips.notes() == ["metadata.json not used: of another run (run_uid uid-a..., frames.csv and "
+                             "events.jsonl say uid-b...)"]
+
+
+def test_a_log_of_the_previous_release_reads_as_a_plain_csv_reader_reads_it() -> None:
+    """tests/data/runlog-previous (no uid anywhere): read_frames gives what the csv module and
+    float() give (empty cell: None), read_events every line, and nothing is noted."""
+    import csv
+    import json
+
+    from twin.runlog import Skips
+
+    prev = Path(__file__).resolve().parents[1] / "data" / "runlog-previous"
+
+    def plain(v: str) -> object:
+        try:
+            return None if v == "" else float(v)
+        except ValueError:
+            return v
+
+    with open(prev / "frames.csv", newline="") as fh:
+        want = [{k: plain(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    skips = Skips()
+    got = read_frames(prev, skips)
+    assert len(got) == len(want) == 120
+    for g, w in zip(got, want, strict=True):
+        assert g.keys() == w.keys()
+        assert all(g[k] == w[k] or (g[k] != g[k] and w[k] != w[k]) for k in w)  # NaN == NaN here
+    lines = [json.loads(ln) for ln in (prev / "events.jsonl").read_text().splitlines()]
+    assert read_events(prev, skips) == lines and skips.notes() == []

@@ -21,8 +21,8 @@ from tests.conftest import BENCH_MEMORY_ARGS, BENCHES
 from tests.twin.live_script import run_scripted
 from tests.waiting import wait_until
 from twin.config import RunConfig
-from twin.loop import Seams, supervisor_config
 from twin.records import FaultRaised
+from twin.run.settings import Seams, supervisor_config
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
 REAL = Path(__file__).resolve().parents[1] / "data" / "real-drum-pmma" / "images"
@@ -96,7 +96,7 @@ def test_whatif_refuses_a_zero_or_negative_rpm_with_the_dashboards_check(rpm: st
     and ``--rpm 0`` simulated a standing drum, where the dashboard's what-if refused both: the
     command now refuses them with the loop's own check (``Limits.check_whatif``), word for word."""
     from control.errors import ControlError
-    from twin.loop import supervisor_config
+    from twin.run.settings import supervisor_config
 
     bad = float(rpm.split(",")[-1])
     with pytest.raises(ControlError) as loops:  # what the dashboard's viewer is told (LiveLoop.run_whatif)
@@ -156,14 +156,14 @@ def test_mill_set_rpm_takes_its_limits_from_the_configs_drum(tmp_path) -> None:
     refuses. Each refusal names the limit and leaves the board untouched."""
     import math
 
-    from twin.cli.sim_cmds import load_mixer
+    from twin.config import load_checked_config
 
     def crit(d_mm: float) -> float:  # n_c = (30 / pi) sqrt(g / R), independently of sim/
         return 30.0 / math.pi * math.sqrt(9.81 / (d_mm / 2000.0))
 
     big, mid, small = (_drum_config(tmp_path / f"d{d}.toml", d) for d in (1000, 400, 100))
     for cfg, d in ((big, 1000), (mid, 400), (small, 100)):
-        assert load_mixer(cfg)[0].drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
+        assert load_checked_config(cfg).mixer.drum.critical_rpm == pytest.approx(crit(d), rel=1e-3)
         want = RunConfig(meter_config=cfg)
         assert supervisor_config(None, crit(d), want).limits.rpm_range[1] == pytest.approx(min(45.0, 0.6 * crit(d)),
                                                                                       rel=1e-3)
@@ -234,7 +234,6 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
     controls the motor passes ``heartbeat_s``. A started motor with a silent default
     client is stopped by the board's watchdog (0.3 s here)."""
     import threading
-    import time
 
     from control.driver import MillClient
 
@@ -247,7 +246,6 @@ def test_a_default_mill_client_never_feeds_the_watchdog() -> None:
             c.start()
             assert emu.motor.running
             assert {t.name for t in threading.enumerate()} - before == set()  # no thread of its own
-            time.sleep(0.3)  # the watchdog's time, then it trips on the emulator's next tick
             wait_until(lambda: not emu.motor.running and emu.motor.fault is not None, 10.0,
                        "the watchdog to stop the motor of a silent host")
 
@@ -262,10 +260,10 @@ def test_kill_9_leftovers_are_removed_at_the_next_start(tmp_path, monkeypatch) -
     from control.emulator import PTY_DIR_PREFIX
 
     env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": os.environ.get("PYTHONPATH", os.getcwd())}
-    code = ("import time; from control.emulator import MillEmulator; e = MillEmulator(); "
-            "print(e.open_pty(), flush=True); time.sleep(60)")
-    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
-             for _ in range(11)]
+    code = ("import sys; from control.emulator import MillEmulator; e = MillEmulator(); "
+            "print(e.open_pty(), flush=True); sys.stdin.read()")  # lives until killed or its stdin closes
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                              env=env) for _ in range(11)]
     links = [Path(p.stdout.readline().strip()) for p in procs]  # type: ignore[union-attr]
     assert all(link.is_symlink() for link in links)
     alive = procs.pop()
@@ -332,19 +330,21 @@ def _mismatch_rig(camera_slope: float, twin_slope: float, tol=None):
     b = Boxes("auto")
     b.mill_at(5.0)
     recal: list[float] = []
-    from control.supervisor import Mode, Supervisor, SupervisorConfig
+    from control.decision import Mode
+    from control.supervisor import Supervisor
+    from tests.control.supervisor_values import worked_config
     from tests.twin.test_mill_worker import Sink
     from twin.live.supervise import SupervisorWorker
 
     sink = Sink()
-    w = SupervisorWorker(Supervisor(SupervisorConfig(vision_timeout_s=3.0, recover_s=2.0), mode=Mode.AUTO),
+    w = SupervisorWorker(Supervisor(worked_config(vision_timeout_s=3.0, recover_s=2.0), mode=Mode.AUTO),
                          b.view, sink, [].append, None, b.mode, mismatch=MismatchMonitor(tol),
                          on_twin_mismatch=lambda: recal.append(b.view.now_s()))
 
     def run(t0: float, t1: float, twin_slope_deg: float, twin_steps: bool = True, seeded_s: float = 0.0) -> None:
         """Run time ``t0`` to ``t1`` in 0.5 s ticks; the twin was seeded at run time ``seeded_s``."""
         from control.trend import TrendEstimate
-        from twin.live.records import CameraInfo, FrameInfo, TwinInfo
+        from twin.live.snapshots import CameraInfo, FrameInfo, TwinInfo
 
         t = t0
         while t < t1 - 1e-9:
@@ -375,10 +375,11 @@ def test_a_twin_calibrated_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_
 
 
 def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_chooses() -> None:
-    from control.supervisor import Mode, PredictionRequest
+    from control.decision import Mode, PredictionRequest
     from tests.twin.test_mill_worker import Sink
     from tests.twin.test_workers import Boxes, advance, sup_worker
-    from twin.live.records import SetMode, TwinInfo
+    from twin.live.commands import SetMode
+    from twin.live.snapshots import TwinInfo
     from twin.live.whatif import WhatIfWorker
     from twin.state import LiveState
 
@@ -442,10 +443,9 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
     """Another host sets the board to 55 rpm (limits 2-40 here): the mill worker reads it
     again (a new epoch, no stale belief), the supervisor worker alarms; in AUTO the
     supervisor brings it to 40 rpm at once, in OFF it keeps its hands off."""
-    import time
 
+    from control.decision import Mode
     from control.driver import MillClient
-    from control.supervisor import Mode
     from tests.twin.test_workers import Boxes, advance, sup_worker
     from twin.live.mill import MillWorker
 
@@ -471,13 +471,16 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
             if mode == "auto":
                 assert emu.motor.setpoint_rpm == 40.0
                 assert any(d["rpm"] == 40.0 for d in sink.kinds("decision"))
-                t = 3.0
-                while "mill_above_limits" in sink.faults and t < 20.0:  # the motor slows down (real time)
-                    time.sleep(0.1)
+                t = [3.0]
+
+                def step() -> bool:  # the motor slows down in real time: read it, tick the supervisor
                     mill.cycle()
-                    advance(b, sup, t, t + 0.5)
-                    t += 0.5
-                assert "mill_above_limits" not in sink.faults and emu.motor.actual_rpm <= 40.5
+                    advance(b, sup, t[0], t[0] + 0.5)
+                    t[0] += 0.5
+                    return "mill_above_limits" not in sink.faults
+
+                wait_until(step, 20.0, "the fault to clear as the motor slows to 40 rpm")
+                assert emu.motor.actual_rpm <= 40.5
             else:
                 assert emu.motor.setpoint_rpm == 55.0 and sink.kinds("decision") == []
         finally:
@@ -534,43 +537,36 @@ def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_saf
     10 s of run time and the supervisor is safe with the twin stale."""
     import dataclasses
     import math
-    import time
 
+    from twin.live.faults import FaultHooks
     from twin.live.mismatch import MismatchMonitor, MismatchTolerance
     from twin.runlog import read_events
 
     cfg = RunConfig(dashboard=False, duration_s=600, speed=4.0, mode="auto", log_dir=tmp_path / "run").resolved()
     report: dict = {}
 
-    def before(loop, plant) -> None:  # wrap the twin's box before any worker publishes
-        box = loop.twin_box
-        inner_set = box.set
+    def before(loop, plant) -> None:
+        report["loop"] = loop
 
-        def wrong_set(info) -> None:
-            if report.get("t_wrong") is not None and math.isfinite(info.slope_deg):
-                s = -info.slope_deg if wrong == "direction" else info.slope_deg + 30.0
-                info = dataclasses.replace(info, slope_deg=s)
-                report.setdefault("t_first_wrong", loop.now_s())  # the twin's first wrong publish
-            inner_set(info)
-
-        box.set = wrong_set
+    def wrong_twin(info):  # the twin's state as it is published (twin.live.faults: twin_published)
+        if report.get("t_wrong") is not None and math.isfinite(info.slope_deg):
+            s = -info.slope_deg if wrong == "direction" else info.slope_deg + 30.0
+            info = dataclasses.replace(info, slope_deg=s)
+            report.setdefault("t_first_wrong", report["loop"].now_s())  # the twin's first wrong publish
+        return info
 
     def body(loop, plant) -> None:
         # the twin goes wrong once it is evidence (past its spin-up, ``warmup_s`` simulated since
         # it was seeded) and has agreed a whole median window: on a busy machine it seeds late
         settled = MismatchTolerance().warmup_s + MismatchMonitor().window_s
-        end = time.monotonic() + 120
-        while time.monotonic() < end and not (loop.now_s() > 15.0 and loop.twin_box.get().age_s > settled):
-            time.sleep(0.1)
+        wait_until(lambda: loop.now_s() > 15.0 and loop.twin_box.get().age_s > settled, 120, "a settled twin")
         report["quiet_before"] = not any("twin" in a for a in loop.state.alarms)
         report["t_wrong"] = loop.now_s()
-        end = time.monotonic() + 60
-        while time.monotonic() < end and not loop.supervisor.safe:
-            time.sleep(0.05)
+        wait_until(lambda: loop.supervisor.safe, 120, "the safe state after the twin went wrong")
         report["t_safe"] = loop.now_s()
         report["safe_reason"] = loop.supervisor.supervisor.safe_reason
 
-    run_scripted(cfg, body, before)
+    run_scripted(cfg, body, before, Seams(faults=FaultHooks(twin_published=wrong_twin)))
     events = read_events(tmp_path / "run")
     raised = [e for e in events if e["kind"] == "fault" and e["fault"] == "twin_mismatch"]
     assert report["quiet_before"] and raised
@@ -589,8 +585,8 @@ def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_
     from control.limits import WHATIF_MAX_RUNS
     from control.protocol import MillStatus
     from tests.twin.test_mill_worker import FakeLink
-    from twin.live.records import TwinInfo
-    from twin.loop import LiveLoop
+    from twin.live.snapshots import TwinInfo
+    from twin.run.loop import LiveLoop
     from twin.runlog import RunLog, read_events
 
     started, release = threading.Event(), threading.Event()
@@ -604,19 +600,19 @@ def test_the_loops_whatif_has_the_whatif_commands_caps_and_can_be_cancelled(tmp_
     with RunLog(tmp_path / "run") as log:
         loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(5.0, 5.0, True, None)), log,
                         seams=Seams(whatif_study=slow_study))
-        loop.run_whatif([5.0], 1e9)
-        loop.run_whatif([5.0 + i * 0.001 for i in range(WHATIF_MAX_RUNS + 1)], 60.0)
-        loop.run_whatif([10000.0], 60.0)
+        loop.controls.run_whatif([5.0], 1e9)
+        loop.controls.run_whatif([5.0 + i * 0.001 for i in range(WHATIF_MAX_RUNS + 1)], 60.0)
+        loop.controls.run_whatif([10000.0], 60.0)
         errors = [e["error"] for e in read_events(tmp_path / "run") if e["kind"] == "operator_rejected"]
         assert len(errors) == 3 and "(0, 3600] s" in errors[0] and "at most 2000 runs" in errors[1]
         assert "10000 outside (0, 77.23] rpm" in errors[2]  # the demo drum's critical speed
-        assert not loop.cancel_whatif()  # nothing to cancel
+        assert not loop.controls.cancel_whatif()  # nothing to cancel
         loop.twin_box.set(TwinInfo(updated_s=1.0, state=object()))
-        loop.run_whatif([5.0, 25.0], 60.0)
+        loop.controls.run_whatif([5.0, 25.0], 60.0)
         t = threading.Thread(target=loop.whatif.serve_once)
         t.start()
         assert started.wait(10)
-        assert loop.cancel_whatif()  # running: abandoned (the local pool is terminated)
+        assert loop.controls.cancel_whatif()  # running: abandoned (the local pool is terminated)
         release.set()
         t.join(10)
         kinds = [e["kind"] for e in read_events(tmp_path / "run")]

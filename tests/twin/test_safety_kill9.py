@@ -6,6 +6,7 @@ the temp directory either (no ``drumtwin-*``, no ``pymp-*``, nothing) and no pro
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -18,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from control.emulator import OWNER_FILE, PTY_DIR_PREFIX, owner_pid
+from tests.waiting import wait_until
 from twin.runlog import EVENTS_FILE, FRAMES_FILE, read_events, read_frames
 
 DRUMTWIN = Path(sys.executable).with_name("drumtwin")
@@ -72,13 +74,6 @@ def _env(tmp: Path, marker: str) -> dict[str, str]:
     return env
 
 
-def _wait_gone(marker: str, timeout_s: float) -> list[int]:
-    end = time.monotonic() + timeout_s
-    while (left := _ours(marker)) and time.monotonic() < end:
-        time.sleep(0.2)
-    return left
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next_start(tmp_path, request) -> None:
@@ -102,17 +97,16 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
         runs = [(i, *start(i)) for i in range(pair, pair + 2)]
         for i, proc, log in runs:
             milestone, extra = MOMENTS[i]
-            end = time.monotonic() + 150
-            while time.monotonic() < end and proc.poll() is None and not _reached(milestone, tmp, log, proc.pid):
-                time.sleep(0.05)
+            wait_until(lambda p=proc, m=milestone, d=log: p.poll() is not None or _reached(m, tmp, d, p.pid), 150,
+                       f"run {i} to reach {milestone}")
             assert proc.poll() is None, (f"run {i} ended by itself (code {proc.returncode}) before {milestone}: "
                                        f"{(tmp_path / f'run{i}.err').read_text(errors='replace')[-800:]}")
             assert _reached(milestone, tmp, log, proc.pid), f"run {i} never reached {milestone}"
-            time.sleep(extra)
+            time.sleep(extra)  # real time: the kill lands this long after the milestone (the race under test)
             proc.send_signal(signal.SIGKILL)
             killed.append((log, time.time(), f"{milestone} + {extra:g} s"))
             proc.wait(10)
-    assert not _wait_gone(marker, 20.0), "a killed run's child process outlived it"
+    wait_until(lambda: not _ours(marker), 20.0, "the killed runs' child processes to end with them")
 
     # each start already removed the leftovers of the runs killed before it; the last pair's
     # (killed well after their pty existed) are still there: the kills do leave them
@@ -138,6 +132,19 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
     p = subprocess.run([*argv[:-1], "20", "--log", str(tmp_path / "next")], env=env, capture_output=True,
                        text=True, timeout=240)
     assert p.returncode == 0, p.stderr[-2000:]
+
+    # issue 40: the catalogue beside the runs lists each killed run as ended without a stop,
+    # with what its log holds, and the next run as a clean one
+    listed = subprocess.run([str(DRUMTWIN), "runs", "list", "--runs-dir", str(tmp_path), "--json"], env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert listed.returncode == 0, listed.stderr[-2000:]
+    rows = {Path(r["path"]).name: r for r in json.loads(listed.stdout)}
+    assert rows["next"]["ended"] == "clean" and rows["next"]["frames"] > 0
+    for log, _t, moment in killed:
+        if (log / EVENTS_FILE).exists() or (log / FRAMES_FILE).exists():
+            row = rows[log.name]
+            assert row["ended"] == "killed" and "without a stop" in row["failure"], (moment, row)
+            assert (row["frames"] or 0) == len(read_frames(log)), moment
     assert "Traceback" not in p.stderr
-    assert not _wait_gone(marker, 20.0)
+    wait_until(lambda: not _ours(marker), 20.0, "the next run's processes to end")
     assert sorted(p.name for p in tmp.iterdir()) == [], "left in the temp directory after the next run"

@@ -18,10 +18,10 @@ from control.trend import MITrend
 from tests.cli import cli
 from tests.twin.test_mill_worker import Sink
 from tests.twin.test_workers import Boxes, _reading
-from twin.cli.run_cmd import run_live
 from twin.config import RunConfig
 from twin.live.camera import CameraReading, ProcessWorker
-from twin.loop import Seams
+from twin.run.main import run_live
+from twin.run.settings import Seams
 from twin.runlog import read_events, read_frames
 from twin.state import LiveState
 
@@ -87,7 +87,7 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     try:
         cfg = RunConfig(video=video, mill=f"socket://127.0.0.1:{port}", meter_config=classes, dashboard=False,
                         duration_s=8.0, mode="auto", log_dir=tmp_path / "run").resolved()
-        run_live(cfg, progress=False, seams=Seams(calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+        run_live(cfg, Seams(calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
                                                   whatif_study=study))
     finally:
         emu.close()

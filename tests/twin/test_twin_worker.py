@@ -17,7 +17,8 @@ import pytest
 from control.limits import Limits
 from control.protocol import MillStatus
 from tests.twin.test_mill_worker import Sink
-from twin.live.records import CameraInfo, FrameInfo, Latest, MillSnapshot, RunView, TwinInfo
+from twin.live.commands import Reseed
+from twin.live.snapshots import CameraInfo, FrameInfo, Latest, MillSnapshot, RunView, TwinInfo
 from twin.live.twin import CALIBRATION_STEADY_S, CALIBRATION_WINDOW_S, TwinSettings, TwinWorker
 from twin.state import LiveState
 
@@ -36,15 +37,15 @@ class RecordingPool(Executor):
 class Rig:
     """A TwinWorker on the run's records, stepped at 0.1 s of run time."""
 
-    def __init__(self, min_rpm: float | None = None) -> None:
+    def __init__(self, limits: Limits | None = None) -> None:
         self.frames: Latest[FrameInfo] = Latest(FrameInfo())
         self.mill: Latest[MillSnapshot] = Latest(MillSnapshot())
         view = RunView(1.0, Latest(CameraInfo()), self.frames, self.mill, Latest(TwinInfo()), Latest("auto"),
                        clock_now=lambda: 0.0)
         self.sink = Sink()
         self.slopes: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
-        self.worker = TwinWorker(TwinSettings(start_rpm=5.0, min_rpm=min_rpm), view, self.sink, LiveState(),
-                                 Latest(TwinInfo()), self.slopes)
+        self.worker = TwinWorker(TwinSettings(start_rpm=5.0, limits=limits or Limits()), view, self.sink,
+                                 LiveState(), Latest(TwinInfo()), self.slopes)
         self.pool = RecordingPool()
         self.worker._pool = self.pool
         self.t = 0.0
@@ -66,7 +67,7 @@ class Rig:
 
 
 def test_the_twin_calibrates_only_a_turning_steady_drum_at_its_measured_rpm() -> None:
-    r = Rig()
+    r = Rig(Limits(min_rpm=2.0))  # worked out on a 2 rpm minimum (a run's is 5): the ramp from 2.5 rpm turns
     r.run(CALIBRATION_WINDOW_S + 1.0, 0.19)  # the camera's slope window is full; the drum creeps
     assert r.pool.jobs == [] and r.sink.kinds("calibration_started") == []
     assert r.waiting() == ["not turning"]
@@ -104,29 +105,32 @@ def test_the_minimum_is_the_limits_lowest_rpm() -> None:
 
 
 def test_the_live_calibrations_minimum_is_the_runs_supervisor_minimum(tmp_path) -> None:
-    """The run's supervisor runs the drum at 5 rpm and above (``LOOP_SUPERVISOR``), but the
-    twin calibrated at anything from ``Limits().min_rpm`` (2 rpm) on: a drum creeping at 3 rpm,
-    a speed the run never commands, was taken as a calibration speed."""
+    """The run's supervisor ran the drum at 5 rpm and above, but the twin calibrated at anything
+    from ``Limits()``' 2 rpm on: a drum creeping at 3 rpm, a speed the run never commands, was
+    taken as a calibration speed. ``Limits``' defaults are now the run's; this run's minimum is
+    set above them (7 rpm) to show the twin takes the run's limits, not the defaults."""
     from tests.twin.test_mill_worker import FakeLink
     from twin.config import RunConfig
-    from twin.loop import LOOP_SUPERVISOR, LiveLoop
+    from twin.run.loop import LiveLoop
+    from twin.run.settings import Seams
     from twin.runlog import RunLog
 
     cfg = RunConfig(dashboard=False, mode="auto", log_dir=tmp_path / "run").resolved()
     log = RunLog(tmp_path / "run")
-    try:  # the loop hands its twin the supervisor's minimum (not started: no thread)
-        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(0.0, 0.0, False, None)), log)
-        run_min = loop.twin.settings.min_rpm
-        assert run_min == loop.limits.min_rpm == LOOP_SUPERVISOR["min_rpm"] == 5.0
+    try:  # the loop hands its twin the supervisor's limits (not started: no thread)
+        loop = LiveLoop(cfg, iter(()), FakeLink(MillStatus(0.0, 0.0, False, None)), log,
+                        seams=Seams(limits={"min_rpm": 7.0}))
+        run_limits = loop.twin.settings.limits
+        assert run_limits == loop.limits == loop.supervisor.supervisor.config.limits and run_limits.min_rpm == 7.0
     finally:
         log.close()
-    assert run_min > Limits().min_rpm
-    creeping, turning = Rig(min_rpm=run_min), Rig(min_rpm=run_min)
-    creeping.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 3.0)
-    turning.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 5.5)
+    assert run_limits.min_rpm > Limits().min_rpm
+    creeping, turning = Rig(run_limits), Rig(run_limits)
+    creeping.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 6.0)
+    turning.run(CALIBRATION_WINDOW_S + CALIBRATION_STEADY_S + 1.0, 7.5)
     assert creeping.pool.jobs == [] and creeping.waiting() == ["not turning"]
-    assert "below the run's 5 rpm minimum" in creeping.sink.kinds("calibration_waiting")[0]["reason"]
-    assert [job[1] for job in turning.pool.jobs] == [pytest.approx(5.5)]
+    assert "below the run's 7 rpm minimum" in creeping.sink.kinds("calibration_waiting")[0]["reason"]
+    assert [job[1] for job in turning.pool.jobs] == [pytest.approx(7.5)]
 
 
 def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> None:
@@ -174,7 +178,7 @@ def test_the_twins_age_is_its_simulated_time_since_seeding_not_run_time() -> Non
             until(lambda i, k=k: i.updated_s >= jump + 0.1 * k - 1e-6, "kept up")
         ran = box.get()
         assert ran.updated_s == pytest.approx(jump + 3.0) and ran.age_s == pytest.approx(3.0, abs=0.05)
-        worker.request("reseed")
+        worker.request(Reseed())
         again = until(lambda i: i.seeds == 2, "been seeded again")
         assert again.updated_s >= jump + 3.0 - 1e-6 and again.age_s < 0.2
     finally:

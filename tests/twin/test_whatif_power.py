@@ -11,7 +11,8 @@ from sim.whatif import run_study
 from tests.twin.test_mill_worker import Sink
 from tests.twin.test_workers import Boxes
 from twin.dashboard.layout import whatif_table_md
-from twin.live.records import TwinInfo
+from twin.live.commands import RunStudy
+from twin.live.snapshots import TwinInfo
 from twin.live.whatif import WhatIfWorker
 from twin.state import LiveState, WhatIfView
 
@@ -28,7 +29,7 @@ def test_the_live_whatif_reports_time_power_and_energy_to_the_configs_target():
     b.twin.set(TwinInfo(updated_s=1.0, state=sim.snapshot()))
     state, sink = LiveState(), Sink()
     w = WhatIfWorker(b.view, sink, state, study=study, target_mi=0.2)
-    assert w.submit([5.0, 30.0], 3.0) and w.serve_once()
+    assert w.submit(RunStudy((5.0, 30.0), 3.0)) and w.serve_once()
     assert [j.target_mi for j in seen] == [0.2, 0.2]  # the worker's target reaches every job
     v = state.snapshot().whatif
     assert v.target_mi == 0.2 and v.rpms == (5.0, 30.0)

@@ -11,6 +11,7 @@ supervisor ended it with exit 2)."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -19,14 +20,35 @@ import pytest
 from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from tests.cli import cli
-from twin.cli import run_cmd
+from tests.waiting import wait_until
 from twin.errors import EXIT_WORKER_CRASHED
-from twin.loop import WORKERS, LiveLoop, Seams, WorkerCrash, crash_summary
+from twin.live.faults import FaultHooks, Hook
+from twin.run import main as run_main
+from twin.run.loop import WORKERS, LiveLoop, crash_summary
+from twin.run.settings import Seams
 from twin.runlog import read_events
 from vision.synthetic import drum_frame
 
 LIVE = pytest.mark.xdist_group("live")
 CRASH_AT_S = 1.5  # run time (the video's paced time); the operator's start is logged at 0.00-0.02 s
+POINTS: dict[str, Callable[[Hook], FaultHooks]] = {  # each worker's per-pass point (twin.live.faults)
+    "camera": lambda h: FaultHooks(camera_frame=h),  # its next frame
+    "process": lambda h: FaultHooks(process_reading=h),  # its next reading
+    "mill": lambda h: FaultHooks(mill_cycle=h),  # its next cycle
+    "twin": lambda h: FaultHooks(twin_pass=h),
+    "whatif": lambda h: FaultHooks(whatif_pass=h),
+    "supervisor": lambda h: FaultHooks(supervisor_tick=h),
+}
+
+
+def _crash_from(at_s: float, message: str) -> Hook:
+    """A bug: from run time ``at_s`` on, the worker's next pass raises ``RuntimeError(message)``."""
+
+    def crash(now_s: float) -> None:
+        if now_s >= at_s:
+            raise RuntimeError(message)
+
+    return crash
 
 
 def _video(path: Path, n: int) -> Path:
@@ -40,10 +62,8 @@ def _video(path: Path, n: int) -> Path:
 
 def _start_mill(loop: LiveLoop, plant: object, dash: object) -> None:
     """The operator presses Start once the board has been read (the run then controls it)."""
-    end = time.monotonic() + 20.0
-    while not loop.mill_box.get().connected and time.monotonic() < end:
-        time.sleep(0.02)
-    loop.start_mill()
+    wait_until(lambda: loop.mill_box.get().connected, 20.0, "the board to be read")
+    loop.controls.start_mill()
 
 
 @pytest.fixture(scope="module")
@@ -62,9 +82,10 @@ def test_a_crashed_worker_stops_the_mill_logs_it_and_exits_3(tmp_path: Path, wor
     url = emu.open_pty()
     emu.set_motor(setpoint_rpm=10.0, actual_rpm=0.0, running=False)
     video = drum_video
-    real = run_cmd.run_live
-    seams = Seams(crash=WorkerCrash(worker, at_s=CRASH_AT_S, message=f"bug in {worker}\nsecond line"))
-    monkeypatch.setattr(run_cmd, "run_live", lambda cfg, **kw: real(cfg, **kw, seams=seams, on_started=_start_mill))
+    real = run_main.run_live  # what `drumtwin run` calls, with the crash and the operator's start
+    seams = Seams(faults=POINTS[worker](_crash_from(CRASH_AT_S, f"bug in {worker}\nsecond line")),
+                  on_started=_start_mill)
+    monkeypatch.setattr(run_main, "run_live", lambda cfg, seams_=None, **kw: real(cfg, seams, **kw))
     try:
         t0 = time.monotonic()
         r = cli("run", "--video", video, "--mill", url, "--no-dashboard", "--mode", "manual", "--duration", "60",
@@ -88,7 +109,7 @@ def test_a_crashed_worker_stops_the_mill_logs_it_and_exits_3(tmp_path: Path, wor
     crashed = [e for e in events if e["kind"] == "fault" and e["fault"] == "worker_crashed"]
     assert len(crashed) == 1, [e for e in events if e["kind"] == "fault"]
     assert crashed[0]["worker"] == worker and crashed[0]["error"] == f"RuntimeError: bug in {worker}"
-    assert "raise RuntimeError(crash.message)" in crashed[0]["traceback"]
+    assert ", in crash\n" in crashed[0]["traceback"]  # where the bug was raised, on the worker's thread
     assert crashed[0]["t_s"] >= CRASH_AT_S
     assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
                for e in events)
@@ -100,6 +121,7 @@ def test_crash_summary_is_one_line_with_the_type() -> None:
     assert crash_summary(KeyError()) == "KeyError"
 
 
-def test_a_crash_seam_names_a_worker_of_the_loop() -> None:
-    with pytest.raises(ValueError, match="no worker 'camra'"):
-        WorkerCrash("camra")
+def test_every_worker_has_a_fault_point_and_a_misspelt_point_is_an_error() -> None:
+    assert set(POINTS) == set(WORKERS)
+    with pytest.raises(TypeError, match="camra_frame"):
+        FaultHooks(camra_frame=_crash_from(0.0, "never"))  # type: ignore[call-arg]

@@ -12,23 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from control.decision import Mode, PredictionRequest, PredictionResult
 from control.protocol import MillStatus
-from control.supervisor import Mode, PredictionRequest, PredictionResult, Supervisor, SupervisorConfig
+from control.supervisor import Supervisor
 from control.trend import MITrend, TrendEstimate
+from tests.control.supervisor_values import worked_config
 from tests.twin.test_mill_worker import FakeLink, Sink
 from twin.live.camera import CameraReading, CameraWorker, ProcessWorker, put_dropping_oldest
-from twin.live.records import (
-    CameraInfo,
-    FrameInfo,
-    Latest,
-    MillSnapshot,
-    RunView,
-    SetManualRpm,
-    SetMode,
-    SetRpm,
-    StopMill,
-    TwinInfo,
-)
+from twin.live.commands import Recalibrate, Reseed, RunStudy, SetManualRpm, SetMode, SetRpm, StopMill
+from twin.live.snapshots import CameraInfo, FrameInfo, Latest, MillSnapshot, RunView, TwinInfo
 from twin.live.supervise import SupervisorWorker
 from twin.live.whatif import WhatIfWorker
 from twin.state import FRAME_ROW_COLUMNS, SERIES, FrameRow, LiveState
@@ -83,7 +75,7 @@ def sup_worker(b: Boxes, mode: Mode, preds: FakePredictions | None = None, **cfg
                 seg_level=0.5, clear_level=0.6, prediction_wait_s=0.0, min_rpm=2.0, max_rpm=40.0)
     sent: list = []
     sink = Sink()
-    w = SupervisorWorker(Supervisor(SupervisorConfig(**{**base, **cfg}), mode=mode), b.view, sink, sent.append,
+    w = SupervisorWorker(Supervisor(worked_config(**{**base, **cfg}), mode=mode), b.view, sink, sent.append,
                          preds, b.mode)
     return w, sink, sent
 
@@ -139,7 +131,7 @@ def test_a_twin_that_never_runs_is_stale_for_the_loops_auto() -> None:
     """The twin worker died (or hung) before its first step: the supervisor saw no twin time
     at all and never called it stale, so AUTO went on without it. With the loop's settings a
     twin that has not run within the twin timeout is stale: safe state."""
-    from twin.loop import supervisor_config
+    from twin.run.settings import supervisor_config
 
     b = Boxes()
     b.mill_at(5.0)
@@ -420,14 +412,14 @@ def test_whatif_worker_answers_requests_once_the_twin_runs() -> None:
     res = w.poll()
     assert res is not None and res.t_s == 2.0 and res.predictions == {5.0: 0.05, 45.0: 0.45}
     assert w.poll() is None and jobs_seen == [[5.0, 45.0]]
-    assert w.submit([10.0], 20.0) and not w.submit([12.0], 20.0)  # one operator study at a time
+    assert w.submit(RunStudy((10.0,), 20.0)) and not w.submit(RunStudy((12.0,), 20.0))  # one at a time
     assert w.serve_once() and state.snapshot().whatif.rpms == (10.0,)
 
 
 def test_root_controls_become_typed_commands(tmp_path) -> None:
     """The dashboard's Controls put commands on the workers' queues; nothing runs."""
     from twin.config import RunConfig
-    from twin.loop import LiveLoop
+    from twin.run.loop import LiveLoop
     from twin.runlog import RunLog, read_events
 
     class Link(FakeLink):
@@ -437,17 +429,21 @@ def test_root_controls_become_typed_commands(tmp_path) -> None:
     cfg = RunConfig(dashboard=False, mode="off", log_dir=tmp_path / "run").resolved()
     with RunLog(tmp_path / "run") as log:
         loop = LiveLoop(cfg, iter(()), Link(), log)
-        loop.set_mode("manual")
-        loop.set_manual_rpm(12.0)
-        loop.emergency_stop()
+        loop.controls.set_mode("manual")
+        loop.controls.set_manual_rpm(12.0)
+        loop.controls.emergency_stop()
         assert loop.supervisor._inbox.get_nowait() == SetMode("manual")
         assert loop.supervisor._inbox.get_nowait() == SetManualRpm(12.0)
         assert loop.supervisor._inbox.get_nowait() == SetMode("off")
         assert loop.mill._inbox.get_nowait() == StopMill(source="emergency_stop", urgent=True)
         assert "emergency_stop" in loop.events.active()
-        loop.run_whatif([5.0], math.nan)  # refused with an event, never an exception
-        loop.run_whatif([5.0, 25.0], 10.0)
-        loop.run_whatif([5.0], 10.0)  # one study at a time: refused
+        loop.controls.recalibrate()
+        loop.controls.reseed_twin()
+        assert loop.twin._requests.get_nowait() == Recalibrate()
+        assert loop.twin._requests.get_nowait() == Reseed()
+        loop.controls.run_whatif([5.0], math.nan)  # refused with an event, never an exception
+        loop.controls.run_whatif([5.0, 25.0], 10.0)
+        loop.controls.run_whatif([5.0], 10.0)  # one study at a time: refused
         ev = [e for e in read_events(tmp_path / "run") if e["kind"] in ("operator", "operator_rejected")]
         assert [e["kind"] for e in ev if e.get("action") == "whatif"] == [
             "operator_rejected", "operator", "operator", "operator_rejected",

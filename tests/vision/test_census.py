@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
+from vision.bed import bed_cover, spread_ratios
 from vision.census import (
     CIRCLES_MIN,
     ClassSize,
@@ -20,6 +21,7 @@ from vision.census import (
     class_size,
     count_particles,
     particle_body,
+    particle_edges,
     run_diameter_px,
     single_particle_crops,
 )
@@ -185,3 +187,73 @@ def test_census_shares_and_fill_from_counts_at_the_merged_size():
     assert cen.direction == -1 and cen.classes[1].own == sizes[1]
     with pytest.raises(ValueError):
         census(["a"], np.array([[1.0]]), np.array([1.0]), sizes, np.array([[1]]), [0.0], 1.0, 0.8)
+
+
+def test_the_beds_cover_is_its_envelope_whatever_is_painted_of_each_particle() -> None:
+    """``bed_cover``: the gaps between packed discs and their highlights do not count against the bed;
+    a half-filled drum is half covered whether its discs are drawn whole or as rings."""
+    r, d = 150, 16.0
+    yy, xx = np.mgrid[0:2 * r, 0:2 * r]
+    inside = (xx - r + 0.5) ** 2 + (yy - r + 0.5) ** 2 <= r * r
+    lower = inside & (yy >= r)  # the bed: the lower half
+    centres = [(x, y) for x, y in hex_cluster(d, 30, 30, (0, 0))
+               if lower[min(int(y), 2 * r - 1), min(int(x), 2 * r - 1)]]
+    whole = np.zeros((2 * r, 2 * r), np.uint8)
+    rings = np.zeros_like(whole)
+    for x, y in centres:
+        cv2.circle(whole, (int(round(x)), int(round(y))), int(0.5 * d) - 1, 1, -1)
+        cv2.circle(rings, (int(round(x)), int(round(y))), int(0.5 * d) - 2, 1, 2)  # a glossy disc: its rim only
+    for bed in (whole, rings):
+        assert bed_cover(bed.astype(bool) & inside, inside, d) == pytest.approx(0.5, abs=0.03)
+    assert math.isnan(bed_cover(whole.astype(bool), np.zeros_like(inside), d))
+
+
+def test_spread_ratios_put_a_core_class_under_one_and_a_rim_class_over() -> None:
+    """Parallel-axis theorem against the pixels themselves: a class in the core (a small disc of pixels)
+    and one around it (a ring), each class's rms distance from the whole bed's centroid over the bed's."""
+    yy, xx = np.mgrid[0:200, 0:200].astype(float)
+    rr = np.hypot(xx - 100, yy - 120)
+    core, rim = rr < 40, (rr >= 40) & (rr < 70)
+    stats = []
+    for m in (core, rim):
+        x, y = xx[m], yy[m]
+        stats.append((x.mean(), y.mean(), math.sqrt(x.var() + y.var()), m.sum()))
+    ratios = spread_ratios(*zip(*stats, strict=True))
+    bed = core | rim
+    bx, by = xx[bed].mean(), yy[bed].mean()
+    s_bed = math.sqrt(np.mean((xx[bed] - bx) ** 2 + (yy[bed] - by) ** 2))
+    want = [math.sqrt(np.mean((xx[m] - bx) ** 2 + (yy[m] - by) ** 2)) / s_bed for m in (core, rim)]
+    assert ratios == pytest.approx(want, rel=1e-9)
+    assert ratios[0] < 0.8 < 1.1 < ratios[1]
+    mixed = spread_ratios([100.0, 100.0], [120.0, 120.0], [30.0, 30.0], [500, 700])
+    assert mixed == pytest.approx((1.0, 1.0))
+    assert all(math.isnan(v) for v in spread_ratios([math.nan], [math.nan], [math.nan], [0]))
+
+
+def test_a_notched_disc_is_one_particle_not_two_however_it_lies() -> None:
+    """A notched disc's distance transform has two equal maxima, one each side of its notch: they are
+    one particle's (the count of separate and of packed notched discs is their number)."""
+    from sim.mixer import Shape, shape_outline_m
+
+    v = shape_outline_m(Shape("notched_disc", 1.0, notch_deg=90.0, notch_depth=0.4)) * 36.0
+    rng = np.random.default_rng(1)
+    for step, n in ((45.0, 8), (36.0, 9)):  # apart, and packed (touching)
+        m = np.zeros((int(step * n) + 40, int(step * n) + 40), np.uint8)
+        for i in range(n):
+            for j in range(n):
+                a = rng.uniform(0, 2 * np.pi)
+                rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+                pts = (v @ rot.T + (30 + step * i + 0.5 * step * (j % 2), 30 + step * 0.87 * j)) * 16
+                cv2.fillPoly(m, [pts.astype(np.int32)], 1, shift=4)
+        assert count_particles(m.astype(bool), 36.0, 0.8) == n * n
+
+
+def test_a_classs_particles_reach_their_gray_edge_and_stop_at_a_neighbour_of_another_class() -> None:
+    """``particle_edges``: a class map eroded by blurred colour (two pixels short of the discs' gray edge)
+    gets its particles' own outline back; the pixels of a touching disc of the other class stay out."""
+    gray, lab = draw((120, 160), [(40, 60, 30, 200, 1), (70, 60, 30, 110, 2)])
+    eroded = cv2.erode((lab == 1).astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))).astype(bool)
+    edges = particle_edges(eroded, gray, lab == 2, GAP_GRAY)
+    true = lab == 1
+    assert np.count_nonzero(edges & ~true) <= 0.02 * true.sum()  # nothing of the neighbour, nor the gap
+    assert np.count_nonzero(edges) == pytest.approx(true.sum(), rel=0.05)  # the disc's own area back

@@ -11,8 +11,9 @@ import pytest
 
 from tests.cli import assert_one_line_error, cli
 from tests.vision import helpers as H
-from twin.cli.vision_cmds import csv_columns
-from vision.config import parse_config
+from twin.records import FRAME_COLUMNS
+from vision.config import load_config, parse_config
+from vision.sources import read_image
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "configs" / "pmma-blue-white.toml"
@@ -33,25 +34,25 @@ def frames_dir(tmp_path_factory):
 
 
 def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
+    """The CSV is a run's frames.csv (its columns, in order; the twin's and the mill's empty), one
+    row per frame with the trend and moving average beside the MI; the plot and the video too."""
     out, png, mp4 = tmp_path / "mi.csv", tmp_path / "mi.png", tmp_path / "ov.mp4"
     r = cli("mi", frames_dir, "--csv", out, "--plot", png, "--overlay-video", mp4)
     assert r.code == 0, r.err
     rows = list(csv.DictReader(out.open()))
     header = next(csv.reader(out.open()))
-    assert header == csv_columns(["red", "blue"])
-    assert header[:9] == ["frame", "t_s", "mi", "mi_sigmoid", "mi_linear", "d_px", "dsigma_px", "slope_deg", "valid"]
-    assert header[9:17] == ["cx_red", "cy_red", "sigma_red", "frac_red",
-                            "cx_blue", "cy_blue", "sigma_blue", "frac_blue"]
-    for col in ("slope_axis_deg", "surface_curvature", "roi_cx_px", "roi_cy_px", "roi_r_px"):
-        assert col in header
+    assert tuple(header) == FRAME_COLUMNS
     assert len(rows) == 5 and all(r["valid"] == "1" for r in rows)
+    assert [int(r["frame"]) for r in rows] == list(range(5)) and float(rows[1]["t_s"]) == pytest.approx(1 / 30)
     mis = [float(r["mi"]) for r in rows]
     assert mis[0] < 0.1 and mis[-1] > 0.8
     assert float(rows[0]["mi_linear"]) == pytest.approx(0.0)
-    for row in rows:  # drum_frame draws its drum at the centre, radius 0.46 x 480
-        assert abs(float(row["roi_cx_px"]) - 320) < 4 and abs(float(row["roi_r_px"]) - 0.46 * 480) < 0.05 * 220
-        # a coarse bed (15 discs across) drawn with a 30 deg surface: both angles near it
-        assert 15 < float(row["slope_deg"]) < 45 and 25 < float(row["slope_axis_deg"]) < 38
+    assert float(rows[0]["ma_mi"]) == mis[0] and float(rows[1]["ma_mi"]) == pytest.approx(sum(mis[:2]) / 2)
+    assert all(0.0 <= float(r["trend_mi"]) <= 1.0 and float(r["trend_lo95"]) <= float(r["trend_hi95"])
+               for r in rows)
+    for row in rows:  # a coarse bed (15 discs across) drawn with a 30 deg surface
+        assert 15 < float(row["slope_deg"]) < 45
+        assert all(row[c] == "" for c in FRAME_COLUMNS if c.startswith(("twin_", "rpm_"))) and row["mode"] == ""
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     cap = cv2.VideoCapture(str(mp4))
     n = 0
@@ -62,6 +63,13 @@ def test_mi_csv_plot_and_overlay_video(frames_dir, tmp_path):
         assert img.shape == (480, 640, 3)
         n += 1
     assert n == 5
+
+
+def test_mi_max_frames_and_window(frames_dir):
+    """``--max-frames`` stops early; ``--window`` is the moving average's (``ma_mi``) sample count."""
+    rows = rows_of(cli("mi", frames_dir, "--max-frames", 3, "--window", 2).out)
+    mis = [float(r["mi"]) for r in rows]
+    assert len(rows) == 3 and float(rows[2]["ma_mi"]) == pytest.approx((mis[1] + mis[2]) / 2)
 
 
 @pytest.mark.parametrize("method", ["lacey", "glcm"])
@@ -86,13 +94,20 @@ def test_paths_with_brackets_are_printed_whole(frames_dir, tmp_path):
 
 
 def test_mi_real_frames_with_config_and_manual_roi(real_drum_dir):
-    r = cli("mi", real_drum_dir / "images" / "0002.jpg", real_drum_dir / "images" / "0097.jpg",
-            "--config", CONFIG, "--roi", "320.3,319.2,312")
+    """Two real frames with the rig's config and a manual drum circle: each row is the meter's
+    reading of that frame in that drum (the same numbers as ``Meter.measure``)."""
+    imgs = [real_drum_dir / "images" / f"{n}.jpg" for n in ("0002", "0097")]
+    r = cli("mi", *imgs, "--config", CONFIG, "--roi", "320.3,319.2,312")
     assert r.code == 0, r.err
     rows = rows_of(r.out)
-    assert [r["source"] for r in rows] == ["0002.jpg", "0097.jpg"]
-    assert "cx_white" in rows[0] and float(rows[0]["mi"]) < float(rows[1]["mi"]) - 0.3
-    assert rows[0]["roi_cx_px"] == "320.3" and rows[0]["roi_r_px"] == "312"
+    assert float(rows[0]["mi"]) < float(rows[1]["mi"]) - 0.3
+    from vision.roi import DrumROI
+
+    meter = load_config(CONFIG).make_meter(roi=DrumROI(320.3, 319.2, 312.0))
+    for row, path in zip(rows, imgs, strict=True):
+        want = meter.measure(read_image(path)[0])
+        assert float(row["mi"]) == pytest.approx(want.mi, abs=1e-12)
+        assert float(row["slope_deg"]) == pytest.approx(want.slope_deg, abs=1e-9)
 
 
 def test_bad_frames_become_flagged_rows_and_new_sizes_get_their_drum(tmp_path):
@@ -107,11 +122,10 @@ def test_bad_frames_become_flagged_rows_and_new_sizes_get_their_drum(tmp_path):
     assert r.code == 0, r.err
     rows = rows_of(r.out)
     assert [r["valid"] for r in rows] == ["1", "0", "0", "1", "1"]
-    assert "decode" in rows[1]["flags"]
-    assert "3-channel" in rows[2]["flags"]
-    assert rows[1]["mi"] == "" and float(rows[4]["mi"]) > 0.9
-    # the 800x600 frame has its own drum, and says which circle was used
-    assert abs(float(rows[3]["roi_cx_px"]) - 400) < 4 and abs(float(rows[0]["roi_cx_px"]) - 320) < 4
+    assert rows[1]["flags"].startswith("bad_frame:") and "decode" in rows[1]["flags"]
+    assert rows[2]["flags"].startswith("bad_frame:") and "grayscale" in rows[2]["flags"]
+    assert rows[1]["mi"] == "nan" and float(rows[4]["mi"]) > 0.9
+    # the 800x600 frame has its own drum (a half-disk bed there measures as segregated too)
     assert float(rows[3]["mi"]) < 0.05
 
 
@@ -127,12 +141,13 @@ def test_classes_suggest_folder_with_preview_then_mi(real_drum_dir, tmp_path):
     path.write_text(r.out)
     out = cli("mi", real_drum_dir / "images", "--config", path)
     assert out.code == 0, out.err
-    rows = {r["source"]: r for r in rows_of(out.out)}
+    names = sorted(p.stem for p in (real_drum_dir / "images").glob("*.jpg"))
+    rows = dict(zip(names, rows_of(out.out), strict=True))  # one row per image, in name order
+    meter = cfg.make_meter()  # the blue class's centroid in the labelled frame: where the labels put it
+    blue = meter.measure(read_image(real_drum_dir / "images" / "0097.jpg")[0]).cls("blue")
     a = np.loadtxt(real_drum_dir / "labels" / "0097.txt", ndmin=2)
-    row = rows["0097.jpg"]
-    err = np.hypot(float(row["cx_blue"]) - a[:, 1].mean() * 640, float(row["cy_blue"]) - a[:, 2].mean() * 640)
-    assert err < 0.03 * 312
-    assert float(rows["0002.jpg"]["mi"]) < min(float(r["mi"]) for k, r in rows.items() if k >= "0013") - 0.2
+    assert np.hypot(blue.cx_px - a[:, 1].mean() * 640, blue.cy_px - a[:, 2].mean() * 640) < 0.03 * 312
+    assert float(rows["0002"]["mi"]) < min(float(r["mi"]) for k, r in rows.items() if k >= "0013") - 0.2
 
 
 def test_no_config_and_no_default_colours_says_run_classes_suggest(tmp_path):
@@ -286,9 +301,10 @@ def test_mi_on_grayscale_frames_is_an_error(tmp_path):
 
 
 def test_a_frame_without_a_drum_in_a_sequence_is_a_flagged_row(tmp_path):
-    """A frame of another size in which no drum is found (a test chart, a blank frame) made
-    the whole folder an error after the rows before it; now it is an invalid row saying so.
-    When the first frame has no drum, the error names it."""
+    """A frame in which no drum is found (a test chart, a blank frame) is a ``no_drum:`` row,
+    the live run's policy (vision.stream): also when it is the first frame, as long as a drum
+    shows within the grace; a source that never shows one is a one-line error naming its first
+    frame without a drum."""
     cv2.imwrite(str(tmp_path / "a.png"), H.half_disks())
     cv2.imwrite(str(tmp_path / "b.png"), np.full((300, 400, 3), 128, np.uint8))
     cv2.imwrite(str(tmp_path / "c.png"), H.fine_mix())
@@ -296,9 +312,12 @@ def test_a_frame_without_a_drum_in_a_sequence_is_a_flagged_row(tmp_path):
     assert r.code == 0, r.err
     rows = rows_of(r.out)
     assert [row["valid"] for row in rows] == ["1", "0", "1"]
-    assert "drum" in rows[1]["flags"] and rows[1]["mi"] == ""
-    assert_one_line_error(cli("mi", tmp_path / "b.png", tmp_path / "c.png"), "b.png", "drum", "--roi")
-
+    assert rows[1]["flags"].startswith("no_drum:") and rows[1]["mi"] == "nan"
+    r = cli("mi", tmp_path / "b.png", tmp_path / "c.png")
+    assert r.code == 0, r.err
+    assert [(row["valid"], row["flags"].startswith("no_drum:")) for row in rows_of(r.out)] == [("0", True),
+                                                                                                ("1", False)]
+    assert_one_line_error(cli("mi", tmp_path / "b.png", tmp_path / "b.png"), "b.png", "drum", "--roi")
 
 
 def test_classes_suggest_uses_every_frame_of_a_short_source(tmp_path):

@@ -11,7 +11,6 @@ import csv
 import dataclasses
 import math
 import queue
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -28,40 +27,30 @@ from vision.config import config_to_toml
 from vision.sources import read_image
 from vision.synthetic import PERTURBATIONS, light_change, particle_drum, perturb
 
-MI_CAUSES = ("few_pixels:", "collapsed:", "roi_outside_frame:", "lighting_changed:", "bad_frame:")
-SURFACE_CAUSES = ("no_surface:", "bad_frame:")
-CLASS_CAUSES = ("few_pixels:{c}", "collapsed:{c}", "bad_frame:")
-CAUSES = {  # column (a per-class column: its name before _<class>) -> the flags that explain a NaN there
+MI_CAUSES = ("few_pixels:", "collapsed:", "roi_outside_frame:", "lighting_changed:", "bad_frame:", "no_drum:")
+SURFACE_CAUSES = ("no_surface:", "bad_frame:", "no_drum:")
+CAUSES = {  # column -> the flags that explain a NaN there
     "mi": MI_CAUSES, "mi_sigmoid": MI_CAUSES, "mi_linear": MI_CAUSES, "d_px": MI_CAUSES, "dsigma_px": MI_CAUSES,
-    "mi_avg": MI_CAUSES, "ma_mi": MI_CAUSES, "concentration": ("few_pixels:", "bad_frame:"),
-    "slope_deg": SURFACE_CAUSES, "surface_curvature": (*SURFACE_CAUSES, "no_curvature:"),
-    "slope_axis_deg": (*SURFACE_CAUSES, "no_axis:"),
+    "ma_mi": MI_CAUSES, "concentration": ("few_pixels:", "bad_frame:", "no_drum:"), "slope_deg": SURFACE_CAUSES,
     "trend_mi": MI_CAUSES, "trend_lo95": MI_CAUSES, "trend_hi95": MI_CAUSES, "trend_rate": MI_CAUSES,
-    "cx": CLASS_CAUSES, "cy": CLASS_CAUSES, "sigma": CLASS_CAUSES, "frac": ("few_pixels:", "bad_frame:"),
-    "roi_cx_px": ("bad_frame:",), "roi_cy_px": ("bad_frame:",), "roi_r_px": ("bad_frame:",),
 }
 NUMERIC_CSV = ("frame", "t_s", "valid")  # never empty
 
 
-def _is_nan(v, empty_is_nan: bool = False) -> bool:
-    if v is None or v == "":
-        return empty_is_nan and v == ""  # the CSV writes NaN as an empty field; None: no twin yet
+def _is_nan(v) -> bool:
+    """A NaN cell or value (the CSVs write NaN as "nan"; an empty cell, None, is no twin or mill here)."""
     try:
         return math.isnan(float(v))
     except (TypeError, ValueError):
         return False
 
 
-def unflagged(row: dict, flags: list[str], classes: list[str], empty_is_nan: bool = False) -> list[str]:
+def unflagged(row: dict, flags: list[str]) -> list[str]:
     """The columns of ``row`` that hold a NaN no flag of the row explains."""
     out = []
     for col, v in row.items():
-        if not _is_nan(v, empty_is_nan):
-            continue
-        cls = next((c for c in classes if col.endswith("_" + c)), None)
-        key = col[: -len(cls) - 1] if cls else col
-        causes = CAUSES.get(key)
-        if causes is None or not any(f.startswith(p.format(c=cls)) for f in flags for p in causes):
+        causes = CAUSES.get(col)
+        if _is_nan(v) and (causes is None or not any(f.startswith(p) for f in flags for p in causes)):
             out.append(f"{col} (flags {flags})")
     return out
 
@@ -100,13 +89,12 @@ def test_every_nan_in_the_mi_csv_is_flagged(frames, tmp_path):
     assert r.code == 0, r.err
     rows = list(csv.DictReader(out.open()))
     assert len(rows) == len(imgs)
-    names = [c.name for c in cfg.counted]
-    bad = {row["source"]: unflagged({k: v for k, v in row.items() if k not in ("flags", "source")},
-                                    row["flags"].split(";") if row["flags"] else [], names, empty_is_nan=True)
-           for row in rows}
+    bad = {imgs[int(row["frame"])][0]: unflagged({k: v for k, v in row.items() if k != "flags"},
+                                                 row["flags"].split(";") if row["flags"] else [])
+           for row in rows}  # (the folder's files in name order: frame i is imgs[i])
     assert not any(bad.values()), {k: v for k, v in bad.items() if v}
     assert all(row[c] != "" for row in rows for c in NUMERIC_CSV)
-    nan_rows = sum(any(_is_nan(v, True) for k, v in row.items() if k != "flags") for row in rows)
+    nan_rows = sum(any(_is_nan(v) for k, v in row.items() if k != "flags") for row in rows)
     assert nan_rows >= 8  # (the walk saw NaNs to check: saturated, dark, empty, few, half, sideways ...)
     assert any("lighting_changed:" in row["flags"] for row in rows)
 
@@ -125,16 +113,14 @@ def test_every_nan_in_the_live_loops_frame_rows_is_flagged(frames):
         pw.process(CameraReading(0.1 * i, i, meter.measure(img)))
     rows = sink.rows()
     assert len(rows) == len(order)
-    bad = [unflagged({k: v for k, v in r.items() if k != "flags"}, list(r["flags"]), []) for r in rows]
+    bad = [unflagged({k: v for k, v in r.items() if k != "flags"}, list(r["flags"])) for r in rows]
     assert not any(bad), [b_ for b_ in bad if b_]
     assert any(_is_nan(r["mi"]) for r in rows) and any(not _is_nan(r["mi"]) for r in rows)
 
 
 def test_the_walk_catches_a_silent_nan():
-    """(The checker itself: a NaN slope with no surface flag, a NaN class centroid with the
-    other class's flag, are reported.)"""
-    assert unflagged({"slope_deg": "nan"}, ["few_pixels:blue"], ["blue"]) == ["slope_deg (flags ['few_pixels:blue'])"]
-    assert unflagged({"cx_blue": ""}, ["few_pixels:white"], ["blue", "white"], empty_is_nan=True)
-    assert not unflagged({"cx_blue": ""}, ["few_pixels:blue"], ["blue", "white"], empty_is_nan=True)
-    assert unflagged({"new_column": float("nan")}, ["few_pixels:blue"], ["blue"])  # a column nobody explains
-    assert Path(__file__).exists()
+    """(The checker itself: a NaN slope with no surface flag, a NaN in a column nobody explains,
+    are reported; a NaN MI with its cause and an empty twin cell are not.)"""
+    assert unflagged({"slope_deg": "nan"}, ["few_pixels:blue"]) == ["slope_deg (flags ['few_pixels:blue'])"]
+    assert unflagged({"new_column": float("nan")}, ["few_pixels:blue"])  # a column nobody explains
+    assert not unflagged({"mi": "nan", "twin_mi": ""}, ["no_drum:no circle"])

@@ -13,7 +13,8 @@ import pytest
 
 from tests.vision.helpers import half_disks
 from twin.live.camera import CameraWorker
-from twin.live.records import CameraInfo, Latest, SwapClasses
+from twin.live.commands import SwapClasses
+from twin.live.snapshots import CameraInfo, Latest
 from twin.state import LiveState
 from vision.colours import DEFAULT_CLASSES
 from vision.meter import Meter

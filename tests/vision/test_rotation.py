@@ -167,7 +167,7 @@ def test_the_live_loop_measures_with_the_configs_turn_and_light(tmp_path, partic
     from control.protocol import MillStatus
     from tests.twin.test_mill_worker import FakeLink
     from twin.config import RunConfig
-    from twin.loop import LiveLoop
+    from twin.run.loop import LiveLoop
     from twin.runlog import RunLog
 
     _, cfg = particles

@@ -34,6 +34,8 @@ _COMMAND_MODULES = (
     "twin.cli.sim_cmds",
     "twin.cli.control_cmds",
     "twin.cli.report_cmd",
+    "twin.cli.runs_cmd",
+    "twin.cli.commission_cmd",
 )
 
 for _name in _COMMAND_MODULES:

@@ -1,10 +1,9 @@
-"""Commands of the control package: ``mill``, ``mill-emulator``, ``bench trend``."""
+"""Commands of the control package: ``mill``, ``bench trend``, ``bench link`` (``mill-emulator``
+lives in ``twin.cli.emulator_cmds``, registered from here)."""
 
 from __future__ import annotations
 
 import math
-import signal
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -15,16 +14,14 @@ import typer
 from rich.progress import Progress
 from rich.table import Table
 
-from control.device import DeviceConfig
 from control.driver import MillClient
-from control.emulator import Faults, MillEmulator
 from control.errors import ControlError, check_number
-from control.modbus.link import ModbusMill, comm_loss_problem, is_modbus_url, parse_modbus_url
-from control.motor import MotorConfig
+from control.modbus.link import ModbusMill, is_modbus_url, parse_modbus_url
 from control.protocol import MillStatus
 from twin.cli.app import app, bench_app, console, console_err, print_json, say
+from twin.config import load_checked_config
 
-if TYPE_CHECKING:  # the trend bench pulls in filterpy (slow import): loaded by its command only
+if TYPE_CHECKING:  # the trend bench: loaded by its command only
     from control.limits import Limits
     from control.trendbench import RealFrameMI, SequenceSource, TrendBenchResult
 
@@ -57,31 +54,28 @@ def _mill(
     limits = None
     if config is not None:  # a given config is read (and refused when bad) whatever the subcommand
         from control.modbus.link import config_mill_url
-        from vision.config import load_config
 
-        mc = load_config(config)
-        url = config_mill_url(url, mc.drive_table, f"config {mc.source}")
-        limits = mill_limits(config)
+        checked = load_checked_config(config)
+        url = config_mill_url(url, checked.meter.drive_table, f"config {checked.meter.source}")
+        limits = mill_limits(checked.mixer.drum.critical_rpm)
     ctx.obj = {"url": url, "timeout_s": timeout_s, "retries": retries, "limits": limits}
 
 
-def mill_limits(config: Path | None) -> Limits:
-    """The limits ``drumtwin run --config CONFIG`` enforces: the supervisor's rpm range
-    with the critical speed of the config's drum (the demo's drum without a config or
-    without a ``[drum]``). A bad config is a one-line error."""
-    from twin.cli.sim_cmds import load_mixer
-    from twin.loop import supervisor_config
+def mill_limits(critical_rpm: float | None) -> Limits:
+    """The limits ``drumtwin run --config CONFIG`` enforces: the supervisor's rpm range with the
+    critical speed of the config's drum (``critical_rpm``; None: the demo's drum)."""
+    from twin.run.settings import supervisor_config
 
-    if config is None:
-        return supervisor_config().limits
-    mixer, _ = load_mixer(config)
-    return supervisor_config(None, mixer.drum.critical_rpm).limits
+    return supervisor_config().limits if critical_rpm is None else supervisor_config(None, critical_rpm).limits
 
 
 def _client(ctx: typer.Context) -> MillClient | ModbusMill:
+    """The link of a ``mill`` command. A drive is not refused as a whole when its comm-loss
+    trip is unsafe: ``stop`` and ``status`` always go to it, ``start`` and a faster
+    ``set-rpm`` are refused with the reason (``SafetyRefused``, exit 2)."""
     o = ctx.obj
     if is_modbus_url(o["url"]):
-        return ModbusMill(o["url"], timeout_s=o["timeout_s"], retries=o["retries"])
+        return ModbusMill(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], refuse_unsafe=False)
     return MillClient(o["url"], timeout_s=o["timeout_s"], retries=o["retries"], heartbeat_s=None)
 
 
@@ -185,23 +179,26 @@ def mill_check(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
     if not is_modbus_url(url):
         raise ControlError("check reads a drive's parameters: give a modbus: URL (modbus:PORT?profile=NAME)")
     spec = parse_modbus_url(url)
-    mill = ModbusMill(url, timeout_s=ctx.obj["timeout_s"], retries=ctx.obj["retries"], enforce=False)
-    with mill:  # not enforced: check reports the problem instead of refusing to read
+    mill = ModbusMill(url, timeout_s=ctx.obj["timeout_s"], retries=ctx.obj["retries"], refuse_unsafe=False)
+    with mill:  # reads only: the problem is reported, not refused
         ident = mill.read_identity()
-        setting = mill.read_comm_loss()
+        why = mill.comm_loss_check()
+        setting = mill.comm_loss  # None: the parameters could not be read
         st = mill.status()
     p = mill.profile
-    why = comm_loss_problem(p, setting, spec.comm_loss_limit_s)
     if as_json:
-        print_json({"profile": p.name, "unit": spec.unit, "identity": ident, "comm_loss_s": setting.time_s,
-                    "comm_loss_action": setting.action, "safe": why is None, "change": why, **st.as_dict()})
+        print_json({"profile": p.name, "unit": spec.unit, "identity": ident,
+                    "comm_loss_s": setting.time_s if setting else None,
+                    "comm_loss_action": setting.action if setting else None, "safe": why is None, "change": why,
+                    **st.as_dict()})
     else:
         console.print(f"{p.title} (profile {p.name}), unit {spec.unit}", highlight=False)
         for name, v in ident.items():
             console.print(f"  {name}: {v} (0x{v:04X})", highlight=False)
         cl = p.comm_loss
-        console.print(f"  comm-loss trip {cl.time_parameter}: {setting.time_s:g} s; action"
-                      f" {cl.action_parameter or '(fixed)'}: {setting.action}", highlight=False)
+        if setting is not None:
+            console.print(f"  comm-loss trip {cl.time_parameter}: {setting.time_s:g} s; action"
+                          f" {cl.action_parameter or '(fixed)'}: {setting.action}", highlight=False)
         console.print(f"  hz_per_rpm {mill.hz_per_rpm:g}, max {mill.max_hz:g} Hz"
                       f" = {mill.max_hz / mill.hz_per_rpm:.2f} drum rpm", highlight=False)
         _report(st, False)
@@ -212,144 +209,6 @@ def mill_check(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
             console.print(f"[bold red]change:[/] {why}", highlight=False)
     if why is not None:
         raise typer.Exit(2)
-
-
-@app.command("mill-emulator")
-def mill_emulator(
-    pty: bool = typer.Option(False, "--pty", help="Serve on a pseudo-terminal (default)."),
-    tcp: int | None = typer.Option(None, "--tcp", help="Serve on this TCP port instead (0: any free port)."),
-    host: str = typer.Option("127.0.0.1", "--host", help="TCP address to listen on."),
-    link: str | None = typer.Option(None, "--link", help="Path of the stable symlink to the pty slave."),
-    faults: str = typer.Option("", "--faults", help="e.g. 'corrupt=0.05,drop=0.01,delay=0.02,disconnect=10:1'."),
-    watchdog_s: float = typer.Option(
-        1.0, "--watchdog", help="Stop the motor after this long without HB/SET/RUN/STP (s; 0 disables it)."
-    ),
-    max_rpm: float = typer.Option(60.0, "--max-rpm", help="Top speed of the drive (rpm)."),
-    accel: float = typer.Option(10.0, "--accel", help="Acceleration limit (rpm/s)."),
-    tau_s: float = typer.Option(0.5, "--tau", help="Speed-loop time constant (s)."),
-    duration_s: float | None = typer.Option(None, "--duration", help="Exit after this many seconds (default: Ctrl-C)."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of the fault injection."),
-    modbus: str | None = typer.Option(
-        None, "--modbus", help="Emulate this drive profile over Modbus RTU instead (delta-ms300, abb-acs, ...)."
-    ),
-    unit: int = typer.Option(1, "--unit", help="--modbus: the drive's unit id (1..247)."),
-    comm_loss_s: float = typer.Option(
-        2.0, "--comm-loss", help="--modbus: comm-loss trip time (s; 0 disables it, to test the refusal)."
-    ),
-) -> None:
-    """Run the motor-board emulator on a pty (prints its path) or a TCP port; with
-    --modbus PROFILE a frequency inverter's emulator (prints its modbus: URL)."""
-    _check_emulator_options(tcp, host, link, unit, comm_loss_s, seed)
-    if modbus is not None:
-        _drive_emulator(modbus, unit, comm_loss_s, tcp, link, faults, duration_s, seed)
-        return
-    if pty and tcp is not None:
-        raise ControlError("choose one of --pty and --tcp")
-    if tcp is not None and not 0 <= tcp <= 65535:
-        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
-    check_number("--watchdog", watchdog_s, at_least=0.0, at_most=3600.0)
-    check_number("--max-rpm", max_rpm, above=0.0, at_most=1000.0)
-    check_number("--accel", accel, above=0.0, at_most=1e4)
-    check_number("--tau", tau_s, at_least=0.0, at_most=60.0)
-    if duration_s is not None:
-        check_number("--duration", duration_s, above=0.0, at_most=30 * 86400.0)  # 1e308 would never end
-    cfg = DeviceConfig(watchdog_s=watchdog_s, motor=MotorConfig(max_rpm=max_rpm, accel_rpm_per_s=accel, tau_s=tau_s))
-    emu = MillEmulator(cfg, Faults.parse(faults), seed=seed)
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())  # before the path is printed: clean exit
-    try:
-        if tcp is not None:
-            emu.open_tcp(tcp, host)
-        else:
-            emu.open_pty(link)
-        print(emu.url, flush=True)
-        say(f"mill emulator on {emu.url} (watchdog {watchdog_s:g} s); Ctrl-C to stop")
-        t_end = None if duration_s is None else time.monotonic() + duration_s
-        last = None
-        try:
-            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
-                st = emu.status()
-                line = (round(st.setpoint_rpm, 1), round(st.actual_rpm, 1), st.running, st.fault)
-                if line != last:
-                    say(f"setpoint {st.setpoint_rpm:6.2f}  actual {st.actual_rpm:6.2f} rpm  "
-                        f"{'running' if st.running else 'stopped'}  fault {st.fault or 'none'}")
-                    last = line
-                done.wait(0.5)
-        except KeyboardInterrupt:
-            pass
-    finally:
-        emu.close()
-
-
-def _check_emulator_options(tcp: int | None, host: str, link: str | None, unit: int, comm_loss_s: float,
-                            seed: int | None) -> None:
-    """``mill-emulator``'s options that both emulators share, checked before anything opens
-    (one-line ControlError/TwinError): an option that does not apply is refused, not ignored."""
-    from twin.config import check_host
-
-    if tcp is not None and not 0 <= tcp <= 65535:
-        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
-    check_host(host)
-    if link is not None and tcp is not None:
-        raise ControlError("--link names the pty's symlink: not with --tcp")
-    if not 1 <= unit <= 247:
-        raise ControlError(f"--unit must be in 1..247 (got {unit})")
-    check_number("--comm-loss", comm_loss_s, at_least=0.0, at_most=600.0)
-    if seed is not None and not 0 <= seed < 2**32:
-        raise ControlError(f"--seed must be in 0..{2**32 - 1} (got {seed})")
-
-
-def _drive_emulator(profile: str, unit: int, comm_loss_s: float, tcp: int | None, link: str | None,
-                    faults: str, duration_s: float | None, seed: int | None) -> None:
-    """``mill-emulator --modbus``: a drive emulator until Ctrl-C / SIGTERM / --duration."""
-    from control.modbus.emulator import DriveEmulator, DriveFaults
-    from control.modbus.profile import load_profile
-
-    if tcp is not None and not 0 <= tcp <= 65535:
-        raise ControlError(f"--tcp must be a port in 0..65535 (0: any free port), got {tcp}")
-    if not 1 <= unit <= 247:
-        raise ControlError(f"--unit must be in 1..247 (got {unit})")
-    check_number("--comm-loss", comm_loss_s, at_least=0.0, at_most=600.0)
-    f = DriveFaults()
-    for item in filter(None, (x.strip() for x in faults.split(","))):
-        key, _, val = item.partition("=")
-        try:
-            if key == "delay":
-                f.delay_s = check_number("fault delay", float(val), at_least=0.0, at_most=60.0)
-            elif key == "corrupt":
-                f.corrupt_p = check_number("fault corrupt", float(val), at_least=0.0, at_most=1.0)
-            elif key == "mute":
-                f.mute = True
-            else:
-                raise ControlError(f"unknown drive fault {key!r} (use delay=S, corrupt=P, mute)")
-        except ValueError as exc:
-            raise exc if isinstance(exc, ControlError) else ControlError(f"bad fault value in {item!r}") from None
-    emu = DriveEmulator(load_profile(profile), unit=unit, comm_loss_s=comm_loss_s, faults=f, seed=seed)
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    try:
-        if tcp is not None:
-            emu.open_tcp(tcp)
-        else:
-            emu.open_pty(link)
-        print(emu.mill_url(), flush=True)
-        say(f"{emu.profile.title} emulator, unit {unit}, on {emu.url} (comm-loss trip "
-            f"{emu.model.comm_loss_time_s():g} s); Ctrl-C to stop")
-        t_end = None if duration_s is None else time.monotonic() + duration_s
-        last = None
-        try:
-            while not done.is_set() and (t_end is None or time.monotonic() < t_end):
-                m = emu.motor
-                line = (round(emu.output_hz, 1), m.running, m.fault)
-                if line != last:
-                    say(f"output {emu.output_hz:6.2f} Hz  {'running' if m.running else 'stopped'}"
-                        f"  fault {m.fault or 'none'}")
-                    last = line
-                done.wait(0.25)
-        except KeyboardInterrupt:
-            pass
-    finally:
-        emu.close()
 
 
 TREND_SOURCES: dict[str, SequenceSource] = {}
@@ -364,6 +223,8 @@ REAL_FRAMES = Path(__file__).resolve().parents[2] / "tests" / "data" / "real-dru
 BLEND_PARTNERS = 4  # mixed frames blended with the segregated one (drift and segregated pools)
 SEGREGATED_BLENDS = (0.05, 0.1)  # mixed share of the segregated pool's near-copies
 DRIFT_BLENDS = tuple(round(0.15 + 0.05 * i, 2) for i in range(12))  # 0.15 ... 0.7: the drift's levels
+OCCLUDER_AT = ((0.0, 0.0), (-0.25, 0.0), (0.25, 0.0), (0.0, -0.25), (0.0, 0.25))
+"""Centres of the dark object of the occluded bursts: the bed's centroid plus these offsets (drum radii)."""
 
 
 def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> RealFrameMI:
@@ -372,11 +233,12 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
     pools: the lowest-MI frame is the segregated one, frames more than 0.05 below the median
     are the mix in progress (only in the looped sequence), the rest are mixed; the drift
     and the segregated pool's near-copies are blends (cv2.addWeighted) of the segregated
-    frame with the first ``BLEND_PARTNERS`` mixed frames."""
+    frame with the first ``BLEND_PARTNERS`` mixed frames; the occluded pools are the mixed frames
+    with a near-black disc of a third of the drum's area over the bed (centred on the bed's
+    centroid plus each of ``OCCLUDER_AT``), the frames the meter flags left out."""
     import cv2
 
     from control.trendbench import RealFrameMI
-    from vision.config import load_config
     from vision.errors import VisionError
     from vision.sources import open_source
     from vision.suggest import suggest_classes
@@ -387,7 +249,7 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
         raise ControlError(f"cannot read the real frames in {images}: {exc} (use --frames DIR)") from None
     if len(frames) < 3:
         raise ControlError(f"the real trend bench needs at least 3 frames in {images}, found {len(frames)}")
-    cfg = load_config(config) if config is not None else suggest_classes(list(frames.values()))
+    cfg = load_checked_config(config).meter if config is not None else suggest_classes(list(frames.values()))
     # the frames are as shot and their blends are no change of light (but mixed colours no gain maps back):
     # the trend bench measures them in the set-up's light, without tracking it
     meter = replace(cfg, light_reference=None, light_reference_classes=None).make_meter()
@@ -409,11 +271,28 @@ def real_frame_mi(images: Path = REAL_FRAMES, config: Path | None = None) -> Rea
         return tuple(mi(cv2.addWeighted(frames[seg], 1.0 - alpha, p, alpha, 0.0), f"a blend of {seg}")
                      for p in partners)
 
+    def occluded(at: tuple[float, float]) -> tuple[float, ...]:
+        out = []
+        for n in mixed:
+            r = meter.measure(frames[n])
+            if r.roi is None:  # (a valid reading, as the mixed frames' are, has its drum)
+                continue
+            n_px = sum(c.n_px for c in r.classes)
+            bed = (sum(c.cx_px * c.n_px for c in r.classes) / n_px, sum(c.cy_px * c.n_px for c in r.classes) / n_px)
+            img = frames[n].copy()
+            centre = (round(bed[0] + at[0] * r.roi.r_px), round(bed[1] + at[1] * r.roi.r_px))
+            cv2.circle(img, centre, round(r.roi.r_px / math.sqrt(3.0)), (20, 20, 20), -1)
+            o = meter.measure(img)
+            if o.valid and math.isfinite(o.mi):
+                out.append(float(o.mi))
+        return tuple(out)
+
     return RealFrameMI(
         segregated=(raw[seg], *(v for a in SEGREGATED_BLENDS for v in blends(a))),
         mixed=tuple(raw[n] for n in mixed),
         looped=tuple(raw[n] for n in names),
         drift=tuple(blends(a) for a in DRIFT_BLENDS),
+        occluded=tuple(p for p in (occluded(at) for at in OCCLUDER_AT) if p),
     )
 
 
@@ -445,6 +324,8 @@ def bench_trend(
     check_number("--fps", fps, above=0.0, at_most=10000.0)
     check_number("--noise", noise_sd, at_least=0.0, at_most=1.0)
     check_number("--ripple", ripple, at_least=0.0, at_most=1.0)
+    if config is not None and real_seeds:  # refused now, not after the synthetic sequences
+        load_checked_config(config)
     if source == "synthetic":
         make: SequenceSource = lambda i: synthetic_sequence(i, fps=fps, noise_sd=noise_sd, ripple_amp=ripple)  # noqa: E731
     elif source in TREND_SOURCES:
@@ -520,3 +401,6 @@ def print_trend_results(results: list[TrendBenchResult], as_json: bool) -> None:
                 p.add_row(s.name, f"{s.kalman.rmse:.4f} / {s.ma.rmse:.4f}",
                           f"{s.kalman.lockout_s:.2f} / {s.ma.lockout_s:.2f}", f"{100 * s.kalman.coverage:.1f} %")
             console.print(p)
+
+
+from twin.cli import emulator_cmds  # noqa: E402,F401  (registers mill-emulator after mill, as before)

@@ -7,51 +7,45 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
-from twin.cli.app import ENDPOINT_HELP, app, bench_app, check_outputs, console_err, print_json, say
+from twin.cli.app import ENDPOINT_HELP, app, bench_app, console_err, print_json, say
 from twin.errors import TwinError
 
 if TYPE_CHECKING:
     from twin.config import RunConfig
-    from twin.dashboard import Dashboard
-    from twin.demo import DemoPlant
-    from twin.loop import LiveLoop, Seams, Summary
-
-StartHook = Callable[["LiveLoop", Optional["DemoPlant"], Optional["Dashboard"]], None]
+    from twin.run.loop import LiveLoop, Summary
 
 
-def run_live(
-    cfg: RunConfig, *, progress: bool = True, on_started: StartHook | None = None, seams: Seams | None = None
-) -> Summary:
-    """``drumtwin run`` for ``cfg`` (a resolved ``RunConfig``): the one composition root
-    (``twin.loop.run_live``) with the CLI's progress bar, Ctrl-C and SIGTERM; returns the
-    run's ``Summary``. ``on_started(loop, plant, dashboard)`` is the ``Seams.on_started``
-    seam (tests inject faults there)."""
-    from dataclasses import replace
-
-    from twin.loop import Seams
-    from twin.loop import run_live as run
-
-    seams = seams or Seams()
-    if on_started is not None:
-        seams = replace(seams, on_started=on_started)
+@contextlib.contextmanager
+def _signals_restored() -> Iterator[None]:
+    """The run's SIGINT and SIGTERM handlers (set by :func:`_wait`) end with the run; after a
+    Ctrl-C the process is on its way out: a repeated one stays harmless to the end."""
     main = threading.current_thread() is threading.main_thread()
     saved = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) if main else None
     try:
-        return run(cfg, seams, wait=lambda loop: _wait(loop, cfg, progress),
-                   on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
-                                                              highlight=False))
+        yield
     finally:
-        if saved is not None:  # _wait's SIGTERM handler ends with the run; after a Ctrl-C the process is
-            signal.signal(signal.SIGTERM, saved[1])  # on its way out: a repeated one stays harmless to the end
+        if saved is not None:
+            signal.signal(signal.SIGTERM, saved[1])
             if signal.getsignal(signal.SIGINT) is not _still_stopping:
                 signal.signal(signal.SIGINT, saved[0])
+
+
+def _run(cfg: RunConfig, progress: bool) -> Summary:
+    """``drumtwin run`` for ``cfg`` (a resolved ``RunConfig``): the one composition root
+    (``twin.run.main.run_live``) with the CLI's progress bar, Ctrl-C and SIGTERM."""
+    from twin.run import main
+
+    with _signals_restored():
+        return main.run_live(cfg, wait=lambda loop: _wait(loop, cfg, progress),
+                             on_dashboard=lambda url: console_err.print(f"dashboard on [bold]{url}[/]  (Ctrl-C stops)",
+                                                                        highlight=False))
 
 
 def _still_stopping(signum: int, frame: object) -> None:
@@ -156,6 +150,9 @@ def run(
     endpoint_dwell_s: float = typer.Option(None, "--endpoint-dwell-s", help=ENDPOINT_HELP["dwell_s"]),
     endpoint_block_s: float = typer.Option(None, "--endpoint-block-s", help=ENDPOINT_HELP["block_s"]),
     endpoint_block_sd_max: float = typer.Option(None, "--endpoint-block-sd-max", help=ENDPOINT_HELP["block_sd_max"]),
+    catalogue: str = typer.Option(None, "--catalogue", help="Run catalogue to index the run in: an SQLite path or "
+                                  "postgresql://... (default $DRUMTWIN_CATALOGUE, else catalogue.sqlite beside the run "
+                                  "folder)."),
 ) -> None:
     """Run the live twin: camera -> MI -> trend -> supervisor -> mill, with the twin beside it.
 
@@ -174,74 +171,40 @@ def run(
             endpoint=endpoint_options(band=endpoint_band, dwell_s=endpoint_dwell_s, block_s=endpoint_block_s,
                                       block_sd_max=endpoint_block_sd_max),
             drive=None if drive is None else _drive_profile(drive, camera, video, mill),
+            catalogue=catalogue,
         ).resolved()
         if cfg.dashboard:  # issue 26: a port in use is refused, not swapped for another
             check_port_free(cfg.host, cfg.port)
         if json_out:
             with stdout_to_stderr():
-                summary = run_live(cfg, progress=False)
+                summary = _run(cfg, progress=False)
         else:
-            summary = run_live(cfg, progress=True)
+            summary = _run(cfg, progress=True)
     except OSError as exc:
         if isinstance(exc, (FileNotFoundError, PermissionError, ConnectionError, TimeoutError)):
             raise
         raise TwinError(str(exc)) from None  # one line (twin.cli.main), never wrapped
-    out = {
-        "final_trend_mi": summary.final_trend_mi,
-        "final_rpm": summary.final_rpm,
-        "decisions": summary.decisions,
-        "faults": summary.faults,
-        "log_dir": summary.log_dir,
-        "frames": summary.frames,
-        "run_time_s": round(summary.run_time_s, 2),
-        "wall_time_s": round(summary.wall_time_s, 2),
-        "camera_fps": round(summary.camera_fps, 1),
-        "twin_fps": round(summary.twin_fps, 1),
-    }
+    _report(summary, json_out)
+
+
+def _report(summary: Summary, json_out: bool) -> None:
+    """The run's end: its summary as JSON (``--json``, stdout) or one line."""
     if json_out:
-        print_json(out)
+        print_json({
+            "final_trend_mi": summary.final_trend_mi,
+            "final_rpm": summary.final_rpm,
+            "decisions": summary.decisions,
+            "faults": summary.faults,
+            "log_dir": summary.log_dir,
+            "frames": summary.frames,
+            "run_time_s": round(summary.run_time_s, 2),
+            "wall_time_s": round(summary.wall_time_s, 2),
+            "camera_fps": round(summary.camera_fps, 1),
+            "twin_fps": round(summary.twin_fps, 1),
+        })
     else:
         say(f"run ended: trend MI {summary.final_trend_mi:.3f}, {summary.final_rpm:.1f} rpm, "
             f"{summary.decisions} decisions, {summary.faults} faults; log in {summary.log_dir}")
-
-
-@app.command("compare")
-def compare(
-    runs: list[str] = typer.Argument(
-        ..., help="Run log dirs, each LABEL=DIR (or just DIR: its folder name is the label)."
-    ),
-    plot: Path = typer.Option(..., "--plot", help="PNG to write: MI and Kalman trend of every run, rpm below."),
-    title: str = typer.Option("", "--title", help="Plot title."),
-) -> None:
-    """Compare run logs: one plot of their MI curves and rpm (e.g. AUTO against OFF)."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from twin.cli.app import console
-    from twin.plots import plot_runs
-    from twin.runlog import FRAMES_FILE, read_events, read_frames
-
-    check_outputs(plot)  # a directory as --plot would become DIR.png
-    labelled: dict[str, Path] = {}
-    for spec in runs:
-        label, sep, d = spec.partition("=")
-        path = Path(d if sep else spec)
-        if not (path / FRAMES_FILE).is_file():
-            raise TwinError(f"{path} is not a run log dir (no {FRAMES_FILE})")
-        labelled[label if sep else path.name] = path
-    table = Table(title="runs")
-    for col in ("run", "frames", "run time s", "final trend MI", "final rpm", "rpm moves"):
-        table.add_column(col, justify="right" if col != "run" else "left")
-    for label, path in labelled.items():
-        rows = read_frames(path)
-        last = next((r for r in reversed(rows) if r.get("trend_mi") is not None), rows[-1] if rows else {})
-        moves = sum(1 for e in read_events(path) if e["kind"] == "decision" and e.get("decision") == "move")
-        fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
-        table.add_row(escape(label), str(len(rows)), fmt(last.get("t_s"), ".1f"), fmt(last.get("trend_mi"), ".3f"),
-                      fmt(last.get("rpm_actual"), ".1f"), str(moves))
-    console.print(table)
-    out = plot_runs(labelled, plot, title)
-    say(f"plot written to {out}")
 
 
 @bench_app.command("dashboard")

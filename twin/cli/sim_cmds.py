@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import math
 import time
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +21,10 @@ SIM_COLUMNS = ("t_s", "rpm", "mi", "mi_sigmoid", "mi_linear", "mi_particles", "m
                "slope_deg_particles", "valid")
 
 
-def _progress(label: str):
+def _progress():
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=console_err, transient=True)
 
 
@@ -50,20 +52,6 @@ CONFIG_HELP = "TOML with the colour classes and the mixer (\\[drum], [\\[particl
 ENGINE_HELP = "twin engine: dem (discs in a plain drum) or pymunk (any shape, baffles); default: the mixer's"
 
 
-def load_mixer(config: Path | None, engine: str | None = None) -> tuple[Any, Any]:
-    """(the mixer, the meter config) of ``--config`` (``sim.mixer.paper_mixer()`` and None without one or
-    when the config has no ``[drum]``); ``engine`` is checked against it (``sim.engine.engine_for``)."""
-    from sim.engine import engine_for
-    from sim.mixer import mixer_from_config, paper_mixer
-    from vision.config import load_config
-
-    cfg = load_config(config) if config is not None else None
-    mixer = mixer_from_config(cfg) if cfg is not None else None
-    mixer = paper_mixer() if mixer is None else mixer
-    engine_for(mixer, engine)
-    return mixer, (cfg if cfg is not None and cfg.mixer_tables else None)
-
-
 @app.command("sim")
 def sim_cmd(
     case: str = typer.Option("C", "--case", help="initial state: A (left/right), B (top/bottom), C (random)"),
@@ -85,110 +73,32 @@ def sim_cmd(
     as_json: bool = typer.Option(False, "--json", help="print a JSON summary to stdout"),
 ) -> None:
     """Run the twin and measure MI over time (vision meter on rendered frames + particle level)."""
-    import cv2
-
-    from sim.engine import engine_for, make_twin
-    from sim.errors import check_number
+    from sim.capacity import twin_particles
+    from sim.engine import make_twin
     from sim.measure import twin_meter
-    from sim.probe import probe
     from sim.render import Realism, Renderer
-    from sim.whatif import flow_regime, froude, froude_regime
+    from twin.config import load_checked_config
 
-    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)
-    check_number("--fps", fps, 0.0, 240.0, lo_open=True)
-    check_number("--size", size, 32, 4096, integer=True)
+    kw = _sim_options(duration, fps, size, friction, rolling, dt_ms, end_friction)
     seed = _check_seed(seed)
-    kw: dict = {}
-    if friction is not None:
-        kw["friction"] = check_number("--friction", friction, 0.0, 5.0)
-    if rolling is not None:
-        kw["rolling"] = check_number("--rolling", rolling, 0.0, 5.0)
-    kw.update(_step_options(dt_ms, end_friction))
-    mixer, meter_cfg = load_mixer(config, engine)
-    sim: Any = make_twin(mixer, engine, case=case, seed=seed, rpm=rpm, **kw)
-    renderer = Renderer(sim.drum, size, realism=Realism(seed=seed) if realism else None)
-    meter = twin_meter(renderer) if meter_cfg is None else meter_cfg.make_meter(roi=renderer.roi)
-    writer = None
-    if video is not None:
-        video.parent.mkdir(parents=True, exist_ok=True)
-        writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"mp4v"), float(min(fps, 60.0)),
-                                 (renderer.width_px, renderer.height_px))
-        if not writer.isOpened():
-            raise SimError(f"cannot write video {video}")
-    n = max(1, int(round(duration * fps)))
-    rows = []
-    curv, air = [], []
-    last = None
-    try:
-        with _progress("sim") as prog:
-            task = prog.add_task("sim", total=n + 1)
-            for i, smp in enumerate(probe(sim, duration, duration / n)):
-                p = smp.particles
-                frame = renderer.render(p, smp.sim_t_s)
-                pm = smp.mi
-                fs = smp.surface
-                curv.append(fs.curvature)
-                air.append(smp.airborne if i > 0 else float("nan"))
-                if frame is not None:
-                    rd = meter.measure(frame)
-                    mi, mi_s, mi_l, sl, valid = rd.mi, rd.mi_sigmoid, rd.mi_linear, rd.slope_deg, rd.valid
-                    last = frame
-                else:  # dropped frame
-                    mi = mi_s = mi_l = sl = float("nan")
-                    valid = False
-                if writer is not None and last is not None:
-                    writer.write(last)
-                rows.append({
-                    "t_s": round(smp.sim_t_s, 6), "rpm": smp.rpm_actual, "mi": mi, "mi_sigmoid": mi_s,
-                    "mi_linear": mi_l, "mi_particles": pm.mi, "mi_sigmoid_particles": pm.mi_sigmoid, "slope_deg": sl,
-                    "slope_deg_particles": fs.slope_deg, "valid": int(bool(valid)),
-                })
-                prog.advance(task)
-    finally:
-        if writer is not None:
-            writer.release()
+    checked = load_checked_config(config, engine=engine)
+    with _progress() as prog:  # the twin is built (placed and settled) under its own line
+        task = prog.add_task(f"sim: building the twin ({twin_particles(checked.mixer)} particles)", total=None)
+        sim: Any = make_twin(checked.mixer, engine, case=case, seed=seed, rpm=rpm, **kw)
+        renderer = Renderer(sim.drum, size, realism=Realism(seed=seed) if realism else None)
+        meter = checked.meter.make_meter(roi=renderer.roi) if checked.has_mixer else twin_meter(renderer)
+        rows, curv, air = _sim_rows(sim, renderer, meter, duration, fps, video, lambda n: prog.update(
+            task, description="sim", total=n, completed=0), lambda: prog.advance(task))
     if csv_out is not None:
         csv_out.parent.mkdir(parents=True, exist_ok=True)
         with open(csv_out, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=SIM_COLUMNS)
             w.writeheader()
             w.writerows(rows)
-    t = np.array([r["t_s"] for r in rows], float)
-    mi_arr = np.array([r["mi"] for r in rows], float)
-    mip = np.array([r["mi_particles"] for r in rows], float)
-    mis = np.array([r["mi_sigmoid"] for r in rows], float)
-    sl_v = np.array([r["slope_deg"] for r in rows], float)
-    sl_p = np.array([r["slope_deg_particles"] for r in rows], float)
-    tail = max(1, int(round(0.1 * len(rows))))
-    third = max(1, len(rows) // 3)
-    late = t >= min(SLOPE_AFTER_S, 0.5 * duration)
-
-    def first_valid(a):
-        f = a[np.isfinite(a)]
-        return float(f[0]) if f.size else float("nan")
-
-    def mean(a):
-        f = np.asarray(a, float)
-        f = f[np.isfinite(f)]
-        return float(f.mean()) if f.size else float("nan")
-
-    st = sim.stats()
-    air_m, curv_m = mean(air[-third:]), mean(curv[-third:])
-    summary = {
-        "case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
-        "engine": engine_for(mixer, engine), "config": str(config) if config else None,
-        "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": _default_dt_ms(sim),
-        "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.params.end_mu,
-        "mi_start": first_valid(mi_arr), "mi_end": mean(mi_arr[-tail:]),
-        "mi_sigmoid_end": mean(mis[-tail:]), "mi_linear_end": mean(np.array([r["mi_linear"] for r in rows])[-tail:]),
-        "mi_particles_start": float(mip[0]), "mi_particles_end": mean(mip[-tail:]),
-        "slope_deg": mean(sl_p[late]), "slope_deg_vision": mean(sl_v[late]), "surface_curvature": mean(curv[-third:]),
-        "overlap_p99_r": st.overlap_p99_r, "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm,
-        "airborne": air_m, "regime": flow_regime(air_m, curv_m), "froude": froude(rpm, sim.drum),
-        "froude_regime": froude_regime(rpm, sim.drum),
-        "n_particles": len(sim.particles()), "csv": str(csv_out) if csv_out else None,
-        "video": str(video) if video else None,
-    }
+    summary = {"case": sim.case, "rpm": rpm, "duration_s": duration, "seed": seed, "frames": len(rows),
+               "engine": checked.engine, "config": str(config) if config else None,
+               **_sim_summary(sim, rows, curv, air, rpm, duration),
+               "csv": str(csv_out) if csv_out else None, "video": str(video) if video else None}
     if as_json:
         print_json(summary)
     else:
@@ -199,6 +109,102 @@ def sim_cmd(
             f"{summary['regime']} (Fr {summary['froude']:.3f}); step {summary['dt_ms']:g} ms, "
             f"overlap p99 {summary['overlap_p99_r']:.3f} r, wall {summary['wall_max_mm']:.2f} mm"
         )
+
+
+def _sim_options(duration: float, fps: float, size: int, friction: float | None, rolling: float | None,
+                 dt_ms: float | None, end_friction: float | None) -> dict[str, float]:
+    """``drumtwin sim``'s numbers checked (one-line ``SimError``s); the twin's keyword arguments."""
+    from sim.errors import check_number
+
+    check_number("--duration", duration, 0.0, MAX_SIM_S, lo_open=True)
+    check_number("--fps", fps, 0.0, 240.0, lo_open=True)
+    check_number("--size", size, 32, 4096, integer=True)
+    kw: dict[str, float] = {}
+    if friction is not None:
+        kw["friction"] = check_number("--friction", friction, 0.0, 5.0)
+    if rolling is not None:
+        kw["rolling"] = check_number("--rolling", rolling, 0.0, 5.0)
+    kw.update(_step_options(dt_ms, end_friction))
+    return kw
+
+
+def _sim_rows(sim: Any, renderer: Any, meter: Any, duration: float, fps: float, video: Path | None,
+              start: Callable[[int], None], advance: Callable[[], None]) -> tuple[list[dict], list[float], list[float]]:
+    """The twin run for ``duration`` s, rendered and measured ``fps`` times per simulated second (and at
+    the start): one ``SIM_COLUMNS`` row per frame, the free surface's curvature and the airborne share
+    per frame; the frames written to ``video`` (MP4) when given. ``start(frames)``, ``advance()``: progress."""
+    import cv2
+
+    from sim.probe import probe
+
+    writer = None
+    if video is not None:
+        video.parent.mkdir(parents=True, exist_ok=True)
+        writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"mp4v"), float(min(fps, 60.0)),
+                                 (renderer.width_px, renderer.height_px))
+        if not writer.isOpened():
+            raise SimError(f"cannot write video {video}")
+    n = max(1, int(round(duration * fps)))
+    start(n + 1)
+    rows, curv, air = [], [], []
+    last = None
+    nan = float("nan")
+    try:
+        for i, smp in enumerate(probe(sim, duration, duration / n)):
+            frame = renderer.render(smp.particles, smp.sim_t_s)
+            curv.append(smp.surface.curvature)
+            air.append(smp.airborne if i > 0 else nan)
+            rd = meter.measure(frame) if frame is not None else None  # None: a dropped frame
+            last = frame if frame is not None else last
+            if writer is not None and last is not None:
+                writer.write(last)
+            rows.append({
+                "t_s": round(smp.sim_t_s, 6), "rpm": smp.rpm_actual, "mi": rd.mi if rd else nan,
+                "mi_sigmoid": rd.mi_sigmoid if rd else nan, "mi_linear": rd.mi_linear if rd else nan,
+                "mi_particles": smp.mi.mi, "mi_sigmoid_particles": smp.mi.mi_sigmoid,
+                "slope_deg": rd.slope_deg if rd else nan, "slope_deg_particles": smp.surface.slope_deg,
+                "valid": int(bool(rd.valid)) if rd else 0,
+            })
+            advance()
+    finally:
+        if writer is not None:
+            writer.release()
+    return rows, curv, air
+
+
+def _finite_mean(a: Any) -> float:
+    f = np.asarray(a, float)
+    f = f[np.isfinite(f)]
+    return float(f.mean()) if f.size else float("nan")
+
+
+def _sim_summary(sim: Any, rows: list[dict], curv: list[float], air: list[float], rpm: float,
+                 duration: float) -> dict[str, Any]:
+    """``drumtwin sim``'s numbers of a run: MI at the start and the end (the last 10 % of the frames),
+    the slope after ``SLOPE_AFTER_S`` (or half the run), the flow regime of its last third, the step and
+    the contact statistics."""
+    from sim.whatif import flow_regime, froude, froude_regime
+
+    col = {k: np.array([r[k] for r in rows], float) for k in SIM_COLUMNS}
+    end = {k: _finite_mean(col[k][-max(1, int(round(0.1 * len(rows)))):]) for k in SIM_COLUMNS}  # the last 10 %
+    mi_valid = col["mi"][np.isfinite(col["mi"])]
+    third = max(1, len(rows) // 3)
+    late = col["t_s"] >= min(SLOPE_AFTER_S, 0.5 * duration)
+    st = sim.stats()
+    air_m, curv_m = _finite_mean(air[-third:]), _finite_mean(curv[-third:])
+    return {
+        "dt_ms": sim.substep_s() * 1e3, "default_dt_ms": _default_dt_ms(sim),
+        "friction": sim.params.friction, "rolling": sim.params.rolling, "end_friction": sim.params.end_mu,
+        "mi_start": float(mi_valid[0]) if mi_valid.size else float("nan"), "mi_end": end["mi"],
+        "mi_sigmoid_end": end["mi_sigmoid"], "mi_linear_end": end["mi_linear"],
+        "mi_particles_start": float(col["mi_particles"][0]), "mi_particles_end": end["mi_particles"],
+        "slope_deg": _finite_mean(col["slope_deg_particles"][late]),
+        "slope_deg_vision": _finite_mean(col["slope_deg"][late]),
+        "surface_curvature": curv_m,
+        "overlap_p99_r": st.overlap_p99_r, "overlap_max_r": st.overlap_max_r, "wall_max_mm": st.wall_max_mm,
+        "airborne": air_m, "regime": flow_regime(air_m, curv_m), "froude": froude(rpm, sim.drum),
+        "froude_regime": froude_regime(rpm, sim.drum), "n_particles": len(sim.particles()),
+    }
 
 
 def _step_options(dt_ms: float | None, end_friction: float | None) -> dict[str, float]:
@@ -227,13 +233,13 @@ def _default_dt_ms(sim: Any) -> float:
     return pymunk_dt_s(sim.mixer) * 1e3
 
 
-def _measure_source_surface(source: str, max_frames: int, bed: str | None = None,
-                            config: Path | None = None) -> tuple[float, float | None, int]:
-    """Median free-surface slope (deg), median curvature (None if the meter gives none) and frames used."""
-    from vision.config import load_config
+def _measure_source_surface(source: str, max_frames: int, bed: str | None,
+                            config: Any) -> tuple[float, float | None, int]:
+    """Median free-surface slope (deg), median curvature (None if the meter gives none) and frames used,
+    measured with ``config``'s meter (a ``vision.config.MeterConfig``)."""
     from vision.sources import open_source
 
-    meter = load_config(config).make_meter(bed=bed)
+    meter = config.make_meter(bed=bed)
     vals, curvs = [], []
     n = 0
     for frame in open_source(source, loop=False, reconnect=False):
@@ -266,31 +272,37 @@ def calibrate_cmd(
     engine: str | None = typer.Option(None, "--engine", help=ENGINE_HELP),
     seed: int = typer.Option(0, "--seed", help="0 <= seed < 2**32"),
     max_evals: int = typer.Option(8, "--max-evals", help="twin runs per search path, after the range runs (1..40)"),
-    spin_up_s: float = typer.Option(3.0, "--spin-up-s", help="simulated start-up of each twin run, s"),
+    spin_up_s: float | None = typer.Option(None, "--spin-up-s", help="simulated start-up of each twin run, s "
+                                                                      "(default: 3 s or a quarter turn if longer)"),
     window_s: float = typer.Option(5.0, "--window-s", help="simulated seconds each run's slope is averaged over"),
     dt_ms: float | None = typer.Option(None, "--dt-ms", help="internal time step of the twin runs, ms"),
     end_friction: float | None = typer.Option(None, "--end-friction",
                                               help="friction of the drum's end plates in the twin runs, kept "
-                                                   "fixed (default: the wall's; 0: none, e.g. a monolayer rig)"),
+                                                   "fixed (default: the wall's in a deep drum; a monolayer's is "
+                                                   "calibrated)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
-    """Fit the twin's sliding and rolling friction to a measured free-surface slope (and curvature).
+    """Fit the twin's sliding and rolling friction (and a monolayer's end-plate friction) to a measured
+    free-surface slope (and curvature).
 
-    Prints the slopes the twin can reach at this rpm; a target outside them is an error.
+    Prints the slopes the twin can reach at this rpm; a target outside them is an error naming the
+    friction that would have to leave its range.
     """
     from sim.calibrate import calibrate
     from sim.drum import check_rpm
-    from sim.engine import engine_for
     from sim.errors import check_number
+    from twin.config import load_checked_config
 
     if (source is None) == (slope_deg is None):
         raise SimError("give either SOURCE or --slope-deg (exactly one)")
     seed = _check_seed(seed)
-    mixer, _ = load_mixer(config, engine)
+    checked = load_checked_config(config, engine=engine)
+    mixer = checked.mixer
     check_rpm(rpm, mixer.drum)
     check_number("--rpm", rpm, 0.0, mixer.drum.critical_rpm, lo_open=True)
     check_number("--max-evals", max_evals, 1, 40, integer=True)
-    check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
+    if spin_up_s is not None:
+        check_number("--spin-up-s", spin_up_s, 0.0, 600.0)
     check_number("--window-s", window_s, 0.0, 600.0, lo_open=True)
     sim_kw: dict[str, Any] = _step_options(dt_ms, end_friction)  # spread into calibrate(...)
     if curvature is not None:
@@ -299,13 +311,13 @@ def calibrate_cmd(
     target_curv = curvature
     if source is not None:
         check_number("--max-frames", max_frames, 1, 100_000, integer=True)
-        target, measured_curv, n_frames = _measure_source_surface(source, max_frames, bed, config)
+        target, measured_curv, n_frames = _measure_source_surface(source, max_frames, bed, checked.meter)
         if target_curv is None:
             target_curv = measured_curv
         say(f"measured slope {target:.1f} deg in {n_frames} frame(s)")
     else:
         target = check_number("--slope-deg", slope_deg, -90.0, 90.0)
-    with _progress("calibrate") as prog:
+    with _progress() as prog:
         task = prog.add_task("calibrate", total=None)
         cal = calibrate(target, rpm, target_curvature=target_curv, seed=seed, max_evals=max_evals,
                         spin_up_s=spin_up_s, window_s=window_s, mixer=mixer, engine=engine, **sim_kw,
@@ -314,7 +326,8 @@ def calibrate_cmd(
            "rolling": cal.rolling, "residual_deg": cal.residual_deg, "rpm": rpm,
            "range_deg": list(cal.range_deg), "curvature": target_curv, "twin_curvature": cal.twin_curvature,
            "path": cal.path, "evaluations": cal.evaluations, "frames": n_frames, "source": source,
-           "engine": engine_for(mixer, engine), "end_friction": end_friction}
+           "engine": checked.engine, "end_friction": cal.end_friction,
+           "end_friction_max": cal.end_friction_max}
     if as_json:
         print_json(out)
     else:
@@ -322,6 +335,7 @@ def calibrate_cmd(
             f"reachable at {rpm:g} rpm: {cal.range_deg[0]:.1f}-{cal.range_deg[1]:.1f} deg; "
             f"target slope {target:.1f} deg -> twin {cal.twin_slope_deg:.1f} deg "
             f"(residual {cal.residual_deg:+.2f}) with friction {cal.friction:.3f}, rolling {cal.rolling:.3f}"
+            + (f", end plates {cal.end_friction:.4f}" if cal.end_friction_max > 0 else "")
         )
 
 
@@ -346,12 +360,14 @@ def whatif_cmd(
     """Run the twin for several rpm values and report the plateau MI and regime of each, the drive power
     (whole drum) and, with --target-mi, the time and energy to reach it (seed mean and sd)."""
     from control.limits import Limits
-    from sim.engine import engine_for
+    from sim.capacity import check_twin
     from sim.errors import check_number
     from sim.whatif import WhatIfJob, run_study, summarize
+    from twin.config import load_checked_config
 
     check_outputs(csv_out, plot)  # before the study: a directory as --plot is no PNG
-    mixer, _ = load_mixer(config, engine)
+    checked = load_checked_config(config, engine=engine)
+    mixer = checked.mixer
     check_number("--seeds", seeds, 1, MAX_SEEDS, integer=True)
     # the dashboard's and the loop's check (control.limits): rpm in (0, critical], study size, duration
     rpms, duration = Limits(critical_rpm=mixer.drum.critical_rpm).check_whatif(_parse_list(rpm, "--rpm"), duration,
@@ -359,6 +375,7 @@ def whatif_cmd(
     check_number("--sample-s", sample_s, 0.0, duration, lo_open=True)
     if fill is not None:
         check_number("--fill", fill, 0.0, 0.85, lo_open=True)
+        check_twin(replace(mixer, fill=fill), engine, source=f"--fill {fill:g}")  # shares: more particles
     if target_mi is not None:
         check_number("--target-mi", target_mi, 0.0, 1.0)
     if workers is not None:
@@ -368,7 +385,7 @@ def whatif_cmd(
     jobs = [WhatIfJob(rpm=r, duration_s=duration, case=case.upper(), seed=s, fill=fill, sample_s=sample_s,
                       mixer=mixer, engine=engine, target_mi=target_mi) for r in rpms for s in range(seeds)]
     t0 = time.perf_counter()
-    with _progress("whatif") as prog:
+    with _progress() as prog:
         task = prog.add_task("whatif", total=len(jobs))
         results = run_study(jobs, workers=workers, scheduler=scheduler,
                             progress=lambda d, t: prog.update(task, completed=d))
@@ -386,7 +403,7 @@ def whatif_cmd(
         _plot_whatif(results, plot)
     summary = summarize(results)
     out = {"rpm": summary, "duration_s": duration, "case": case.upper(), "seeds": seeds, "wall_s": wall,
-           "scheduler": scheduler, "workers": workers, "engine": engine_for(mixer, engine), "target_mi": target_mi}
+           "scheduler": scheduler, "workers": workers, "engine": checked.engine, "target_mi": target_mi}
     if as_json:
         print_json(out)
     else:
@@ -435,74 +452,22 @@ def _plot_whatif(results, path: Path) -> None:
     plt.close(fig)
 
 
-def _cpu_rtf(sim, duration_s: float) -> float:
-    """Sim seconds per CPU second of a twin: warmed up past the start transient, the best of three equal chunks."""
-    sim.advance(min(1.0, duration_s))
-    best = math.inf
-    for _ in range(3):
-        t0 = time.process_time()
-        sim.advance(duration_s / 3)
-        best = min(best, time.process_time() - t0)
-    return duration_s / 3 / max(best, 1e-9)
-
-
 @bench_app.command("twin")
 def bench_twin(
     duration: float = typer.Option(10.0, "--duration", help="simulated seconds per measurement"),
     as_json: bool = typer.Option(False, "--json", help="print JSON to stdout"),
 ) -> None:
     """Real-time factor of the twin on one core: paper bed at 5 and 30 rpm, 4x and 16x particles at 5 rpm
-    on the DEM; the paper bed and the cut-disc rig (configs/pmma-cutdisc.toml) on pymunk, each at its default step.
-
-    The 4x/16x beds keep the particles and fill level and grow the drum (diameter and depth x2, x4:
-    the paper's drum scaled, its end plates as far apart relative to its size), so the particle
-    count grows at the same time step and contact physics. Timed by this process's
-    CPU time (a shared machine's other jobs do not count), the best of three equal chunks.
+    on the DEM; the paper bed and the cut-disc rig (configs/pmma-cutdisc.toml) on pymunk, each at its
+    default step; and the time to place 20,000 and 200,000 discs (``sim.bench``: the beds and the clock).
     """
-    from sim.drum import DrumSim
+    from sim.bench import DEM_BEDS, PLACEMENT_BEDS, PYMUNK_BEDS, run_twin_bench
     from sim.errors import check_number
-    from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec
 
     check_number("--duration", duration, 0.0, 600.0, lo_open=True)
-    cases = [
-        ("rtf_paper_5rpm", PAPER_DRUM, 5.0),
-        ("rtf_paper_30rpm", PAPER_DRUM, 30.0),
-        ("rtf_4x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 2, depth_m=PAPER_DRUM.depth_m * 2), 5.0),
-        ("rtf_16x", DrumSpec(diameter_m=PAPER_DRUM.diameter_m * 4, depth_m=PAPER_DRUM.depth_m * 4), 5.0),
-    ]
-    out: dict = {}
-    counts: dict = {}
-    with _progress("bench twin") as prog:
-        task = prog.add_task("bench", total=len(cases))
-        for name, drum, rpm in cases:
-            sim = DrumSim(drum, PAPER_RECIPE, case="C", seed=0, rpm=rpm, settle_s=0.3)
-            out[name] = _cpu_rtf(sim, duration)
-            counts[name.replace("rtf_", "n_")] = len(sim.particles())
-            prog.advance(task)
-    out.update(counts)
-    from sim.drum import DEFAULT_DT_S
-
-    out["dt_ms"] = DEFAULT_DT_S * 1e3
-    # the pymunk engine beside it, in the same run: the paper bed and the cut-disc rig at its default step
-    from sim.engine import make_twin
-    from sim.mixer import paper_mixer
-    from sim.validation_pymunk import rig
-
-    for name, mixer, rpm in (("rtf_paper_5rpm_pymunk", paper_mixer(), 5.0),
-                             ("rtf_cutdisc_10rpm_pymunk", rig(True), 10.0)):
-        twin = make_twin(mixer, "pymunk", case="C", seed=0, rpm=rpm, settle_s=0.3)
-        out[name] = _cpu_rtf(twin, duration)
-        out[name.replace("rtf_", "n_")] = len(twin.particles())
-        out[name.replace("rtf_", "dt_ms_")] = twin.substep_s() * 1e3  # each bed's own default step
-    # where the cut-disc rig's step goes: shapes, contacts, iterations, Chipmunk against the post-step pass
-    from sim.pymunk_twin import PymunkDrumSim
-
-    assert isinstance(twin, PymunkDrumSim)
-    out["profile_cutdisc_pymunk"] = twin.cost_profile(duration / 3)
-    out["clock"] = "process cpu time, best of 3 chunks"
-    # total cost per simulated second grows as N^k from the paper bed to the 16x bed
-    out["cost_exponent_16x"] = math.log(out["rtf_paper_5rpm"] / out["rtf_16x"]) / math.log(
-        counts["n_16x"] / counts["n_paper_5rpm"])
+    with _progress() as prog:
+        task = prog.add_task("bench twin", total=len(DEM_BEDS))
+        out = run_twin_bench(duration, progress=lambda: prog.advance(task))
     if as_json:
         print_json(out)
     else:
@@ -511,14 +476,14 @@ def bench_twin(
         table = Table(title="twin real-time factor = sim s per wall s (one core)")
         for col in ("bed", "particles", "RTF", "µs/particle/sim-s"):
             table.add_column(col, justify="left" if col == "bed" else "right")
-        for name, drum, rpm in cases:
-            n = counts[name.replace("rtf_", "n_")]
-            rtf = out[name]
+        for name, drum, rpm in DEM_BEDS:
+            n, rtf = out[name.replace("rtf_", "n_")], out[name]
             bed = "paper" if name.startswith("rtf_paper") else name[4:] + " particles"
             table.add_row(f"DEM: {bed}, {rpm:g} rpm, D {drum.diameter_m:.1f} m", str(n), f"{rtf:.1f}",
                           f"{1e6 / (rtf * n):.0f}")
-        for name, bed in (("rtf_paper_5rpm_pymunk", "pymunk: paper, 5 rpm"),
-                          ("rtf_cutdisc_10rpm_pymunk", "pymunk: cut-disc rig, 10 rpm")):
+        for name, bed in PYMUNK_BEDS:
             n, rtf = out[name.replace("rtf_", "n_")], out[name]
             table.add_row(bed, str(n), f"{rtf:.1f}", f"{1e6 / (rtf * n):.0f}")
         console.print(table)
+        console.print("placement (sim.placement): " + ", ".join(
+            f"{n:,} discs {out[f'placement_s_{n}']:.2f} s" for n in PLACEMENT_BEDS), highlight=False)

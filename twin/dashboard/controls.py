@@ -18,6 +18,7 @@ from control.errors import ControlError
 from control.limits import WHATIF_MAX_RUNS, WHATIF_MAX_S, Limits
 from twin.dashboard.guard import Gatekeeper, client_address
 from twin.dashboard.layout import MODE_LABELS, Layout, parse_rpm_list
+from twin.dashboard.setup import SetupView
 from twin.records import ModeSet, OperatorClamped, OperatorRejected
 from twin.state import Controls, LiveState
 
@@ -33,7 +34,7 @@ class ClientControls:
     """One viewer's control handles (None until its controls are built)."""
 
     authorised: bool
-    handles: list[Disableable] = field(default_factory=list)
+    handles: list[Disableable] = field(default_factory=list)  # disabled for a read-only viewer
     mode: viser.GuiDropdownHandle[str] | None = None
     rpm: viser.GuiSliderHandle[float] | None = None
     status: viser.GuiMarkdownHandle | None = None
@@ -45,14 +46,39 @@ class ClientControls:
             self.status.content = text
 
 
+@dataclass
+class _Handles:
+    """One viewer's control handles while they are built and wired."""
+
+    mode: viser.GuiDropdownHandle[str]
+    rpm: viser.GuiSliderHandle[float]
+    start: viser.GuiButtonHandle
+    stop: viser.GuiButtonHandle
+    estop: viser.GuiButtonHandle
+    recal: viser.GuiButtonHandle
+    reseed: viser.GuiButtonHandle
+    relearn: viser.GuiButtonHandle
+
+
+@dataclass
+class _WhatIfForm:
+    """One viewer's what-if form."""
+
+    rpms: viser.GuiTextHandle
+    dur: viser.GuiNumberHandle[float]
+    run: viser.GuiButtonHandle
+    cancel: viser.GuiButtonHandle
+
+
 class Viewers:
     """The connected viewers' controls (see module doc), keyed by viser client id."""
 
     def __init__(
         self, server: viser.ViserServer, layout: Layout, gate: Gatekeeper, controls: Controls, state: LiveState,
-        limits: Limits,
+        limits: Limits, setup: SetupView | None = None,
     ) -> None:
         self._server = server
+        self.setup = setup
         self.layout = layout
         self.gate = gate
         self.controls = controls
@@ -66,64 +92,83 @@ class Viewers:
         cc = ClientControls(authorised=not self.gate.token_required)
         with self._lock:
             self._clients[client.client_id] = cc
-        gui = client.gui
-        mode_now = (self.state.panel.mode or "off").upper()
         with self.layout.controls_folder:
             if self.gate.token_required:
-                token = gui.add_text("Control token", "", hint="controls stay read-only without it")
-                unlock = gui.add_button("Unlock controls", icon=viser.Icon.LOCK_OPEN)
+                self._add_unlock(client, cc)
+            h = self._add_controls(client.gui, cc)
+        with self.layout.whatif_folder:
+            w = self._add_whatif(client.gui, cc)
+        cc.handles = [h.mode, h.start, h.stop, h.recal, h.reseed, h.relearn, w.rpms, w.dur, w.run, w.cancel]
+        if self.setup is not None:
+            with self.layout.setup_folder:
+                cc.handles += list(self.setup.build(client.gui, cc.authorised, self._guarded(cc), cc.say, client))
+        cc.estop = h.estop
+        self._wire(client, cc, h, w)
 
-                @unlock.on_click
-                def _(event: viser.GuiEvent) -> None:
-                    if event.client is None:
-                        return
-                    address = client_address(self._server, client.client_id)
-                    ok, message = self.gate.try_unlock(client.client_id, token.value, address)
-                    cc.authorised = ok
-                    for h in cc.handles:
-                        h.disabled = not ok
-                    if cc.estop is not None:
-                        cc.estop.disabled = not self.gate.estop_allowed(cc.authorised)
-                    self._sync_rpm_enabled(cc, self.state.panel.mode or "off")
-                    cc.say(message)
+    def _add_unlock(self, client: viser.ClientHandle, cc: ClientControls) -> None:
+        """The token field and its button: a right token enables this viewer's controls."""
+        token = client.gui.add_text("Control token", "", hint="controls stay read-only without it")
+        unlock = client.gui.add_button("Unlock controls", icon=viser.Icon.LOCK_OPEN)
 
-            cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
-            mode_select = cc.mode = gui.add_dropdown(
-                "Mode", MODE_LABELS, initial_value=mode_now if mode_now in MODE_LABELS else "OFF",
-                disabled=not cc.authorised,
-            )
-            lo, hi = self.limits.rpm_range  # the slider shows what the supervisor allows
-            rpm_slider = cc.rpm = gui.add_slider(
-                "rpm (MANUAL)",
-                min=lo,
-                max=hi,
-                step=0.5,
-                initial_value=self.limits.clamp(float(self.state.panel.rpm_setpoint or lo)),
-                disabled=not cc.authorised or mode_now != "MANUAL",
-                hint=f"limits {self.limits.describe()}",
-            )
-            start = gui.add_button("Start mill", icon=viser.Icon.PLAYER_PLAY, disabled=not cc.authorised)
-            stop = gui.add_button("Stop mill", icon=viser.Icon.PLAYER_STOP, disabled=not cc.authorised)
-            estop = gui.add_button(  # a stop is always safe: every viewer has it unless configured off
+        @unlock.on_click
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
+            address = client_address(self._server, client.client_id)
+            ok, message = self.gate.try_unlock(client.client_id, token.value, address)
+            cc.authorised = ok
+            for h in cc.handles:
+                h.disabled = not ok
+            if cc.estop is not None:
+                cc.estop.disabled = not self.gate.estop_allowed(cc.authorised)
+            self._sync_rpm_enabled(cc, self.state.panel.mode or "off")
+            cc.say(message)
+
+    def _add_controls(self, gui: viser.GuiApi, cc: ClientControls) -> _Handles:
+        """The mode, rpm, mill and twin controls (disabled for a read-only viewer)."""
+        locked = not cc.authorised
+        mode_now = (self.state.panel.mode or "off").upper()
+        cc.status = gui.add_markdown("" if cc.authorised else "*read-only viewer*")
+        cc.mode = gui.add_dropdown("Mode", MODE_LABELS, initial_value=mode_now if mode_now in MODE_LABELS else "OFF",
+                                   disabled=locked)
+        lo, hi = self.limits.rpm_range  # the slider shows what the supervisor allows
+        cc.rpm = gui.add_slider(
+            "rpm (MANUAL)", min=lo, max=hi, step=0.5,
+            initial_value=self.limits.clamp(float(self.state.panel.rpm_setpoint or lo)),
+            disabled=locked or mode_now != "MANUAL", hint=f"limits {self.limits.describe()}",
+        )
+        return _Handles(
+            mode=cc.mode, rpm=cc.rpm,
+            start=gui.add_button("Start mill", icon=viser.Icon.PLAYER_PLAY, disabled=locked),
+            stop=gui.add_button("Stop mill", icon=viser.Icon.PLAYER_STOP, disabled=locked),
+            estop=gui.add_button(  # a stop is always safe: every viewer has it unless configured off
                 "EMERGENCY STOP", color="red", icon=viser.Icon.ALERT_OCTAGON,
                 disabled=not self.gate.estop_allowed(cc.authorised),
-            )
-            recal = gui.add_button("Recalibrate twin", icon=viser.Icon.ADJUSTMENTS, disabled=not cc.authorised)
-            reseed = gui.add_button("Re-seed twin from camera", icon=viser.Icon.CAMERA, disabled=not cc.authorised)
-            relearn = gui.add_button(  # issue 22: after lighting_changed:, the classes from the live bed
-                "Re-learn classes", icon=viser.Icon.REFRESH, disabled=not cc.authorised,
+            ),
+            recal=gui.add_button("Recalibrate twin", icon=viser.Icon.ADJUSTMENTS, disabled=locked),
+            reseed=gui.add_button("Re-seed twin from camera", icon=viser.Icon.CAMERA, disabled=locked),
+            relearn=gui.add_button(  # issue 22: after lighting_changed:, the classes from the live bed
+                "Re-learn classes", icon=viser.Icon.REFRESH, disabled=locked,
                 hint="learn the colour classes again from the live bed (when the light moved too far)",
-            )
-        with self.layout.whatif_folder:
-            rpms = gui.add_text("What-if rpm list", "5, 20, 40, 60", disabled=not cc.authorised, order=-2)
-            dur = gui.add_number(
-                "What-if duration s", 60.0, min=1.0, max=WHATIF_MAX_S, step=5.0, disabled=not cc.authorised,
+            ),
+        )
+
+    def _add_whatif(self, gui: viser.GuiApi, cc: ClientControls) -> _WhatIfForm:
+        """The what-if form: rpm list, duration, run, cancel."""
+        locked = not cc.authorised
+        return _WhatIfForm(
+            rpms=gui.add_text("What-if rpm list", "5, 20, 40, 60", disabled=locked, order=-2),
+            dur=gui.add_number(
+                "What-if duration s", 60.0, min=1.0, max=WHATIF_MAX_S, step=5.0, disabled=locked,
                 order=-1.6, hint=f"at most {WHATIF_MAX_S:g} s, {WHATIF_MAX_RUNS} rpm values",
-            )
-            run = gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=not cc.authorised, order=-1.5)
-            cancel = gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=not cc.authorised, order=-1)
-        cc.handles = [mode_select, start, stop, recal, reseed, relearn, rpms, dur, run, cancel]
-        cc.estop = estop
+            ),
+            run=gui.add_button("Run what-if", icon=viser.Icon.CHART_LINE, disabled=locked, order=-1.5),
+            cancel=gui.add_button("Cancel what-if", icon=viser.Icon.X, disabled=locked, order=-1),
+        )
+
+    @staticmethod
+    def _guarded(cc: ClientControls) -> Callable[[Callable[[viser.GuiEvent], None]], Callable[[viser.GuiEvent], None]]:
+        """A callback of ``cc``'s viewer wrapped so that its authorisation is re-checked on every event."""
 
         def guarded(fn: Callable[[viser.GuiEvent], None]) -> Callable[[viser.GuiEvent], None]:
             def cb(event: viser.GuiEvent) -> None:
@@ -136,29 +181,21 @@ class Viewers:
 
             return cb
 
-        @mode_select.on_update
+        return guarded
+
+    def _wire(self, client: viser.ClientHandle, cc: ClientControls, h: _Handles, w: _WhatIfForm) -> None:
+        """Each control's callback: authorisation re-checked, then the loop's ``Controls``."""
+        guarded = self._guarded(cc)
+
+        @h.mode.on_update
         @guarded
         def _(event: viser.GuiEvent) -> None:
-            mode = str(mode_select.value).lower()
+            mode = str(h.mode.value).lower()
             self.controls.set_mode(mode)
             self.state.record(ModeSet(t_s=self.gate.now_s(), mode=mode))
             self.sync_mode(mode)
 
-        @rpm_slider.on_update
-        @guarded
-        def _(event: viser.GuiEvent) -> None:
-            try:
-                check = self.limits.check_rpm(rpm_slider.value)
-            except ControlError as exc:
-                cc.say(f"**rpm refused: {exc}**")
-                return
-            if check.clamped:  # the person who asked is told (the supervisor clamps the same way)
-                cc.say(f"**{check.message}**")
-                self.gate.publish(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
-                                                requested=check.requested, rpm=check.rpm))
-            self.controls.set_manual_rpm(check.rpm)
-
-        @estop.on_click
+        @h.estop.on_click
         def _(event: viser.GuiEvent) -> None:
             if event.client is None:
                 return
@@ -167,43 +204,42 @@ class Viewers:
                 return
             self.controls.emergency_stop()
 
-        start.on_click(guarded(lambda e: self.controls.start_mill()))
-        stop.on_click(guarded(lambda e: self.controls.stop_mill()))
-        cancel.on_click(guarded(lambda e: self._cancel_whatif(cc)))
-        recal.on_click(guarded(lambda e: self.controls.recalibrate()))
-        reseed.on_click(guarded(lambda e: self.controls.reseed_twin()))
-        relearn.on_click(guarded(lambda e: self._relearn(cc)))
+        h.rpm.on_update(guarded(lambda e: self._manual_rpm(client, cc, h.rpm.value)))
+        h.start.on_click(guarded(lambda e: self.controls.start_mill()))
+        h.stop.on_click(guarded(lambda e: self.controls.stop_mill()))
+        h.recal.on_click(guarded(lambda e: self.controls.recalibrate()))
+        h.reseed.on_click(guarded(lambda e: self.controls.reseed_twin()))
+        h.relearn.on_click(guarded(lambda e: cc.say(self.controls.relearn_classes())))
+        w.run.on_click(guarded(lambda e: self._run_whatif(client, cc, str(w.rpms.value), w.dur.value)))
+        w.cancel.on_click(guarded(lambda e: cc.say("what-if cancelled" if self.controls.cancel_whatif()
+                                                   else "no what-if to cancel")))
 
-        @run.on_click
-        @guarded
-        def _(event: viser.GuiEvent) -> None:
-            try:
-                rpm_list = parse_rpm_list(str(rpms.value), self.limits)
-                rpm_list, duration = self.limits.check_whatif(rpm_list, dur.value)
-            except (ValueError, ControlError) as exc:  # refused, with the limit, to the person who asked
-                cc.say(f"**what-if refused: {exc}**")
-                self.gate.publish(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
-                                                 error=str(exc)))
-                return
-            cc.say(f"what-if queued: {len(rpm_list)} rpm x {duration:g} s")
-            self.controls.run_whatif(rpm_list, duration)
-
-    def _cancel_whatif(self, cc: ClientControls) -> None:
-        cancel = getattr(self.controls, "cancel_whatif", None)
-        if cancel is None:
-            cc.say("**cancel: not supported by this loop**")
+    def _manual_rpm(self, client: viser.ClientHandle, cc: ClientControls, value: float) -> None:
+        """The slider's rpm, clamped into the limits (the viewer who asked is told; the
+        supervisor clamps the same way)."""
+        try:
+            check = self.limits.check_rpm(value)
+        except ControlError as exc:
+            cc.say(f"**rpm refused: {exc}**")
             return
-        cc.say("what-if cancelled" if cancel() else "no what-if to cancel")
+        if check.clamped:
+            cc.say(f"**{check.message}**")
+            self.gate.publish(OperatorClamped(t_s=self.gate.now_s(), client=client.client_id,
+                                              requested=check.requested, rpm=check.rpm))
+        self.controls.set_manual_rpm(check.rpm)
 
-    def _relearn(self, cc: ClientControls) -> None:
-        """The loop's typed relearn command (``relearn_classes``: a ``SwapClasses`` for the camera
-        worker, logged as an operator action); what it answered goes to the viewer who asked."""
-        relearn = getattr(self.controls, "relearn_classes", None)
-        if relearn is None:
-            cc.say("**re-learn: not supported by this loop**")
+    def _run_whatif(self, client: viser.ClientHandle, cc: ClientControls, rpms: str, duration_s: float) -> None:
+        """A what-if study from the form, or its refusal (with the limit) to the viewer who asked."""
+        try:
+            rpm_list = parse_rpm_list(rpms, self.limits)
+            rpm_list, duration = self.limits.check_whatif(rpm_list, duration_s)
+        except (ValueError, ControlError) as exc:
+            cc.say(f"**what-if refused: {exc}**")
+            self.gate.publish(OperatorRejected(t_s=self.gate.now_s(), client=client.client_id, action="whatif",
+                                               error=str(exc)))
             return
-        answer = relearn()
-        cc.say(answer if isinstance(answer, str) else "re-learning the classes from the live bed ...")
+        cc.say(f"what-if queued: {len(rpm_list)} rpm x {duration:g} s")
+        self.controls.run_whatif(rpm_list, duration)
 
     def _sync_rpm_enabled(self, cc: ClientControls, mode: str) -> None:
         """Show ``mode`` in the viewer's selector; the rpm slider is live only in MANUAL."""

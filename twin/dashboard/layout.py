@@ -14,6 +14,7 @@ import viser
 
 from control.errors import ControlError
 from control.limits import Limits
+from twin.dashboard.history import GOLDEN_SERIES, HistoryPanel, golden_column
 from twin.dashboard.scene import TwinScene
 from twin.state import Panel, Snapshot, WhatIfView, forward_fill
 
@@ -130,8 +131,9 @@ def alarms_html(alarms: Sequence[str]) -> str:
 
 
 class Layout:
-    """The shared elements of one viser server (see module doc); ``controls_folder`` and
-    ``whatif_folder`` are where each viewer's own controls go (``twin.dashboard.controls``)."""
+    """The shared elements of one viser server (see module doc); ``controls_folder``,
+    ``whatif_folder`` and ``setup_folder`` are where each viewer's own controls go
+    (``twin.dashboard.controls``); ``plots_panel`` holds the set-up view's tab (``twin.dashboard.setup``)."""
 
     def __init__(self, server: viser.ViserServer, title: str = "drumtwin") -> None:
         self._server = server
@@ -150,14 +152,15 @@ class Layout:
         self._live_panel.dock_left()
         self._live_panel.set_width(420)
 
-        self._plots_panel = gui.add_panel()
+        self.plots_panel = self._plots_panel = gui.add_panel()
         with self._plots_panel.add_tab("Plots"):
             self._numbers = gui.add_markdown(numbers_markdown(Panel()))
             z = np.zeros(1)
             self._mi_plot = gui.add_uplot(
-                (z,) * 7,
+                (z,) * 8,
                 (
                     {"label": "t s"},
+                    GOLDEN_SERIES,  # first: drawn behind the live curves
                     {"label": "MI raw", "stroke": "#9e9e9e", "width": 1},
                     {"label": "trend", "stroke": "#1565c0", "width": 2},
                     {"label": "lo95", "stroke": "rgba(21,101,192,0.3)", "width": 1},
@@ -166,10 +169,11 @@ class Layout:
                     {"label": "twin MI", "stroke": "#2e7d32", "width": 2},
                 ),
                 title="Mixing index",
-                bands=({"series": (4, 3), "fill": "rgba(21,101,192,0.15)"},),
+                bands=({"series": (5, 4), "fill": "rgba(21,101,192,0.15)"},),
                 scales={"x": {"time": False}, "y": {"auto": False, "range": (0.0, 1.0)}},
                 aspect=1.8,
             )
+            self.history = HistoryPanel(gui)
             self._rpm_plot = gui.add_uplot(
                 (z,) * 3,
                 (
@@ -199,6 +203,7 @@ class Layout:
         self._server.gui.main_panel.set_width(340)
         self.controls_folder = gui.add_folder("Controls")
         self.whatif_folder = gui.add_folder("What-if")
+        self.setup_folder = gui.add_folder("Commissioning")
         with self.whatif_folder:
             self._whatif_status = gui.add_markdown("No study yet.")
             self._whatif_plot = gui.add_uplot(
@@ -226,12 +231,12 @@ class Layout:
             seen["twin"] = snap.twin_seq
         self._alarm.content = alarms_html(snap.alarms)
         self._numbers.content = numbers_markdown(snap.panel)
-        if plots and snap.history_seq != seen["hist"] and len(snap.history["t_s"]) >= 2:
+        fresh = snap.history_seq != seen["hist"] or snap.rig_history_seq != seen.get("rig")  # new frames or golden
+        if plots and fresh and len(snap.history["t_s"]) >= 2:
             h = {k: forward_fill(v) for k, v in snap.history.items()}
             t = h["t_s"]
-            self._mi_plot.data = (
-                t, h["mi"], h["trend_mi"], h["trend_lo95"], h["trend_hi95"], h["ma_mi"], h["twin_mi"]
-            )
+            self._mi_plot.data = (t, golden_column(snap.rig_history, t), h["mi"], h["trend_mi"], h["trend_lo95"],
+                                  h["trend_hi95"], h["ma_mi"], h["twin_mi"])
             for plot, ys in (
                 (self._rpm_plot, (h["rpm_setpoint"], h["rpm_actual"])),
                 (self._slope_plot, (h["slope_deg"], h["twin_slope_deg"])),
@@ -241,8 +246,10 @@ class Layout:
                     plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": rng}}
                     self._y_ranges[id(plot)] = rng
                 plot.data = (t, *ys)
-            seen["hist"] = snap.history_seq
+            seen["hist"], seen["rig"] = snap.history_seq, snap.rig_history_seq
             pushed = True
+        if plots:
+            self.history.push(snap)
         if snap.whatif.seq != self._whatif_seq:
             self._push_whatif(snap)
         return pushed

@@ -13,7 +13,9 @@ Three parts, each in its own module, composed here:
   redraws cost the browser more than images); it never touches the loop's threads;
 * each viewer's controls (``twin.dashboard.controls``): built per viser client, one at a
   time, so every viewer gets them and EMERGENCY STOP however many connect at once; without
-  the token a viewer has EMERGENCY STOP only (``estop_needs_token``: not even that).
+  the token a viewer has EMERGENCY STOP only (``estop_needs_token``: not even that);
+* the set-up view (``twin.dashboard.setup``): commissioning on the live camera (``setup``:
+  what it reads of the run), its checks in a tab, its report one click away.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from twin.dashboard.guard import (
     origin_allowed,
 )
 from twin.dashboard.layout import Layout, alarms_html, axis_range, numbers_markdown, parse_rpm_list
+from twin.dashboard.setup import SetupFeed, SetupView
 from twin.records import DashboardRefused
 from twin.state import Controls, LiveState
 
@@ -67,6 +70,7 @@ class Dashboard:
         limits: Limits | None = None,
         estop_needs_token: bool = False,
         now_s: Callable[[], float] | None = None,
+        setup: SetupFeed | None = None,
     ) -> None:
         if not is_loopback(host) and not control_token:
             raise ValueError(f"binding the dashboard to {host} needs a control token")
@@ -93,7 +97,8 @@ class Dashboard:
         disable_share_tunnel(self._server)
         self.layout = Layout(self._server, title)
         self.scene = self.layout.scene
-        self.viewers = Viewers(self._server, self.layout, self.gate, controls, state, self.limits)
+        self.setup = SetupView(self._server, self.layout.plots_panel, setup)
+        self.viewers = Viewers(self._server, self.layout, self.gate, controls, state, self.limits, self.setup)
         self._server.on_client_connect(self._on_connect)
         self._server.on_client_disconnect(self._on_disconnect)
 
@@ -156,6 +161,7 @@ class Dashboard:
         """Start the update thread; returns self."""
         self._thread = threading.Thread(target=self._run, name="dashboard", daemon=True)
         self._thread.start()
+        self.setup.start()
         return self
 
     @property
@@ -198,6 +204,7 @@ class Dashboard:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
+        self.setup.stop()
         self.gate.flush_throttled(force=True)
         self._remove_error_filter()
         self._server.stop()

@@ -1,6 +1,7 @@
-"""The camera worker (frames -> meter -> readings) and the process worker (readings ->
-Kalman trend + the paper's moving average -> one ``FrameReading`` record on the run's bus,
-and the newest :class:`FrameInfo` for the other workers)."""
+"""The camera worker (frames -> readings: ``vision.stream.FrameMeter``) and the process worker
+(readings -> Kalman trend + the paper's moving average -> one ``FrameReading`` record on the run's
+bus: ``twin.frame_rows.FrameRows``, and the newest :class:`FrameInfo` for the other workers). The
+two steps are the ones ``drumtwin mi`` runs on a file, in one thread; here each has its own."""
 
 from __future__ import annotations
 
@@ -15,9 +16,13 @@ from typing import TypeVar
 import numpy as np
 
 from control.endpoint import EndpointDetector
-from control.trend import MITrend, MovingAverage, TrendEstimate
+from control.trend import MITrend, TrendEstimate
 from twin.clock import Cadence
-from twin.live.records import CameraInfo, EventSink, FrameInfo, Latest, RunView, SwapClasses
+from twin.frame_rows import FrameRows, is_valid_mi
+from twin.live.commands import SwapClasses
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
+from twin.live.snapshots import CameraInfo, FrameInfo, Latest, RunView
 from twin.records import (
     CameraRate,
     FaultCleared,
@@ -29,16 +34,14 @@ from twin.records import (
     Unmixed,
 )
 from twin.state import LiveState
-from vision.errors import VisionError
 from vision.meter import Meter, Reading
 from vision.sources import Frame
+from vision.stream import FrameMeter
+
+__all__ = ["READINGS_MAX", "SLOPES_MAX", "CameraReading", "CameraWorker", "ProcessWorker", "Rate", "is_valid_mi",
+           "make_room", "put_dropping_oldest"]
 
 T = TypeVar("T")
-
-NO_DRUM_GRACE_S = 5.0
-"""Camera seconds from the first frame during which frames without a findable drum (a webcam
-warming up: black or washed-out frames) are flagged readings (``no_drum:``); a source that
-shows no drum for longer, or ends without one, is bad input and ends the run."""
 
 READINGS_MAX = 512  # readings waiting for the process worker; beyond that the oldest go (counted)
 SLOPES_MAX = 4000  # camera slope angles waiting for the twin worker (its own window keeps as many)
@@ -79,12 +82,6 @@ class Rate:
             return (len(self._times) - 1) / span if span > 0 else 0.0
 
 
-def is_valid_mi(r: Reading) -> bool:
-    """The reading counts as vision: flagged valid and its MI a number in [0, 1] (the meter's
-    indices are; anything else is a broken reading, never fed to the trend or the timeout)."""
-    return bool(r.valid) and math.isfinite(r.mi) and 0.0 <= r.mi <= 1.0
-
-
 def put_dropping_oldest(q: queue.Queue[T], item: T) -> int:
     """Put without ever blocking: when ``q`` is full its oldest item is dropped; returns how
     many items were dropped."""
@@ -115,9 +112,10 @@ def make_room(q: queue.Queue[T]) -> int:
 
 
 class CameraWorker:
-    """Reads frames at the source's own rate, measures them, and hands the readings on
-    (never blocked by anything downstream). Publishes :class:`CameraInfo`; draws the
-    overlay for the dashboard at ``overlay_hz`` (0: none)."""
+    """Reads frames at the source's own rate, measures them (``vision.stream.FrameMeter``: the
+    no-drum policy, ``vision.stream.NO_DRUM_GRACE_S``), and hands the readings on (never blocked by anything
+    downstream). Publishes :class:`CameraInfo`; draws the overlay for the dashboard at
+    ``overlay_hz`` (0: none)."""
 
     def __init__(
         self,
@@ -131,9 +129,11 @@ class CameraWorker:
         overlay: Callable[[np.ndarray, Reading], np.ndarray] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
         commands: queue.SimpleQueue[SwapClasses] | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.frames = frames
-        self.meter = meter
+        self.faults = faults
+        self.frame_meter = FrameMeter(meter)
         self.commands = commands  # SwapClasses: a new meter from the next frame on
         self.out = out
         self.box = box
@@ -143,6 +143,11 @@ class CameraWorker:
         self._monotonic = monotonic
         self.fps = Rate(monotonic=monotonic)
         self.dropped = 0  # readings dropped because the process worker was behind (frames_dropped:)
+
+    @property
+    def meter(self) -> Meter:
+        """The meter measuring the frames now (a ``SwapClasses`` command replaces it)."""
+        return self.frame_meter.meter
 
     def run(self, stop: threading.Event) -> None:
         """Until the source ends or fails (then ``CameraInfo.ended``: vision is lost now)."""
@@ -154,10 +159,8 @@ class CameraWorker:
 
     def _run(self, stop: threading.Event) -> None:
         n = 0
-        t_first: float | None = None  # camera time of the first frame
-        found = False  # a drum was found in a frame of this run
-        missed: VisionError | None = None
         for frame in self.frames:
+            at(self.faults.camera_frame, float(frame.t_s))
             if stop.is_set():
                 return
             wall = self._monotonic()  # when the frame arrived
@@ -169,18 +172,9 @@ class CameraWorker:
             roi = prev.roi
             if came:
                 self.box.set(CameraInfo(t, wall, frame.image, roi, n, False))  # it came (alarms)
-            if t_first is None and math.isfinite(t):
-                t_first = t
             while self.commands is not None and not self.commands.empty():
-                self.meter = self.commands.get_nowait().meter
-            try:
-                reading = self.meter.measure(frame.image)
-                found = True
-            except VisionError as exc:  # no drum in a frame of a new size
-                missed = exc
-                if not found and t_first is not None and t - t_first > NO_DRUM_GRACE_S:
-                    raise VisionError(f"no drum in {t - t_first:.0f} s of camera frames: {exc}") from None
-                reading = self.meter.invalid(f"no_drum:{exc}")
+                self.frame_meter.meter = self.commands.get_nowait().meter
+            reading = self.frame_meter.measure(frame)  # flagged when it cannot be measured; raises past the grace
             if came and reading.roi is not roi:
                 self.box.set(CameraInfo(t, wall, frame.image, reading.roi, n, False))
             self.fps.tick()
@@ -189,8 +183,8 @@ class CameraWorker:
             cadence = self._overlay_cadence
             if cadence is not None and self.overlay is not None and cadence.due(self._monotonic()):
                 self.state.publish_camera(self.overlay(frame.image, reading))
-        if not found and missed is not None and not stop.is_set():
-            raise VisionError(f"no drum in any camera frame: {missed}")
+        if not stop.is_set():
+            self.frame_meter.finish()  # the source ended: bad input when it never showed a drum
 
 
 def _known(value: float) -> float | None:
@@ -217,16 +211,17 @@ class ProcessWorker:
         ma_window: int = 150,
         camera_fps: Callable[[], float] = lambda: 0.0,
         endpoint: EndpointDetector | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.inbox = inbox
+        self.faults = faults
         self.trend = trend
-        self.ma = MovingAverage(ma_window)
+        self.rows = FrameRows(trend, ma_window, endpoint)  # the batch endpoint: events mixed / unmixed
         self.box = box
         self.view = view
         self.sink = sink
         self.slopes = slopes
         self.camera_fps = camera_fps
-        self.endpoint = endpoint or EndpointDetector()  # the batch endpoint: events mixed / unmixed
         self._settled: bool | None = None  # the trend's state last logged (None: no valid trend yet)
         self._dropped = 0  # the camera's dropped count at the last reading processed
 
@@ -236,6 +231,7 @@ class ProcessWorker:
                 item = self.inbox.get(timeout=0.1)
             except queue.Empty:
                 continue
+            at(self.faults.process_reading, item.t_s)
             self.process(item)
 
     def process(self, item: CameraReading) -> FrameReading | None:
@@ -243,7 +239,10 @@ class ProcessWorker:
         or goes back before the newest processed one is dropped (None) with a
         ``camera_clock`` fault: the trend's time only runs forward."""
         prev = self.box.get()
-        if not math.isfinite(item.t_s) or (prev.n_frames and item.t_s < prev.t_s):
+        mill = self.view.mill()
+        rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
+        step = self.rows.step(item.t_s, item.frame, item.reading, rpm)
+        if step is None:
             why = (f"went back from {prev.t_s:g} to {item.t_s:g} s" if math.isfinite(item.t_s)
                    else f"is {item.t_s}")
             self.sink.publish(FaultRaised(
@@ -251,35 +250,24 @@ class ProcessWorker:
                 message=f"camera frame time {why}: frames dropped until it runs forward again"))
             return None
         self.sink.publish(FaultCleared(t_s=item.t_s, fault="camera_clock", message="frame times in order again"))
-        r = item.reading
-        valid = is_valid_mi(r)
-        mi = r.mi if valid else math.nan
-        mill = self.view.mill()
-        rpm = mill.actual_rpm if math.isfinite(mill.actual_rpm) else 0.0
-        est = self.trend.update(item.t_s, mi, rpm)
+        r, est, end = item.reading, step.estimate, step.endpoint
         self._log_settled(est)
-        ma = self.ma.update(mi)
-        end = self.endpoint.update(item.t_s, mi, est.level, est.valid and est.settled)
         if end.changed:  # issue 24: the endpoint, live (the frame record carries it to the panel)
             change = Mixed if end.changed == "mixed" else Unmixed  # control.endpoint: "mixed" | "unmixed"
             self.sink.publish(change(t_s=item.t_s, mixing_time_s=end.mixing_time_s, plateau_mi=end.plateau_mi,
                                      block_sd=end.block_sd, reason=end.reason))
-        last_valid = item.t_s if valid else prev.last_valid_t_s
+        last_valid = item.t_s if step.valid else prev.last_valid_t_s
         self.box.set(FrameInfo(item.t_s, prev.n_frames + 1, last_valid, r, est, end.mixed, end.mixing_time_s))
-        if valid and self.slopes is not None and math.isfinite(r.slope_deg):
+        if step.valid and self.slopes is not None and math.isfinite(r.slope_deg):
             put_dropping_oldest(self.slopes, (item.t_s, float(r.slope_deg)))  # bounded: a stalled twin
         dropped, self._dropped = item.dropped_total - self._dropped, max(self._dropped, item.dropped_total)
         tw = self.view.twin()
-        row = FrameReading(
-            t_s=item.t_s, frame=item.frame, mi=r.mi, mi_sigmoid=r.mi_sigmoid, mi_linear=r.mi_linear,
-            d_px=r.d_px, dsigma_px=r.dsigma_px, concentration=r.concentration, slope_deg=r.slope_deg,
-            valid=valid, trend_mi=est.level, trend_lo95=est.lo95, trend_hi95=est.hi95, trend_rate=est.rate,
-            ma_mi=ma, twin_mi=None if tw.updated_s is None else tw.mi,
+        row = replace(  # what only the run knows, beside the measurement's row
+            step.row, twin_mi=None if tw.updated_s is None else tw.mi,
             twin_slope_deg=None if tw.updated_s is None else tw.slope_deg,
             rpm_setpoint=_known(mill.setpoint_rpm), rpm_actual=_known(mill.actual_rpm), mode=self.view.mode(),
-            flags=tuple(r.flags) + ((mill.link_flag,) if mill.link_flag else ())
+            flags=step.row.flags + ((mill.link_flag,) if mill.link_flag else ())
             + ((f"frames_dropped:{dropped}",) if dropped > 0 else ()),
-            mixed=end.mixed, mixing_time_s=end.mixing_time_s,
         )
         self.sink.publish(row)  # the one way a frame leaves: the CSV row, the plots, the numbers panel
         self.sink.publish(CameraRate(t_s=item.t_s, fps=self.camera_fps()))

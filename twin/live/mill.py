@@ -37,7 +37,10 @@ from typing import Protocol
 
 from control.errors import ControlError, MillRefused
 from control.protocol import MillStatus
-from twin.live.records import EventSink, Latest, MillCommand, MillSnapshot, SetRpm, StartMill, StopMill, drain
+from twin.live.commands import MillCommand, SetRpm, StartMill, StopMill, drain
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
+from twin.live.snapshots import Latest, MillSnapshot
 from twin.records import (
     FaultCleared,
     FaultRaised,
@@ -86,8 +89,10 @@ class MillWorker:
         box: Latest[MillSnapshot],
         now_s: Callable[[], float],
         poll_s: float = MILL_POLL_S,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.link = link
+        self.faults = faults
         self.sink = sink
         self.box = box
         self.now_s = now_s
@@ -103,6 +108,11 @@ class MillWorker:
         self._controlling = False  # a command of this run went through: feed the watchdog
 
     # -- any thread ------------------------------------------------------------------------
+    @property
+    def controlling(self) -> bool:
+        """A command of this run went through to the mill (this run has moved or stopped it)."""
+        return self._controlling
+
     def submit(self, cmd: MillCommand) -> None:
         """Queue a command (never blocks)."""
         self._inbox.put(cmd)
@@ -117,6 +127,7 @@ class MillWorker:
 
     def cycle(self) -> MillSnapshot:
         """Take new commands, send what is due, poll; returns the published snapshot."""
+        at(self.faults.mill_cycle, self.now_s())
         snap = self.box.get()
         self._take_commands()
         if snap.connected:

@@ -19,21 +19,15 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
+from control.decision import Action, Decision, PredictionRequest, PredictionResult, SupervisorInputs
 from control.errors import ControlError
-from control.supervisor import Action, Decision, PredictionRequest, PredictionResult, Supervisor, SupervisorInputs
+from control.supervisor import Supervisor
 from twin.live.camera import is_valid_mi
+from twin.live.commands import MillCommand, SetManualRpm, SetMode, SetRpm, StopMill, SupervisorCommand
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
 from twin.live.mismatch import MismatchMonitor, twin_is_evidence
-from twin.live.records import (
-    EventSink,
-    Latest,
-    MillCommand,
-    RunView,
-    SetManualRpm,
-    SetMode,
-    SetRpm,
-    StopMill,
-    SupervisorCommand,
-)
+from twin.live.snapshots import Latest, RunView
 from twin.records import DecisionMade, FaultCleared, FaultRaised, ModeSet, OperatorAction, OperatorRejected
 
 RPM_LIMIT_SLACK = 0.5  # rpm above the upper limit before a board counts as above it (its speed loop overshoots)
@@ -88,8 +82,10 @@ class SupervisorWorker:
         alive: Latest[float] | None = None,
         mismatch: MismatchMonitor | None = None,
         on_twin_mismatch: Callable[[], None] | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.supervisor = supervisor
+        self.faults = faults
         self.view = view
         self.sink = sink
         self.send = send
@@ -167,6 +163,7 @@ class SupervisorWorker:
 
     def tick(self, now_s: float) -> Decision | None:
         """One supervision step at run time ``now_s``."""
+        at(self.faults.supervisor_tick, now_s)
         if not self.view.mill().polled:
             return None  # nothing is known about the board yet: decide nothing
         self._alarms(now_s)
@@ -223,7 +220,7 @@ class SupervisorWorker:
                 self.sink.publish(FaultCleared(t_s=now, fault="camera_stopped", message="camera frames again"))
         mill = self.view.mill()
         if mill.connected:  # fresh reads only (unknown values are NaN)
-            hi = c.rpm_limits[1]
+            hi = c.limits.rpm_range[1]
             over = [f"{name} {v:g}" for name, v in (("setpoint", mill.setpoint_rpm), ("actual", mill.actual_rpm))
                     if math.isfinite(v) and v > hi + RPM_LIMIT_SLACK]
             if over:

@@ -3,11 +3,12 @@
 As soon as the camera has a frame, the twin is seeded from it (``sim.from_image``) with
 the paper's materials and kept in step with run time at the mill's actual rpm, rendered
 (``sim.render``) and measured with a vision ``Meter`` like the camera. Calibration runs
-beside it, in a worker process of its own (``sim.whatif.make_pool``; a converged
+beside it, in a worker process of its own (``sim.pool.make_pool``; a converged
 calibration takes tens of seconds): once ``CALIBRATION_WINDOW_S`` of camera slope angles
 are in, their median is the target of ``sim.calibrate``, and the result is applied to the
-running twin when it arrives. ``recalibrate``/``reseed`` requests are served between steps. It reads only the
-:class:`RunView`; it publishes :class:`TwinInfo` and reports through the event sink.
+running twin when it arrives. ``Recalibrate``/``Reseed`` commands are served between steps. It reads only the
+:class:`RunView`; it publishes :class:`TwinInfo` and reports through the event sink. The twin follows
+the mill's measured rpm at ``control.limits.simulated_rpm`` (the one cap of a simulated drum).
 """
 
 from __future__ import annotations
@@ -23,9 +24,13 @@ from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from control.limits import Limits, simulated_rpm
 from twin.clock import Cadence
 from twin.live.camera import Rate
-from twin.live.records import EventSink, Latest, RunView, TwinInfo, drain
+from twin.live.commands import Recalibrate, TwinCommand, drain
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
+from twin.live.snapshots import Latest, RunView, TwinInfo
 from twin.records import (
     Calibrated,
     CalibrationStarted,
@@ -67,7 +72,7 @@ class TwinSettings:
     mixer: Mixer | None = None  # the user's mixer (``sim.mixer.Mixer``); None: the paper's (``paper_mixer``)
     engine: str | None = None  # None: the mixer's engine (``sim.engine.engine_for``)
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
-    min_rpm: float | None = None  # the run's lowest rpm (its supervisor's limits); None: ``control.limits.Limits``'
+    limits: Limits = field(default_factory=Limits)  # the run's (its supervisor's): calibrated only from their min_rpm
 
 
 def _calibrate_job(target_slope_deg: float, rpm: float, kwargs: Mapping[str, Any]) -> Any:
@@ -88,8 +93,10 @@ class TwinWorker:
         state: LiveState,
         box: Latest[TwinInfo],
         slopes: queue.Queue[tuple[float, float]] | queue.SimpleQueue[tuple[float, float]],
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.settings = settings
+        self.faults = faults
         self.view = view
         self.sink = sink
         self.state = state
@@ -101,13 +108,15 @@ class TwinWorker:
         self.calibration: Calibration | None = None
         self.fps = Rate()
         self.t0_run = 0.0  # run time at which the twin's own clock read 0
-        self._requests: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._requests: queue.SimpleQueue[TwinCommand] = queue.SimpleQueue()
         self._slopes: deque[tuple[float, float]] = deque(maxlen=4000)
         self._state: Any = None
         self._seeds = 0  # times seeded (TwinInfo.seeds: a what-if "from the bed" waits for the next)
         self._seeded_sim_s = 0.0  # the twin's own time at its latest seeding (TwinInfo.age_s counts from it)
         self._mi = math.nan
         self._slope = math.nan
+        self._energy_j = 0.0  # drive energy over the run (sim.power: drum torque x angular speed)
+        self._depth_scale = 1.0  # slice -> drum (sim.power.depth_scale), per seeding
         self._pool: Executor | None = None
         self._closed = False
         self._cal_future: Future | None = None
@@ -117,11 +126,9 @@ class TwinWorker:
         self._cal_waiting: str | None = None  # why a wanted calibration waits (logged once per reason)
 
     # -- any thread ------------------------------------------------------------------------
-    def request(self, kind: str) -> None:
-        """``"calibrate"`` or ``"reseed"``: served by the twin thread between steps."""
-        if kind not in ("calibrate", "reseed"):
-            raise ValueError(f"unknown twin request {kind!r}")
-        self._requests.put(kind)
+    def request(self, cmd: TwinCommand) -> None:
+        """``Recalibrate`` or ``Reseed``: served by the twin thread between steps."""
+        self._requests.put(cmd)
 
     # -- the worker thread -----------------------------------------------------------------
     @property
@@ -131,7 +138,9 @@ class TwinWorker:
 
     def _publish(self, updated_s: float | None) -> None:
         age = self.sim.t_s - self._seeded_sim_s if self.sim is not None else 0.0
-        self.box.set(TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds, age))
+        info = TwinInfo(updated_s, self._mi, self._slope, self._state, self._seeds, age, self._energy_j)
+        hook = self.faults.twin_published
+        self.box.set(info if hook is None else hook(info))
 
     def _drain_slopes(self) -> None:
         self._slopes.extend(drain(self.slopes))
@@ -147,6 +156,7 @@ class TwinWorker:
         render = Cadence(1.0 / TWIN_FPS, start_s=self.now_s)  # run clock
         next_snap = self.now_s
         while not stop.is_set():
+            at(self.faults.twin_pass, view.now_s())
             self._drain_slopes()
             self._serve_requests()
             self._tend_calibration()
@@ -166,8 +176,10 @@ class TwinWorker:
                 raise RuntimeError("the twin worker has no twin after seeding")
             rpm = view.mill().actual_rpm
             if math.isfinite(rpm):
-                sim.set_rpm(min(max(rpm, 0.0), 0.95 * sim.critical_rpm))
-            sim.step(min(lag, 1.0 / TWIN_FPS))
+                sim.set_rpm(simulated_rpm(rpm, sim.critical_rpm))
+            dt = min(lag, 1.0 / TWIN_FPS)
+            sim.step(dt)
+            self._add_energy(sim, dt)
             if render.due(self.now_s):
                 self._render_and_measure()
             if self.now_s >= next_snap:
@@ -175,9 +187,18 @@ class TwinWorker:
                 self._state = sim.snapshot()
             self._publish(self.now_s)
 
+    def _add_energy(self, sim: Twin, dt_s: float) -> None:
+        """The drive's energy over the step the twin just took (its mean drum torque there, scaled
+        from the slice to the drum, at its actual speed; a NaN torque adds nothing)."""
+        from sim.power import drive_power_w
+
+        power = float(drive_power_w(sim.drum_torque_nm() * self._depth_scale, sim.rpm_actual))
+        if math.isfinite(power):
+            self._energy_j += power * dt_s
+
     def _serve_requests(self) -> None:
-        for kind in drain(self._requests):
-            if kind == "calibrate":
+        for cmd in drain(self._requests):
+            if isinstance(cmd, Recalibrate):
                 self._cal_wanted = True
             else:
                 self._reseed()
@@ -193,11 +214,8 @@ class TwinWorker:
     def _rpm_now(self, t: float) -> tuple[float | None, str]:
         """The drum's measured rpm to calibrate at, from the mill's actual rpm seen at run time
         ``t`` (called every step): the median over the last ``CALIBRATION_STEADY_S`` once the
-        drum has turned at >= the run's lowest rpm (``TwinSettings.min_rpm``: the supervisor's
-        limits) and steadily (within ``CALIBRATION_RPM_SPREAD`` of it) all that time; else
-        ``(None, why)``."""
-        from control.limits import Limits
-
+        drum has turned at >= the run's lowest rpm (``TwinSettings.limits``: the supervisor's)
+        and steadily (within ``CALIBRATION_RPM_SPREAD`` of it) all that time; else ``(None, why)``."""
         seen = self._rpm_seen
         rpm = self.view.mill().actual_rpm
         if not math.isfinite(rpm):  # not read yet, or the link is lost: start over
@@ -207,7 +225,7 @@ class TwinWorker:
             seen.append((t, rpm))
         while len(seen) > 1 and seen[1][0] <= t - CALIBRATION_STEADY_S:
             seen.popleft()  # keep one sample at or before the window's start
-        lo_rpm = Limits().min_rpm if self.settings.min_rpm is None else float(self.settings.min_rpm)
+        lo_rpm = self.settings.limits.min_rpm
         if rpm < lo_rpm:
             return None, f"not turning: the drum turns at {rpm:.2f} rpm, below the run's {lo_rpm:g} rpm minimum"
         if t - seen[0][0] < CALIBRATION_STEADY_S:
@@ -263,13 +281,14 @@ class TwinWorker:
         self.calibration = cal
         self.sink.publish(Calibrated(
             t_s=t, target_slope_deg=target, rpm=rpm, friction=cal.friction, rolling=cal.rolling,
-            twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg, took_s=time.monotonic() - wall0,
+            end_friction=cal.end_friction, twin_slope_deg=cal.twin_slope_deg, residual_deg=cal.residual_deg,
+            took_s=time.monotonic() - wall0,
         ))
         self.sink.metadata(calibration=cal)
         self.sink.publish(TwinStatus(t_s=t, state="running"))
         self.sink.publish(FaultCleared(t_s=t, fault="calibration", message="calibrated"))
         if self.sim is not None:
-            self.sim.set_friction(cal.friction, cal.rolling)
+            self.sim.set_friction(**cal.twin_kwargs())  # sliding, rolling and the end plates' (a monolayer's)
 
     def _calibration_failed(self, t: float, exc: BaseException) -> None:
         self.sink.publish(FaultRaised(t_s=t, fault="calibration", message=f"calibration failed: {exc}"))
@@ -279,7 +298,7 @@ class TwinWorker:
         if self._closed:
             raise RuntimeError("the twin worker is closed")
         if self._pool is None:
-            from sim.whatif import make_pool
+            from sim.pool import make_pool
             from twin.live.whatif import short_pool_tempdir
 
             short_pool_tempdir()
@@ -288,7 +307,7 @@ class TwinWorker:
 
     def close(self) -> None:
         """End the calibration process (a running calibration is abandoned)."""
-        from sim.whatif import close_pool
+        from sim.pool import close_pool
 
         self._closed = True
         pool, self._pool = self._pool, None
@@ -299,6 +318,7 @@ class TwinWorker:
         from sim.errors import SimError
         from sim.from_image import seed_from_frame
         from sim.mixer import paper_mixer
+        from sim.power import depth_scale
         from sim.render import Renderer
         from vision.meter import Meter
 
@@ -321,12 +341,16 @@ class TwinWorker:
             except SimError as exc:  # an engine that cannot place from a frame: a fresh bed, said in the log
                 sim = make_twin(mixer, s.engine, case=s.case, seed=s.seed, rpm=rpm, **kw)
                 how = f"recipe case ({exc})"
+        if cal is not None:  # the end plates' friction too (a monolayer's is calibrated)
+            sim.set_friction(**cal.twin_kwargs())
         if self.renderer is None:
             self.renderer = Renderer(sim.drum, s.size_px)
             self.meter = Meter(roi=self.renderer.roi, classes=s.classes)
         self.sim = sim
         self.t0_run = t - sim.t_s
         self._seeded_sim_s = sim.t_s
+        self._depth_scale = depth_scale(sim)
+        sim.drum_torque_nm()  # the torque's mean starts at the first step of this bed
         self._state = sim.snapshot()
         self._seeds += 1
         self.sink.publish(TwinSeeded(t_s=t, source=how, n_particles=len(sim.particles())))

@@ -3,10 +3,10 @@
 This is the application's predictor (the supervisor itself only asks): ``request`` takes
 the supervisor's :class:`PredictionRequest` (a newer one supersedes one not started yet;
 it waits for the twin's first state), ``poll`` hands a finished :class:`PredictionResult`
-back once. ``submit`` starts an operator study. One thread serves both, one study at a time, from the twin's newest
-state (:class:`TwinInfo`); the studies themselves run in a local process pool
-(``sim.whatif.make_pool``) or on a Dask cluster (``--scheduler``), so they never compete
-with the loop for the GIL.
+back once. ``submit`` takes an operator's study (a ``RunStudy`` command). One thread serves
+both, one study at a time, from the twin's newest state (:class:`TwinInfo`); the studies
+themselves run in a local process pool (``sim.pool.make_pool``) or on a Dask cluster
+(``--scheduler``), so they never compete with the loop for the GIL.
 """
 
 from __future__ import annotations
@@ -15,15 +15,17 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from control.decision import PredictionRequest, PredictionResult
 from control.objective import RpmPrediction
-from control.supervisor import PredictionRequest, PredictionResult
 from twin.errors import TwinError
-from twin.live.records import EventSink, RunView
+from twin.live.commands import RunStudy
+from twin.live.events import EventSink
+from twin.live.faults import NO_FAULTS, FaultHooks, at
+from twin.live.snapshots import RunView
 from twin.records import WhatIfCancelled, WhatIfError, WhatIfResult
 from twin.state import LiveState, WhatIfView
 
@@ -33,13 +35,6 @@ if TYPE_CHECKING:
 
 Study = Callable[[Sequence["WhatIfJob"]], Sequence["StudyResult"]]
 """``study(jobs) -> results`` (``sim.whatif.WhatIfJob`` -> ``WhatIfResult``, in order)."""
-
-
-@dataclass(frozen=True)
-class _OperatorStudy:
-    rpms: tuple[float, ...]
-    duration_s: float
-    reason: str
 
 
 POOL_TMP_MAX = 60
@@ -93,8 +88,10 @@ class WhatIfWorker:
         study: Study | None = None,
         target_mi: float | None = None,
         reseed_twin: Callable[[], None] | None = None,
+        faults: FaultHooks = NO_FAULTS,
     ) -> None:
         self.view = view
+        self.faults = faults
         self.reseed_twin = reseed_twin  # asks the twin to seed itself from the camera's bed (a request)
         self.target_mi = target_mi
         self.sink = sink
@@ -107,7 +104,7 @@ class WhatIfWorker:
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._pending_pred: PredictionRequest | None = None
-        self._pending_study: _OperatorStudy | None = None
+        self._pending_study: RunStudy | None = None
         self._result: PredictionResult | None = None
         self._busy = False
         self._running_reason: str | None = None
@@ -128,12 +125,12 @@ class WhatIfWorker:
             res, self._result = self._result, None
         return res
 
-    def submit(self, rpms: Sequence[float], duration_s: float, reason: str = "operator") -> bool:
+    def submit(self, study: RunStudy) -> bool:
         """Queue an operator study; False when one is already waiting or running."""
         with self._lock:
             if self._busy or self._pending_study is not None:
                 return False
-            self._pending_study = _OperatorStudy(tuple(float(r) for r in rpms), float(duration_s), reason)
+            self._pending_study = study
         self._wake.set()
         return True
 
@@ -149,7 +146,7 @@ class WhatIfWorker:
                 self._cancelled = True
                 pool, self._pool = self._pool, None
         if running:
-            from sim.whatif import close_pool
+            from sim.pool import close_pool
 
             close_pool(pool)
         return waiting or running
@@ -175,6 +172,7 @@ class WhatIfWorker:
 
     def serve_once(self) -> bool:
         """Run the next pending study (a prediction first); False when none was pending."""
+        at(self.faults.whatif_pass, self.view.now_s())
         twin_ready = self.view.twin().state is not None
         with self._lock:
             pred, study = self._pending_pred, self._pending_study
@@ -246,7 +244,7 @@ class WhatIfWorker:
         if self._closed:
             raise RuntimeError("the what-if worker is closed")
         if self._pool is None:
-            from sim.whatif import make_pool
+            from sim.pool import make_pool
 
             short_pool_tempdir()
             self._pool = make_pool(self.workers)
@@ -322,7 +320,7 @@ class WhatIfWorker:
 
     def close(self) -> None:
         """Shut the worker processes down (a running study is abandoned: it fails at once)."""
-        from sim.whatif import close_pool
+        from sim.pool import close_pool
 
         self._closed = True
         pool, self._pool = self._pool, None

@@ -10,11 +10,19 @@ mix at the rpm AUTO picked against the plant's, ``time_to_mix_check``), energy (
 predicted, when the run logged any), configuration and versions.
 
 A run dir cut short (``kill -9``: a partial last CSV line, no ``stop`` event, perhaps no
-``metadata.json``) renders what was logged and says that the run did not end cleanly.
+``metadata.json``) renders what was logged and says that the run did not end cleanly. Any
+other damage (a line that is not an event, a cell that is not a number, a number no plot can
+place, a file of another run) is skipped and counted in a note on the run (``twin.runread``);
+a run dir with nothing readable at all is a one-line error.
+
+Memory is bounded by the page, not the logs: each run is read in streamed passes and its
+series decimated (min/max per bucket, ``twin.report.decimate``), and runs are read one at a
+time (``twin.report.build``); ``drumtwin bench report`` measures it (docs/numbers.md).
 """
 
 from __future__ import annotations
 
-from twin.report.build import RunData, build_report, load_run, render_html, time_to_mix_check
+from twin.report.build import build_report, render_html, run_specs, time_to_mix_check, write_report
+from twin.report.load import RunData, load_run
 
-__all__ = ["RunData", "build_report", "load_run", "render_html", "time_to_mix_check"]
+__all__ = ["RunData", "build_report", "load_run", "render_html", "run_specs", "time_to_mix_check", "write_report"]

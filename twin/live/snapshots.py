@@ -1,30 +1,24 @@
-"""What the live workers exchange: immutable snapshots, typed commands, a read-only view
-of the run, and the event sink (typed run records onto the run's bus: ``twin.records``).
+"""What the live workers read of each other: immutable snapshots and the read-only view of the run.
 
-Threads never share mutable fields. Each snapshot has exactly one writer (the worker
-that owns it) and is replaced whole in a :class:`Latest` box; readers get the current
-value and keep it as long as they like. Commands are small frozen dataclasses put on
-the owning worker's queue.
+Threads never share mutable fields. Each snapshot has exactly one writer (the worker that
+owns it) and is replaced whole in a :class:`Latest` box; readers get the current value and
+keep it as long as they like. A worker reads the others only through a :class:`RunView`.
 """
 
 from __future__ import annotations
 
 import math
-import queue
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
 from control.protocol import MillStatus
 from control.trend import TrendEstimate
-from twin.records import Bus, DecisionMade, FaultCleared, FaultRaised, Record
-from twin.runlog import RecordWriter, write_record
-from twin.state import LiveState
-from vision.meter import Meter, Reading
+from vision.meter import Reading
 from vision.roi import DrumROI
 
 T = TypeVar("T")
@@ -46,16 +40,7 @@ class Latest(Generic[T]):
             self._value = value
 
 
-def drain(q: queue.Queue[T] | queue.SimpleQueue[T]) -> Iterator[T]:
-    """Every item waiting in ``q`` now, oldest first, without blocking."""
-    while True:
-        try:
-            yield q.get_nowait()
-        except queue.Empty:
-            return
 
-
-# -- snapshots --------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MillSnapshot:
     """The mill as the mill worker last saw it: the board's own report (``status``, None
@@ -141,7 +126,8 @@ class TwinInfo:
     its measured MI and slope, the engine's snapshot (``Twin.snapshot()``: opaque, picklable;
     a ``sim.drum.SimState`` or a pymunk state) no older than a few seconds for what-if studies,
     ``seeds``: how many times it was seeded (from the camera's bed), and ``age_s``: the simulated
-    seconds since its latest seeding (its bed's spin-up; run time skipped to catch up is not in it)."""
+    seconds since its latest seeding (its bed's spin-up; run time skipped to catch up is not in it),
+    ``energy_j``: the drive energy its drum torque and speed add up to over the run."""
 
     updated_s: float | None = None
     mi: float = math.nan
@@ -149,61 +135,9 @@ class TwinInfo:
     state: Any = None  # as sim.engine.Twin.snapshot() (Any there: each engine its own state class)
     seeds: int = 0
     age_s: float = 0.0
+    energy_j: float = 0.0  # drive energy the twin estimates since the run started (sim.power), J
 
 
-# -- commands ---------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SetRpm:
-    """Set the mill's setpoint; ``epoch``: the :class:`MillSnapshot` epoch it was decided on."""
-
-    rpm: float
-    epoch: int
-    source: str = "supervisor"
-
-
-@dataclass(frozen=True)
-class StartMill:
-    """Start the motor (only ever on an operator's command); ``epoch`` as in :class:`SetRpm`."""
-
-    epoch: int
-    source: str = "operator"
-
-
-@dataclass(frozen=True)
-class StopMill:
-    """Stop the motor. Never stale. ``urgent``: drop every pending command first (E-stop)."""
-
-    source: str = "operator"
-    urgent: bool = False
-
-
-MillCommand = SetRpm | StartMill | StopMill
-
-
-@dataclass(frozen=True)
-class SetMode:
-    mode: str
-
-
-@dataclass(frozen=True)
-class SetManualRpm:
-    rpm: float
-
-
-SupervisorCommand = SetMode | SetManualRpm
-
-
-@dataclass(frozen=True)
-class SwapClasses:
-    """Measure from the next camera frame on with ``meter``: one built off the camera thread
-    (1-3 s) from ``vision.suggest.relearn_classes``' config (the classes re-learned from the
-    live bed after ``lighting_changed:``; names and order kept)."""
-
-    meter: Meter
-    source: str = "operator"
-
-
-# -- the read-only view -----------------------------------------------------------------------
 class RunView:
     """What a worker may read: run time and the newest snapshots (never the loop itself).
 
@@ -256,80 +190,4 @@ class RunView:
         return self._mode.get()
 
 
-# -- events ---------------------------------------------------------------------------------
-class EventSink(Protocol):
-    """Where workers report: typed run records (``publish``, see ``twin.records``; a
-    ``FaultRaised`` goes out once until its ``FaultCleared``) and metadata for the run log's
-    ``metadata.json``."""
-
-    def publish(self, rec: Record) -> None: ...
-    def metadata(self, **data: object) -> None: ...
-
-
-class RunLogLike(RecordWriter, Protocol):
-    """The run log as the sink uses it (``twin.runlog.RunLog``): a record writer with metadata."""
-
-    def set_metadata(self, **data: Any) -> None: ...
-
-
-class RunEvents:
-    """The run's :class:`EventSink`: records go on the run's :class:`Bus` (``bus``), to which the
-    run log (``twin.runlog.write_record``: CSV rows, JSONL events) and the dashboard's state
-    (``LiveState.record``) subscribe. Faults go through the run's one ``ActiveFaults``
-    (``state.faults``): a ``FaultRaised`` is published only when its fault is not active, a
-    ``FaultCleared`` only when it is. Thread-safe; counts faults and decisions. A run-log write
-    that fails (disk full, read-only) never raises into a worker: the first one is a ``run_log``
-    alarm and goes to ``on_failure`` (the loop ends the run)."""
-
-    def __init__(
-        self, runlog: RunLogLike, state: LiveState, on_failure: Callable[[str], None] | None = None,
-        bus: Bus | None = None,
-    ) -> None:
-        self.runlog = runlog
-        self.state = state
-        self.faults = state.faults
-        self.on_failure = on_failure
-        self.bus = bus if bus is not None else Bus()
-        self._lock = threading.Lock()
-        self.n_faults = 0
-        self.n_decisions = 0
-        self.log_error: str | None = None
-        self.bus.subscribe(self._log)
-        self.bus.subscribe(state.record)
-
-    def _log(self, rec: Record) -> None:
-        self._write(write_record, self.runlog, rec)
-
-    def _write(self, write: Callable[..., object], *args: object, **kwargs: object) -> None:
-        try:
-            write(*args, **kwargs)
-        except OSError as exc:
-            with self._lock:
-                if self.log_error is not None:
-                    return
-                self.log_error = reason = f"cannot write the run log: {exc}"
-            self.faults.raise_fault("run_log", reason)
-            if self.on_failure is not None:
-                self.on_failure(reason)
-
-    def publish(self, rec: Record) -> None:
-        if isinstance(rec, FaultRaised):
-            if not self.faults.raise_fault(rec.fault, rec.message, shown=False):
-                return
-            with self._lock:
-                self.n_faults += 1
-            self.bus.publish(rec)
-            self.faults.show(rec.fault)  # the alarm once its event is logged
-            return
-        if isinstance(rec, FaultCleared) and not self.faults.clear(rec.fault):
-            return
-        if isinstance(rec, DecisionMade):
-            with self._lock:
-                self.n_decisions += 1
-        self.bus.publish(rec)
-
-    def metadata(self, **data: object) -> None:
-        self._write(self.runlog.set_metadata, **data)
-
-    def active(self) -> frozenset[str]:
-        return self.faults.keys()
+__all__ = ["CameraInfo", "FrameInfo", "Latest", "MillSnapshot", "RunView", "TwinInfo"]

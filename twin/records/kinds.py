@@ -1,130 +1,20 @@
-"""What a run emits: one stream of typed, immutable run records, and the bus that carries them.
-
-Every record is a frozen dataclass with a run time ``t_s`` and a ``kind``. Each kind declares
-its fields and their units once, here; everything else is derived from these classes:
-
-* the frame CSV's columns (:data:`FRAME_COLUMNS`, from :class:`FrameReading`) and the
-  dashboard's plot series (:data:`SERIES`, the fields marked ``plot``);
-* the ``events.jsonl`` lines: ``{"t_s", "wall_s", "kind", **fields}`` of every record whose
-  class is ``logged`` (:func:`event_fields`; optional fields that are None are left out);
-* the dashboard's numbers panel (``twin.state.Panel``), which folds the records it sees;
-* the table of record kinds in ``docs/architecture.md`` (:func:`records_table`, checked by a test).
-
-Producers (the live workers, the loop, the dashboard) construct these classes and ``publish``
-them (``twin.live.records.EventSink``; no producer names a kind by string, so a misspelt kind
-or field is a mypy error) onto a :class:`Bus`; consumers subscribe: the run log
-(``twin.runlog.RunLog.record``: CSV rows and JSONL lines), the dashboard's state
-(``twin.state.LiveState.record``: plots, numbers panel). The one set of active faults is
-:class:`ActiveFaults` (the sink publishes a :class:`FaultRaised` only when its fault is not
-active). ``compare``, ``report`` and the tests read the same records back with
-``twin.runlog.read_frames`` / ``read_events`` (dicts, the JSONL keys) or ``read_records``
-(typed: the one name -> class lookup, :func:`record_of`).
-
-Adding a record kind is a one-place change: a frozen dataclass here, derived from :class:`Record`
-(or a group base), with a ``kind`` ClassVar, its fields with :func:`unit` / :func:`opt`, and
-``@register``; the docs table is regenerated with ``python -m twin.records``.
-"""
+"""Every run record kind but the frame reading, by concern: the run's start and stop, faults,
+the operator, the supervisor's decisions, the mill link, the trend, the batch endpoint, the run
+catalogue and the golden batch, the twin, the what-if studies, the dashboard's security events
+and the dashboard-only status. One module on purpose: the kinds are declared alike (a frozen
+dataclass, ``kind``, ``doc``, ``producer``, fields), and in one place they read as one table;
+the order here is the registry's (the docs' table, the descriptors)."""
 
 from __future__ import annotations
 
-import logging
-import threading
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import MISSING, Field, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from twin.records.declare import Record, opt, register, unit
 
 if TYPE_CHECKING:
     from control.supervisor import Decision
-
-log = logging.getLogger("drumtwin.records")
-
-
-def unit(u: str = "", doc: str = "", *, plot: bool = False, default: object = MISSING) -> Any:
-    """A record field with its unit (``""``: none, a count, a name) and a short description;
-    ``plot``: a dashboard plot series (frame readings only)."""
-    meta = {"unit": u, "doc": doc, "plot": plot}
-    if default is MISSING:
-        return field(metadata=meta)
-    return field(default=default, metadata=meta)
-
-
-def opt(u: str = "", doc: str = "") -> Any:
-    """An optional event field (default None): left out of the JSONL line when None."""
-    return field(default=None, metadata={"unit": u, "doc": doc, "plot": False, "optional": True})
-
-
-@dataclass(frozen=True, kw_only=True)
-class Record:
-    """One run record. ``kind``: its name in ``events.jsonl`` (and in the docs table);
-    ``logged``: written to ``events.jsonl`` (the frame reading goes to ``frames.csv``; the
-    dashboard-only status records to neither)."""
-
-    kind: ClassVar[str] = ""
-    logged: ClassVar[bool] = True
-    doc: ClassVar[str] = ""
-
-    t_s: float = unit("s", "run time (the demo clock, scaled by --speed)")
-
-
-R = TypeVar("R", bound=type[Record])
-
-KINDS: dict[str, type[Record]] = {}
-"""Every record kind by name (the registry :func:`register` fills)."""
-
-
-def register(cls: R) -> R:
-    """Register a record class under its ``kind`` (one class per kind, each kind once)."""
-    if not cls.kind or cls.kind in KINDS:
-        raise TypeError(f"record kind {cls.kind!r} of {cls.__name__} is empty or registered twice")
-    KINDS[cls.kind] = cls
-    return cls
-
-
-# -- the frame reading: one row of frames.csv ------------------------------------------------
-@register
-@dataclass(frozen=True, kw_only=True)
-class FrameReading(Record):
-    """One processed camera frame: the run log's CSV row and the plots' point."""
-
-    kind: ClassVar[str] = "frame"
-    logged: ClassVar[bool] = False
-    doc: ClassVar[str] = "one processed camera frame (a row of frames.csv)"
-
-    t_s: float = unit("s", "run time of the frame", plot=True)
-    frame: int = unit("", "camera frame index")
-    mi: float = unit("", "mixing index, paper eq. 4 (0..1, NaN when invalid)", plot=True)
-    mi_sigmoid: float = unit("", "paper eq. 3")
-    mi_linear: float = unit("", "paper eq. 1")
-    d_px: float = unit("px", "centroid distance of the two classes")
-    dsigma_px: float = unit("px", "spread difference of the two classes")
-    concentration: float = unit("", "n_1 / (n_1 + n_2)")
-    slope_deg: float = unit("deg", "bed free-surface slope", plot=True)
-    valid: bool = unit("", "the reading counts as vision")
-    trend_mi: float = unit("", "Kalman trend level", plot=True)
-    trend_lo95: float = unit("", "trend 95 % band, low", plot=True)
-    trend_hi95: float = unit("", "trend 95 % band, high", plot=True)
-    trend_rate: float = unit("1/s", "trend rate of change")
-    ma_mi: float = unit("", "the paper's 150-sample moving average", plot=True)
-    twin_mi: float | None = unit("", "twin MI (empty: no twin yet)", plot=True)
-    twin_slope_deg: float | None = unit("deg", "twin slope (empty: no twin yet)", plot=True)
-    rpm_setpoint: float | None = unit("rpm", "board setpoint (empty: link lost)", plot=True)
-    rpm_actual: float | None = unit("rpm", "board actual speed (empty: link lost)", plot=True)
-    mode: str = unit("", "supervisor mode: off | manual | auto")
-    flags: tuple[str, ...] = unit("", "reading flags, ';'-separated")
-    mixed: bool = unit("", "the batch is at its endpoint (control.endpoint)", default=False)
-    mixing_time_s: float | None = unit("s", "mixing time of the endpoint (empty: not mixed)", default=None)
-
-    def as_dict(self) -> dict[str, object]:
-        """The CSV row (without ``wall_s``, which the run log fills in)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-FRAME_COLUMNS: tuple[str, ...] = ("t_s", "wall_s", *(f.name for f in fields(FrameReading)[1:]))
-"""The columns of ``frames.csv``: the frame reading's fields, with ``wall_s`` (unix time when
-the row was written, s) after ``t_s``."""
-
-SERIES: tuple[str, ...] = tuple(f.name for f in fields(FrameReading) if f.metadata.get("plot"))
-"""The dashboard's plot series (x is ``t_s``)."""
 
 
 # -- run start / stop -------------------------------------------------------------------------
@@ -133,6 +23,7 @@ SERIES: tuple[str, ...] = tuple(f.name for f in fields(FrameReading) if f.metada
 class RunStart(Record):
     kind: ClassVar[str] = "start"
     doc: ClassVar[str] = "the workers start: the run's configuration, versions and mixer (also in metadata.json)"
+    producer: ClassVar[str] = "twin.run.loop"
     mode: str = unit("", "supervisor mode at start")
     mill: str = unit("", "mill link URL")
     config: Mapping[str, object] | None = unit("", "the resolved run options (RunConfig.to_metadata: the token never)",
@@ -148,9 +39,12 @@ class RunStart(Record):
 class RunStop(Record):
     kind: ClassVar[str] = "stop"
     doc: ClassVar[str] = "the run ended"
+    producer: ClassVar[str] = "twin.run.loop"
     frames: int = unit("", "frames processed")
     workers_alive: Sequence[str] = unit("", "workers still running after the join")
     failure: str | None = unit("", "why the run had to end (null: it did not)")
+    energy_j: float | None = opt("J", "drive energy over the run as the twin estimates it (its drum torque x "
+                                 "angular speed, sim.power; null: no twin ran)")
 
 
 # -- faults -----------------------------------------------------------------------------------
@@ -159,6 +53,7 @@ class RunStop(Record):
 class FaultRaised(Record):
     kind: ClassVar[str] = "fault"
     doc: ClassVar[str] = "a named fault raised (once until cleared; a dashboard alarm)"
+    producer: ClassVar[str] = "twin.live"
     fault: str = unit("", "fault key, e.g. mill_link, vision_lost")
     message: str = unit("", "what the operator reads")
     url: str | None = opt("", "mill link URL")
@@ -174,6 +69,7 @@ class FaultRaised(Record):
 class FaultCleared(Record):
     kind: ClassVar[str] = "recovered"
     doc: ClassVar[str] = "an active fault cleared"
+    producer: ClassVar[str] = "twin.live"
     fault: str = unit("", "fault key")
     message: str = unit("", "why it cleared")
     url: str | None = opt("", "mill link URL")
@@ -185,6 +81,7 @@ class FaultCleared(Record):
 class OperatorAction(Record):
     kind: ClassVar[str] = "operator"
     doc: ClassVar[str] = "an operator command taken"
+    producer: ClassVar[str] = "operator"
     action: str = unit("", "start | stop | emergency_stop | manual_rpm | recalibrate | reseed | whatif | ...")
     rpm: float | None = opt("rpm", "requested rpm")
     clamped_rpm: float | None = opt("rpm", "rpm after the limits")
@@ -198,6 +95,7 @@ class OperatorAction(Record):
 class OperatorRejected(Record):
     kind: ClassVar[str] = "operator_rejected"
     doc: ClassVar[str] = "an operator command refused (bad input, busy)"
+    producer: ClassVar[str] = "operator"
     action: str = unit("", "the command")
     error: str = unit("", "why")
     mode: str | None = opt("", "requested mode")
@@ -210,6 +108,7 @@ class OperatorRejected(Record):
 class OperatorClamped(Record):
     kind: ClassVar[str] = "operator_clamped"
     doc: ClassVar[str] = "a dashboard rpm brought inside the limits"
+    producer: ClassVar[str] = "twin.dashboard"
     client: int = unit("", "dashboard client id")
     requested: float = unit("rpm", "what was asked")
     rpm: float = unit("rpm", "what is sent")
@@ -221,6 +120,7 @@ class OperatorClamped(Record):
 class DecisionMade(Record):
     kind: ClassVar[str] = "decision"
     doc: ClassVar[str] = "a supervisor decision and the inputs it was made on"
+    producer: ClassVar[str] = "control.supervisor"
     decision: str = unit("", "mode | manual | move | ramp | hold | safe | recover")
     mode: str = unit("", "supervisor mode")
     action: str = unit("", "none | set_rpm | stop")
@@ -249,8 +149,9 @@ class DecisionMade(Record):
 # -- mill -------------------------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _MillCommandRecord(Record):
+    producer: ClassVar[str] = "twin.live.mill"
     command: str = unit("", "set_rpm | start | stop")
-    source: str = unit("", "supervisor | operator | emergency_stop | run_failed")
+    source: str = unit("", "supervisor | operator | emergency_stop | run_failed | run_end")
     rpm: float | None = opt("rpm", "setpoint of a set_rpm")
 
 
@@ -279,6 +180,7 @@ class MillRefused(_MillCommandRecord):
 
 @dataclass(frozen=True, kw_only=True)
 class _MillStatusRecord(Record):
+    producer: ClassVar[str] = "twin.live.mill"
     setpoint_rpm: float = unit("rpm", "board setpoint")
     actual_rpm: float = unit("rpm", "board actual speed")
     running: bool = unit("", "motor running")
@@ -312,6 +214,7 @@ class MillSynced(_MillStatusRecord):
 # -- trend ------------------------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _TrendChange(Record):
+    producer: ClassVar[str] = "control.trend"
     level: float = unit("", "trend MI level")
     lo95: float = unit("", "95 % band, low")
     hi95: float = unit("", "95 % band, high")
@@ -336,9 +239,11 @@ class TrendUnsettled(_TrendChange):
 # -- batch endpoint (control.endpoint, docs/endpoint.md) ----------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class _EndpointChange(Record):
+    producer: ClassVar[str] = "control.endpoint"
     mixing_time_s: float | None = opt("s", "mixing time (run time since which the trend holds its plateau)")
     plateau_mi: float | None = opt("", "the plateau the trend holds")
-    block_sd: float | None = opt("", "moving-block sd of the raw MI")
+    block_sd: float | None = opt("", "moving-block spread of the raw MI: 1.4826 x its median absolute deviation "
+                                 "(an sd that one odd frame cannot move)")
     reason: str = unit("", "why", default="")
 
 
@@ -356,12 +261,36 @@ class Unmixed(_EndpointChange):
     doc: ClassVar[str] = "the batch left its endpoint band again"
 
 
+# -- the run catalogue (twin.catalogue) ---------------------------------------------------------
+@register
+@dataclass(frozen=True, kw_only=True)
+class CatalogueUnavailable(Record):
+    kind: ClassVar[str] = "catalogue_unavailable"
+    doc: ClassVar[str] = "the run could not be indexed in the run catalogue (it goes on; 'runs list' indexes it later)"
+    producer: ClassVar[str] = "twin.catalogue"
+    message: str = unit("", "why, and what happens next")
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class SlowerThanGolden(Record):
+    kind: ClassVar[str] = "slower_than_golden"
+    doc: ClassVar[str] = "this batch is behind its rig's golden batch by more than the rig's usual spread (no alarm)"
+    producer: ClassVar[str] = "twin.live.golden"
+    golden_run: str = unit("", "the golden batch's run id")
+    mi: float = unit("", "this run's trend MI now")
+    golden_mi: float = unit("", "the golden batch's trend MI at the same run time")
+    deviation: float = unit("", "mi - golden_mi")
+    spread: float = unit("", "the rig's usual spread of MI at this run time (its runs' sd, or the floor)")
+
+
 # -- twin -------------------------------------------------------------------------------------
 @register
 @dataclass(frozen=True, kw_only=True)
 class TwinLag(Record):
     kind: ClassVar[str] = "twin_lag"
     doc: ClassVar[str] = "the twin fell behind the camera and skipped ahead"
+    producer: ClassVar[str] = "twin.live.twin"
     lag_s: float = unit("s", "run time skipped")
 
 
@@ -370,6 +299,7 @@ class TwinLag(Record):
 class TwinSeeded(Record):
     kind: ClassVar[str] = "twin_seeded"
     doc: ClassVar[str] = "the twin was (re)seeded"
+    producer: ClassVar[str] = "twin.live.twin"
     source: str = unit("", "live frame | recipe case (...)")
     n_particles: int = unit("", "particles in the twin")
 
@@ -379,6 +309,7 @@ class TwinSeeded(Record):
 class CalibrationWaiting(Record):
     kind: ClassVar[str] = "calibration_waiting"
     doc: ClassVar[str] = "the twin waits for a turning, steady drum before it calibrates (not a fault)"
+    producer: ClassVar[str] = "twin.live.twin"
     reason: str = unit("", "why it waits")
     rpm: float = unit("rpm", "the board's actual speed now")
 
@@ -388,6 +319,7 @@ class CalibrationWaiting(Record):
 class CalibrationStarted(Record):
     kind: ClassVar[str] = "calibration_started"
     doc: ClassVar[str] = "a twin calibration started"
+    producer: ClassVar[str] = "twin.live.twin"
     target_slope_deg: float = unit("deg", "camera slope to match")
     rpm: float = unit("rpm", "speed it is calibrated at")
 
@@ -397,10 +329,12 @@ class CalibrationStarted(Record):
 class Calibrated(Record):
     kind: ClassVar[str] = "calibration"
     doc: ClassVar[str] = "a twin calibration applied"
+    producer: ClassVar[str] = "twin.live.twin"
     target_slope_deg: float = unit("deg", "camera slope to match")
     rpm: float = unit("rpm", "speed it was calibrated at")
     friction: float = unit("", "sliding friction coefficient")
     rolling: float = unit("", "rolling friction coefficient")
+    end_friction: float | None = opt("", "the end plates' friction (a monolayer's is calibrated; sim.calibrate)")
     twin_slope_deg: float = unit("deg", "the calibrated twin's slope")
     residual_deg: float = unit("deg", "twin minus target")
     took_s: float = unit("s", "wall time")
@@ -412,6 +346,7 @@ class Calibrated(Record):
 class WhatIfResult(Record):
     kind: ClassVar[str] = "whatif"
     doc: ClassVar[str] = "a what-if study's result"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
     requested_t_s: float = unit("s", "run time it was asked")
     duration_s: float = unit("s", "simulated time per rpm")
@@ -428,6 +363,7 @@ class WhatIfResult(Record):
 class WhatIfError(Record):
     kind: ClassVar[str] = "whatif_error"
     doc: ClassVar[str] = "a what-if study failed"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
     error: str = unit("", "why")
 
@@ -437,6 +373,7 @@ class WhatIfError(Record):
 class WhatIfCancelled(Record):
     kind: ClassVar[str] = "whatif_cancelled"
     doc: ClassVar[str] = "the operator cancelled a study"
+    producer: ClassVar[str] = "twin.live.whatif"
     reason: str = unit("", "AUTO | operator")
 
 
@@ -445,7 +382,7 @@ class WhatIfCancelled(Record):
 class DashboardEvent(Record):
     """A dashboard security event (the fields each kind may carry)."""
 
-
+    producer: ClassVar[str] = "twin.dashboard"
     client: int | None = opt("", "viser client id")
     address: str | None = opt("", "client address")
     origin: str | None = opt("", "Origin header")
@@ -540,141 +477,3 @@ class TwinReading(_Status):
     mi: float = unit("", "twin MI")
     slope_deg: float = unit("deg", "twin slope")
     fps: float = unit("1/s", "twin frames per wall second")
-
-
-# -- building, encoding -----------------------------------------------------------------------
-@dataclass(frozen=True, kw_only=True)
-class UntypedEvent(Record):
-    """A JSONL event read back whose kind or fields no class here declares (a log of another
-    release). It holds the line as it came, so no data is lost (and is written back whole)."""
-
-    name: str = unit("", "the unregistered kind")
-    data: Mapping[str, object] = unit("", "its fields")
-
-
-def record_of(kind: str, t_s: float, **data: object) -> Record:
-    """The record of ``kind`` built from ``data``: the name -> class lookup of the JSONL reader
-    (``twin.runlog.read_records``; producers construct their record classes, so a misspelt kind
-    or field is a type error). A kind not registered, or fields its class does not declare,
-    give an :class:`UntypedEvent` and a warning: reading never crashes and never loses data."""
-    cls = KINDS.get(kind)
-    if cls is not None:
-        try:
-            return cls(t_s=float(t_s), **data)
-        except TypeError as exc:
-            log.warning("event %s does not fit its record: %s", kind, exc)
-    else:
-        log.warning("event kind %s is not a registered record kind (twin/records.py)", kind)
-    return UntypedEvent(t_s=float(t_s), name=kind, data=dict(data))
-
-
-def kind_of(rec: Record) -> str:
-    return rec.name if isinstance(rec, UntypedEvent) else rec.kind
-
-
-def event_fields(rec: Record) -> dict[str, object]:
-    """The JSONL payload of ``rec`` (beside ``t_s``, ``wall_s``, ``kind``): its fields, the
-    optional ones only when set."""
-    if isinstance(rec, UntypedEvent):
-        return dict(rec.data)
-    out: dict[str, object] = {}
-    for f in fields(rec):
-        if f.name == "t_s":
-            continue
-        v = getattr(rec, f.name)
-        if v is None and f.metadata.get("optional"):
-            continue
-        out[f.name] = v
-    return out
-
-
-# -- the bus ----------------------------------------------------------------------------------
-Subscriber = Callable[[Record], None]
-
-
-class Bus:
-    """Publish/subscribe of run records: ``publish`` hands each record to every subscriber in
-    the order they subscribed, synchronously on the publisher's thread (subscribers are
-    thread-safe and quick: a lock and an append)."""
-
-    def __init__(self) -> None:
-        self._subs: tuple[Subscriber, ...] = ()
-        self._lock = threading.Lock()
-
-    def subscribe(self, fn: Subscriber) -> None:
-        with self._lock:
-            self._subs = (*self._subs, fn)
-
-    def publish(self, rec: Record) -> None:
-        for fn in self._subs:
-            fn(rec)
-
-
-# -- the one set of active faults -------------------------------------------------------------
-class ActiveFaults:
-    """The run's active faults, key -> message (the one place they are kept): the event sink
-    raises a fault only when it is not active and clears it only when it is; the dashboard
-    shows the messages as alarms. A fault raised with ``shown=False`` is active at once but
-    shown only from :meth:`show` on (the sink shows it once its event is logged, as the run
-    always did). Thread-safe."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._active: dict[str, tuple[str, bool]] = {}  # key -> (message, shown)
-
-    def raise_fault(self, key: str, message: str, shown: bool = True) -> bool:
-        """True when ``key`` was not active (it is now)."""
-        with self._lock:
-            if key in self._active:
-                return False
-            self._active[key] = (message, shown)
-            return True
-
-    def show(self, key: str) -> None:
-        """Show an active fault raised with ``shown=False``."""
-        with self._lock:
-            if key in self._active:
-                self._active[key] = (self._active[key][0], True)
-
-    def clear(self, key: str) -> bool:
-        """True when ``key`` was active (it is not now)."""
-        with self._lock:
-            return self._active.pop(key, None) is not None
-
-    def keys(self) -> frozenset[str]:
-        with self._lock:
-            return frozenset(self._active)
-
-    def messages(self) -> tuple[str, ...]:
-        with self._lock:
-            return tuple(m for m, shown in self._active.values() if shown)
-
-
-# -- the docs table ---------------------------------------------------------------------------
-def _type_name(f: Field[Any]) -> str:
-    t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
-    return t.replace("|", "\\|")
-
-
-def records_table() -> str:
-    """The Markdown table of every record kind, its fields and their units (the one in
-    ``docs/architecture.md``; ``python -m twin.records`` prints it)."""
-    lines = ["| kind | goes to | fields (unit) |", "|---|---|---|"]
-    for kind, cls in KINDS.items():
-        where = "frames.csv" if cls is FrameReading else "events.jsonl" if cls.logged else "dashboard"
-        parts = []
-        for f in fields(cls):
-            u = f.metadata.get("unit", "")
-            name = f"{f.name}?" if f.metadata.get("optional") else f.name
-            parts.append(f"`{name}`" + (f" ({u})" if u else ""))
-        lines.append(f"| `{kind}` | {where}: {cls.doc} | {', '.join(parts)} |")
-    return "\n".join(lines) + "\n"
-
-
-def fields_of(cls: type[Record]) -> Mapping[str, str]:
-    """Field name -> unit of a record class."""
-    return {f.name: str(f.metadata.get("unit", "")) for f in fields(cls)}
-
-
-if __name__ == "__main__":
-    print(records_table(), end="")

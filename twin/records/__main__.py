@@ -1,0 +1,5 @@
+"""``python -m twin.records`` prints the docs' table of record kinds."""
+
+from twin.records import records_table
+
+print(records_table(), end="")
