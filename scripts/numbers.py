@@ -36,6 +36,7 @@ BENCHES: dict[str, tuple[str, ...]] = {
     "twin": ("bench", "twin", "--json"),
     "trend": ("bench", "trend", "--json"),
     "link": ("bench", "link", "--json"),
+    "rigs": ("bench", "vision", "--rigs", "--json"),
 }
 """The benches whose numbers the page shows, in its order: name -> ``drumtwin`` arguments."""
 
@@ -107,15 +108,38 @@ def fmt(v: Any) -> str:
     return f"`{json.dumps(v)}`"
 
 
+def key_rows(result: Mapping[str, Any]) -> list[str]:
+    """One row per number of a bench's JSON."""
+    return ["| key | value |", "|---|---:|", *(f"| `{k}` | {fmt(v)} |" for k, v in flatten(result))]
+
+
+RIG_COLUMNS = ("within_3pct", "flagged", "holds_1pct", "wrong_unflagged", "mi_err_median", "mi_err_p90", "frames")
+"""The cross-rig bench's numbers per rig and light (``vision.rigbench``), one column each."""
+
+
+def rig_rows(result: Mapping[str, Any]) -> list[str]:
+    """The cross-rig bench: one row per suite, rig and light (:data:`RIG_COLUMNS`), then the
+    rest of its JSON (the summary, the leave-one-rig-out checks) one row per number."""
+    out = ["| suite | rig (classes learned) | light | " + " | ".join(f"`{c}`" for c in RIG_COLUMNS) + " |",
+           "|---|---|---|" + "---:|" * len(RIG_COLUMNS)]
+    for suite in ("real", "synthetic"):
+        for rig, row in result.get(suite, {}).items():
+            for light, v in row.items():
+                if isinstance(v, Mapping):
+                    out.append(f"| {suite} | {rig} ({row['classes']}) | {light} | "
+                               + " | ".join(fmt(v[c]) for c in RIG_COLUMNS) + " |")
+    return [*out, "", *key_rows({k: v for k, v in result.items() if k not in ("real", "synthetic")})]
+
+
 def render(kept: Sequence[Mapping[str, Any]]) -> str:
-    """The block: per bench, where and when it ran, then one row per number of its JSON."""
+    """The block: per bench, where and when it ran, then its numbers (one row per number of its
+    JSON; the cross-rig bench: one row per rig and light, :func:`rig_rows`)."""
     out: list[str] = []
     for rec in kept:
         name = rec["bench"]
         out += [f"**{name}**: `{rec['command']}` at {rec['commit']}, {rec['measured_utc']} UTC, load "
-                f"{rec['load_1m']} on {rec['cores']} cores ([{name}.json](numbers/{name}.json))", "",
-                "| key | value |", "|---|---:|"]
-        out += [f"| `{k}` | {fmt(v)} |" for k, v in flatten(rec["result"])]
+                f"{rec['load_1m']} on {rec['cores']} cores ([{name}.json](numbers/{name}.json))", ""]
+        out += rig_rows(rec["result"]) if name == "rigs" else key_rows(rec["result"])
         out.append("")
     return "\n".join(out)
 

@@ -45,14 +45,12 @@ from vision.rigs import (
     RigFrame,
     RigSpec,
     SourceFrame,
-    class_colours,
     default_rigs,
     make_rig,
+    prepare_source,
     relight,
     setup_indices,
-    source_labels,
 )
-from vision.roi import detect_drum
 from vision.synthetic import particle_drum
 
 __all__ = ["REAL_SOURCES", "load_source", "measure_light", "rig_setup", "run_rig_bench", "synthetic_rig"]
@@ -198,7 +196,7 @@ def _bench_rig(name: str, frames: Callable[[], Iterable[RigFrame]], colours: Seq
     setup = rig_setup([f.image for f in chosen], colours, learn)
     ratio, bed = density_records(chosen)
     rec: dict = {"setup_spreads": [], "curve_spreads": [], "density_ratio": ratio, "density_bed": bed}
-    row: dict = {"classes": list(setup.names)}
+    row: dict = {"classes": ", ".join(setup.names)}
     at_setup: list[tuple[float, float]] = []
     for light in sorted(lights, key=lambda v: v != "setup"):  # the set-up light first: the others are held to it
         say(f"rig {name}: {light} ...")
@@ -212,19 +210,21 @@ def run_rig_bench(
     synthetic: Sequence[str] | None = None, source: Sequence[SourceFrame] | None = None,
     log: Callable[[str], None] | None = None, learn: Callable[..., MeterConfig] | None = None,
 ) -> dict:
-    """The cross-rig bench: ``{"real": {rig: {"classes": [...], light: {...}}}, "synthetic": {...},
+    """The cross-rig bench: ``{"real": {rig: {"classes": "a, b", light: {...}}}, "synthetic": {...},
     "summary": {...}}`` (see the module's doc); ``rigs`` default ``vision.rigs.default_rigs()``,
     ``synthetic`` every pair of ``SYNTHETIC_PAIRS``, ``source`` the real frames of :data:`REAL_SOURCES`."""
     say = log or (lambda s: None)
     src = list(source) if source is not None else load_source()
     rigs = default_rigs() if rigs is None else rigs
-    labels = [source_labels(f.image, detect_drum(f.image)) for f in src]
-    colours = class_colours([f.image for f in src], labels)
+    prep = prepare_source(src)
     res: dict = {"real": {}, "synthetic": {}}
     records: dict = {}
     for spec in rigs:
+        made: Callable[[], Iterable[RigFrame]] = partial(make_rig, spec, src, prep)
+        if not spec.camera.startswith("scale2048"):  # kept (~50 MB); a 2048 px rig is made again per light
+            made = partial(list, list(made()))
         res["real"][spec.name], records[spec.name] = _bench_rig(
-            spec.name, partial(make_rig, spec, src), _pair_colours(spec.pair, colours), lights, learn, len(src), say)
+            spec.name, made, _pair_colours(spec.pair, prep.colours), lights, learn, len(src), say)
     for pair in SYNTHETIC_PAIRS if synthetic is None else synthetic:
         frames = synthetic_rig(pair)
         res["synthetic"][pair], records[f"synthetic {pair}"] = _bench_rig(
@@ -260,7 +260,7 @@ def summarise(res: dict) -> dict:
             per[light] = {"worst_within_3pct": min(v["within_3pct"] for v in vals.values()),
                           "worst_flagged": max(v["flagged"] for v in vals.values()),
                           "mi_err_median": float(np.nanmedian([v["mi_err_median"] for v in vals.values()])),
-                          "rigs_missing_aim": misses}
+                          "rigs_missing_aim": ", ".join(misses)}
         out[suite] = per
     return out
 
@@ -275,14 +275,14 @@ def rig_table(res: dict) -> list[str]:
     lines = []
     for suite in ("real", "synthetic"):
         for rig, row in res.get(suite, {}).items():
-            lines.append(f"{suite} {rig} (classes {', '.join(row['classes'])})")
+            lines.append(f"{suite} {rig} (classes {row['classes']})")
             for light, v in row.items():
                 if light != "classes":
                     lines.append(f"  {light:9s} within 3%: {num(v['within_3pct'], '5.1f', 100)}  flagged: "
                                  f"{num(v['flagged'], '5.1f', 100)}  held: {num(v['holds_1pct'], '5.1f', 100)}  "
                                  f"MI error: {num(v['mi_err_median'], '.3f')}")
     for suite, per in res.get("summary", {}).items():
-        missing = sorted({r for v in per.values() for r in v.get("rigs_missing_aim", [])})
+        missing = sorted({r for v in per.values() for r in v.get("rigs_missing_aim", "").split(", ") if r})
         lines.append(f"{suite}: rigs missing an aim: {', '.join(missing) or 'none'}")
     for rig, row in res.get("loro", {}).get("rigs", {}).items():
         lines.append(f"left out {rig}: " + ", ".join(f"{k} {num(v, '.3g')}" for k, v in row.items()))

@@ -41,6 +41,7 @@ __all__ = [
     "LIGHTS",
     "PAIRS",
     "SYNTHETIC_PAIRS",
+    "PreparedSource",
     "RigFrame",
     "RigSpec",
     "SourceFrame",
@@ -49,6 +50,7 @@ __all__ = [
     "default_rigs",
     "label_truth",
     "make_rig",
+    "prepare_source",
     "recolour",
     "relight",
     "setup_indices",
@@ -310,14 +312,31 @@ def label_truth(frame: SourceFrame, labels: np.ndarray, roi: DrumROI) -> tuple[t
     return c1, mixing_indices(c1, c2, s1, s2, roi.r_px).mi
 
 
-def make_rig(spec: RigSpec, frames: Sequence[SourceFrame]) -> Iterator[RigFrame]:
+@dataclass(frozen=True)
+class PreparedSource:
+    """What every rig made from the same source frames shares: each frame's drum, its class map
+    (:func:`source_labels`) and the classes' colours (:func:`class_colours`)."""
+
+    rois: tuple[DrumROI, ...]
+    labels: tuple[np.ndarray, ...]
+    colours: np.ndarray
+
+
+def prepare_source(frames: Sequence[SourceFrame]) -> PreparedSource:
+    """The drums, class maps and class colours of the source frames (once for every rig)."""
+    rois = tuple(detect_drum(f.image) for f in frames)
+    labels = tuple(source_labels(f.image, r) for f, r in zip(frames, rois, strict=True))
+    return PreparedSource(rois, labels, class_colours([f.image for f in frames], labels))
+
+
+def make_rig(spec: RigSpec, frames: Sequence[SourceFrame],
+             prepared: PreparedSource | None = None) -> Iterator[RigFrame]:
     """The frames of rig ``spec`` in the source's order (made one at a time: a 2048 px rig holds
-    one frame, not 42)."""
-    rois = [detect_drum(f.image) for f in frames]
-    labels = [source_labels(f.image, r) for f, r in zip(frames, rois, strict=True)]
+    one frame, not 42); ``prepared``: :func:`prepare_source` of ``frames`` (made here when None)."""
+    prep = prepare_source(frames) if prepared is None else prepared
     targets = PAIRS[spec.pair]
-    source = class_colours([f.image for f in frames], labels) if any(t is not None for t in targets) else None
-    for f, roi, lab in zip(frames, rois, labels, strict=True):
+    source = prep.colours if any(t is not None for t in targets) else None
+    for f, roi, lab in zip(frames, prep.rois, prep.labels, strict=True):
         img = f.image if source is None else recolour(f.image, lab, source, targets)
         view, m = camera_view(img, spec.camera)
         (cx, cy), mi = label_truth(f, lab, roi)

@@ -91,7 +91,7 @@ def test_bench_vision_rigs_json_and_table(source, monkeypatch):
     res = json.loads(r.out)
     assert set(res["real"]) == {"blue-white/scale320", "teal-white/scale320"}
     for rig, row in res["real"].items():
-        assert row["classes"] == (["blue", "white"] if rig.startswith("blue") else ["teal", "white"])
+        assert row["classes"] == ("blue, white" if rig.startswith("blue") else "teal, white")
         assert row["setup"]["within_3pct"] >= 0.75 and row["setup"]["flagged"] == 0.0, (rig, row)
         assert row["x0.7"]["holds_1pct"] >= 0.75, (rig, row)
         assert row["curve1.8"]["flagged"] + row["curve1.8"]["wrong_unflagged"] > 0.0  # (never all right in silence)
