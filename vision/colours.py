@@ -20,7 +20,7 @@ Both forms are baked into the same exact BGR lookup table (``vision.moments``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -330,38 +330,45 @@ class Classifier:
         result: list[np.ndarray] = []
         for k, plan in enumerate(self._plan):
             out = self._buf(f"class{k}")
-            first = True
-            for htests, stest, vtest in plan:
+            for i, (htests, stest, vtest) in enumerate(plan):
                 g = self._buf("group") if len(plan) > 1 else out
-                hue: np.ndarray | None = None
-                if len(htests) == 1:
-                    hue = run(htests[0])
-                elif htests:
-                    hue = self._buf("hue")
-                    cv2.bitwise_or(run(htests[0]), run(htests[1]), dst=hue)
-                    for t in htests[2:]:
-                        cv2.bitwise_or(hue, run(t), dst=hue)
-                b = base(stest, vtest)
-                if b is None:
-                    if hue is None:
-                        g[...] = 255
-                    else:
-                        np.copyto(g, hue)
-                elif hue is None:
-                    np.copyto(g, b)
-                else:
-                    cv2.bitwise_and(hue, b, dst=g)
+                self._group_mask(g, self._hue_mask(htests, run), base(stest, vtest))
                 if g is not out:
-                    if first:
+                    if i == 0:
                         np.copyto(out, g)
                     else:
                         cv2.bitwise_or(out, g, dst=out)
-                first = False
             if self._exclusive[k]:
                 for prev in result:
                     cv2.subtract(out, prev, dst=out)
             result.append(out)
         return result
+
+    def _hue_mask(self, htests: Sequence[tuple], run: Callable[[tuple], np.ndarray]) -> np.ndarray | None:
+        """The OR of a group's hue tests (None: the group has none)."""
+        if not htests:
+            return None
+        if len(htests) == 1:
+            return run(htests[0])
+        hue = self._buf("hue")
+        cv2.bitwise_or(run(htests[0]), run(htests[1]), dst=hue)
+        for t in htests[2:]:
+            cv2.bitwise_or(hue, run(t), dst=hue)
+        return hue
+
+    @staticmethod
+    def _group_mask(g: np.ndarray, hue: np.ndarray | None, b: np.ndarray | None) -> None:
+        """``g`` = the AND of a group's hue mask and its base (S, V, ROI) mask; either may be
+        None (no test: every pixel)."""
+        if b is None:
+            if hue is None:
+                g[...] = 255
+            else:
+                np.copyto(g, hue)
+        elif hue is None:
+            np.copyto(g, b)
+        else:
+            cv2.bitwise_and(hue, b, dst=g)
 
     def labels(self, bgr: np.ndarray, mask_u8: np.ndarray | None = None) -> np.ndarray:
         """Label map (uint8, same h x w) of a BGR uint8 image: 0 = none, ``k + 1`` = class k."""

@@ -1,0 +1,57 @@
+"""The cross-rig bench run with another checkout's vision: the "before" column of the bench's table.
+
+``drumtwin bench vision --rigs`` measures this tree's ``classes suggest`` and meter on rigs made
+from the real frames. To show today's code on the same bench beside it, this script imports
+the ``vision`` package of ``OLD`` (a checkout of the code before, e.g. ``git worktree add
+/tmp/oldvision 07b7317``) and lays this tree's bench modules over it (the rigs, the bench and
+what they need that the old package lacks: ``synthetic`` for the synthetic rigs' truth,
+``bedframe``/``colourfit``/``loro`` for its records), so that the frames, the truth and the
+counting are this tree's and the learning and measuring are the old code's::
+
+    .venv/bin/python -m scripts.rigs_before /tmp/oldvision [--lights setup,x0.7,...] > before.json
+
+The old light estimates have no classes' disagreement, so the leave-one-rig-out rows are left out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+OVERLAID = ("synthetic", "colourfit", "bedframe", "rigs", "loro", "rigbench")
+"""This tree's modules laid over the old package, in import order."""
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m scripts.rigs_before", description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("old", type=Path, help="a checkout whose vision/ is measured")
+    ap.add_argument("--lights", default="", help="comma-separated lights (default: every light of the bench)")
+    args = ap.parse_args(argv)
+    if not (args.old / "vision" / "meter.py").is_file():
+        ap.error(f"{args.old} has no vision/meter.py")
+    sys.path.insert(0, str(args.old.resolve()))
+    sys.modules.pop("vision", None)
+    import vision
+
+    assert Path(vision.__file__).resolve().is_relative_to(args.old.resolve()), vision.__file__
+    for name in OVERLAID:
+        spec = importlib.util.spec_from_file_location(f"vision.{name}", REPO / "vision" / f"{name}.py")
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod
+        spec.loader.exec_module(mod)
+    rb = sys.modules["vision.rigbench"]
+    measure = rb.measure_light
+    rb.measure_light = lambda setup, frames, light, _spreads, at_setup: measure(setup, frames, light, None, at_setup)
+    lights = tuple(v for v in args.lights.split(",") if v) or (*rb.LIGHTS, *rb.BEYOND)
+    res = rb.run_rig_bench(lights=lights, log=lambda s: print(s, file=sys.stderr, flush=True))
+    res.pop("loro", None)
+    print(json.dumps(res, indent=1))
+
+
+if __name__ == "__main__":
+    main()
