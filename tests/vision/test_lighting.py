@@ -26,21 +26,14 @@ from vision.colours import classify
 from vision.config import config_to_toml, parse_config
 from vision.errors import VisionError
 from vision.photometric import GAMMA, channel_maps, estimate_light, light_quantiles
+from vision.rigs import SYNTHETIC_PAIRS
 from vision.sources import open_source
 from vision.synthetic import LIGHT_CHANGES, colour_temperature_gains, light_change, particle_drum, perturb
 
 # one worker for the module (xdist group): its pairs' set-up (``setups``, ~12-14 s busy) once per run
 pytestmark = pytest.mark.xdist_group("lighting")
 
-LIGHT_PAIRS = {
-    "blue-white": ((200, 70, 10), (235, 235, 235)),
-    "paleteal-white": ((205, 210, 160), (235, 235, 235)),
-    "paleteal-white-clip": ((232, 240, 218), (244, 244, 244)),  # two channels clip at x1.3
-    "palepink-white": ((215, 205, 245), (240, 240, 240)),
-    "palecream-white": ((200, 238, 246), (244, 244, 244)),
-    "darkgreen-lightgreen": ((30, 110, 20), (150, 235, 150)),
-    "red-blue": ((30, 30, 210), (200, 70, 10)),
-}
+LIGHT_PAIRS = SYNTHETIC_PAIRS  # the cross-rig bench's synthetic pairs (one definition: vision.rigs)
 PALE = ("paleteal-white-clip", "palepink-white", "palecream-white")
 SCENES = [(0.0, 25.0), (0.4, 35.0), (0.8, 30.0), (0.2, 28.0)]  # (mix, slope_deg) per frame
 SETUP = 1  # the classes are learned on this frame alone (partly mixed: from the segregated frame 0
