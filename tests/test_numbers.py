@@ -70,3 +70,19 @@ def test_the_kept_trend_numbers_are_what_bench_trend_prints(memo_learning) -> No
     assert set(got) == set(kept["result"]) == {"synthetic", "real"}
     for part in ("synthetic", "real"):
         assert got[part] == pytest.approx(kept["result"][part], rel=1e-9), part
+
+
+def test_the_cross_rig_bench_is_one_row_per_rig_and_light() -> None:
+    """The rigs bench's JSON (``drumtwin bench vision --rigs --json``) is shown one row per suite,
+    rig and light with its numbers in the page's columns, the rest of it one row per number."""
+    light = {"within_3pct": 0.952381, "flagged": 0.0, "holds_1pct": 1.0, "wrong_unflagged": 0.047619,
+             "mi_err_median": 0.0123, "mi_err_p90": 0.05, "frames": 42}
+    res = {"real": {"teal-white/rot90": {"classes": "teal, white", "setup": light, "x0.7": light | {"flagged": 0.5}}},
+           "synthetic": {"red-blue": {"classes": "blue, red", "setup": light}},
+           "summary": {"real": {"setup": {"rigs_missing_aim": ""}}}}
+    rows = numbers.rig_rows(res)
+    nums = "0.9524 | {} | 1 | 0.04762 | 0.0123 | 0.05 | 42 |"
+    assert rows[2:5] == ["| real | teal-white/rot90 (teal, white) | setup | " + nums.format(0),
+                         "| real | teal-white/rot90 (teal, white) | x0.7 | " + nums.format(0.5),
+                         "| synthetic | red-blue (blue, red) | setup | " + nums.format(0)]
+    assert "| `summary.real.setup.rigs_missing_aim` | `\"\"` |" in rows

@@ -37,7 +37,7 @@ EMPTY_DENSITY = 0.35
 """... where the texture density is under this x the bed's (its 95th percentile in the frame);
 the bed region is where it is over twice that. The rule of ``vision.loro.density_rule`` (the
 best balanced accuracy against the rigs' class maps) on every rig of the cross-rig bench
-(docs/validation.md, section 14: checked leave-one-rig-out)."""
+(docs/validation.md, section 15: checked leave-one-rig-out)."""
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ clipped levels saying the gain is beyond what the rest fits (saturation), a gain
 cast: the pooled spread over :data:`MAX_CLASS_SPREAD`) -- the estimate names the cause, and the
 meter gives no MI for the frame and a ``lighting_changed:<cause>`` flag. A config without a
 per-class reference is tracked on the drum-wide quantiles (``[meter] light_reference``,
-:func:`estimate_light`), as before. History and measurements: docs/validation.md, section 14.
+:func:`estimate_light`), as before. History and measurements: docs/validation.md, section 15.
 """
 
 from __future__ import annotations
@@ -71,13 +71,13 @@ share of the drum moves the levels near the bed/background step)."""
 MAX_CLASS_SPREAD = 0.17
 """The largest pooled weighted spread (:func:`track_light`) one gain per channel explains: the
 rule of ``vision.loro.spread_rule`` (twice the 99th percentile at the set-up light) on every
-rig of the cross-rig bench, rounded up (0.162; docs/validation.md, section 14: checked
+rig of the cross-rig bench, rounded up (0.162; docs/validation.md, section 15: checked
 leave-one-rig-out)."""
 MAX_DISAGREEMENT = 0.26
 """The largest range of the classes' own gains at their median level (log, any channel) that one
 light explains: a tone curve or a cast that the pooled fit absorbs moves bright classes apart
 (``vision.lightkernels``); the rule of ``vision.loro.spread_rule`` on every rig of the cross-rig
-bench, rounded up (0.256; docs/validation.md, section 14: checked leave-one-rig-out)."""
+bench, rounded up (0.256; docs/validation.md, section 15: checked leave-one-rig-out)."""
 JUMP = 0.03
 """Between two full estimates, a frame whose sampled mean moved by more than this share in a
 channel (or 3 display levels) since the last estimate is estimated at once (``Meter``)."""
