@@ -80,7 +80,9 @@ def test_relight_past_a_gain():
 def test_bench_vision_rigs_json_and_table(source, monkeypatch):
     """``drumtwin bench vision --rigs --json`` (on two small rigs of four frames, three lights):
     each rig and light on its own row, the set-up light's classes found, the tone curve past
-    mapping back flagged, and the leave-one-rig-out rows."""
+    mapping back flagged, and the leave-one-rig-out rows: the light thresholds chosen on the
+    other rig flag none of this rig's set-up frames and its tone-curve frames, the density
+    threshold finds its empty drum."""
     import vision.rigbench as rb
 
     small = partial(rb.run_rig_bench, rigs=[RigSpec("blue-white", "scale320"), RigSpec("teal-white", "scale320")],
@@ -96,5 +98,8 @@ def test_bench_vision_rigs_json_and_table(source, monkeypatch):
         assert row["x0.7"]["holds_1pct"] >= 0.75, (rig, row)
         assert row["curve1.8"]["flagged"] + row["curve1.8"]["wrong_unflagged"] > 0.0  # (never all right in silence)
     assert set(res["loro"]["rigs"]) == set(res["real"])
+    for rig, row in res["loro"]["rigs"].items():  # thresholds chosen on the other rig, measured on this one
+        assert row["setup_flagged"] == 0.0 and row["curve_flagged"] >= 0.75, (rig, row)
+        assert row["empty_found"] > 0.9, (rig, row)  # the empty drum's samples are found as empty
     lines = rig_table(res)
     assert sum(ln.strip().startswith("x0.7") for ln in lines) == 2
