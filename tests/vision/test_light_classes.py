@@ -83,3 +83,18 @@ def test_a_segregated_bed_at_the_set_up_light_is_not_a_cast(orange_black):
             r = meter.measure(relight(f.image, light))
             st = r.classes[orange]
             assert r.valid and math.hypot(st.cx_px - x, st.cy_px - y) / f.r_px < 0.01, (light, f.name, r.flags)
+
+
+def test_a_light_no_gain_explains_is_flagged_not_measured(orange_black):
+    """The weighted fit (dark entries count little) must not absorb a light that no gain per
+    channel explains: past mapping back every frame is flagged ``lighting_changed:`` and gives
+    no MI -- a tone curve (display value ** 1.8) and the blue and red channels swapped (the
+    orange discs turn blue). (A guard of the new fit: the old unweighted one flagged these too.)"""
+    rig, cfg = orange_black
+    for name, change in (("curve", lambda im: relight(im, "curve1.8")),
+                         ("swap", lambda im: np.ascontiguousarray(im[..., ::-1]))):
+        meter = cfg.make_meter()
+        for f in rig:
+            r = meter.measure(change(f.image))
+            assert any(fl.startswith("lighting_changed:") for fl in r.flags), (name, f.name, r.flags)
+            assert not r.valid and math.isnan(r.mi), (name, f.name)
