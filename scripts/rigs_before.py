@@ -9,8 +9,11 @@ what they need that the old package lacks: ``synthetic`` for the synthetic rigs'
 counting are this tree's and the learning and measuring are the old code's::
 
     .venv/bin/python -m scripts.rigs_before /tmp/oldvision [--lights setup,x0.7,...] > before.json
+    .venv/bin/python -m scripts.rigs_before --table before.json docs/numbers/rigs.json
 
 The old light estimates have no classes' disagreement, so the leave-one-rig-out rows are left out.
+``--table`` prints the two side by side (markdown, the issue's aims: at the set-up light the
+flagged share, at x0.7, x1.3 and the white-balance shifts the share within 3 % of R).
 """
 
 from __future__ import annotations
@@ -26,11 +29,41 @@ OVERLAID = ("synthetic", "colourfit", "bedframe", "rigs", "loro", "rigbench")
 """This tree's modules laid over the old package, in import order."""
 
 
+AIMS = ("setup", "x0.7", "x1.3", "wb_warm", "wb_cool", "wb_green")
+"""The lights of the issue's aims, in the table's order."""
+
+
+def table(before: dict, after: dict) -> list[str]:
+    """Markdown: one row per suite, rig and light of :data:`AIMS` that both ran; at the set-up
+    light the flagged share (aim <= 2 %), else the share within 3 % of R (aim >= 90 %), before ->
+    after, and whether after meets the aim."""
+    out = ["| suite | rig | light | number (aim) | before | after | aim met |", "|---|---|---|---|---:|---:|---|"]
+    for suite in ("real", "synthetic"):
+        for rig, row in after.get(suite, {}).items():
+            old_row = before.get(suite, {}).get(rig, {})
+            for light in AIMS:
+                if light not in row:
+                    continue
+                key, aim = ("flagged", "<= 2 %") if light == "setup" else ("within_3pct", ">= 90 %")
+                new = row[light][key]
+                old = old_row[light][key] if light in old_row else None
+                met = "yes" if (new <= 0.02 if light == "setup" else new >= 0.9) else "**no**"
+                was = "-" if old is None else f"{100 * old:.1f} %"
+                out.append(f"| {suite} | {rig} | {light} | {key} ({aim}) | {was} | {100 * new:.1f} % | {met} |")
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m scripts.rigs_before", description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("old", type=Path, help="a checkout whose vision/ is measured")
     ap.add_argument("--lights", default="", help="comma-separated lights (default: every light of the bench)")
+    ap.add_argument("--table", type=Path, metavar="AFTER", help="OLD is a JSON this script printed: print it "
+                    "beside AFTER (the bench's JSON, or a kept docs/numbers/rigs.json)")
     args = ap.parse_args(argv)
+    if args.table is not None:
+        after = json.loads(args.table.read_text(encoding="utf-8"))
+        print("\n".join(table(json.loads(args.old.read_text(encoding="utf-8")), after.get("result", after))))
+        return
     if not (args.old / "vision" / "meter.py").is_file():
         ap.error(f"{args.old} has no vision/meter.py")
     sys.path.insert(0, str(args.old.resolve()))
