@@ -79,7 +79,8 @@ def main(argv: list[str] | None = None) -> None:
         spec.loader.exec_module(mod)
     rb = sys.modules["vision.rigbench"]
     measure = rb.measure_light
-    rb.measure_light = lambda setup, frames, light, _spreads, at_setup: measure(setup, frames, light, None, at_setup)
+    vars(rb)["measure_light"] = lambda setup, frames, light, _spreads, at_setup: measure(setup, frames, light, None,
+                                                                                       at_setup)
     lights = tuple(v for v in args.lights.split(",") if v) or (*rb.LIGHTS, *rb.BEYOND)
     res = rb.run_rig_bench(lights=lights, log=lambda s: print(s, file=sys.stderr, flush=True))
     res.pop("loro", None)
