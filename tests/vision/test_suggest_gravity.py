@@ -143,7 +143,6 @@ def test_a_colour_denser_in_the_bed_than_in_the_empty_drum_is_never_background()
     assert np.linalg.norm(np.array(blue.lab[0].mean_lab) - (30, 30, -60)) < 3.0
 
 
-@pytest.mark.slow  # the CLI on three 640 px frames (the learned model's 2^24 table is built once a process)
 def test_classes_suggest_on_real_frames_upright_upside_down_and_mirrored(source, tmp_path):
     """``drumtwin classes suggest`` on a folder of three real PMMA frames at their own 640 px,
     upright, upside down and mirrored (a camera remounted, flipped copies): exit 0, blue and
