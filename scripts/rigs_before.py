@@ -9,7 +9,7 @@ what they need that the old package lacks: ``synthetic`` for the synthetic rigs'
 counting are this tree's and the learning and measuring are the old code's::
 
     .venv/bin/python -m scripts.rigs_before /tmp/oldvision [--lights setup,x0.7,...] > before.json
-    .venv/bin/python -m scripts.rigs_before --table before.json docs/numbers/rigs.json
+    .venv/bin/python -m scripts.rigs_before before.json --table docs/numbers/rigs.json
 
 The old light estimates have no classes' disagreement, so the leave-one-rig-out rows are left out.
 ``--table`` prints the two side by side (markdown, the issue's aims: at the set-up light the
@@ -61,8 +61,8 @@ def main(argv: list[str] | None = None) -> None:
                     "beside AFTER (the bench's JSON, or a kept docs/numbers/rigs.json)")
     args = ap.parse_args(argv)
     if args.table is not None:
-        after = json.loads(args.table.read_text(encoding="utf-8"))
-        print("\n".join(table(json.loads(args.old.read_text(encoding="utf-8")), after.get("result", after))))
+        before, after = (json.loads(p.read_text(encoding="utf-8")) for p in (args.old, args.table))
+        print("\n".join(table(before.get("result", before), after.get("result", after))))  # a kept record or bare
         return
     if not (args.old / "vision" / "meter.py").is_file():
         ap.error(f"{args.old} has no vision/meter.py")
