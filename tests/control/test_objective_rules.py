@@ -86,7 +86,9 @@ def test_staying_compares_with_the_prediction_nearest_the_current_rpm_within_hal
 
 def test_a_gain_of_exactly_min_rel_gain_moves_and_a_best_at_the_current_rpm_never_does() -> None:
     rows = [row(10.0, 100.0), row(20.0, 50.0)]
-    assert choose(rows, "time", 10.0, LIMITS, min_rel_gain=0.5).move is True  # 50 % better: "at least"
+    ch = choose(rows, "time", 10.0, LIMITS, min_rel_gain=0.5)
+    assert ch.move is True  # 50 % better: "at least"
+    assert ch.reason.startswith("objective time: 20 rpm 50 s vs 100 s at 10 rpm (10 rpm 100 s, 20 rpm 50 s); ")
     assert choose(rows, "time", 10.0, LIMITS, min_rel_gain=0.51).move is False
     at_once = [row(10.0, 0.0, 0.0, 1.0), row(20.0, 40.0, 9.0, 1.0)]  # staying costs 0 s: no move, not a zero gain
     assert choose(at_once, "time", 10.0, LIMITS).move is False
