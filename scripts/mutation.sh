@@ -22,7 +22,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # The supervisor's pure core is four modules (control/supervisor.py and its settings, step records and
 # segregation detector, split out of it): one guarding set for all four.
-SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
+SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py tests/control/test_auto_endpoint_rules.py"
 SUPERVISOR_DESELECT="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
 # The drive link's pure parts: their tests share files with pty/TCP tests, so their fast sets name tests
 # (pytest node ids, FILE::TEST) beside the pure *_rules.py files.
@@ -49,7 +49,7 @@ declare -A TESTS=(
   [control/segregation.py]="$SUPERVISOR_TESTS"
   [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py tests/control/test_trend_mutants.py"
   [sim/calibrate.py]="tests/sim/test_calibrate_rules.py tests/sim/test_calibrate_mutants.py"
-  [control/endpoint.py]="tests/control/test_endpoint.py tests/control/test_endpoint_supervisor.py"
+  [control/endpoint.py]="tests/control/test_endpoint.py tests/control/test_endpoint_supervisor.py tests/control/test_auto_endpoint_rules.py"
   [control/limits.py]="tests/control/test_limits.py tests/control/test_limits_rules.py"
   [control/objective.py]="tests/control/test_objective.py tests/control/test_objective_rules.py tests/control/test_objective_supervisor.py"
   [control/modbus/url.py]="$MODBUS_URL_TESTS tests/control/test_modbus_url_rules.py"
