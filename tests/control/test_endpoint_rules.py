@@ -87,6 +87,7 @@ def test_each_plateau_criterion_holds_at_its_exact_edge() -> None:
 
     flat = [0.875] * 11
     assert mixed([0.875] * 5 + [0.9375] + [0.875] * 5)  # max - min = 2 band exactly
+    assert not mixed([0.875] * 5 + [0.96875] + [0.875] * 5)  # 3 band: one frame off the band is enough
     assert mixed([0.875] * 10 + [0.90625])  # net change = band exactly
     assert mixed(flat, EndpointConfig(**{**EXACT.__dict__, "target_mi": 0.875}))  # the plateau = the target
     # the net change is the mean of the window's last tenth minus that of its first: with 11 samples
@@ -161,6 +162,8 @@ def test_unmixed_after_exactly_exit_dwell_s_below_the_floor_with_its_reason() ->
     assert det.mixed and not any(s.changed for s in sts)
     sts = feed(det, [(21.0 + 0.5 * k, 0.75) for k in range(11)])  # below from 21 s
     assert [(s.t_s, s.changed) for s in sts if s.changed] == [(26.0, "unmixed")]
+    waiting = sts[4]  # 23 s: below the floor for 2 s, not yet exit_dwell_s
+    assert (waiting.t_s, waiting.mixed, waiting.changed, waiting.block_sd) == (23.0, True, "", 0.0)
     st = next(s for s in sts if s.changed)
     assert st.reason == "trend 0.750 < 0.812 (plateau 0.875 - 0.0625) for 5.0 s"
     assert (st.mixed, st.mixing_time_s, st.plateau_mi, st.block_sd) == (False, None, None, 0.0)

@@ -232,6 +232,11 @@ def test_status_and_fault_words_decode_by_their_masks() -> None:
     assert delta.fault_text(99) == "fault code 99 (not in the delta-ms300 profile)"
 
 
+def test_a_fault_name_is_the_text_before_its_first_colon(tmp_path: Path) -> None:
+    p = load(tmp_path, {**MINIMAL, "fault": {**MINIMAL["fault"], "codes": {"7": "OC: over-current: phase U"}}})
+    assert p.fault_name(7) == "OC" and p.fault_text(7) == "OC: over-current: phase U"
+
+
 def test_a_packed_comm_loss_code_decodes_through_its_mask_and_shift() -> None:
     e3 = load_profile("invertek-e3")
     assert e3.comm_loss_setting({164: 3 << 8}) == CommLossSetting(1.0, "t 1000 ms: trip", True)
