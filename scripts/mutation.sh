@@ -56,6 +56,10 @@ declare -A TESTS=(
   [control/modbus/reply.py]="$MODBUS_REPLY_TESTS tests/control/test_modbus_reply_rules.py"
   [control/modbus/drive.py]="$MODBUS_DRIVE_TESTS tests/control/test_modbus_drive_rules.py"
   [control/modbus/profile.py]="$MODBUS_PROFILE_TESTS $MODBUS_DRIVE_TESTS tests/control/test_modbus_profile_rules.py"
+  [control/motor.py]="tests/control/test_device.py tests/control/test_device_rules.py tests/control/test_motor_rules.py \
+    tests/control/test_modbus_drive_rules.py"
+  [control/errors.py]="tests/control/test_errors_rules.py tests/control/test_modbus_url_rules.py \
+    tests/control/test_modbus_profile_rules.py"
 )
 # Tests of those files left out of the fast set (they run the CLI, in a subprocess or in process).
 declare -A DESELECT=(
