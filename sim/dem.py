@@ -143,7 +143,10 @@ def run(
     acc,  # (ACC_N,) statistics (ACC_* slots), updated
     ncont,  # (n,) contacts of each disk in the last step, updated
 ):
-    """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed)."""
+    """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed).
+
+    Long on purpose (a numba kernel): one compiled step loop keeps each disk's sums in registers, and
+    splitting it changes how LLVM contracts its updates (runs no longer bit-identical; ``_end_plate_torque``)."""
     n = pos.shape[0]
     cap = nb_j.size
     dt = prm[P_DT]

@@ -38,7 +38,8 @@ def list_skin(vel, dt, skin_min, r_min):
 @njit(cache=True, error_model="numpy")
 def rebuild_list(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max) -> bool:
     """New Verlet list (compressed rows: pairs j > i of disk i at ``nb_start[i]:nb_start[i + 1]``,
-    sorted by j), springs carried over; False if the list does not fit its arrays."""
+    sorted by j), springs carried over; False if the list does not fit its arrays. Long on purpose (a numba
+    kernel): one compiled pass whose stages (cells, pairs, rows, springs) share their scratch arrays."""
     n = pos.shape[0]
     cap = nb_j.size
     cs = 2.0 * r_max + skin

@@ -172,7 +172,8 @@ def post_step(ints: np.ndarray, fl: np.ndarray, id_keys: np.ndarray, id_part: np
 
     The contacts are taken in a canonical order (particle pair as (lower, higher) index, then
     ``_later``): Chipmunk's contact cache is a hash set keyed by memory addresses, and the sums must
-    not depend on where a twin or a restored copy lives in memory (bit-exact branches and runs)."""
+    not depend on where a twin or a restored copy lives in memory (bit-exact branches and runs).
+    Long on purpose (a numba kernel): one compiled pass, its stages sharing the contacts' canonical order."""
     n = batch_of.size
     nbins = hist.size - 1
     m_all = ints.shape[0]
