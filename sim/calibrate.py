@@ -40,10 +40,11 @@ from typing import Any
 
 import numpy as np
 
-from sim.drum import DrumSim, SimParams, check_rpm
+from sim.drum import DrumSim
 from sim.engine import make_twin
 from sim.errors import SimError
 from sim.mixer import Mixer
+from sim.params import SimParams, check_rpm
 from sim.probe import probe
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 

@@ -131,7 +131,7 @@ class RunConfig:
         mode = self.mode.lower()
         if mode not in MODES:
             raise TwinError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
-        from sim.drum import CASES  # the one definition of the recipe's initial states
+        from sim.params import CASES  # the one definition of the recipe's initial states
 
         case = self.case.upper()
         if case not in CASES:

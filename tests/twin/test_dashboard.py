@@ -18,7 +18,7 @@ import websockets
 
 from control.limits import Limits
 from control.supervisor import Supervisor
-from sim.drum import Particles
+from sim.twin_base import Particles
 from tests.twin.dashboard_helpers import (
     IMG,
     button,
@@ -482,7 +482,7 @@ def test_scene_draws_shaped_particles_as_turned_outlines_and_the_baffles() -> No
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         scene = TwinScene(server)
-        class Parts(SimpleNamespace):  # sim.drum.Particles with the pymunk engine's outline and baffle fields
+        class Parts(SimpleNamespace):  # sim.twin_base.Particles with the pymunk engine's outline and baffle fields
             def __len__(self) -> int:
                 return len(self.x_m)
 

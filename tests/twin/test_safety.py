@@ -92,7 +92,7 @@ SWEEP: list[tuple[tuple[str, ...], str]] = [
 
 @pytest.mark.parametrize("rpm", ["0", "-5", "5,-5"])
 def test_whatif_refuses_a_zero_or_negative_rpm_with_the_dashboards_check(rpm: str) -> None:
-    """``whatif --rpm -5`` ran (sim.drum.check_rpm bounds |rpm|: the drum turned the other way)
+    """``whatif --rpm -5`` ran (sim.params.check_rpm bounds |rpm|: the drum turned the other way)
     and ``--rpm 0`` simulated a standing drum, where the dashboard's what-if refused both: the
     command now refuses them with the loop's own check (``Limits.check_whatif``), word for word."""
     from control.errors import ControlError

@@ -97,9 +97,9 @@ class Commission:
 
 def check_given(g: Given) -> None:
     """The numbers the user gave, each a one-line error when out of range (before any work)."""
-    from sim.drum import check_rpm
     from sim.engine import check_engine
     from sim.errors import check_number
+    from sim.params import check_rpm
     from sim.recipe import DrumSpec
 
     check_number("--drum-diameter-mm", g.drum_diameter_mm, 10.0, 1e4)
