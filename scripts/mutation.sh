@@ -22,7 +22,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # The supervisor's pure core is four modules (control/supervisor.py and its settings, step records and
 # segregation detector, split out of it): one guarding set for all four.
-SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
+SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_choice.py tests/control/test_supervisor_due.py tests/control/test_supervisor_ramps.py tests/control/test_supervisor_safe.py tests/control/test_supervisor_modes.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
 SUPERVISOR_DESELECT="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
 declare -A TESTS=(
   [vision/mixing.py]="tests/vision/test_mixing.py tests/vision/test_known_answers.py"
