@@ -324,7 +324,7 @@ def test_residual_flags_direction_slope_and_mi() -> None:
 
 
 def _mismatch_rig(camera_slope: float, twin_slope: float, tol=None):
-    from tests.twin.test_workers import Boxes, _reading
+    from tests.twin.workers_fakes import Boxes, reading
     from twin.live.mismatch import MismatchMonitor
 
     b = Boxes("auto")
@@ -351,7 +351,7 @@ def _mismatch_rig(camera_slope: float, twin_slope: float, tol=None):
             b.wall.t += 0.5
             est = TrendEstimate(t, 0.9, 0.0, 0.01, 0.001, 0.88, 0.92, True, False)
             b.camera.set(CameraInfo(t, b.wall.t, None, None, int(t * 2) + 1, False))
-            b.frames.set(FrameInfo(t, int(t * 2) + 1, t, _reading(0.9, slope=camera_slope), est))
+            b.frames.set(FrameInfo(t, int(t * 2) + 1, t, reading(0.9, slope=camera_slope), est))
             if twin_steps:  # False: the twin lags (its newest state stays where it was)
                 b.twin.set(TwinInfo(updated_s=t, mi=0.88, slope_deg=twin_slope_deg, age_s=t - seeded_s))
             w.tick(b.view.now_s())
@@ -377,7 +377,7 @@ def test_a_twin_calibrated_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_
 def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_chooses() -> None:
     from control.decision import Mode, PredictionRequest
     from tests.twin.test_mill_worker import Sink
-    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from tests.twin.workers_fakes import Boxes, advance, sup_worker
     from twin.live.commands import SetMode
     from twin.live.snapshots import TwinInfo
     from twin.live.whatif import WhatIfWorker
@@ -412,7 +412,7 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
 
     from control.trend import MITrend
     from tests.twin.test_mill_worker import RUNNING, Sink, make
-    from tests.twin.test_workers import Boxes, _reading
+    from tests.twin.workers_fakes import Boxes, reading
     from twin.live.camera import CameraReading, ProcessWorker
     from twin.live.supervise import inputs_of
 
@@ -423,15 +423,15 @@ def test_during_a_link_outage_rpm_is_empty_with_a_link_lost_flag() -> None:
     b.view.mill = box.get  # type: ignore[method-assign]
     sink = Sink()
     pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, sink, None)
-    pw.process(CameraReading(0.0, 0, _reading(0.8)))
+    pw.process(CameraReading(0.0, 0, reading(0.8)))
     link.up = False  # the outage: the board's last report (5 rpm) is history now
     w.cycle()
-    pw.process(CameraReading(0.1, 1, _reading(0.8)))
+    pw.process(CameraReading(0.1, 1, reading(0.8)))
     assert box.get().status is not None and box.get().status.actual_rpm == 5.0  # kept for the resync
     assert inputs_of(b.view, 0.1).actual_rpm is None and inputs_of(b.view, 0.1).setpoint_rpm is None
     link.up = True
     w.cycle()
-    pw.process(CameraReading(0.2, 2, _reading(0.8)))
+    pw.process(CameraReading(0.2, 2, reading(0.8)))
     rows = sink.rows()
     assert [(r["rpm_actual"], r["rpm_setpoint"]) for r in rows] == [(5.0, 5.0), (None, None), (5.0, 5.0)]
     assert [r["flags"] for r in rows] == [(), ("link_lost:mill",), ()]
@@ -446,7 +446,7 @@ def test_a_board_found_above_the_limits_is_an_alarm_and_brought_inside_when_we_c
 
     from control.decision import Mode
     from control.driver import MillClient
-    from tests.twin.test_workers import Boxes, advance, sup_worker
+    from tests.twin.workers_fakes import Boxes, advance, sup_worker
     from twin.live.mill import MillWorker
 
     fast = MotorConfig(max_rpm=200.0, accel_rpm_per_s=200.0, tau_s=0.05)
