@@ -117,7 +117,7 @@ def memo_learning() -> Iterator[None]:
 # arguments: run once per session (``cli_once``), both tests assert on the one result. Their
 # users share xdist group "benches" (one worker: one run).
 BENCH_TREND_ARGS = ["--json", "--sequences", "2", "--real-seeds", "1"]  # control/test_cli.py's bench test
-BENCH_MEMORY_ARGS = ["--seconds", "5", "--json"]  # twin/test_safety.py's bench test
+BENCH_MEMORY_ARGS = ["--seconds", "5", "--json"]  # twin/test_memory.py's bench test
 BENCH_TWIN_ARGS = ["--duration", "0.02", "--json"]  # sim/test_cli.py's bench test
 BENCHES = pytest.mark.xdist_group("benches")
 

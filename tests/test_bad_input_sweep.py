@@ -209,7 +209,7 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("whatif",): ["--rpm", "5", "--duration", "0.5", "--workers", "1"],
     ("mill-emulator",): ["--tcp", "0", "--duration", "0.2"],
     ("bench", "dashboard"): BENCH_DASHBOARD_ARGS,  # its base run is shared with test_live.py's bench test
-    ("bench", "memory"): BENCH_MEMORY_ARGS,  # its base run is shared with test_safety.py's bench test
+    ("bench", "memory"): BENCH_MEMORY_ARGS,  # its base run is shared with twin/test_memory.py's bench test
     ("bench", "vision"): ["--seconds", "0.1"],
     ("bench", "twin"): BENCH_TWIN_ARGS,  # ... with sim/test_cli.py's
     ("bench", "trend"): ["--sequences", "1", "--real-seeds", "0"],

@@ -373,7 +373,7 @@ def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
         encoding="utf-8",
     )
     limit = sys.getrecursionlimit()  # mypy's main raises it to 2**14 for the whole process, which let
-    try:  # a 5000-deep TOML parse in later tests of the worker (test_safety's "nested too deeply")
+    try:  # a 5000-deep TOML parse in later tests of the worker (test_safety_input's "nested too deeply")
         out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
                                   "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
     finally:
