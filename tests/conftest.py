@@ -85,7 +85,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 # `drumtwin bench dashboard` (a demo in its own process, chromium on its dashboard) once per
-# session: the bad-input sweep's base of that command and test_live.py's bench test read it.
+# session: the bad-input sweep's base of that command and twin/test_live_browser.py's bench test read it.
 BENCH_DASHBOARD_ARGS = ["--seconds", "2", "--warmup", "0", "--speed", "2"]
 
 

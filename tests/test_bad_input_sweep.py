@@ -208,7 +208,7 @@ BASE: dict[tuple[str, ...], list[str]] = {
                      "--window-s", "0.5"],
     ("whatif",): ["--rpm", "5", "--duration", "0.5", "--workers", "1"],
     ("mill-emulator",): ["--tcp", "0", "--duration", "0.2"],
-    ("bench", "dashboard"): BENCH_DASHBOARD_ARGS,  # its base run is shared with test_live.py's bench test
+    ("bench", "dashboard"): BENCH_DASHBOARD_ARGS,  # its base run is shared with twin/test_live_browser.py's bench test
     ("bench", "memory"): BENCH_MEMORY_ARGS,  # its base run is shared with twin/test_memory.py's bench test
     ("bench", "vision"): ["--seconds", "0.1"],
     ("bench", "twin"): BENCH_TWIN_ARGS,  # ... with sim/test_cli.py's
@@ -446,7 +446,7 @@ SHARED_BASES = {" ".join((*cmd, *args)) for cmd, args in (
 def _base_marks(k: str) -> list[pytest.MarkDecorator]:
     marks = [pytest.mark.slow] if k.startswith(SLOW_BASES) else []
     if k == BENCH_DASHBOARD_BASE:
-        marks.append(pytest.mark.xdist_group("live"))  # beside test_live.py's bench test
+        marks.append(pytest.mark.xdist_group("live"))  # beside twin/test_live_browser.py's bench test
     elif k == COMMISSION_BASE:
         marks.append(COMMISSION)  # beside tests/twin/test_commission.py, which reads the same run
     elif k in SHARED_BASES:

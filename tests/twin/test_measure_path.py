@@ -51,7 +51,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-@pytest.mark.xdist_group("live")  # (see test_live.py)
+@pytest.mark.xdist_group("live")  # (see tests/twin/live_helpers.py)
 @pytest.mark.timeout(180)
 def test_mi_and_run_write_the_same_row_for_every_frame_of_a_video(real_drum_dir: Path, tmp_path: Path) -> None:
     video, n = _video(tmp_path / "pmma.avi", [real_drum_dir, real_drum_dir.parent / "real-drum-pmma-white"])

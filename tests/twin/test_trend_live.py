@@ -61,7 +61,7 @@ def _looped_video(images: Path, path: Path, seconds: float, fps: float = 30.0) -
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("live")  # (see test_live.py)
+@pytest.mark.xdist_group("live")  # (see tests/twin/live_helpers.py)
 @pytest.mark.timeout(240)
 def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: Path, tmp_path: Path,
                                                                memo_learning: None) -> None:
