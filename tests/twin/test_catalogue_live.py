@@ -44,6 +44,7 @@ def _listed(*args: object) -> dict[str, dict]:
 
 
 @LIVE
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_two_runs_at_once_land_in_one_catalogue_beside_them_and_on_a_server(
         tmp_path: Path, postgres_url: str) -> None:  # noqa: F811

@@ -110,6 +110,8 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
 
 
 @LIVE
+@pytest.mark.slow
+@pytest.mark.browser
 @pytest.mark.timeout(300)
 def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
     delta: DriveEmulator, page, tmp_path: Path
