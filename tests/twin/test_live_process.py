@@ -13,25 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from control.device import DeviceConfig
-from control.emulator import MillEmulator
 from tests.twin.live_helpers import DRUMTWIN, LIVE, free_port, synthetic_video
 from tests.waiting import wait_until
 from twin.runlog import read_events, read_frames
-
-
-@pytest.fixture
-def tcp_mill():
-    """The mill emulator on a TCP port, its watchdog short; the drive was running and
-    its watchdog has stopped it (fault WDOG) before the run connects."""
-    emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
-    port = emu.open_tcp(0)
-    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
-    wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
-    try:
-        yield emu, f"socket://127.0.0.1:{port}"
-    finally:
-        emu.close()
 
 
 @LIVE

@@ -12,29 +12,12 @@ import cv2
 import numpy as np
 import pytest
 
-from control.device import DeviceConfig
-from control.emulator import MillEmulator
 from tests.cli import assert_one_line_error, cli
 from tests.twin.live_helpers import LIVE, synthetic_video
-from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.run.main import run_live
 from twin.runlog import read_events, read_frames
 from vision.synthetic import drum_frame
-
-
-@pytest.fixture
-def tcp_mill():
-    """The mill emulator on a TCP port, its watchdog short; the drive was running and
-    its watchdog has stopped it (fault WDOG) before the run connects."""
-    emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
-    port = emu.open_tcp(0)
-    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
-    wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
-    try:
-        yield emu, f"socket://127.0.0.1:{port}"
-    finally:
-        emu.close()
 
 
 @LIVE
