@@ -22,7 +22,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # The supervisor's pure core is four modules (control/supervisor.py and its settings, step records and
 # segregation detector, split out of it): one guarding set for all four.
-SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py tests/control/test_auto_endpoint_rules.py"
+SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_choice.py tests/control/test_supervisor_due.py tests/control/test_supervisor_ramps.py tests/control/test_supervisor_safe.py tests/control/test_supervisor_modes.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py tests/control/test_auto_endpoint_rules.py"
 SUPERVISOR_DESELECT="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
 # The drive link's pure parts: their tests share files with pty/TCP tests, so their fast sets name tests
 # (pytest node ids, FILE::TEST) beside the pure *_rules.py files.

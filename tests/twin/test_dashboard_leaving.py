@@ -9,8 +9,8 @@ from __future__ import annotations
 import pytest
 
 import twin.dashboard.server as server_mod
+from tests.twin.dashboard_fakes import RecordingControls
 from tests.twin.dashboard_helpers import drain_callbacks, open_viewer, wait_for_label
-from tests.twin.test_dashboard import RecordingControls
 from tests.waiting import wait_until
 from twin.dashboard import Dashboard
 from twin.dashboard.guard import close_client

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.twin.dashboard_fakes import RecordingControls
 from tests.twin.dashboard_helpers import button, input_by_label
-from tests.twin.test_dashboard import RecordingControls
 from tests.waiting import wait_until
 from twin.commission.report import SECTIONS
 from twin.dashboard import Dashboard
