@@ -34,9 +34,10 @@ drum, whose plates are a third calibrated parameter (docs/validation.md, section
    chosen path's runs gives where the slope crosses the target, and confirming runs (several seeds,
    long windows: ``sim.calibrate_slope.CONFIRM_RUN``, or the caller's ``measure``, e.g. the
    twin-vs-camera check's own run) settle it (``sim.calibrate_confirm``): ``confirm_evals`` of them at
-   most, ``CONFIRM_EVALS`` where the answer must land within the tolerance (commissioning's). The answer's slope
-   and residual are a confirming run's, with its standard error. Every slope is the median of the
-   frames' (``sim.calibrate_slope.frames_slope_deg``), as the twin-vs-camera check takes it.
+   most, ``CONFIRM_EVALS`` where the answer must land within the tolerance (commissioning's). The
+   answer's slope and residual are a confirming run's, with its standard error. Every slope is the
+   median of the frames' (``sim.calibrate_slope.frames_slope_deg``), as the twin-vs-camera check
+   takes it.
 """
 
 from __future__ import annotations
