@@ -19,6 +19,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from sim.calibrate import CONFIRM_EVALS
 from sim.errors import SimError
 from sim.mixer import Friction, Mixer
 from twin.commission import checks as ck
@@ -34,9 +35,9 @@ MIN_SLOPE_FRAMES = 5  # frames with a free surface the camera's slope needs, at 
 MIN_CHROMA_APART = 5.0  # two classes whose mean colours (CIELAB a, b) are closer are one material in light and
 # shade (one colour of particles: 0.6 apart on a rendered white bed; the PMMA rig's blue/white 64, teal/white 25)
 CENSUS_FRAMES = 24  # frames the census measures (the first of the frames kept, spread over the source)
-CALIBRATE: dict[str, Any] = {"confirm_evals": 3, "tol_deg": ck.TOLERANCES.slope_deg / 2}
+CALIBRATE: dict[str, Any] = {"confirm_evals": CONFIRM_EVALS, "tol_deg": ck.TOLERANCES.slope_deg / 2}
 """Keyword arguments of the one calibration call (``calibrate_twin``): the search as ``sim.calibrate.
-calibrate``'s defaults, then up to three confirming runs, each the twin-vs-camera check's own run
+calibrate``'s defaults, then up to ``CONFIRM_EVALS`` (3) confirming runs, each the twin-vs-camera check's own run
 (``twin_check.CheckRuns``), until the twin's slope is within half the check's tolerance: a search run
 (one seed, 5 s) is good to 2-4 deg on a monolayer, the check's run to about 0.5 (docs/commissioning.md)."""
 
