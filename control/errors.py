@@ -46,6 +46,6 @@ def check_number(
     if not ok:
         lo = f"> {above:g}" if above is not None else (f">= {at_least:g}" if at_least is not None else "")
         hi = f"<= {at_most:g}" if at_most is not None else ""
-        rng = " and ".join(x for x in (lo, hi) if x) or "finite"
-        raise ControlError(f"{name} must be a finite number {rng} (got {value})")
+        rng = " and ".join(x for x in (lo, hi) if x)
+        raise ControlError(f"{name} must be a finite number{' ' + rng if rng else ''} (got {value})")
     return v

@@ -22,12 +22,26 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # The supervisor's pure core is four modules (control/supervisor.py and its settings, step records and
 # segregation detector, split out of it): one guarding set for all four.
-SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_mutants.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py"
+SUPERVISOR_TESTS="tests/control/test_supervisor.py tests/control/test_supervisor_props.py tests/control/test_supervisor_rules.py tests/control/test_supervisor_choice.py tests/control/test_supervisor_due.py tests/control/test_supervisor_ramps.py tests/control/test_supervisor_safe.py tests/control/test_supervisor_modes.py tests/control/test_objective_supervisor.py tests/control/test_endpoint_supervisor.py tests/control/test_auto_endpoint_rules.py"
 SUPERVISOR_DESELECT="tests/control/test_objective_supervisor.py::test_run_options_objective_and_target_are_checked_in_one_line"
+# The drive link's pure parts: their tests share files with pty/TCP tests, so their fast sets name tests
+# (pytest node ids, FILE::TEST) beside the pure *_rules.py files.
+M=tests/control/test_modbus.py
+MODBUS_URL_TESTS="$M::test_modbus_urls_parse_and_bad_ones_name_the_key \
+  $M::test_the_configs_drive_hz_per_rpm_goes_into_the_modbus_url_and_a_disagreeing_url_is_refused"
+MODBUS_REPLY_TESTS="tests/control/test_modbus_replies.py::test_check_reply_takes_the_exact_answer_after_line_noise \
+  tests/control/test_modbus_replies.py::test_check_reply_refuses_anything_else"
+MODBUS_DRIVE_TESTS="$M::test_drive_model_trips_on_silence_not_on_reads_and_latches_until_reset \
+  tests/control/test_modbus_book.py::test_the_drive_model_refuses_writes_by_the_book_and_applies_none_of_them \
+  tests/control/test_modbus_book.py::test_the_status_word_says_decelerating_and_a_drive_fault_coasts"
+MODBUS_PROFILE_TESTS="$M::test_every_shipped_profile_loads_and_names_its_comm_loss_parameter \
+  $M::test_bad_profiles_are_one_line_errors $M::test_read_blocks_groups_near_registers \
+  $M::test_comm_loss_problem_names_the_parameter_and_the_value_to_set"
 declare -A TESTS=(
   [vision/mixing.py]="tests/vision/test_mixing.py tests/vision/test_known_answers.py"
   [control/protocol.py]="tests/control/test_protocol.py tests/control/test_protocol_rules.py"
-  [control/device.py]="tests/control/test_device.py tests/control/test_device_rules.py"
+  [control/device.py]="tests/control/test_device.py tests/control/test_device_rules.py \
+    tests/control/test_stop_never_gated.py::test_a_resent_stop_still_stops_a_motor_started_from_the_front_panel"
   [vision/moments.py]="tests/vision/test_moments_pure.py"
   [control/supervisor.py]="$SUPERVISOR_TESTS"
   [control/supervisor_config.py]="$SUPERVISOR_TESTS"
@@ -35,13 +49,27 @@ declare -A TESTS=(
   [control/segregation.py]="$SUPERVISOR_TESTS"
   [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py tests/control/test_trend_mutants.py"
   [sim/calibrate.py]="tests/sim/test_calibrate_rules.py tests/sim/test_calibrate_mutants.py"
+  [control/endpoint.py]="tests/control/test_endpoint.py tests/control/test_endpoint_rules.py tests/control/test_endpoint_supervisor.py"
+  [control/limits.py]="tests/control/test_limits.py tests/control/test_limits_rules.py"
+  [control/objective.py]="tests/control/test_objective.py tests/control/test_objective_rules.py tests/control/test_objective_supervisor.py"
+  [control/modbus/url.py]="$MODBUS_URL_TESTS tests/control/test_modbus_url_rules.py"
+  [control/modbus/reply.py]="$MODBUS_REPLY_TESTS tests/control/test_modbus_reply_rules.py"
+  [control/modbus/drive.py]="$MODBUS_DRIVE_TESTS tests/control/test_modbus_drive_rules.py"
+  [control/modbus/profile.py]="$MODBUS_PROFILE_TESTS $MODBUS_DRIVE_TESTS tests/control/test_modbus_profile_rules.py"
+  [control/motor.py]="tests/control/test_device.py tests/control/test_device_rules.py tests/control/test_motor_rules.py \
+    tests/control/test_modbus_drive_rules.py"
+  [control/errors.py]="tests/control/test_errors_rules.py tests/control/test_modbus_url_rules.py \
+    tests/control/test_modbus_profile_rules.py"
 )
-# Tests of those files left out of the fast set (they run the CLI in a subprocess).
+# Tests of those files left out of the fast set (they run the CLI, in a subprocess or in process).
 declare -A DESELECT=(
   [control/supervisor.py]="$SUPERVISOR_DESELECT"
   [control/supervisor_config.py]="$SUPERVISOR_DESELECT"
   [control/decision.py]="$SUPERVISOR_DESELECT"
   [control/segregation.py]="$SUPERVISOR_DESELECT"
+  [control/objective.py]="$SUPERVISOR_DESELECT"
+  [control/endpoint.py]="tests/control/test_endpoint.py::test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_exit_2 \
+    tests/control/test_endpoint.py::test_an_endpoint_table_in_the_config_is_read_under_the_options_and_a_bad_one_is_one_line_exit_2"
 )
 mod=${1:-}
 if [ -z "$mod" ] || [ "$mod" = list ]; then
@@ -103,7 +131,7 @@ PY
 tests=""
 # MUTATION_TESTS="a.py b.py" replaces the module's set (a subset kills no more than the whole set: its score
 # is a lower bound of the set's)
-for t in ${MUTATION_TESTS:-${TESTS[$mod]}}; do [ -e "$t" ] && tests="$tests\"$t\", "; done
+for t in ${MUTATION_TESTS:-${TESTS[$mod]}}; do [ -e "${t%%::*}" ] && tests="$tests\"$t\", "; done
 for t in ${DESELECT[$mod]:-}; do tests="$tests\"--deselect\", \"$t\", "; done
 cat >> pyproject.toml <<TOML
 

@@ -24,11 +24,20 @@ drum, whose plates are a third calibrated parameter (docs/validation.md, section
    A target outside that range (with ``RANGE_TOL_DEG`` of grace) is a ``SimError`` that names the
    range and the parameter that would have to leave its range -- never a silent best effort.
 2. **Slope.** Along a path from the low corner to the high point the slope is monotone, and a
-   bracketing search (regula falsi) finds the point whose mean free-surface slope matches the
+   bracketing search (regula falsi) finds the point whose free-surface slope matches the
    target. Every evaluation uses the same seed (common random numbers).
 3. **Curvature** (when measured). Several paths through the plane -- sliding friction first, both
    together, rolling friction first -- each give a point on the target's iso-slope line; the one
    whose surface S-shape (``sim.measure.FreeSurface.curvature``) is nearest the measured one wins.
+4. **Confirmation.** A search run (one seed, a few seconds) is good to 2-4 deg on a monolayer, so the
+   search stops within ``SEARCH_TOL_DEG`` and its answer is only a start: the monotone fit of the
+   chosen path's runs gives where the slope crosses the target, and confirming runs (several seeds,
+   long windows: ``sim.calibrate_slope.CONFIRM_RUN``, or the caller's ``measure``, e.g. the
+   twin-vs-camera check's own run) settle it (``sim.calibrate_confirm``): ``confirm_evals`` of them at
+   most, ``CONFIRM_EVALS`` where the answer must land within the tolerance (commissioning's). The
+   answer's slope and residual are a confirming run's, with its standard error. Every slope is the
+   median of the frames' (``sim.calibrate_slope.frames_slope_deg``), as the twin-vs-camera check
+   takes it.
 """
 
 from __future__ import annotations
@@ -36,15 +45,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
-import numpy as np
-
-from sim.drum import DrumSim, SimParams, check_rpm
-from sim.engine import make_twin
+from sim.calibrate_confirm import confirm
+from sim.calibrate_slope import (
+    CONFIRM_RUN,
+    SPIN_UP_S,
+    SPIN_UP_TURNS,
+    Measure,
+    SlopeRun,
+    default_spin_up_s,
+    twin_measure,
+    twin_slope_deg,
+    twin_surface,
+)
 from sim.errors import SimError
 from sim.mixer import Mixer
-from sim.probe import probe
+from sim.params import SimParams, check_rpm
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, Recipe
 
 FRICTION_RANGE = (0.05, 1.0)  # sliding friction searched (geometric)
@@ -52,18 +68,19 @@ ROLLING_RANGE = (0.0, 1.0)  # rolling friction searched
 END_LOAD_MAX = 0.08  # a monolayer's plates: the most friction per unit in-plane contact load, mu_end r / W
 PLATE_EDGE = (0.5, 1.0)  # shares of a monolayer's most plate friction tried at the plane's high point (the top)
 RANGE_TOL_DEG = 1.0  # a target this close outside the range still calibrates (to the end)
-SPIN_UP_S = 3.0  # each twin run's start before its slope is averaged, s, at least ...
-SPIN_UP_TURNS = 0.25  # ... this share of a drum turn: a bed from rest must first turn up to its slope
 HIGH_EDGE = (0.25, 0.5, 1.0)  # sliding friction tried at the largest rolling friction for the top of the range
 PATHS = ("diagonal", "sliding-first", "rolling-first")
 PLATES = "plates"  # the leg from the plane's high point up the plates' friction (a monolayer's)
+CONFIRM_EVALS = 3  # confirming runs a calibration that must land within its tolerance asks for (commissioning)
+SEARCH_TOL_DEG = 1.5  # with confirming runs, the search stops this close: its single runs are no better
 
 Run = tuple[float, float, float, float]  # (sliding friction, rolling friction, end-plate friction, slope deg)
 
 __all__ = [
-    "END_LOAD_MAX", "FRICTION_RANGE", "HIGH_EDGE", "PATHS", "PLATES", "PLATE_EDGE", "RANGE_TOL_DEG", "ROLLING_RANGE",
-    "SPIN_UP_S", "SPIN_UP_TURNS", "Calibration", "calibrate", "default_spin_up_s", "end_friction_max", "path_point",
-    "reachable_range", "twin_slope_deg", "twin_surface",
+    "CONFIRM_EVALS", "CONFIRM_RUN", "END_LOAD_MAX", "FRICTION_RANGE", "HIGH_EDGE", "PATHS", "PLATES", "PLATE_EDGE",
+    "RANGE_TOL_DEG", "ROLLING_RANGE", "SEARCH_TOL_DEG", "SPIN_UP_S", "SPIN_UP_TURNS", "Calibration", "SlopeRun",
+    "calibrate", "default_spin_up_s", "end_friction_max", "path_point", "reachable_range", "twin_slope_deg",
+    "twin_surface",
 ]
 
 
@@ -73,7 +90,9 @@ class Calibration:
 
     ``end_friction`` is the end plates' friction in effect at the fit (the engines' ``end_friction``:
     the wall's for a deep drum, the searched one for a monolayer); ``end_friction_max`` the most the
-    search gave the plates (0: not searched). ``history``: every twin run as ``Run``."""
+    search gave the plates (0: not searched). ``history``: every twin run as ``Run`` (a confirming run
+    as one, its pooled slope). ``twin_slope_deg`` is the confirming run's at the answer when there were
+    any (``confirmations`` > 0; ``slope_se_deg`` its standard error), else the search's closest run's."""
 
     friction: float
     rolling: float
@@ -89,6 +108,8 @@ class Calibration:
     path: str = "diagonal"
     end_friction: float = math.nan
     end_friction_max: float = 0.0
+    slope_se_deg: float = math.nan
+    confirmations: int = 0
 
     def as_dict(self) -> dict:
         return {
@@ -97,52 +118,12 @@ class Calibration:
             "target_slope_deg": self.target_slope_deg, "rpm": self.rpm, "evaluations": self.evaluations,
             "range_deg": list(self.range_deg), "twin_curvature": self.twin_curvature,
             "target_curvature": self.target_curvature, "path": self.path, "end_friction_max": self.end_friction_max,
+            "slope_se_deg": self.slope_se_deg, "confirmations": self.confirmations,
         }
 
     def twin_kwargs(self) -> dict[str, float]:
         """The fitted parameters as a twin takes them (``make_twin``, ``set_friction``)."""
         return {"friction": self.friction, "rolling": self.rolling, "end_friction": self.end_friction}
-
-
-def twin_surface(
-    friction: float,
-    rolling: float,
-    rpm: float,
-    *,
-    drum: DrumSpec = PAPER_DRUM,
-    recipe: Recipe = PAPER_RECIPE,
-    seed: int = 0,
-    case: str = "C",
-    spin_up_s: float = 3.0,
-    window_s: float = 5.0,
-    sample_s: float = 0.1,
-    mixer: Mixer | None = None,
-    engine: str | None = None,
-    **sim_kwargs,
-) -> tuple[float, float]:
-    """Mean free-surface slope (deg) and curvature of a fresh twin at ``rpm`` over ``window_s`` after ``spin_up_s``
-    (of ``mixer`` on ``engine`` when given, else the ``drum`` + ``recipe`` DEM)."""
-    sim: Any
-    if mixer is not None:
-        drum = mixer.drum
-        sim = make_twin(mixer, engine, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling,
-                        **sim_kwargs)
-    else:
-        sim = DrumSim(drum, recipe, case=case, seed=seed, rpm=rpm, friction=friction, rolling=rolling, **sim_kwargs)
-    slopes, curvs = [], []
-    n = max(1, int(round(window_s / sample_s)))
-    for smp in probe(sim, n * sample_s, sample_s, spin_up_s=spin_up_s, include_start=False):
-        slopes.append(smp.surface.slope_deg)
-        curvs.append(smp.surface.curvature)
-    s = np.asarray(slopes, dtype=float)
-    c = np.asarray(curvs, dtype=float)
-    s, c = s[np.isfinite(s)], c[np.isfinite(c)]
-    return (float(np.mean(s)) if s.size else math.nan, float(np.mean(c)) if c.size else math.nan)
-
-
-def twin_slope_deg(friction: float, rolling: float, rpm: float, **kwargs) -> float:
-    """Mean free-surface slope (deg) of a fresh twin (``twin_surface``'s first number)."""
-    return twin_surface(friction, rolling, rpm, **kwargs)[0]
 
 
 def path_point(u: float, path: str = "diagonal", high: tuple[float, float] | None = None) -> tuple[float, float]:
@@ -171,12 +152,6 @@ def end_friction_max(mixer: Mixer | None, sim_kwargs: dict | None = None) -> flo
     return END_LOAD_MAX * mixer.drum.depth_m / max(p.shape.radius_m for p in mixer.particles)
 
 
-def default_spin_up_s(rpm: float) -> float:
-    """The default start of a calibration run at ``rpm`` (s): ``SPIN_UP_S``, or ``SPIN_UP_TURNS`` of a
-    turn when that is longer (at 2 rpm a bed from rest needs 7.5 s to turn up to its slope)."""
-    return max(SPIN_UP_S, SPIN_UP_TURNS * 60.0 / abs(rpm)) if rpm else SPIN_UP_S
-
-
 def _check_target(target_slope_deg: float) -> float:
     try:
         target = float(target_slope_deg)
@@ -200,6 +175,11 @@ class _Runs:
     def __call__(self, f: float, r: float, e: float | None = None) -> Run:
         kw = self.twin_kw if e is None else {**self.twin_kw, "end_friction": e}
         s, c = twin_surface(f, r, self.rpm, **kw)
+        return self.record(f, r, e, s, c)
+
+    def record(self, f: float, r: float, e: float | None, s: float, c: float = math.nan) -> Run:
+        """A run at (``f``, ``r``, ``e``) that showed slope ``s`` (deg) and curvature ``c``, kept."""
+        kw = self.twin_kw if e is None else {**self.twin_kw, "end_friction": e}
         mixer, end = kw.get("mixer"), kw.get("end_friction")
         end = mixer.end_friction if end is None and mixer is not None else end  # as make_twin resolves it
         e_eff = SimParams(friction=f, rolling=r, wall_friction=kw.get("wall_friction"), end_friction=end).end_mu
@@ -276,13 +256,17 @@ def _out_of_range(target: float, ends: _Ends, rpm: float, end_max: float) -> Sim
                     f"at {abs(rpm):g} rpm ({box}): it needs {need}")
 
 
+Leg = list[tuple[float, Run]]  # a path's runs with their u
+
+
 def _search(runs: _Runs, ends: _Ends, path: str, lo: Run, hi: Run, target: float, tol_deg: float,
-            max_evals: int) -> Run:
+            max_evals: int) -> Leg:
     """Regula falsi along ``path`` between the runs ``lo`` (u=0) and ``hi`` (u=1) for ``target`` (deg),
-    kept 15 % off the bracket's ends, at most ``max_evals`` runs; the run nearest the target."""
+    kept 15 % off the bracket's ends, at most ``max_evals`` runs; the path's runs with their u."""
     start = len(runs.history)
     lo_u, hi_u, sl, sh = 0.0, 1.0, lo[3], hi[3]
     own = [lo, hi]
+    us = [0.0, 1.0]
     while len(runs.history) - start < max_evals:
         best = min(own, key=lambda h: abs(h[3] - target))
         if abs(best[3] - target) <= tol_deg or not (sl < target < sh):
@@ -290,6 +274,7 @@ def _search(runs: _Runs, ends: _Ends, path: str, lo: Run, hi: Run, target: float
         w = min(max((target - sl) / (sh - sl), 0.15), 0.85)
         u = lo_u + w * (hi_u - lo_u)
         own.append(runs(*ends.leg_point(u, path)))
+        us.append(u)
         s = own[-1][3]
         if not math.isfinite(s):
             break
@@ -297,7 +282,11 @@ def _search(runs: _Runs, ends: _Ends, path: str, lo: Run, hi: Run, target: float
             lo_u, sl = u, s
         else:
             hi_u, sh = u, s
-    return min(own, key=lambda h: abs(h[3] - target))
+    return list(zip(us, own, strict=True))
+
+
+def _nearest(leg: Leg, target: float) -> Run:
+    return min((h for _, h in leg), key=lambda h: abs(h[3] - target))
 
 
 def _check_search(rpm: float, drum: DrumSpec, target_curvature: float | None, tol_deg: float, max_evals: int) -> float:
@@ -329,6 +318,9 @@ def calibrate(
     progress: Callable[[int, int], None] | None = None,
     mixer: Mixer | None = None,
     engine: str | None = None,
+    confirm_evals: int = 0,
+    measure: Measure | None = None,
+    confirm_run: SlopeRun | None = None,
     **sim_kwargs,
 ) -> Calibration:
     """Fit sliding and rolling friction (and a monolayer's end-plate friction) so the twin's free
@@ -337,7 +329,10 @@ def calibrate(
     ``spin_up_s`` None: ``default_spin_up_s(rpm)``. ``max_evals`` is the budget of the bracketing search
     per path (after the range runs: the low corner, the ``HIGH_EDGE`` points and a monolayer's
     ``PLATE_EDGE`` points). A target outside the reachable range is a ``SimError`` naming the range and
-    the friction that would have to leave its range.
+    the friction that would have to leave its range. Then at most ``confirm_evals`` confirming runs
+    (``sim.calibrate_confirm``; 0: none, the search's closest run is the answer; ``CONFIRM_EVALS`` for
+    an answer within ``tol_deg``) measured by ``measure`` (None: the particle twin's ``confirm_run``,
+    default ``CONFIRM_RUN``) settle the answer.
     """
     target = _check_target(target_slope_deg)
     drum = mixer.drum if mixer is not None else drum
@@ -346,7 +341,9 @@ def calibrate(
     target_mag = abs(target)
     end_max = end_friction_max(mixer, sim_kwargs)
     paths = PATHS if target_curvature is not None else PATHS[:1]
-    total = 1 + len(HIGH_EDGE) + (len(PLATE_EDGE) if end_max > 0 else 0) + len(paths) * max_evals
+    n_confirm = max(int(confirm_evals), 0)
+    search_tol = max(tol_deg, SEARCH_TOL_DEG) if n_confirm > 0 else tol_deg
+    total = 1 + len(HIGH_EDGE) + (len(PLATE_EDGE) if end_max > 0 else 0) + len(paths) * max_evals + n_confirm
     twin_kw = {"drum": drum, "recipe": recipe, "seed": seed, "window_s": window_s, "mixer": mixer, "engine": engine,
                "spin_up_s": default_spin_up_s(rpm) if spin_up_s is None else spin_up_s, **sim_kwargs}
     runs = _Runs(rpm, twin_kw, progress, total)
@@ -358,16 +355,37 @@ def calibrate(
         legs = [(PLATES, ends.plane_top, ends.top)]
     else:
         legs = [(p, ends.low, ends.plane_top) for p in paths]
-    candidates = [(p, _search(runs, ends, p, lo, hi, target_mag, tol_deg, max_evals)) for p, lo, hi in legs]
-    path, (f, r, e, s) = _choose(candidates, target_mag, tol_deg, target_curvature, runs.curv)
+    searched = {p: _search(runs, ends, p, lo, hi, target_mag, search_tol, max_evals) for p, lo, hi in legs}
+    path, found = _choose([(p, _nearest(leg, target_mag)) for p, leg in searched.items()], target_mag, search_tol,
+                          target_curvature, runs.curv)
+    (f, r, e, s), se, n = found, math.nan, 0
+    if n_confirm > 0:
+        meas = measure if measure is not None else twin_measure(rpm, twin_kw, confirm_run or CONFIRM_RUN)
+        (f, r, e, s), se, n = _confirm_leg(runs, ends, path, searched[path], meas, target_mag, tol_deg, n_confirm,
+                                           found)
     return Calibration(
         friction=float(f), rolling=float(r), twin_slope_deg=float(sign * s),
         residual_deg=float(sign * (s - target_mag)),
         target_slope_deg=target, rpm=rpm, evaluations=len(runs.history), history=tuple(runs.history),
-        range_deg=(float(lo_b), float(hi_b)), twin_curvature=float(runs.curv[(f, r, e, s)]),
+        range_deg=(float(lo_b), float(hi_b)), twin_curvature=float(runs.curv[found]),
         target_curvature=None if target_curvature is None else float(target_curvature), path=path,
-        end_friction=float(e), end_friction_max=float(end_max),
+        end_friction=float(e), end_friction_max=float(end_max), slope_se_deg=float(se), confirmations=n,
     )
+
+
+def _confirm_leg(runs: _Runs, ends: _Ends, path: str, leg: Leg, measure: Measure, target: float, tol_deg: float,
+                 max_evals: int, found: Run) -> tuple[Run, float, int]:
+    """The confirming runs along ``path`` from its search runs ``leg`` (``sim.calibrate_confirm``), each kept
+    in the history: the one nearest ``target`` with its standard error and how many ran (``found``, the
+    search's answer, when none measured a slope)."""
+    done = confirm(measure, lambda u: ends.leg_point(u, path), [u for u, _ in leg], [h[3] for _, h in leg], target,
+                   tol_deg, max_evals)
+    kept = [(runs.record(*c.point, c.slope_deg), c.measured.se_deg) for c in done]
+    kept = [k for k in kept if math.isfinite(k[0][3])]
+    if not kept:
+        return found, math.nan, len(done)
+    run, se = min(kept, key=lambda k: abs(k[0][3] - target))
+    return run, se, len(done)
 
 
 def _choose(candidates: list[tuple[str, Run]], target: float, tol_deg: float, target_curvature: float | None,

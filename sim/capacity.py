@@ -20,10 +20,11 @@ names the bound and the count.
 
 from __future__ import annotations
 
-from sim.drum import SimParams, _check_params, default_dt_s
+from sim.drum import default_dt_s
 from sim.engine import engine_for
 from sim.errors import SimError
 from sim.mixer import Mixer, check_fits, disk_classes, resolve_counts
+from sim.params import SimParams, check_params
 
 LIVE_MAX_PARTICLES = 3600  # the live twin (``drumtwin run``): what the DEM runs in real time on one core here
 MAX_PARTICLES = 20_000  # any other twin (sim, whatif, calibrate): built and settled in seconds, not minutes
@@ -51,7 +52,7 @@ def check_twin(mixer: Mixer, engine: str | None = None, *, live: bool = False, s
     if name == "dem":
         classes = disk_classes(mixer)
         try:
-            _check_params(SimParams(dt_s=default_dt_s(classes)))
+            check_params(SimParams(dt_s=default_dt_s(classes)))
         except SimError as exc:
             lightest = min(classes, key=lambda c: c.radius_m)
             raise SimError(f"{source}: the DEM cannot step discs this light (the smallest "

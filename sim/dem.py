@@ -56,12 +56,13 @@ import math
 import numpy as np
 from numba import njit
 
+from sim.dem_neighbours import list_skin, rebuild_list
+
 __all__ = [
     "ACC_AIRBORNE", "ACC_CONTACTS", "ACC_N", "ACC_OVERLAP_MAX", "ACC_TORQUE", "ACC_TORQUE_STEPS", "ACC_WALL_MAX",
     "DS_ANGLE", "DS_RPM", "DS_TARGET", "END_TORQUE_EVERY",
     "P_ACCEL", "P_DAMP", "P_DT", "P_END", "P_G", "P_MU", "P_MU_R", "P_MU_W", "P_N", "P_R", "P_RMIN",
-    "P_SKIN", "SKIN_MAX_R", "SKIN_STEPS", "contact_tables", "contact_time_s", "damping_ratio", "list_skin",
-    "neighbour_slots", "run",
+    "P_SKIN", "run",
 ]
 
 # slots of the float parameter vector ``prm``
@@ -95,96 +96,6 @@ ACC_N = 6
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
 END_TORQUE_EVERY = 16  # steps between samples of the end plates' share of the drum torque
-SKIN_STEPS = 40.0  # a list build's skin is chosen to last about this many steps at the fastest disk's speed
-SKIN_MAX_R = 1.5  # widest Verlet skin, small radii
-
-
-_KT_SCALE = 2.0 / 7.0  # tangential stiffness / normal stiffness (balls: the same frequency)
-
-
-def _clamped_collision(zeta: float) -> tuple[float, float]:
-    """Restitution and duration (in units of ``1/omega_0``) of a linear spring-dashpot collision
-    whose normal force may not pull (it ends when the force reaches zero), damping ratio ``zeta``
-    (Schwager & Poeschel, Phys. Rev. E 78, 051304, 2008; the overdamped branch likewise)."""
-    if zeta <= 0.0:
-        return 1.0, math.pi
-    if zeta < 1.0:
-        w = math.sqrt(1.0 - zeta * zeta)
-        if zeta < math.sqrt(0.5):
-            phase = math.pi - math.atan(2.0 * zeta * w / (w * w - zeta * zeta))
-        else:
-            phase = math.atan(2.0 * zeta * w / (zeta * zeta - w * w))
-        return math.exp(-zeta / w * phase), phase / w
-    w = math.sqrt(zeta * zeta - 1.0)
-    if w == 0.0:  # critical damping: the limit of both branches
-        return math.exp(-2.0), 2.0
-    tau = math.atanh(2.0 * zeta * w / (2.0 * zeta * zeta - 1.0)) / w
-    return -math.exp(-zeta * tau) * (math.cosh(w * tau) - zeta / w * math.sinh(w * tau)), tau
-
-
-def damping_ratio(restitution: float) -> float:
-    """Damping ratio ``zeta`` (``c_n = 2 zeta sqrt(m* k_n)``) that gives ``restitution`` (0..1] to a
-    collision whose normal force may not pull (``_clamped_collision``), by bisection."""
-    if restitution >= 1.0:
-        return 0.0
-    lo, hi = 0.0, 50.0
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        if _clamped_collision(mid)[0] > restitution:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def contact_time_s(stiffness_n_m: float, mass_kg: float, restitution: float) -> float:
-    """Duration (s) of a collision of effective mass ``mass_kg`` (no pull at the end)."""
-    return _clamped_collision(damping_ratio(restitution))[1] * math.sqrt(mass_kg / stiffness_n_m)
-
-
-def contact_tables(mass_kg: np.ndarray, radius_m: np.ndarray, stiffness_n_m: float,
-                   restitution: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per class pair and per class at the wall, the contact constants ``run`` reads.
-
-    Every contact lasts the same time (MercuryDPM's collision-time parametrisation): the lightest
-    pair has the normal stiffness ``stiffness_n_m`` (N/m), every other pair (and a disk at the
-    wall, whose effective mass is its own) a stiffness in proportion to its effective mass ``m*``.
-    ``mass_kg``, ``radius_m``: (n_cls,) per class. Returns ``c_pair`` (n_cls, n_cls, 6): normal
-    damping (N s/m), ``r_eff`` (m), ``1 / (1/I_i + 1/I_j)`` (kg m^2), ``k_n``, ``k_t = 2/7 k_n``
-    (N/m), ``1 / k_t`` (m/N); and ``c_wall`` (n_cls, 4): normal damping, ``k_n``, ``k_t``, ``1 / k_t``.
-    """
-    m = np.asarray(mass_kg, dtype=np.float64)
-    r = np.asarray(radius_m, dtype=np.float64)
-    zeta = damping_ratio(restitution)
-    m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
-    k_per_kg = stiffness_n_m / m_pair.min()
-    inv_i = 1.0 / (0.4 * m * r**2)
-    k_pair = k_per_kg * m_pair
-    k_wall = k_per_kg * m
-    c_pair = np.stack([2.0 * zeta * np.sqrt(m_pair * k_pair), r[:, None] * r[None, :] / (r[:, None] + r[None, :]),
-                       1.0 / (inv_i[:, None] + inv_i[None, :]), k_pair, _KT_SCALE * k_pair,
-                       1.0 / (_KT_SCALE * k_pair)], axis=-1)
-    c_wall = np.stack([2.0 * zeta * np.sqrt(m * k_wall), k_wall, _KT_SCALE * k_wall, 1.0 / (_KT_SCALE * k_wall)],
-                      axis=-1)
-    return np.ascontiguousarray(c_pair), np.ascontiguousarray(c_wall)
-
-
-def neighbour_slots(r_max: float, r_min: float, skin: float) -> int:
-    """Neighbour-list slots per disk: half (pairs are listed once) of an area bound on the disks of
-    radius ``r_min`` whose centres lie within ``r_max + r_min + skin`` of a disk of radius ``r_max``."""
-    reach = r_max + 2.0 * r_min + skin
-    return int(math.ceil(0.65 * (reach * reach - r_max * r_max) / (r_min * r_min))) + 2
-
-
-@njit(cache=True)
-def list_skin(vel, dt, skin_min, r_min):
-    """Skin (m) of a new Verlet list: twice the distance the fastest disk (``vel``, m/s) covers in
-    ``SKIN_STEPS`` steps of ``dt`` (s), at least ``skin_min`` and at most ``SKIN_MAX_R * r_min`` (m).
-    Only the cost depends on it (a wider list is rebuilt less often but holds more pairs)."""
-    v2 = 0.0
-    for i in range(vel.shape[0]):
-        v2 = max(v2, vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1])
-    return min(max(2.0 * SKIN_STEPS * math.sqrt(v2) * dt, skin_min), max(SKIN_MAX_R * r_min, skin_min))
 
 
 _CT_SCALE = 2.0 / 7.0  # tangential dashpot / normal dashpot
@@ -204,125 +115,6 @@ def _contact_law(delta, vn, vt, xi_old, cn, mu, kn, kt, inv_kt, dt):
     if ftc != ft:
         xi = -ftc * inv_kt
     return fn, ftc, xi
-
-
-@njit(cache=True, error_model="numpy")
-def _rebuild(pos, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max) -> bool:
-    """New Verlet list (compressed rows: pairs j > i of disk i at ``nb_start[i]:nb_start[i + 1]``,
-    sorted by j), springs carried over; False if the list does not fit its arrays."""
-    n = pos.shape[0]
-    cap = nb_j.size
-    cs = 2.0 * r_max + skin
-    # cells over the disks' bounding box (inside the drum; capped so a stray disk cannot blow it up)
-    lo_x = hi_x = pos[0, 0]
-    lo_y = hi_y = pos[0, 1]
-    for i in range(n):
-        lo_x = min(lo_x, pos[i, 0])
-        hi_x = max(hi_x, pos[i, 0])
-        lo_y = min(lo_y, pos[i, 1])
-        hi_y = max(hi_y, pos[i, 1])
-    lo_x = max(lo_x, -r_drum)
-    lo_y = max(lo_y, -r_drum)
-    ncx = min(int((min(hi_x, r_drum) - lo_x) / cs) + 1, 4096)
-    ncy = min(int((min(hi_y, r_drum) - lo_y) / cs) + 1, 4096)
-    # the disks counted into their cells (a counting sort): a cell's disks lie together, in index
-    # order, their coordinates beside them (read sequentially)
-    ncell = ncx * ncy
-    cell_start = np.zeros(ncell + 1, dtype=np.int64)
-    cell = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        a = min(max(int((pos[i, 0] - lo_x) / cs), 0), ncx - 1)
-        b = min(max(int((pos[i, 1] - lo_y) / cs), 0), ncy - 1)
-        c = b * ncx + a
-        cell[i] = c
-        cell_start[c + 1] += 1
-    for c in range(ncell):
-        cell_start[c + 1] += cell_start[c]
-    fill = cell_start[:ncell].copy()
-    sx = np.empty(n)
-    sy = np.empty(n)
-    sr = np.empty(n)
-    sid = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        k = fill[cell[i]]
-        fill[cell[i]] = k + 1
-        sx[k] = pos[i, 0]
-        sy[k] = pos[i, 1]
-        sr[k] = rad[i]
-        sid[k] = i
-    # the pairs, cell by cell, into new_j in visiting order with their row (the smaller index)
-    # counted; then laid out in rows and sorted by j within each row
-    row_n = np.zeros(n + 1, dtype=np.int64)
-    pair_i = np.empty(cap, dtype=np.int64)
-    m = 0
-    for b in range(ncy):
-        for a in range(ncx):
-            c = b * ncx + a
-            c1 = cell_start[c + 1]
-            for p in range(cell_start[c], c1):
-                x = sx[p]
-                y = sy[p]
-                ri = sr[p] + skin
-                ip = sid[p]
-                # each pair once (a half stencil): the later disks of the own cell and the next cell
-                # of the row (together in the sorted order), then the three cells of the row above
-                for half in range(2):
-                    if half == 0:
-                        q0 = p + 1
-                        q1 = cell_start[c + 2] if a + 1 < ncx else c1
-                    elif b + 1 < ncy:
-                        q0 = cell_start[(b + 1) * ncx + max(a - 1, 0)]
-                        q1 = cell_start[(b + 1) * ncx + min(a + 1, ncx - 1) + 1]
-                    else:
-                        break
-                    for q in range(q0, q1):
-                        dx = sx[q] - x
-                        dy = sy[q] - y
-                        reach = ri + sr[q]
-                        if dx * dx + dy * dy < reach * reach:
-                            if m >= cap:
-                                return False
-                            jq = sid[q]
-                            i = min(ip, jq)
-                            pair_i[m] = i
-                            new_j[m] = max(ip, jq)
-                            m += 1
-                            row_n[i + 1] += 1
-    starts = np.empty(n + 1, dtype=np.int64)
-    starts[0] = 0
-    for i in range(n):
-        starts[i + 1] = starts[i] + row_n[i + 1]
-    put = starts[:n].copy()
-    rows_j = np.empty(m, dtype=np.int64)
-    for k in range(m):
-        i = pair_i[k]
-        j = new_j[k]
-        # insertion sort by j within the row
-        first = starts[i]
-        t = put[i]
-        while t > first and rows_j[t - 1] > j:
-            rows_j[t] = rows_j[t - 1]
-            t -= 1
-        rows_j[t] = j
-        put[i] += 1
-    # carry the tangential springs over (both rows sorted by j)
-    for i in range(n):
-        ko = nb_start[i]
-        end = nb_start[i + 1]
-        for k in range(starts[i], starts[i + 1]):
-            j = rows_j[k]
-            while ko < end and nb_j[ko] < j:
-                ko += 1
-            new_xi[k] = nb_xi[ko] if ko < end and nb_j[ko] == j else 0.0
-    for k in range(m):
-        nb_j[k] = rows_j[k]
-        nb_xi[k] = new_xi[k]
-    for i in range(n + 1):
-        nb_start[i] = starts[i]
-    for i in range(n):
-        ref[i, 0] = pos[i, 0]
-        ref[i, 1] = pos[i, 1]
-    return True
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz", "afn"})
@@ -351,7 +143,10 @@ def run(
     acc,  # (ACC_N,) statistics (ACC_* slots), updated
     ncont,  # (n,) contacts of each disk in the last step, updated
 ):
-    """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed)."""
+    """Run ``n_steps`` fixed steps; returns the steps run (fewer only if the neighbour list overflowed).
+
+    Long on purpose (a numba kernel): one compiled step loop keeps each disk's sums in registers, and
+    splitting it changes how LLVM contracts its updates (runs no longer bit-identical; ``_end_plate_torque``)."""
     n = pos.shape[0]
     cap = nb_j.size
     dt = prm[P_DT]
@@ -419,7 +214,7 @@ def run(
     if rebuild:  # (on the hot rows, as in the step loop: one compiled form of the list build)
         far = 0.0
         skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
-        if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+        if not rebuild_list(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
             return 0
         half_skin2 = 0.25 * skin * skin
     for step in range(n_steps):
@@ -432,7 +227,7 @@ def run(
         # neighbour list still valid? (``far``: the largest squared move since the last build)
         if far > half_skin2:
             skin = list_skin(hot[:, 2:4], dt, skin_min, r_min)
-            if not _rebuild(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
+            if not rebuild_list(hot, rad, nb_start, nb_j, nb_xi, new_j, new_xi, ref, skin, r_drum, r_max):
                 tq_sum += step * end_sum / max(end_cnt, 1)
                 _store(acc, ov_max / r_min, wall_max, n_contacts, ncont, hist, lanes, tq_sum, step)
                 _unpack(hot, pos, vel, omg)

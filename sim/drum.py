@@ -46,30 +46,32 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sim import dem
+from sim import dem, dem_contact, dem_neighbours
 from sim.errors import SimError
 from sim.mixer import Mixer, disk_classes
+from sim.params import (
+    CASES,
+    DEFAULT_ACCEL_RPM_S,
+    DEFAULT_END_FRICTION,
+    DEFAULT_FRICTION,
+    DEFAULT_RESTITUTION,
+    DEFAULT_ROLLING,
+    DEFAULT_STIFFNESS_N_M,
+    DEFAULT_WALL_FRICTION,
+    SimParams,
+    check_params,
+    check_rpm,
+)
 from sim.placement import SHRINK, place_random
 from sim.recipe import G_M_S2, PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
+from sim.twin_base import OVERLAP_BINS, ContactStats, FixedStepTwin, Particles, overlap_p99_r
 
-CASES = ("A", "B", "C")
-# The paper's Hertz-Mindlin parameters (tables 1-2, ball-ball = ball-vessel) are the defaults.
-PAPER_CONTACT = {"friction": 0.25, "rolling": 0.10, "restitution": 0.5}
-DEFAULT_FRICTION = PAPER_CONTACT["friction"]  # particle-particle sliding friction
-DEFAULT_WALL_FRICTION: float | None = None  # particle-wall: None = same as particle-particle
-DEFAULT_END_FRICTION: float | None = None  # particle-end plate: None = same as particle-wall
-DEFAULT_ROLLING = PAPER_CONTACT["rolling"]  # rolling friction coefficient mu_r (torque mu_r r_eff F_n)
-DEFAULT_RESTITUTION = PAPER_CONTACT["restitution"]
-DEFAULT_ACCEL_RPM_S = 20.0  # mill acceleration limit
-MIN_RESTITUTION = 0.05  # below, the dashpot is so strong that contacts (and steps) become very short
-DEFAULT_STIFFNESS_N_M = 2800.0  # normal stiffness of the lightest pair (docs/validation.md, section 2)
 STEPS_PER_CONTACT = 8  # default step = the contact time (every pair's) / this: converged over the calibration box
 MIN_STEPS_PER_CONTACT = 3  # a longer step is unstable (symplectic Euler: omega_0 dt < ~1.5)
 SKIN_R = 0.4  # Verlet skin, in small radii
 SORT_EVERY = 1000  # steps between spatial re-sorts of the disks in memory
 _SETTLE_DAMP_S = 2.0  # velocity damping rate while settling, 1/s
 _INFLATE_S = 0.1  # time to inflate the disks from placement size to full size
-_OVERLAP_BINS = 1000  # overlap histogram: bins of 0.002 small radii up to 2
 
 
 def _slab_m(classes) -> float:
@@ -78,10 +80,10 @@ def _slab_m(classes) -> float:
 
 def bed_contact_time_s(classes, stiffness_n_m: float, restitution: float) -> float:
     """Contact time (s) of the bed's contacts: the lightest disk pair's, which every pair shares
-    (``sim.dem.contact_tables``)."""
+    (``sim.dem_contact.contact_tables``)."""
     slab = _slab_m(classes)
     m = min(c.mass_kg(slab) for c in classes)
-    return dem.contact_time_s(stiffness_n_m, 0.5 * m, restitution)
+    return dem_contact.contact_time_s(stiffness_n_m, 0.5 * m, restitution)
 
 
 def default_dt_s(classes, stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
@@ -91,70 +93,6 @@ def default_dt_s(classes, stiffness_n_m: float = DEFAULT_STIFFNESS_N_M,
 
 
 DEFAULT_DT_S = default_dt_s(slice_2d(PAPER_RECIPE, PAPER_DRUM))  # the paper bed's step
-
-
-@dataclass(frozen=True)
-class SimParams:
-    """Contact and integration parameters of the twin (the knobs calibration turns: friction, rolling).
-
-    ``dt_s`` None: the default step of the bed (``default_dt_s``), resolved when the twin is built.
-    """
-
-    friction: float = DEFAULT_FRICTION
-    rolling: float = DEFAULT_ROLLING
-    restitution: float = DEFAULT_RESTITUTION
-    wall_friction: float | None = DEFAULT_WALL_FRICTION  # None: same as ``friction``
-    accel_rpm_s: float = DEFAULT_ACCEL_RPM_S
-    dt_s: float | None = None
-    stiffness_n_m: float = DEFAULT_STIFFNESS_N_M
-    end_friction: float | None = DEFAULT_END_FRICTION  # None: same as the wall; 0: no end plates
-
-    @property
-    def wall_mu(self) -> float:
-        """Particle-wall sliding friction in effect (``wall_friction``, else ``friction``)."""
-        return self.friction if self.wall_friction is None else self.wall_friction
-
-    @property
-    def end_mu(self) -> float:
-        """Friction of the drum's end plates in effect (``end_friction``, else the wall's)."""
-        return self.wall_mu if self.end_friction is None else self.end_friction
-
-
-@dataclass(frozen=True)
-class ContactStats:
-    """Contact quality since the last ``reset_stats()``: overlaps and wall penetration.
-
-    ``overlap_p99_r``: 99th percentile of disk-disk overlap over all contacts of all
-    steps, in small radii; ``overlap_max_r`` the largest; ``wall_max_mm`` the deepest
-    any disk got into the wall; ``airborne`` the fraction of disks without a contact
-    in the last step.
-    """
-
-    steps: int
-    contacts: int
-    overlap_p99_r: float
-    overlap_max_r: float
-    wall_max_mm: float
-    airborne: float
-
-
-@dataclass(frozen=True)
-class Particles:
-    """Positions (m, drum frame, y up), radii (m) and class index of every disk (for a shaped particle:
-    its centroid and circumscribed radius; its outline in ``class_outline_m``, turned by ``angle_rad``)."""
-
-    x_m: np.ndarray
-    y_m: np.ndarray
-    r_m: np.ndarray
-    cls: np.ndarray
-    angle_rad: np.ndarray | None = None
-    class_names: tuple[str, ...] = ()
-    class_bgr: tuple[tuple[int, int, int], ...] = ()
-    class_outline_m: tuple[np.ndarray | None, ...] = ()  # per class: outline (k, 2) about the centroid, None: disc
-    baffles_m: tuple[np.ndarray, ...] = ()  # the drum's baffles now, polygons (k, 2) in the drum frame
-
-    def __len__(self) -> int:
-        return int(self.x_m.shape[0])
 
 
 @dataclass(frozen=True)
@@ -184,101 +122,6 @@ class SimState:
     def direction(self) -> int:
         """+1: the drum turns counter-clockwise as the camera sees it at positive rpm, -1 clockwise."""
         return 1 if self.mixer is None else int(self.mixer.direction)
-
-
-def rpm_to_rad_s(rpm: float) -> float:
-    return float(rpm) * 2.0 * math.pi / 60.0
-
-
-def check_rpm(rpm: float, drum: DrumSpec) -> float:
-    """The rpm as a float, or SimError if it is not finite or above the critical speed."""
-    try:
-        rpm = float(rpm)
-    except (TypeError, ValueError):
-        raise SimError(f"rpm must be a number (got {rpm!r})") from None
-    if not math.isfinite(rpm):
-        raise SimError(f"rpm must be finite (got {rpm})")
-    if abs(rpm) > drum.critical_rpm:
-        raise SimError(
-            f"{abs(rpm):g} rpm is above the critical speed {drum.critical_rpm:.1f} rpm "
-            f"of a {drum.diameter_m * 1e3:g} mm drum"
-        )
-    return rpm
-
-
-def _check_params(p: SimParams) -> None:
-    if not (0.0 <= p.friction <= 5.0) or not math.isfinite(p.friction):
-        raise SimError(f"friction must be in [0, 5] (got {p.friction})")
-    if not (0.0 <= p.rolling <= 5.0) or not math.isfinite(p.rolling):
-        raise SimError(f"rolling resistance must be in [0, 5] (got {p.rolling})")
-    if not (MIN_RESTITUTION <= p.restitution <= 1.0):
-        raise SimError(f"restitution must be in [{MIN_RESTITUTION:g}, 1] (got {p.restitution})")
-    if p.wall_friction is not None and not (0.0 <= p.wall_friction <= 5.0):
-        raise SimError(f"wall friction must be in [0, 5] (got {p.wall_friction})")
-    if p.end_friction is not None and not (0.0 <= p.end_friction <= 5.0):
-        raise SimError(f"end-plate friction must be in [0, 5] (got {p.end_friction})")
-    if p.dt_s is not None and (not (1e-5 <= p.dt_s <= 0.02) or not math.isfinite(p.dt_s)):
-        raise SimError(f"time step must be in [0.01, 20] ms (got {p.dt_s * 1e3:g} ms)")
-    if not (1.0 <= p.stiffness_n_m <= 1e9) or not math.isfinite(p.stiffness_n_m):
-        raise SimError(f"contact stiffness must be in [1, 1e9] N/m (got {p.stiffness_n_m})")
-    if p.accel_rpm_s <= 0:
-        raise SimError(f"acceleration limit must be positive (got {p.accel_rpm_s} rpm/s)")
-
-
-class FixedStepTwin:
-    """The clock and contact knobs every engine shares: one fixed internal step ``params.dt_s``
-    whatever the caller's slicing (the remainder carried), and run-time friction. An engine
-    provides ``_run(n_steps)`` and ``_params_changed()``."""
-
-    params: SimParams
-    t_s: float
-    _acc_s: float
-
-    def _run(self, n_steps: int, count: bool = True) -> None:
-        raise NotImplementedError
-
-    def _params_changed(self) -> None:
-        raise NotImplementedError
-
-    def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
-        """Change sliding friction (and rolling friction, and the end plates' friction: a calibration's
-        ``sim.calibrate.Calibration.twin_kwargs``) at run time; None keeps that one as it is."""
-        rolling = self.params.rolling if rolling is None else float(rolling)
-        end = self.params.end_friction if end_friction is None else float(end_friction)
-        params = replace(self.params, friction=float(friction), rolling=rolling, end_friction=end)
-        _check_params(params)
-        self.params = params
-        self._params_changed()
-
-    def substep_s(self) -> float:
-        """The fixed internal step (s)."""
-        assert self.params.dt_s is not None
-        return self.params.dt_s
-
-    # ---------------------------------------------------------------- time
-    def step(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` seconds (same as ``advance``; kept for callers of the old API)."""
-        if not (dt_s > 0) or not math.isfinite(dt_s):
-            raise SimError(f"step must be a positive number of seconds (got {dt_s})")
-        self.advance(dt_s)
-
-    def advance(self, duration_s: float) -> None:
-        """Advance the clock by ``duration_s`` s, running every whole fixed step that fits.
-
-        The physics runs in steps of exactly ``dt_s``; what is left over (less than a
-        step) is carried to the next call, so any way of slicing the same time runs
-        the same steps.
-        """
-        if duration_s < 0 or not math.isfinite(duration_s):
-            raise SimError(f"duration must be >= 0 s (got {duration_s})")
-        h = self.substep_s()
-        self._acc_s += duration_s
-        n = int(math.floor(self._acc_s / h + 1e-9))
-        self.t_s += duration_s
-        if n <= 0:
-            return
-        self._acc_s = max(0.0, self._acc_s - n * h)
-        self._run(n)
 
 
 class DrumSim(FixedStepTwin):
@@ -312,7 +155,7 @@ class DrumSim(FixedStepTwin):
                            None if wall_friction is None else float(wall_friction),
                            float(accel_rpm_s), None if dt_s is None else float(dt_s), float(stiffness_n_m),
                            None if end_friction is None else float(end_friction))
-        _check_params(params)
+        check_params(params)
         if mixer is not None:
             drum, recipe_used, classes = mixer.drum, None, disk_classes(mixer)
         else:
@@ -361,7 +204,7 @@ class DrumSim(FixedStepTwin):
         t_c = bed_contact_time_s(st.classes, params.stiffness_n_m, params.restitution)
         if params.dt_s is None:
             params = replace(params, dt_s=t_c / STEPS_PER_CONTACT)
-        _check_params(params)
+        check_params(params)
         assert params.dt_s is not None
         if params.dt_s > t_c / MIN_STEPS_PER_CONTACT:
             raise SimError(
@@ -424,13 +267,13 @@ class DrumSim(FixedStepTwin):
         prm[dem.P_RMIN] = self._r_min
         prm[dem.P_END] = p.end_mu / self.drum.depth_m
         self._prm = prm
-        self._c_pair, self._c_wall = dem.contact_tables(self._cls_mass, np.array([c.radius_m for c in self.classes]),
-                                                        p.stiffness_n_m, p.restitution)
+        self._c_pair, self._c_wall = dem_contact.contact_tables(
+            self._cls_mass, np.array([c.radius_m for c in self.classes]), p.stiffness_n_m, p.restitution)
 
     def _list_slots(self) -> int:
-        """Neighbour-list slots per disk for the widest skin ``dem.list_skin`` may choose."""
-        widest = max(self._skin, dem.SKIN_MAX_R * self._r_min)
-        return dem.neighbour_slots(float(self._r.max()), self._r_min, widest)
+        """Neighbour-list slots per disk for the widest skin ``dem_neighbours.list_skin`` may choose."""
+        widest = max(self._skin, dem_neighbours.SKIN_MAX_R * self._r_min)
+        return dem_neighbours.neighbour_slots(float(self._r.max()), self._r_min, widest)
 
     def _set_masses(self) -> None:
         self._masses = self._cls_mass[self._cls]
@@ -550,20 +393,15 @@ class DrumSim(FixedStepTwin):
     # ------------------------------------------------------------ statistics
     def reset_stats(self) -> None:
         """Start counting contact statistics (``stats()``) afresh."""
-        self._hist = np.zeros(_OVERLAP_BINS + 1, dtype=np.int64)
+        self._hist = np.zeros(OVERLAP_BINS + 1, dtype=np.int64)
         self._acc = np.zeros(dem.ACC_N)
         self._acc[dem.ACC_AIRBORNE] = np.nan
         self._stat_steps = 0
 
     def stats(self) -> ContactStats:
         """Overlap percentiles, wall penetration and airborne fraction since ``reset_stats()``."""
-        total = int(self._hist.sum())
         acc = self._acc
-        if total:
-            k = int(np.searchsorted(np.cumsum(self._hist), 0.99 * total))
-            p99 = min((k + 1) * 2.0 / _OVERLAP_BINS, float(acc[dem.ACC_OVERLAP_MAX]))
-        else:
-            p99 = 0.0
+        p99 = overlap_p99_r(self._hist, float(acc[dem.ACC_OVERLAP_MAX]))
         return ContactStats(self._stat_steps, int(acc[dem.ACC_CONTACTS]), float(p99),
                             float(acc[dem.ACC_OVERLAP_MAX]), 1e3 * float(acc[dem.ACC_WALL_MAX]),
                             float(acc[dem.ACC_AIRBORNE]))
@@ -627,19 +465,11 @@ class DrumSim(FixedStepTwin):
 
 
 __all__ = [
-    "CASES",
     "DEFAULT_DT_S",
-    "DEFAULT_FRICTION",
-    "DEFAULT_ROLLING",
-    "DEFAULT_STIFFNESS_N_M",
-    "ContactStats",
+    "MIN_STEPS_PER_CONTACT",
+    "STEPS_PER_CONTACT",
     "DrumSim",
-    "FixedStepTwin",
-    "Particles",
-    "SimParams",
     "SimState",
     "bed_contact_time_s",
-    "check_rpm",
     "default_dt_s",
-    "rpm_to_rad_s",
 ]

@@ -73,7 +73,7 @@ class Twin(Protocol):
         ...
 
     def particles(self) -> Any:
-        """Positions (m, drum frame, y up), radii, classes and angles now (``sim.drum.Particles``)."""
+        """Positions (m, drum frame, y up), radii, classes and angles now (``sim.twin_base.Particles``)."""
         ...
 
     def snapshot(self) -> Any:
@@ -85,7 +85,7 @@ class Twin(Protocol):
         ...
 
     def stats(self) -> Any:
-        """Contact statistics since ``reset_stats`` (``sim.drum.ContactStats``)."""
+        """Contact statistics since ``reset_stats`` (``sim.twin_base.ContactStats``)."""
         ...
 
     def reset_stats(self) -> None:
@@ -209,7 +209,8 @@ def from_placement(
     None: the mixer's (``[drum.friction]``), else the engines' defaults (the plates: the wall's)."""
     import numpy as np
 
-    from sim.drum import DrumSim, SimParams, SimState, _check_params
+    from sim.drum import DrumSim, SimState
+    from sim.params import SimParams, check_params
 
     name = engine_for(mixer, engine)
     base = SimParams()
@@ -218,7 +219,7 @@ def from_placement(
     params = SimParams(friction=base.friction if friction is None else float(friction),
                        rolling=base.rolling if rolling is None else float(rolling),
                        end_friction=ends.get("end_friction", base.end_friction))
-    _check_params(params)
+    check_params(params)
     if name == "pymunk":
         twin: Twin = twin_class(name).from_placement(mixer, pos_m, classes, angle_rad, rpm, settle_s, seed=int(seed),
                                                      friction=params.friction, rolling=params.rolling,

@@ -29,10 +29,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sim.drum import DrumSim, SimParams, SimState, _check_params, check_rpm
+from sim.drum import DrumSim, SimState
 from sim.engine import from_placement
 from sim.errors import SimError
 from sim.mixer import Mixer, resolve
+from sim.params import SimParams, check_params, check_rpm
 from sim.placement import SHRINK, DiscGrid, disc_arrays
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DiskClass, DrumSpec, Recipe, slice_2d
 
@@ -140,7 +141,7 @@ def seed_from_labels(
         friction=base.friction if friction is None else float(friction),
         rolling=base.rolling if rolling is None else float(rolling),
     )
-    _check_params(params)
+    check_params(params)
     classes = tuple(slice_2d(recipe, drum)) if mixer is None else tuple(
         DiskClass(k.name, k.radius_m, k.count, k.density_kg_m3, k.colour_bgr) for k in resolve(mixer))
     rng = np.random.default_rng(seed)

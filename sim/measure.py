@@ -21,15 +21,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.drum import Particles
 from sim.recipe import DrumSpec
+from sim.twin_base import Particles
 from vision.meter import Meter
 from vision.mixing import MixingIndices, mixing_indices
 from vision.slope import CENTRAL_HALF_CHORD, fit_surface_points, slope_from_moments
 
 __all__ = [
     "CHORD_HALF_R", "FreeSurface", "class_moments", "free_surface", "particle_axis_deg", "particle_mi",
-    "particle_slope_deg", "surface_profile", "twin_meter",
+    "particle_slope_deg", "radial_spread_m", "surface_profile", "twin_meter",
 ]
 
 CHORD_HALF_R = CENTRAL_HALF_CHORD  # half-width of the central chord, in drum radii (the meter's)
@@ -148,6 +148,18 @@ def particle_axis_deg(particles: Particles, drum: DrumSpec) -> float:
     m02 = float(np.dot(a, y * y + self_m))
     m11 = float(np.dot(a, x * y))
     return slope_from_moments(m00, m10, m01, m20, m11, m02, 0.0, 0.0, min_px=0.0) if m00 > 0 else float("nan")
+
+
+def radial_spread_m(particles: Particles, areas_m2: np.ndarray | None = None) -> tuple[float, ...]:
+    """Each class's spread about the whole bed's centroid (m): ``sqrt(mean |p_i - c_bed|^2)`` over
+    its particles, ``c_bed`` area-weighted (``areas_m2`` per class; None: ``pi r^2``)."""
+    a = np.pi * particles.r_m ** 2 if areas_m2 is None else np.asarray(areas_m2)[particles.cls]
+    cx = float(np.dot(a, particles.x_m) / a.sum())
+    cy = float(np.dot(a, particles.y_m) / a.sum())
+    d2 = (particles.x_m - cx) ** 2 + (particles.y_m - cy) ** 2
+    k_max = int(particles.cls.max()) + 1 if len(particles) else 0
+    return tuple(float(np.sqrt(d2[particles.cls == k].mean())) if np.any(particles.cls == k) else float("nan")
+                 for k in range(k_max))
 
 
 def twin_meter(renderer, **kwargs) -> Meter:

@@ -13,7 +13,7 @@ The grid answers exactly what the check against every placed disc answered (the 
 inequality in the same floating-point order), and ``place_random`` draws the same random numbers
 in the same order as the loop it replaced, so a seed places every disc where it did before.
 
-Why not the DEM's cell code (``sim.dem._rebuild``): that sorts a finished set of positions into
+Why not the DEM's cell code (``sim.dem_neighbours.rebuild_list``): that sorts a finished set of positions into
 cells once per neighbour list (a counting sort); placement adds one disc at a time and asks
 after each, which wants cells that grow (a linked list per cell).
 """
@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from sim.errors import SimError
-from sim.recipe import DiskClass
+from sim.recipe import DiskClass, DrumSpec
 
 SHRINK = 0.8  # placement size before inflation (of the full radius)
 GAP_R = 0.02  # placed discs keep this share of the largest radius apart
@@ -208,4 +208,29 @@ def place_random(classes: Sequence[DiskClass], case: str, radius_m: float,
             return pos, cls
 
 
-__all__ = ["CELLS_PER_DISC", "GAP_R", "MAX_TRIES", "SHRINK", "DiscGrid", "disc_arrays", "place_random"]
+def check_placement(pos_m: np.ndarray, classes: np.ndarray, angle_rad: np.ndarray, n_classes: int,
+                    drum: DrumSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A caller's placement (centres ``pos_m`` (n, 2; m, drum frame), class indices ``classes`` (n,)
+    into ``n_classes`` classes, angles ``angle_rad`` (n,; rad)) as float64, int64 and float64 arrays;
+    a one-line SimError when the shapes, the classes or the numbers are off or a centre lies outside
+    the drum."""
+    pos = np.asarray(pos_m, dtype=np.float64)
+    k = np.asarray(classes)
+    ang = np.asarray(angle_rad, dtype=np.float64)
+    n = k.size
+    if pos.shape != (n, 2) or ang.shape != (n,) or k.ndim != 1:
+        raise SimError(f"a placement needs (n, 2) centres, n classes and n angles (got {pos.shape}, "
+                       f"{k.shape}, {ang.shape})")
+    if n == 0:
+        raise SimError("a placement needs at least one particle")
+    if not (np.issubdtype(k.dtype, np.integer) and 0 <= int(k.min()) and int(k.max()) < n_classes):
+        raise SimError(f"placement classes must be indices 0..{n_classes - 1} of the mixer's classes")
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
+        raise SimError("placement centres and angles must be finite")
+    if float(np.hypot(pos[:, 0], pos[:, 1]).max()) >= drum.radius_m:
+        raise SimError(f"a placed particle lies outside the {drum.diameter_m * 1e3:g} mm drum")
+    return pos, k.astype(np.int64), ang
+
+
+__all__ = ["CELLS_PER_DISC", "GAP_R", "MAX_TRIES", "SHRINK", "DiscGrid", "check_placement", "disc_arrays",
+           "place_random"]

@@ -30,9 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from sim.drum import Particles, rpm_to_rad_s
 from sim.mixer import resolve
+from sim.params import rpm_to_rad_s
 from sim.recipe import G_M_S2, PACKING_2D, PACKING_3D
+from sim.twin_base import Particles
 
 __all__ = [
     "class_masses_kg",

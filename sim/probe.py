@@ -18,10 +18,10 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-from sim.drum import Particles
 from sim.errors import SimError
 from sim.measure import FreeSurface, free_surface, particle_mi
 from sim.recipe import DrumSpec
+from sim.twin_base import Particles
 from vision.mixing import MixingIndices
 
 __all__ = ["Sample", "probe"]

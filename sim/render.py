@@ -20,9 +20,10 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from sim.drum import DrumSim, Particles
+from sim.drum import DrumSim
 from sim.errors import SimError
 from sim.recipe import DrumSpec
+from sim.twin_base import Particles
 
 if TYPE_CHECKING:
     from sim.pymunk_twin import PymunkDrumSim

@@ -64,7 +64,8 @@ def convergence(seeds=(0, 1, 2, 3), steps_per_contact=(3, 4, 5, 8, 10, 20, 40), 
                 duration_s: float = 30.0) -> dict:
     """Case C at 5 rpm: slope, late MI, overlap and wall depth against the step (fractions of the
     contact time) and, at the default step fraction, against the contact stiffness."""
-    from sim.drum import DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, bed_contact_time_s
+    from sim.drum import STEPS_PER_CONTACT, bed_contact_time_s
+    from sim.params import DEFAULT_STIFFNESS_N_M
     from sim.recipe import PAPER_RECIPE, slice_2d
 
     t_c = bed_contact_time_s(slice_2d(PAPER_RECIPE, PAPER_DRUM), DEFAULT_STIFFNESS_N_M, 0.5)

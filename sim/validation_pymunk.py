@@ -24,9 +24,8 @@ import numpy as np
 from sim import calibrate as cal
 from sim.engine import make_twin
 from sim.errors import SimError
-from sim.measure import free_surface, particle_mi
+from sim.measure import free_surface, particle_mi, radial_spread_m
 from sim.mixer import Baffles, Mixer, Shape, parse_mixer, resolve
-from sim.pymunk_twin import radial_spread_m
 
 SECTIONS = ("convergence", "segregation", "baffles", "dem", "calibration")
 RIG_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "pmma-cutdisc.toml"

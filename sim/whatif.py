@@ -34,10 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from sim.drum import DrumSim, SimState, check_rpm, rpm_to_rad_s
+from sim.drum import DrumSim, SimState
 from sim.engine import from_state, make_twin
 from sim.errors import SimError
 from sim.mixer import Mixer
+from sim.params import check_rpm, rpm_to_rad_s
 from sim.pool import close_pool, make_pool
 from sim.power import depth_scale, drive_power_w
 from sim.probe import probe

@@ -85,7 +85,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 # `drumtwin bench dashboard` (a demo in its own process, chromium on its dashboard) once per
-# session: the bad-input sweep's base of that command and test_live.py's bench test read it.
+# session: the bad-input sweep's base of that command and twin/test_live_browser.py's bench test read it.
 BENCH_DASHBOARD_ARGS = ["--seconds", "2", "--warmup", "0", "--speed", "2"]
 
 
@@ -117,7 +117,7 @@ def memo_learning() -> Iterator[None]:
 # arguments: run once per session (``cli_once``), both tests assert on the one result. Their
 # users share xdist group "benches" (one worker: one run).
 BENCH_TREND_ARGS = ["--json", "--sequences", "2", "--real-seeds", "1"]  # control/test_cli.py's bench test
-BENCH_MEMORY_ARGS = ["--seconds", "5", "--json"]  # twin/test_safety.py's bench test
+BENCH_MEMORY_ARGS = ["--seconds", "5", "--json"]  # twin/test_memory.py's bench test
 BENCH_TWIN_ARGS = ["--duration", "0.02", "--json"]  # sim/test_cli.py's bench test
 BENCHES = pytest.mark.xdist_group("benches")
 
@@ -144,8 +144,10 @@ def cli_once() -> Callable[..., CliResult]:
 
 # `drumtwin commission` of the real PMMA frames, issue 39's must-show command (no --out: the default folder,
 # in a working folder of its own), once per session: tests/twin/test_commission.py and the bad-input sweep's
-# base of that command read it. Their users share xdist group "commission" (one worker: one run).
-COMMISSION = pytest.mark.xdist_group("commission")
+# base of that command read it. Their users share one xdist group (one worker: one run), and it is "live":
+# one of them runs the loop on the commissioned mixer.toml (marked "live" too), and a test in two groups is
+# in a third of its own ("commission_live": xdist joins the names), whose worker ran the commissioning again.
+COMMISSION = pytest.mark.xdist_group("live")
 COMMISSION_PMMA_ARGS = ["--drum-diameter-mm", "250", "--rpm", "5"]
 
 

@@ -70,3 +70,26 @@ def test_loadgroup_puts_a_group_on_one_worker_and_its_session_fixture_runs_once(
     assert len(set(grouped.values())) == 1, grouped  # one worker for the whole group
     assert len({gw for gw, _ in ran}) == 2, ran  # the free tests did go to both workers
     assert runs.read_text().split() == [next(iter(grouped.values()))]  # the session fixture once
+
+
+def test_a_test_in_two_groups_is_refused_by_name() -> None:
+    """xdist puts a test marked with groups "commission" and "live" in a third group, "commission_live",
+    on any worker: the must-show commissioning that group "commission" shares ran twice, and a loop ran
+    beside the "live" chain. Such a test fails at its set-up (before its fixtures), by name."""
+    import pytest
+
+    from tests.xdist_groups import one_group
+
+    class Item:
+        nodeid = "tests/x.py::test_y"
+
+        def __init__(self, *names: str) -> None:
+            self.marks = [pytest.mark.xdist_group(n).mark for n in names]
+
+        def iter_markers(self, name: str):
+            return iter(m for m in self.marks if m.name == name)
+
+    for fine in (Item("live"), Item("live", "live"), Item()):  # one group, twice (module and test), none
+        one_group(fine)  # type: ignore[arg-type]
+    with pytest.raises(pytest.fail.Exception, match=r"tests/x.py::test_y: in xdist groups \['commission', 'live'\]"):
+        one_group(Item("commission", "live"))  # type: ignore[arg-type]

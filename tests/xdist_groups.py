@@ -15,12 +15,31 @@ from __future__ import annotations
 import pytest
 
 
+def group_names(item: pytest.Item) -> set[str]:
+    """The names of the ``xdist_group`` marks on a test (its module's and class's included)."""
+    return {str(m.args[0] if m.args else m.kwargs.get("name", "default")) for m in item.iter_markers("xdist_group")}
+
+
 def group_suffix(item: pytest.Item) -> str | None:
     """``"@a_b"`` for a test marked ``xdist_group("a")`` and ``("b")`` (xdist's rule: the
     sorted names joined by ``_``), None for an ungrouped test."""
-    names = {str(m.args[0] if m.args else m.kwargs.get("name", "default"))
-             for m in item.iter_markers("xdist_group")}
+    names = group_names(item)
     return "@" + "_".join(sorted(names)) if names else None
+
+
+def one_group(item: pytest.Item) -> None:
+    """A test marked with two groups is in neither (xdist's group is their joined names, ``"a_b"``):
+    it loses what each group was for, one worker for the loops or one run of a session fixture its
+    group shares (``commission_pmma`` ran twice so). Such a test fails at its set-up, by name."""
+    if len(names := group_names(item)) > 1:
+        pytest.fail(f"{item.nodeid}: in xdist groups {sorted(names)} at once (xdist makes that a group of its "
+                    "own); give it one group", pytrace=False)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Before any fixture of the test: :func:`one_group`."""
+    one_group(item)
 
 
 @pytest.hookimpl(trylast=True)

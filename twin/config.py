@@ -131,7 +131,7 @@ class RunConfig:
         mode = self.mode.lower()
         if mode not in MODES:
             raise TwinError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
-        from sim.drum import CASES  # the one definition of the recipe's initial states
+        from sim.params import CASES  # the one definition of the recipe's initial states
 
         case = self.case.upper()
         if case not in CASES:
@@ -142,45 +142,8 @@ class RunConfig:
             math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S
         ):
             raise TwinError(f"--duration must be a number in (0, {MAX_DURATION_S:g}] s, got {self.duration_s}")
-        check_host(self.host)
-        if self.scheduler is not None:
-            check_scheduler(self.scheduler)
-        if not (0 < self.port < 65536):
-            raise TwinError(f"--port must be 1..65535, got {self.port}")
-        if not (0 <= self.seed < 2**32):
-            raise TwinError(f"--seed must be in 0..{2**32 - 1}, got {self.seed}")
-        for name, value in (
-            ("start_rpm", self.start_rpm),
-            ("camera_fps", self.camera_fps),
-            ("supervisor_period_s", self.supervisor_period_s),
-            ("whatif_horizon_s", self.whatif_horizon_s),
-            ("dashboard_hz", self.dashboard_hz),
-        ):
-            if not (math.isfinite(value) and value > 0):
-                raise TwinError(f"{name} must be a number > 0, got {value}")
-        if self.frame_px < 32 or self.whatif_workers < 1:
-            raise TwinError(
-                f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}"
-            )
-        if self.catalogue is not None:  # a catalogue that cannot be used later is a warning; this is a typo
-            from twin.catalogue.store import check_url
-
-            check_url(self.catalogue)
-        if self.mill is not None and not self.mill.strip():
-            raise TwinError("--mill must not be empty")
-        if self.camera is not None and self.video is not None:
-            raise TwinError("give either --camera or --video, not both")
-        if (self.camera is not None or self.video is not None) and self.mill is None:
-            raise TwinError("a real camera or video needs --mill URL (the demo emulates both)")
-        if self.mill is not None and self.camera is None and self.video is None:
-            raise TwinError("--mill needs --camera or --video (the demo emulates both)")
-        if self.video is not None and not Path(self.video).is_file():
-            raise FileNotFoundError(f"video not found: {self.video}")
-        if self.video is not None:
-            from vision.sources import source_kind
-
-            if source_kind(str(self.video)) != "video":  # an image replays as one frame of no video
-                raise TwinError(f"--video {self.video} is not a video file (for images: drumtwin mi)")
+        self._check_numbers()
+        self._check_sources()
         if self.engine is not None and self.engine not in ("dem", "pymunk"):
             raise TwinError(f"--engine must be dem or pymunk, got {self.engine!r}")
         if self.meter_config is not None:  # the demo's plant and twin stay the paper's, the config is checked
@@ -207,6 +170,51 @@ class RunConfig:
             )
         log_dir = self.log_dir or default_run_dir()
         return replace(self, mode=mode, case=case, control_token=token, log_dir=Path(log_dir), objective=objective)
+
+    def _check_numbers(self) -> None:
+        """The host, ports, seed and the run's positive rates and lengths."""
+        check_host(self.host)
+        if self.scheduler is not None:
+            check_scheduler(self.scheduler)
+        if not (0 < self.port < 65536):
+            raise TwinError(f"--port must be 1..65535, got {self.port}")
+        if not (0 <= self.seed < 2**32):
+            raise TwinError(f"--seed must be in 0..{2**32 - 1}, got {self.seed}")
+        for name, value in (
+            ("start_rpm", self.start_rpm),
+            ("camera_fps", self.camera_fps),
+            ("supervisor_period_s", self.supervisor_period_s),
+            ("whatif_horizon_s", self.whatif_horizon_s),
+            ("dashboard_hz", self.dashboard_hz),
+        ):
+            if not (math.isfinite(value) and value > 0):
+                raise TwinError(f"{name} must be a number > 0, got {value}")
+        if self.frame_px < 32 or self.whatif_workers < 1:
+            raise TwinError(
+                f"frame_px must be >= 32 and whatif_workers >= 1, got {self.frame_px}, {self.whatif_workers}"
+            )
+
+    def _check_sources(self) -> None:
+        """The catalogue, the mill, the camera or video: given together or not at all, and readable."""
+        if self.catalogue is not None:  # a catalogue that cannot be used later is a warning; this is a typo
+            from twin.catalogue.store import check_url
+
+            check_url(self.catalogue)
+        if self.mill is not None and not self.mill.strip():
+            raise TwinError("--mill must not be empty")
+        if self.camera is not None and self.video is not None:
+            raise TwinError("give either --camera or --video, not both")
+        if (self.camera is not None or self.video is not None) and self.mill is None:
+            raise TwinError("a real camera or video needs --mill URL (the demo emulates both)")
+        if self.mill is not None and self.camera is None and self.video is None:
+            raise TwinError("--mill needs --camera or --video (the demo emulates both)")
+        if self.video is not None and not Path(self.video).is_file():
+            raise FileNotFoundError(f"video not found: {self.video}")
+        if self.video is not None:
+            from vision.sources import source_kind
+
+            if source_kind(str(self.video)) != "video":  # an image replays as one frame of no video
+                raise TwinError(f"--video {self.video} is not a video file (for images: drumtwin mi)")
 
     def to_metadata(self) -> dict:
         """The config as JSON data for metadata.json (the token is never written)."""

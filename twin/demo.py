@@ -27,7 +27,7 @@ from twin.clock import RunClock
 from vision.sources import Frame
 
 # The plant differs from the twin's defaults: the twin must calibrate to it.
-PLANT_FRICTION = 0.30  # twin default 0.5 (sim.drum.DEFAULT_FRICTION)
+PLANT_FRICTION = 0.30  # the twin starts from sim.params.DEFAULT_FRICTION (0.25)
 PLANT_ROLLING = 0.05  # twin default 0.0: this plant segregates within a minute at 5 rpm
 PLANT_SEED_OFFSET = 1000
 

@@ -40,7 +40,7 @@ from twin.records import (
 )
 
 if TYPE_CHECKING:
-    from sim.drum import Particles
+    from sim.twin_base import Particles
 
 FrameRow = FrameReading
 """The frame record (``twin.records.FrameReading``) under its old name."""

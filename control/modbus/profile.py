@@ -294,7 +294,8 @@ def _build(d: dict[str, Any]) -> DriveProfile:
             action_parameter=str(cl.get("action_parameter", "")),
             time_register=_reg(cl["time_register"], "comm_loss.time_register"),
             time_counts_per_s=check_number("comm_loss.time_counts_per_s", cl.get("time_counts_per_s", 1), above=0.0),
-            action_register=None if "action_register" not in cl else _reg(cl["action_register"], "action_register"),
+            action_register=(None if "action_register" not in cl
+                             else _reg(cl["action_register"], "comm_loss.action_register")),
             safe_actions=tuple(int(a) for a in cl.get("safe_actions", ())),
             recommended_action=cl.get("recommended_action"),
             actions={k: str(v) for k, v in _int_keys(cl.get("actions", {})).items()},

@@ -316,3 +316,15 @@ def test_the_status_rounds_the_actual_speed_to_two_decimals():
     d.tick(0.0625)  # 10 rpm/s for 1/16 s: 0.625 rpm exactly
     assert d.motor.actual_rpm == 0.625
     assert d.status().actual_rpm == 0.62  # round half to even, as the 2-decimal wire field
+
+
+def test_a_resent_stop_that_stops_a_front_panel_start_is_recorded_and_reads_false():
+    """A ``STP`` resend (same seq and payload) that finds the motor running again stops it and
+    records that stop as applied now, with its own seq; the status then says running ``False``."""
+    d = MillDevice(DeviceConfig(watchdog_s=0.0))
+    stp = p.encode_frame(7, p.STP)
+    d.receive(stp, 0.0)
+    d.motor.running = True  # the front panel
+    assert frames(d.receive(stp, 0.5)) == [p.Frame(7, p.ACK)]
+    assert d.applied == [Applied(0.0, 7, p.STP, ()), Applied(0.5, 7, p.STP, ())]
+    assert d.status().running is False and d.status().as_dict()["running"] is False

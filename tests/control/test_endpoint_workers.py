@@ -15,7 +15,7 @@ from control.endpoint import EndpointConfig, EndpointDetector
 from control.supervisor import Mode
 from control.trend import MITrend
 from tests.twin.test_mill_worker import Sink
-from tests.twin.test_workers import Boxes, _reading, sup_worker
+from tests.twin.workers_fakes import Boxes, reading, sup_worker
 from twin.live.camera import CameraReading, ProcessWorker
 from twin.live.commands import StopMill
 from twin.state import LiveState
@@ -27,7 +27,7 @@ def feed(pw: ProcessWorker, b: Boxes, t0: float, t1: float, mi: float) -> None:
     i = int(t0 * FPS)
     while i / FPS < t1 - 1e-9:
         b.wall.t += 1 / FPS
-        pw.process(CameraReading(i / FPS, i, _reading(mi)))
+        pw.process(CameraReading(i / FPS, i, reading(mi)))
         i += 1
 
 

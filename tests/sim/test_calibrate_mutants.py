@@ -291,7 +291,8 @@ def test_a_calibration_as_a_record_has_every_field(field):
         "friction": cal.friction, "rolling": cal.rolling, "end_friction": cal.friction,
         "twin_slope_deg": cal.twin_slope_deg, "residual_deg": cal.residual_deg, "target_slope_deg": 30.0,
         "rpm": 10.0, "evaluations": cal.evaluations, "range_deg": [20.0, 45.0], "twin_curvature": cal.twin_curvature,
-        "target_curvature": 0.25, "path": cal.path, "end_friction_max": 0.0,
+        "target_curvature": 0.25, "path": cal.path, "end_friction_max": 0.0, "slope_se_deg": cal.slope_se_deg,
+        "confirmations": 0,
     }
     assert cal.twin_kwargs() == {"friction": cal.friction, "rolling": cal.rolling, "end_friction": cal.friction}
     assert cal.path in ("diagonal", "sliding-first", "rolling-first")

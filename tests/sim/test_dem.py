@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim import dem
-from sim.drum import DEFAULT_DT_S, DEFAULT_STIFFNESS_N_M, STEPS_PER_CONTACT, DrumSim
+from sim import dem, dem_contact, dem_neighbours
+from sim.drum import DEFAULT_DT_S, STEPS_PER_CONTACT, DrumSim
+from sim.params import DEFAULT_STIFFNESS_N_M
 
 R_SMALL = 0.005
 M_SMALL = 9.75e-4  # kg, a 10 mm disk of the paper bed
@@ -28,11 +29,11 @@ def _run(pos, vel, omg, n_steps, *, r=R_SMALL, m=M_SMALL, drum_r=1.0, mu=0.25, m
     prm[[dem.P_DT, dem.P_MU, dem.P_MU_W, dem.P_MU_R, dem.P_G, dem.P_R, dem.P_SKIN,
          dem.P_ACCEL, dem.P_RMIN, dem.P_END]] = [dt, mu, mu, mu_r, g, drum_r, skin, 20.0, r, end]
     rad = np.full(n, r)
-    kk = dem.neighbour_slots(r, r, max(skin, dem.SKIN_MAX_R * r))
+    kk = dem_neighbours.neighbour_slots(r, r, max(skin, dem_neighbours.SKIN_MAX_R * r))
     hist = np.zeros(1001, dtype=np.int64)
     acc = np.zeros(dem.ACC_N)
     ncont = np.zeros(n, dtype=np.int64)
-    pair, wall = dem.contact_tables(np.array([m]), np.array([r]), k, e)
+    pair, wall = dem_contact.contact_tables(np.array([m]), np.array([r]), k, e)
     done = dem.run(n_steps, prm, np.zeros(3), pos, vel, np.zeros(n), omg, rad, np.zeros(n, dtype=np.int64),
             np.full(n, 1 / m), 1 / (0.4 * m * rad**2), pair,
             wall, np.zeros(n + 1, dtype=np.int64), np.zeros(n * kk, dtype=np.int64),
@@ -48,7 +49,7 @@ def test_a_head_on_collision_at_the_default_step_has_the_set_restitution(e):
     # steps per contact one collision's restitution depends on that phase (0.41-0.63 at e = 0.5),
     # its mean does not much: 0.167 / 0.489 / 0.903 for e = 0.2 / 0.5 / 0.9 (the step's error,
     # largest for strong damping; docs/validation.md, section 3)
-    t_c = dem.contact_time_s(DEFAULT_STIFFNESS_N_M, M_SMALL / 2, e)
+    t_c = dem_contact.contact_time_s(DEFAULT_STIFFNESS_N_M, M_SMALL / 2, e)
     dt = t_c / STEPS_PER_CONTACT
     out = []
     for gap in np.arange(32) / 32 * 0.5 * dt:  # v = 0.5 m/s: onsets over one whole step
@@ -91,18 +92,19 @@ def test_every_disk_pair_and_a_disk_at_the_wall_have_the_same_contact_time():
     classes = slice_2d(PAPER_RECIPE, PAPER_DRUM)
     m = np.array([c.mass_kg(_slab_m(classes)) for c in classes])
     r = np.array([c.radius_m for c in classes])
-    pair, wall = dem.contact_tables(m, r, 3000.0, 0.5)
+    pair, wall = dem_contact.contact_tables(m, r, 3000.0, 0.5)
     m_pair = m[:, None] * m[None, :] / (m[:, None] + m[None, :])
-    t_c = dem.contact_time_s(3000.0, m_pair.min(), 0.5)
+    t_c = dem_contact.contact_time_s(3000.0, m_pair.min(), 0.5)
     assert pair[..., 3].min() == pytest.approx(3000.0)  # the lightest pair keeps the set stiffness
     assert pair[..., 3].max() == pytest.approx(3000.0 * 4)  # two 20 mm disks (4x the mass per disk)
     for a in range(2):
-        assert dem.contact_time_s(wall[a, 1], m[a], 0.5) == pytest.approx(t_c)
+        assert dem_contact.contact_time_s(wall[a, 1], m[a], 0.5) == pytest.approx(t_c)
         assert wall[a, 2] == pytest.approx(2 / 7 * wall[a, 1]) and wall[a, 3] == pytest.approx(1 / wall[a, 2])
         for b in range(2):
-            assert dem.contact_time_s(pair[a, b, 3], m_pair[a, b], 0.5) == pytest.approx(t_c)
+            assert dem_contact.contact_time_s(pair[a, b, 3], m_pair[a, b], 0.5) == pytest.approx(t_c)
             # the damping gives every pair the same restitution: c_n = 2 zeta sqrt(m* k_n)
-            assert pair[a, b, 0] == pytest.approx(2 * dem.damping_ratio(0.5) * np.sqrt(m_pair[a, b] * pair[a, b, 3]))
+            zeta = dem_contact.damping_ratio(0.5)
+            assert pair[a, b, 0] == pytest.approx(2 * zeta * np.sqrt(m_pair[a, b] * pair[a, b, 3]))
 
 
 def test_end_plates_decelerate_a_sliding_disk_at_mu_end_g_r_over_the_depth():
@@ -198,8 +200,8 @@ def test_the_neighbour_list_holds_every_pair_within_reach_once_in_sorted_rows_wi
     nb_j[: len(old)] = old
     nb_xi[: len(old)] = np.arange(1, len(old) + 1) * 1e-4
     ref = np.zeros((n, 2))
-    ok = dem._rebuild(pos, rad, nb_start, nb_j, nb_xi, np.empty(cap, dtype=np.int64), np.empty(cap), ref, skin,
-                      0.15, 0.01)
+    ok = dem_neighbours.rebuild_list(pos, rad, nb_start, nb_j, nb_xi, np.empty(cap, dtype=np.int64), np.empty(cap),
+                                     ref, skin, 0.15, 0.01)
     assert ok and len(want) > 2 * n
     got = [(i, int(j)) for i in range(n) for j in nb_j[nb_start[i]:nb_start[i + 1]]]
     assert got == want  # every pair once, rows by i, sorted by j
@@ -207,13 +209,14 @@ def test_the_neighbour_list_holds_every_pair_within_reach_once_in_sorted_rows_wi
     for k, (i, j) in enumerate(got):
         assert nb_xi[k] == kept.get((i, j), 0.0)
     assert np.array_equal(ref, pos)
-    assert not dem._rebuild(pos, rad, nb_start, nb_j[: len(want) - 1], nb_xi[: len(want) - 1],
+    assert not dem_neighbours.rebuild_list(pos, rad, nb_start, nb_j[: len(want) - 1], nb_xi[: len(want) - 1],
                             np.empty(len(want) - 1, dtype=np.int64), np.empty(len(want) - 1), ref, skin, 0.15, 0.01)
 
 
 def test_the_list_skin_lasts_the_set_steps_at_the_fastest_speed_within_its_bounds():
     dt, r = 2e-4, R_SMALL
     vel = np.array([[0.1, 0.0], [0.0, -0.2]])
-    assert dem.list_skin(vel, dt, 0.1 * r, r) == pytest.approx(2 * dem.SKIN_STEPS * 0.2 * dt)
-    assert dem.list_skin(vel * 0.01, dt, 0.1 * r, r) == 0.1 * r  # slow: the smallest skin
-    assert dem.list_skin(vel * 100, dt, 0.1 * r, r) == pytest.approx(dem.SKIN_MAX_R * r)  # fast: the widest
+    assert dem_neighbours.list_skin(vel, dt, 0.1 * r, r) == pytest.approx(2 * dem_neighbours.SKIN_STEPS * 0.2 * dt)
+    assert dem_neighbours.list_skin(vel * 0.01, dt, 0.1 * r, r) == 0.1 * r  # slow: the smallest skin
+    widest = dem_neighbours.SKIN_MAX_R * r
+    assert dem_neighbours.list_skin(vel * 100, dt, 0.1 * r, r) == pytest.approx(widest)  # fast: the widest

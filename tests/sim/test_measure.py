@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from sim.drum import DrumSim, Particles
+from sim.drum import DrumSim
 from sim.measure import CHORD_HALF_R, free_surface, particle_axis_deg, particle_mi, particle_slope_deg, twin_meter
 from sim.recipe import PAPER_DRUM
 from sim.render import Realism, Renderer
+from sim.twin_base import Particles
 
 
 @pytest.fixture(scope="module")

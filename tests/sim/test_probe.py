@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drum import DrumSim, FixedStepTwin
+from sim.drum import DrumSim
 from sim.errors import SimError
 from sim.measure import free_surface, particle_mi
 from sim.probe import probe
+from sim.twin_base import FixedStepTwin
 from tests.cli import cli
 
 PROBE_FILE = str(Path(__file__).resolve().parents[2] / "sim" / "probe.py")

@@ -7,11 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from sim.drum import ContactStats
 from sim.errors import SimError
+from sim.measure import radial_spread_m
 from sim.mixer import Baffles, Mixer, ParticleKind, Shape, shape_area_m2
-from sim.pymunk_twin import PymunkDrumSim, convex_pieces, radial_spread_m
+from sim.pymunk_shapes import convex_pieces
+from sim.pymunk_twin import PymunkDrumSim
 from sim.recipe import DrumSpec
+from sim.twin_base import ContactStats
 from vision.shapes import polygon_area
 
 
@@ -258,16 +260,16 @@ def test_bad_input_is_a_sim_error() -> None:
 
 
 def test_radial_spread() -> None:
-    from sim.drum import Particles
+    from sim.twin_base import Particles
 
     p = Particles(x_m=np.array([1.0, -1.0, 2.0, -2.0]), y_m=np.zeros(4), r_m=np.ones(4), cls=np.array([0, 0, 1, 1]))
     assert radial_spread_m(p) == pytest.approx((1.0, 2.0))
 
 
 def test_render_draws_the_shapes_and_the_baffles() -> None:
-    from sim.drum import Particles
     from sim.mixer import shape_outline_m
     from sim.render import RIM_BGR, Renderer
+    from sim.twin_base import Particles
 
     drum = DrumSpec(0.1, 0.005)
     cut = Shape("cut_disc", 0.02, wedge_deg=90.0)
@@ -333,7 +335,7 @@ def test_from_placement_rejects_a_bad_placement_in_one_line() -> None:
 def test_post_step_contact_order_is_the_stable_sort_by_particle_pair() -> None:
     """The post-step pass orders contacts by (a, b) with two counting-sort passes: the same order
     as a stable sort of a * (n + 1) + b (the canonical order bit-exact branches rely on)."""
-    from sim.pymunk_twin import _counting_sort
+    from sim.pymunk_contacts import _counting_sort
 
     rng = np.random.default_rng(0)
     for _ in range(200):

@@ -6,8 +6,9 @@ import math
 
 import pytest
 
-from sim.drum import DrumSim, check_rpm
+from sim.drum import DrumSim
 from sim.errors import SimError
+from sim.params import check_rpm
 from sim.recipe import PAPER_DRUM, PAPER_RECIPE, DrumSpec, ParticleSpec, Recipe, recipe_fill_3d, slice_2d, with_fill
 
 

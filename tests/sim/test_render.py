@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.drum import Particles
 from sim.mixer import Shape, shape_area_m2, shape_outline_m
 from sim.recipe import DrumSpec
 from sim.render import Renderer, size_for_radius
+from sim.twin_base import Particles
 
 
 @pytest.mark.parametrize("r_m", [0.003, 0.005, 0.008])

@@ -1,4 +1,4 @@
-"""Fixtures of the twin tests: a headless Debian chromium driven by Playwright."""
+"""Fixtures of the twin tests: a headless Debian chromium driven by Playwright, a mill emulator on TCP."""
 
 from __future__ import annotations
 
@@ -43,3 +43,22 @@ def page(browser) -> Iterator[object]:
         yield pg
     finally:
         ctx.close()
+
+
+@pytest.fixture
+def tcp_mill():
+    """The mill emulator on a TCP port, its watchdog short; the drive was running and
+    its watchdog has stopped it (fault WDOG) before the run connects (test_live_video.py,
+    test_live_process.py)."""
+    from control.device import DeviceConfig
+    from control.emulator import MillEmulator
+    from tests.waiting import wait_until
+
+    emu = MillEmulator(DeviceConfig(watchdog_s=0.3), seed=1)
+    port = emu.open_tcp(0)
+    emu.set_motor(setpoint_rpm=13.0, actual_rpm=13.0, running=True)
+    wait_until(lambda: emu.motor.fault == "WDOG", 5, "the board's watchdog")
+    try:
+        yield emu, f"socket://127.0.0.1:{port}"
+    finally:
+        emu.close()

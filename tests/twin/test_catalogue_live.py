@@ -24,7 +24,7 @@ def _runs(*argv: str) -> list[subprocess.Popen[str]]:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("DRUMTWIN_DEBUG", None)
     env.pop("DRUMTWIN_CATALOGUE", None)
-    return [subprocess.Popen([str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--duration", "8", *a.split()],
+    return [subprocess.Popen([str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--duration", "4", *a.split()],
                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for a in argv]
 
 
@@ -44,6 +44,7 @@ def _listed(*args: object) -> dict[str, dict]:
 
 
 @LIVE
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_two_runs_at_once_land_in_one_catalogue_beside_them_and_on_a_server(
         tmp_path: Path, postgres_url: str) -> None:  # noqa: F811

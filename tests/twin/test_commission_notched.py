@@ -6,8 +6,7 @@ match the rendered rig's within 0.1.
 The rig is ``twin.commission.rigs.notched_rig`` in a 150 mm drum (10 mm discs, 15 across: about 60
 particles, a few seconds of pymunk a twin-second), filmed at 640 px (the discs 37 px across) through the
 synthetic camera (noise, defocus, a lighting falloff, JPEG). ``drumtwin bench commission`` times the
-issue's own size (25 across) for the 2-minute budget. As in test_commission.py, when only the
-calibration-bound checks fail (issue 39 item 3, another change) the test reports xfail naming them.
+issue's own size (25 across) for the 2-minute budget.
 """
 
 from __future__ import annotations
@@ -19,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli import CliResult, cli
-from tests.twin.test_commission import check_lines, waits_on_calibration
+from tests.twin.test_commission import check_lines
 from twin.commission.rigs import RigRun, film, notched_rig, write_frames
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
@@ -52,7 +51,5 @@ def test_commissioning_the_notched_rig_exits_0_and_its_twin_spreads_as_the_rig(n
     assert len(spreads) == 2
     for c in spreads:  # the twin's spread ratio against the rendered rig's, as the camera's meter reads both
         assert abs(c["value"] - c["target"]) <= 0.1, c
-    if r.code != 0 and waits_on_calibration(r):
-        pytest.xfail("waits on the calibration (issue 39 item 3): " + "; ".join(check_lines(r)))
-    assert r.code == 0 and res["exit_code"] == 0, r.err[-3000:]
+    assert r.code == 0 and res["exit_code"] == 0, check_lines(r) or r.err[-3000:]
     assert all(c["passed"] for c in res["checks"])

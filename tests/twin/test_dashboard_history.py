@@ -16,7 +16,7 @@ import pytest
 
 from tests.catalogue_runs import RunSpec, make_run, stamp
 from tests.cli import cli
-from tests.twin.test_dashboard import RecordingControls
+from tests.twin.dashboard_fakes import RecordingControls
 from tests.waiting import wait_until
 from twin.catalogue.history import load_history
 from twin.dashboard import Dashboard

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.twin.dashboard_helpers import button, input_by_label, wait_until
-from tests.twin.test_dashboard import RecordingControls
+from tests.twin.dashboard_fakes import RecordingControls
+from tests.twin.dashboard_helpers import button, input_by_label
+from tests.waiting import wait_until
 from twin.commission.report import SECTIONS
 from twin.dashboard import Dashboard
 from twin.dashboard.setup import SETUP_FRAMES, SetupFeed

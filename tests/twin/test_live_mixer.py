@@ -17,7 +17,7 @@ from tests.cli import cli
 from tests.sim.test_mixer_cli import _white_circles
 from twin.runlog import read_events, read_frames
 
-pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]  # (see test_live.py)
+pytestmark = [pytest.mark.xdist_group("live"), pytest.mark.slow]  # (see tests/twin/live_helpers.py)
 
 REPO = Path(__file__).resolve().parents[2]
 PMMA_RIG = REPO / "configs" / "pmma-rig.toml"

@@ -21,15 +21,15 @@ import pytest
 from control.modbus.emulator import DriveEmulator, DriveFaults
 from control.modbus.profile import load_profile
 from tests.cli import assert_one_line_error, cli
+from tests.twin.live_helpers import QUICK_AUTO, SPEED, free_port, synthetic_video
 from tests.twin.live_script import run_scripted
-from tests.twin.test_live import QUICK_AUTO, SPEED, _free_port, _video
 from tests.waiting import wait_until
 from twin.config import RunConfig
 from twin.run.main import run_live
 from twin.run.settings import Seams
 from twin.runlog import read_events
 
-# the whole-loop tests share one worker, group "live" (see test_live.py: two loops at once on two cores
+# the whole-loop tests share one worker, group "live" (see tests/twin/live_helpers.py: two loops at once on two cores
 # made their timing flaky in CI); the option check and the worker-on-a-pty test run anywhere
 LIVE = pytest.mark.xdist_group("live")
 
@@ -88,7 +88,7 @@ def test_auto_moves_the_drive_and_a_garbled_or_silent_reply_is_a_fault_and_the_s
 def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: DriveEmulator, tmp_path: Path) -> None:
     """Another host starts the drive once the run is up and goes away: the run (OFF) only
     reads, so the drive's own trip stops it while the run keeps polling."""
-    video = _video(tmp_path / "v.avi", n=60)
+    video = synthetic_video(tmp_path / "v.avi", n=60)
     cfg = RunConfig(video=video, mill=delta.mill_url(), dashboard=False, duration_s=5.0, mode="off",
                     log_dir=tmp_path / "run").resolved()
     seen: dict = {}
@@ -110,6 +110,8 @@ def test_off_sends_no_write_and_a_drive_left_running_is_not_kept_running(delta: 
 
 
 @LIVE
+@pytest.mark.slow
+@pytest.mark.browser
 @pytest.mark.timeout(300)
 def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
     delta: DriveEmulator, page, tmp_path: Path
@@ -124,10 +126,10 @@ def test_kill_9_of_drumtwin_run_stops_the_drive_through_its_comm_loss_trip(
     set_s = 2.0
     delta.commission(set_s)
     delta.set_motor(setpoint_rpm=12.0)  # the keypad's frequency command; the drive is stopped
-    video = _video(tmp_path / "v.avi", n=1800)
+    video = synthetic_video(tmp_path / "v.avi", n=1800)
     exe = Path(sys.executable).with_name("drumtwin")
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "COLUMNS": "400"}
-    cmd = [str(exe), "run", "--video", str(video), "--mill", delta.mill_url(), "--port", str(_free_port()),
+    cmd = [str(exe), "run", "--video", str(video), "--mill", delta.mill_url(), "--port", str(free_port()),
            "--duration", "170", "--log", str(tmp_path / "run")]  # the default mode: AUTO
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     lines: list[str] = []
@@ -180,7 +182,7 @@ def test_a_drive_without_a_comm_loss_trip_is_refused_and_runs_only_with_the_logg
     delta: DriveEmulator, tmp_path: Path
 ) -> None:
     delta.commission(0.0)
-    video = _video(tmp_path / "v.avi", n=30)
+    video = synthetic_video(tmp_path / "v.avi", n=30)
     log = tmp_path / "refused"
     r = cli("run", "--video", video, "--mill", delta.mill_url(), "--no-dashboard", "--mode", "off",
             "--duration", "2", "--log", log)
@@ -203,7 +205,7 @@ def test_run_takes_hz_per_rpm_from_the_configs_drive_table(delta: DriveEmulator,
     cfg.write_text("[drive]\nhz_per_rpm = 2.5\n")
     delta.set_motor(setpoint_rpm=10.0)  # 10 Hz (the emulator's own hz_per_rpm is 1)
     bare = f"modbus:{delta.url}?profile=delta-ms300&unit=1&parity=N"
-    video = _video(tmp_path / "v.avi", n=30)
+    video = synthetic_video(tmp_path / "v.avi", n=30)
     args = ("run", "--video", video, "--config", cfg, "--no-dashboard", "--mode", "off", "--duration", "2")
     r = cli(*args, "--mill", bare + "&hz_per_rpm=1", "--log", tmp_path / "refused")
     assert_one_line_error(r, "the mill URL says 1", "[drive] says 2.5")

@@ -17,7 +17,7 @@ from twin.run.main import run_live
 from twin.run.settings import Seams
 from twin.runlog import read_events
 
-pytestmark = pytest.mark.xdist_group("live")  # (see test_live.py)
+pytestmark = pytest.mark.xdist_group("live")  # (see tests/twin/live_helpers.py)
 
 REAL_AUTO = Seams(
     supervisor={"seg_level": 0.99, "clear_level": 0.995, "detect_dwell_s": 2.0, "prediction_wait_s": 60.0,

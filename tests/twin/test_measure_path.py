@@ -51,7 +51,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-@pytest.mark.xdist_group("live")  # (see test_live.py)
+@pytest.mark.xdist_group("live")  # (see tests/twin/live_helpers.py)
 @pytest.mark.timeout(180)
 def test_mi_and_run_write_the_same_row_for_every_frame_of_a_video(real_drum_dir: Path, tmp_path: Path) -> None:
     video, n = _video(tmp_path / "pmma.avi", [real_drum_dir, real_drum_dir.parent / "real-drum-pmma-white"])
@@ -93,14 +93,14 @@ def test_frame_rows_fold_each_reading_into_its_row_as_the_filters_do() -> None:
     otherwise); a frame time that goes back or is NaN is refused (None) and folds nothing in."""
     from control.endpoint import EndpointDetector
     from control.trend import MITrend, MovingAverage
-    from tests.twin.test_workers import _reading
+    from tests.twin.workers_fakes import reading
     from twin.frame_rows import FrameRows
 
     rows = FrameRows(MITrend(), ma_window=3)
     trend, ma, end = MITrend(), MovingAverage(3), EndpointDetector()
     mis = [0.5, 0.6, 1.5, math.nan, 0.7, 0.8]
     for i, m in enumerate(mis):
-        r = _reading(m, valid=math.isfinite(m), slope=20.0 + i)
+        r = reading(m, valid=math.isfinite(m), slope=20.0 + i)
         step = rows.step(0.1 * i, i, r, rpm=4.0)
         assert step is not None
         counted = m if 0.0 <= m <= 1.0 else math.nan
@@ -114,5 +114,5 @@ def test_frame_rows_fold_each_reading_into_its_row_as_the_filters_do() -> None:
                                                                                   est.rate)
         assert row.ma_mi == ma.update(counted) and (row.mixed, row.mixing_time_s) == (e.mixed, e.mixing_time_s)
         assert row.twin_mi is None and row.rpm_actual is None and row.mode == ""
-    assert rows.step(0.2, 9, _reading(0.9)) is None and rows.step(math.nan, 9, _reading(0.9)) is None
+    assert rows.step(0.2, 9, reading(0.9)) is None and rows.step(math.nan, 9, reading(0.9)) is None
     assert rows.last_t_s == pytest.approx(0.5) and rows.ma.update(math.nan) == pytest.approx(0.7)  # 0.6, 0.7, 0.8

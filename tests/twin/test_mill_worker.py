@@ -403,7 +403,7 @@ def test_a_refused_command_puts_the_supervisor_in_its_safe_state_over_tcp() -> N
     from control.driver import MillClient
     from control.emulator import MillEmulator
     from control.motor import MotorConfig
-    from tests.twin.test_workers import Boxes, sup_worker
+    from tests.twin.workers_fakes import Boxes, sup_worker
     from twin.live.commands import SetManualRpm
 
     emu = MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=20.0)), seed=4)

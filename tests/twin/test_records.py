@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from control.trend import MITrend
-from tests.twin.test_workers import Boxes, _reading
+from tests.twin.workers_fakes import Boxes, reading
 from twin.live.camera import CameraReading, ProcessWorker
 from twin.live.events import RunEvents
 from twin.records import (
@@ -115,7 +115,7 @@ def test_the_endpoints_changes_are_logged_as_mixed_and_unmixed_records(tmp_path:
         pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, RunEvents(log, LiveState()))
         for i in range(450):  # 45 s at 10 fps: mixed for 30 s, then segregated
             t = i / 10.0
-            pw.process(CameraReading(t, i, _reading((0.95 if t < 30.0 else 0.5) + 0.005 * (-1) ** i)))
+            pw.process(CameraReading(t, i, reading((0.95 if t < 30.0 else 0.5) + 0.005 * (-1) ** i)))
     ends = [e for e in read_events(tmp_path / "run") if e["kind"] in (Mixed.kind, Unmixed.kind)]
     assert [e["kind"] for e in ends] == ["mixed", "unmixed"], ends
     mixed, unmixed = ends
@@ -289,7 +289,7 @@ def test_one_frame_traced_to_the_csv_row_the_jsonl_and_the_dashboard(tmp_path: P
     with RunLog(tmp_path / "run") as log:
         events = RunEvents(log, state)
         pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, events)
-        rec = pw.process(CameraReading(4.25, 17, _reading(0.83, slope=31.5)))
+        rec = pw.process(CameraReading(4.25, 17, reading(0.83, slope=31.5)))
     assert isinstance(rec, FrameReading)
     [row] = read_frames(tmp_path / "run")
     csv_value = {bool: lambda v: 1.0 if v else 0.0, tuple: lambda v: ";".join(v) or None}
@@ -373,7 +373,7 @@ def test_mypy_refuses_a_misspelt_record_kind_or_field(tmp_path: Path) -> None:
         encoding="utf-8",
     )
     limit = sys.getrecursionlimit()  # mypy's main raises it to 2**14 for the whole process, which let
-    try:  # a 5000-deep TOML parse in later tests of the worker (test_safety's "nested too deeply")
+    try:  # a 5000-deep TOML parse in later tests of the worker (test_safety_input's "nested too deeply")
         out, _, status = api.run([str(snippet), "--follow-imports=silent", "--no-incremental", "--config-file=",
                                   "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache")])
     finally:

@@ -17,7 +17,7 @@ from control.emulator import MillEmulator
 from control.trend import MITrend
 from tests.cli import cli
 from tests.twin.test_mill_worker import Sink
-from tests.twin.test_workers import Boxes, _reading
+from tests.twin.workers_fakes import Boxes, reading
 from twin.config import RunConfig
 from twin.live.camera import CameraReading, ProcessWorker
 from twin.run.main import run_live
@@ -36,7 +36,7 @@ def test_process_worker_logs_the_trend_unsettled_and_settled():
     rng = np.random.default_rng(0)
     for i in range(240):  # 4 s mixed, then 4 s segregated
         mi = (0.97 if i < 120 else 0.38) + rng.normal(0, 0.008)
-        pw.process(CameraReading(i / 30, i, _reading(float(mi))))
+        pw.process(CameraReading(i / 30, i, reading(float(mi))))
     kinds = [(k, round(d["level"], 2)) for k, d in sink.events if k.startswith("trend_")]
     assert [k for k, _ in kinds] == ["trend_unsettled", "trend_settled", "trend_unsettled", "trend_settled"]
     assert sink.faults == set()
@@ -61,7 +61,7 @@ def _looped_video(images: Path, path: Path, seconds: float, fps: float = 30.0) -
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("live")  # (see test_live.py)
+@pytest.mark.xdist_group("live")  # (see tests/twin/live_helpers.py)
 @pytest.mark.timeout(240)
 def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: Path, tmp_path: Path,
                                                                memo_learning: None) -> None:
@@ -118,10 +118,10 @@ def test_process_worker_tells_the_dashboard_the_trend_and_light_states():
     b = Boxes("auto")
     b.mill_at(5.0)
     pw = ProcessWorker(queue.Queue(), MITrend(), b.frames, b.view, Sink(state))
-    pw.process(CameraReading(0.0, 0, _reading(0.9)))
+    pw.process(CameraReading(0.0, 0, reading(0.9)))
     assert state.panel.trend_state == "unsettled" and state.panel.light_state == "ok"
-    dark = replace(_reading(math.nan, valid=False), flags=("lighting_changed:too_dark:0.12",))
+    dark = replace(reading(math.nan, valid=False), flags=("lighting_changed:too_dark:0.12",))
     pw.process(CameraReading(0.1, 1, dark))
     assert state.panel.light_state == "changed (too_dark:0.12)"
-    pw.process(CameraReading(0.2, 2, _reading(0.9)))
+    pw.process(CameraReading(0.2, 2, reading(0.9)))
     assert state.panel.light_state == "ok"

@@ -9,7 +9,7 @@ import math
 from sim.drum import DrumSim
 from sim.whatif import run_study
 from tests.twin.test_mill_worker import Sink
-from tests.twin.test_workers import Boxes
+from tests.twin.workers_fakes import Boxes
 from twin.dashboard.layout import whatif_table_md
 from twin.live.commands import RunStudy
 from twin.live.snapshots import TwinInfo

@@ -110,7 +110,8 @@ def test_a_crashed_worker_stops_the_mill_logs_it_and_exits_3(tmp_path: Path, wor
     assert len(crashed) == 1, [e for e in events if e["kind"] == "fault"]
     assert crashed[0]["worker"] == worker and crashed[0]["error"] == f"RuntimeError: bug in {worker}"
     assert ", in crash\n" in crashed[0]["traceback"]  # where the bug was raised, on the worker's thread
-    assert crashed[0]["t_s"] >= CRASH_AT_S
+    # the camera's hook sees its frame's paced time, the record the run clock: they agree within a frame
+    assert crashed[0]["t_s"] >= CRASH_AT_S - 0.1
     assert any(e["kind"] == "mill_command" and e["command"] == "stop" and e["source"] == "run_failed"
                for e in events)
     assert events[-1]["kind"] == "stop" and f"the {worker} worker crashed" in events[-1]["failure"]

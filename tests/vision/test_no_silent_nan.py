@@ -20,7 +20,7 @@ from control.trend import MITrend
 from tests.cli import cli
 from tests.learned import learn
 from tests.twin.test_mill_worker import Sink
-from tests.twin.test_workers import Boxes
+from tests.twin.workers_fakes import Boxes
 from tests.vision import helpers as H
 from twin.live.camera import CameraReading, ProcessWorker
 from vision.config import config_to_toml

@@ -289,8 +289,8 @@ def calibrate_cmd(
     friction that would have to leave its range.
     """
     from sim.calibrate import calibrate
-    from sim.drum import check_rpm
     from sim.errors import check_number
+    from sim.params import check_rpm
     from twin.config import load_checked_config
 
     if (source is None) == (slope_deg is None):

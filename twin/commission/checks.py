@@ -31,8 +31,6 @@ class Tolerances:
     fill_rel: float = 0.05  # twin's bed cover against the camera's, relative
     mi: float = 0.05  # twin's plateau MI against the camera's MI on its mixed frames
     spread_ratio: float = 0.1  # each class's spread ratio, twin against camera
-    calibration_deg: float = 2.5  # the calibration's residual: one calibration run's slope (5 s of one seed) is good
-    # to +-2.3 deg on a monolayer (docs/commissioning.md): the 1-deg test of its friction is the twin's slope check
     drum_rel: float = 0.02  # the drum's circle from frame to frame (radius and centre, in radii)
     bed_down_deg: float = 60.0  # the bed's centroid, seen from the drum's axis, from gravity's down
     light_flagged: float = 0.10  # share of the set-up frames the meter may flag for their light
@@ -144,12 +142,13 @@ def census_check(counts: Sequence[float], tol: Tolerances = TOLERANCES) -> Check
 
 
 def calibration_check(residual_deg: float, error: str | None, tol: Tolerances = TOLERANCES) -> Check:
-    """The calibration reached the camera's slope: its twin's residual (deg), or why it could not
-    (``error``: the calibration's message, the advice)."""
+    """The calibration reached the camera's slope: its answer's residual (deg; its confirming run, the
+    twin-vs-camera check's own, so within the slope check's tolerance), or why it could not (``error``:
+    the calibration's message, the advice)."""
     if error is not None:
-        return Check("calibration", "calibration residual", math.nan, None, tol.calibration_deg, "deg", False,
+        return Check("calibration", "calibration residual", math.nan, None, tol.slope_deg, "deg", False,
                      error, "no calibration")
-    return _bound("calibration", "calibration residual", abs(residual_deg), tol.calibration_deg, "deg",
+    return _bound("calibration", "calibration residual", abs(residual_deg), tol.slope_deg, "deg",
                   "the calibration stopped short of the slope: more frames, or a rig the twin can reach")
 
 

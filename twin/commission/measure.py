@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.calibrate_slope import frames_slope_deg
 from vision.bed import bed_cover, spread_ratios
 from vision.config import MeterConfig
 from vision.meter import Meter, Reading, gravity_matrix
@@ -66,7 +67,8 @@ def measure_frame(cfg: MeterConfig, meter: Meter, image: np.ndarray, roi: DrumRO
 
 @dataclass(frozen=True)
 class Summary:
-    """What a set of frames says (medians over the frames that have the number): the slope (deg) and
+    """What a set of frames says (medians over the frames that have the number): the slope (deg,
+    ``sim.calibrate_slope.frames_slope_deg``: the calibration's statistic) and
     its standard error (deg, ``1.25 sd / sqrt(n)``), the bed's cover, the MI over ``mi_frames``, each
     class's spread ratio over the same frames, the bed's angle from down (deg); ``frames`` measured,
     ``slopes`` with a free surface, ``mixed`` frames the MI and ratios are taken over."""
@@ -97,7 +99,7 @@ def summarize(ms: Sequence[FrameMeasure], mixed: np.ndarray | None = None) -> Su
     sel = np.ones(len(ms), dtype=bool) if mixed is None else np.asarray(mixed, dtype=bool)
     chosen = [m for m, k in zip(ms, sel, strict=True) if k]
     k = len(ms[0].ratios) if ms else 0
-    return Summary(_median(s), se, _median([m.cover for m in ms]), _median([m.mi for m in chosen]),
+    return Summary(frames_slope_deg(s), se, _median([m.cover for m in ms]), _median([m.mi for m in chosen]),
                    tuple(_median([m.ratios[i] for m in chosen]) for i in range(k)),
                    _median([m.bed_angle_deg for m in ms]), len(ms), int(s.size), len(chosen))
 

@@ -121,7 +121,8 @@ def _calibration(c: Commission) -> str:
             ("sliding friction", f"{cal.friction:.4g}"), ("rolling friction", f"{cal.rolling:.4g}"),
             ("twin's slope", f"{cal.twin_slope_deg:.2f} deg (residual {cal.residual_deg:+.2f})"),
             ("reachable at this rpm", f"{cal.range_deg[0]:.1f}-{cal.range_deg[1]:.1f} deg"),
-            ("twin runs", str(cal.evaluations))]
+            ("twin runs", f"{cal.evaluations} ({cal.confirmations} of them confirming: the twin check's run, its "
+                          f"slope's standard error {cal.slope_se_deg:.2f} deg)")]
     return _img("calibration", pic, "calibration curve") + table(rows)
 
 

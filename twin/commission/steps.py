@@ -19,12 +19,13 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from sim.calibrate import CONFIRM_EVALS
 from sim.errors import SimError
 from sim.mixer import Friction, Mixer
 from twin.commission import checks as ck
 from twin.commission.measure import FrameMeasure, Summary, measure_frame, summarize
 from twin.commission.source import MAX_FRAMES, RigFrames, rig_frames
-from twin.commission.twin_check import TWIN_RUN, TwinFrames, run_twin
+from twin.commission.twin_check import TWIN_RUN, CheckRuns, TwinFrames
 from vision.colours import ColourClass
 from vision.config import MeterConfig
 from vision.errors import VisionError
@@ -34,10 +35,11 @@ MIN_SLOPE_FRAMES = 5  # frames with a free surface the camera's slope needs, at 
 MIN_CHROMA_APART = 5.0  # two classes whose mean colours (CIELAB a, b) are closer are one material in light and
 # shade (one colour of particles: 0.6 apart on a rendered white bed; the PMMA rig's blue/white 64, teal/white 25)
 CENSUS_FRAMES = 24  # frames the census measures (the first of the frames kept, spread over the source)
-CALIBRATE: dict[str, Any] = {}
-"""Keyword arguments of the one calibration call (``calibrate_twin``): ``sim.calibrate.calibrate``'s own
-defaults today (a longer window does not help: one seed's bed differs from another's by 1-3 deg of slope,
-docs/commissioning.md)."""
+CALIBRATE: dict[str, Any] = {"confirm_evals": CONFIRM_EVALS, "tol_deg": ck.TOLERANCES.slope_deg / 2}
+"""Keyword arguments of the one calibration call (``calibrate_twin``): the search as ``sim.calibrate.
+calibrate``'s defaults, then up to ``CONFIRM_EVALS`` (3) confirming runs, each the twin-vs-camera check's own run
+(``twin_check.CheckRuns``), until the twin's slope is within half the check's tolerance: a search run
+(one seed, 5 s) is good to 2-4 deg on a monolayer, the check's run to about 0.5 (docs/commissioning.md)."""
 
 Progress = Callable[[str, str], None]
 """``progress(step, message)``: a step's name and what it did (with its time)."""
@@ -97,9 +99,9 @@ class Commission:
 
 def check_given(g: Given) -> None:
     """The numbers the user gave, each a one-line error when out of range (before any work)."""
-    from sim.drum import check_rpm
     from sim.engine import check_engine
     from sim.errors import check_number
+    from sim.params import check_rpm
     from sim.recipe import DrumSpec
 
     check_number("--drum-diameter-mm", g.drum_diameter_mm, 10.0, 1e4)
@@ -117,15 +119,16 @@ def check_given(g: Given) -> None:
     check_engine(g.engine)
 
 
-def calibrate_twin(mixer: Mixer, target_slope_deg: float, rpm: float, engine: str | None,
+def calibrate_twin(mixer: Mixer, target_slope_deg: float, rpm: float, engine: str | None, measure: CheckRuns,
                    progress: Callable[[int, int], None] | None = None) -> tuple[Any, Friction | None, str | None]:
     """The one calibration call: ``sim.calibrate.calibrate`` of ``mixer`` to the camera's slope at
-    ``rpm`` (``CALIBRATE``), and the friction it gives the mixer. A slope the twin cannot reach:
-    (None, None, the calibration's message)."""
+    ``rpm`` (``CALIBRATE``), confirmed by the check's runs (``measure``), and the friction it gives the
+    mixer. A slope the twin cannot reach: (None, None, the calibration's message)."""
     from sim.calibrate import calibrate
 
     try:
-        cal = calibrate(target_slope_deg, rpm, mixer=mixer, engine=engine, progress=progress, **CALIBRATE)
+        cal = calibrate(target_slope_deg, rpm, mixer=mixer, engine=engine, progress=progress, measure=measure,
+                        **CALIBRATE)
     except SimError as exc:
         return None, None, str(exc)
     plates = float(cal.end_friction) if cal.end_friction_max > 0 else None  # a monolayer's: calibrated
@@ -251,13 +254,14 @@ def commission(g: Given, progress: Progress, frames: RigFrames | None = None) ->
     clock.accept()
     c = Commission(g, fr, cfg, cam, summ, mixed, sug, sug.mixer, target_slope_deg=summ.slope_deg)
     c.checks = _setup_checks(c)
-    cal, friction, err = calibrate_twin(sug.mixer, summ.slope_deg, g.rpm, g.engine)
+    runs = CheckRuns(sug.mixer, g.rpm, cfg, float(np.median([r.r_px for r in fr.rois])), d_px, engine=g.engine)
+    cal, friction, err = calibrate_twin(sug.mixer, summ.slope_deg, g.rpm, g.engine, runs)
     c.calibration, c.calibration_error = cal, err
     c.mixer = replace(sug.mixer, friction=friction)
     c.checks.append(ck.calibration_check(math.nan if cal is None else cal.residual_deg, err))
     clock.done("calibration", err or f"sliding {cal.friction:.3f}, rolling {cal.rolling:.3f}, residual "
-                                     f"{cal.residual_deg:+.2f} deg")
-    c.twin = run_twin(c.mixer, g.rpm, cfg, float(np.median([r.r_px for r in fr.rois])), d_px, engine=g.engine)
+                                     f"{cal.residual_deg:+.2f} deg ({cal.confirmations} confirming runs)")
+    c.twin = runs.frames(friction or Friction())  # the answer's confirming run (uncalibrated: the engine's friction)
     c.twin_summary = summarize(list(c.twin.measures))
     c.checks += _twin_checks(summ, c.twin_summary, [k.name for k in cfg.counted], cal is not None)
     clock.done("twin", f"twin: slope {c.twin_summary.slope_deg:.1f} deg, MI {c.twin_summary.mi:.3f} on "

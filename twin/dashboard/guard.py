@@ -64,7 +64,7 @@ CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {"viser": ("1.1.1",), "websockets
 """Versions whose internals the dashboard relies on were checked against (the websocket
 server found by :func:`install_handshake_guard`, ``_live_connections`` and a connection's
 ``remote_address`` for the per-address unlock limit, the ``websockets.server`` log record
-of a failed handler for :class:`OneLineConnectionErrors`); ``tests/twin/test_dashboard.py``
+of a failed handler for :class:`OneLineConnectionErrors`); ``tests/twin/test_dashboard_door.py``
 tests each assumption and fails on a version not listed here."""
 
 LOOPBACK_HOSTS = frozenset(LOCAL_HOSTS)  # the one list: twin.config.LOCAL_HOSTS

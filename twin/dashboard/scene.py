@@ -15,7 +15,7 @@ import numpy as np
 import viser
 
 if TYPE_CHECKING:
-    from sim.drum import Particles
+    from sim.twin_base import Particles
 
 __all__ = ["TwinScene", "outline_segments", "polygon_segments", "ring_segments"]
 
