@@ -456,13 +456,6 @@ class DrumSim(FixedStepTwin):
         """Go back to ``state`` (bit-identical continuation)."""
         self._build(state)
 
-    @classmethod
-    def from_state(cls, state: SimState) -> DrumSim:
-        """A new twin that continues from ``state``."""
-        sim = cls.__new__(cls)
-        sim._build(state)
-        return sim
-
 
 __all__ = [
     "DEFAULT_DT_S",

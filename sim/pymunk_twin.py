@@ -481,13 +481,6 @@ class PymunkDrumSim(FixedStepTwin):
         if not hasattr(self, "_hist"):
             self.reset_stats()
 
-    @classmethod
-    def from_state(cls, state: PymunkState) -> PymunkDrumSim:
-        """A new twin that continues from ``state``."""
-        sim = cls.__new__(cls)
-        sim.restore(state)
-        return sim
-
 
 __all__ = [
     "DEFAULT_DT_S",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any, Self
 
 import numpy as np
 
@@ -80,6 +81,17 @@ class FixedStepTwin:
 
     def _params_changed(self) -> None:
         raise NotImplementedError
+
+    def restore(self, state: Any) -> None:
+        """Go back to ``state``, the engine's ``snapshot()`` (bit-identical continuation)."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_state(cls, state: Any) -> Self:
+        """A new twin that continues from ``state`` (the engine's ``snapshot()``)."""
+        sim = cls.__new__(cls)
+        sim.restore(state)
+        return sim
 
     def set_friction(self, friction: float, rolling: float | None = None, end_friction: float | None = None) -> None:
         """Change sliding friction (and rolling friction, and the end plates' friction: a calibration's
