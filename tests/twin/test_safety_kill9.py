@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from control.emulator import OWNER_FILE, PTY_DIR_PREFIX, owner_pid
+from tests.cli import cli
 from tests.waiting import wait_until
 from twin.runlog import EVENTS_FILE, FRAMES_FILE, read_events, read_frames
 
@@ -153,10 +154,9 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
 
     # issue 40: the catalogue beside the runs lists each killed run as ended without a stop,
     # with what its log holds, and the next run as a clean one
-    listed = subprocess.run([str(DRUMTWIN), "runs", "list", "--runs-dir", str(tmp_path), "--json"], env=env,
-                            capture_output=True, text=True, timeout=60)
-    assert listed.returncode == 0, listed.stderr[-2000:]
-    rows = {Path(r["path"]).name: r for r in json.loads(listed.stdout)}
+    listed = cli("runs", "list", "--runs-dir", tmp_path, "--json")  # in-process: it starts nothing
+    assert listed.code == 0, listed.err[-2000:]
+    rows = {Path(r["path"]).name: r for r in json.loads(listed.out)}
     assert rows["next"]["ended"] == "clean" and rows["next"]["frames"] > 0
     for log, _t, moment in killed:
         if (log / EVENTS_FILE).exists() or (log / FRAMES_FILE).exists():
