@@ -245,7 +245,7 @@ def test_a_whatif_from_a_state_ramps_the_drum_at_the_supervisors_rate(engine):
     twin = make_twin(paper_mixer(), engine, case="C", seed=0, rpm=5.0, **step)
     twin.advance(0.3)
     state = twin.snapshot()
-    fast = run_job(WhatIfJob(rpm=25.0, duration_s=6.0, start=state, sample_s=0.5))
+    fast = run_job(WhatIfJob(rpm=25.0, duration_s=2.0, start=state, sample_s=0.5))  # its own ramp: there by 1.5 s
     slow = run_job(WhatIfJob(rpm=25.0, duration_s=6.0, start=state, sample_s=0.5, ramp_rpm_s=4.0))
     at = {round(float(t), 1): float(r) for t, r in zip(slow.t_s - slow.t_s[0], slow.rpm_actual, strict=True)}
     assert abs(at[2.5]) == pytest.approx(5.0 + 4.0 * 2.5, abs=1.0)

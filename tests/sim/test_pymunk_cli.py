@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,33 @@ SHORT = ("--spin-up-s", "0.5", "--window-s", "0.5", "--dt-ms", "2")  # short twi
 # tests read the one run of it (``cli_once``, tests/conftest.py; one xdist group: one worker, one run).
 OUTSIDE = ("calibrate", "--config", CUTDISC_RIG, "--rpm", "10", "--slope-deg", "89", *SHORT)
 pytestmark = pytest.mark.xdist_group("pymunk-cli")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def same_twin_run_once() -> Iterator[dict[str, int]]:
+    """``sim.calibrate.twin_surface`` memoised for this module, keyed on every argument: the calls below
+    ask for the same seeded twin runs again (the range's six runs before the search inside it, the plane's
+    four with ``--end-friction 0``), and a pymunk run of the rig costs ~1 s. A call whose arguments differ
+    in anything runs the twin, so a range that comes out the same still says the CLI asked for the same
+    runs; that a repeated run is bit-exact is ``test_pymunk_twin.py``'s (cut discs, other addresses)."""
+    import sim.calibrate
+
+    real = sim.calibrate.twin_surface
+    runs: dict[str, tuple[float, float]] = {}
+    calls = {"ran": 0, "reused": 0}
+
+    def once(friction: float, rolling: float, rpm: float, **kw: object) -> tuple[float, float]:
+        key = repr((friction, rolling, rpm, sorted(kw.items())))
+        if key in runs:
+            calls["reused"] += 1
+        else:
+            calls["ran"] += 1
+            runs[key] = real(friction, rolling, rpm, **kw)
+        return runs[key]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sim.calibrate, "twin_surface", once)
+        yield calls
 
 
 @pytest.mark.slow

@@ -109,13 +109,17 @@ def test_a_failed_auto_study_is_an_alarm_and_the_safe_state_until_the_operator_c
     assert not w.safe and "whatif_failed" not in sink.faults
 
 
+# One loop run: a twin 30 deg too steep takes the same path as one turned the other way (the published
+# slope, the loop's one MismatchMonitor with its default tolerance, the supervisor); which reason the
+# residual names is the rig test's above, with that same monitor and worker, for both ("slope" ran the
+# loop a second time: ~4 s of CPU).
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("wrong", ["direction", "slope"])
+@pytest.mark.parametrize("wrong", ["direction"])
 def test_demo_twin_gone_wrong_raises_twin_mismatch_within_10_s_and_auto_goes_safe(tmp_path, wrong) -> None:
     """The whole loop (embedded demo, AUTO): from run time ``t_wrong`` on, the twin's
-    published bed turns the other way (its slope negated) or 30 deg steeper, as a twin
-    calibrated to the wrong direction or slope would; ``twin_mismatch`` follows within
+    published bed turns the other way (its slope negated; "slope": 30 deg steeper), as a twin
+    calibrated to the wrong direction would; ``twin_mismatch`` follows within
     10 s of run time and the supervisor is safe with the twin stale."""
     import dataclasses
     import math
