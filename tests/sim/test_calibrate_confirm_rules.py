@@ -64,6 +64,15 @@ def test_the_gradient_is_the_rise_that_brackets_the_target_kept_within_the_whole
     assert fit_crossing([0.0, 0.9, 1.0], [20.0, 21.0, 45.0], 20.5) == pytest.approx((0.45, 25.0 / 3.0))
 
 
+def test_the_whole_fits_rise_is_over_its_levels_own_span_of_u():
+    # the first level pools u 0 and 0.4 (20 and 18 deg): the fit spans u 0.2-1, rising 26 / 0.8 = 32.5 deg per u
+    assert fit_crossing([0.0, 0.4, 0.9, 1.0], [20.0, 18.0, 21.0, 45.0], 30.0) == pytest.approx((0.9375, 97.5))
+    # two levels at one u (0.5): the whole fit still rises from it to 1, 50 deg per u, the gradient at its start
+    assert fit_crossing([0.5, 0.5, 1.0], [20.0, 30.0, 45.0], 25.0) == pytest.approx((0.5, 50.0))
+    # ... and the same at its end: 25 deg per u from 0 to 1
+    assert fit_crossing([0.0, 1.0, 1.0], [20.0, 30.0, 45.0], 40.0) == pytest.approx((1.0, 25.0))
+
+
 def test_a_flat_fit_has_no_gradient_and_its_one_level_is_the_crossing():
     u, g = fit_crossing([0.2, 0.6], [35.0, 25.0], 30.0)  # pooled to one level, 30 deg at u 0.4
     assert u == pytest.approx(0.4) and math.isnan(g)
@@ -103,6 +112,13 @@ def test_the_next_point_without_a_bracket_steps_along_the_secant_kept_near_the_f
     assert _next_u([at(0.4, 24.0), at(0.5, 26.5)], 30.0, 25.0) == pytest.approx(0.5 + 3.5 / 25.0)  # within: its own
     # a bracket the wrong way round (below at the larger u: noise) is no bracket: the last two's secant
     assert _next_u([at(0.6, 31.0), at(0.7, 29.0)], 30.0, 25.0) == pytest.approx(0.7 + 1.0 / (25.0 / 3.0))
+
+
+def test_the_bracket_is_the_nearest_confirmed_pair_around_the_target_not_the_last_two():
+    # below at 0.2 (25), above at 0.6 (35) and 0.5 (31): the bracket is 0.2-0.5, not the last two (both above)
+    assert _next_u([at(0.2, 25.0), at(0.6, 35.0), at(0.5, 31.0)], 30.0, 25.0) == pytest.approx(0.2 + 5.0 * 0.3 / 6.0)
+    # below at 0.2 (25) and 0.4 (28), above at 0.6 (35): the bracket is 0.4-0.6
+    assert _next_u([at(0.2, 25.0), at(0.6, 35.0), at(0.4, 28.0)], 30.0, 25.0) == pytest.approx(0.4 + 2.0 * 0.2 / 7.0)
 
 
 def test_a_flat_or_shallow_search_leg_steps_by_its_span_at_least_one_degree_per_u():
