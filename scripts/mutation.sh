@@ -37,6 +37,14 @@ MODBUS_DRIVE_TESTS="$M::test_drive_model_trips_on_silence_not_on_reads_and_latch
 MODBUS_PROFILE_TESTS="$M::test_every_shipped_profile_loads_and_names_its_comm_loss_parameter \
   $M::test_bad_profiles_are_one_line_errors $M::test_read_blocks_groups_near_registers \
   $M::test_comm_loss_problem_names_the_parameter_and_the_value_to_set"
+# The calibration's pure core is three modules (sim/calibrate.py's decision path, its confirming runs in
+# sim/calibrate_confirm.py, its slope statistic in sim/calibrate_slope.py): one set, every test on a known
+# slope field (the twin patched out), none running the DEM.
+S=tests/sim
+CALIBRATE_TESTS="$S/test_calibrate_rules.py $S/test_calibrate_mutants.py $S/test_calibrate_plates.py \
+  $S/test_calibrate_confirm.py $S/test_calibrate_confirm_rules.py"
+# runs the DEM (14 s) for a refusal the known-field tests pin (test_calibrate_mutants.py's out-of-range ones)
+CALIBRATE_DESELECT="$S/test_calibrate_rules.py::test_a_small_target_is_a_valid_angle_refused_only_by_the_range"
 declare -A TESTS=(
   [vision/mixing.py]="tests/vision/test_mixing.py tests/vision/test_known_answers.py"
   [control/protocol.py]="tests/control/test_protocol.py tests/control/test_protocol_rules.py"
@@ -48,7 +56,9 @@ declare -A TESTS=(
   [control/decision.py]="$SUPERVISOR_TESTS"
   [control/segregation.py]="$SUPERVISOR_TESTS"
   [control/trend.py]="tests/control/test_trend.py tests/control/test_trend_props.py tests/control/test_trend_settle.py tests/control/test_trend_rules.py tests/control/test_trend_mutants.py"
-  [sim/calibrate.py]="tests/sim/test_calibrate_rules.py tests/sim/test_calibrate_mutants.py"
+  [sim/calibrate.py]="$CALIBRATE_TESTS"
+  [sim/calibrate_confirm.py]="$CALIBRATE_TESTS"
+  [sim/calibrate_slope.py]="$CALIBRATE_TESTS"
   [control/endpoint.py]="tests/control/test_endpoint.py tests/control/test_endpoint_rules.py tests/control/test_endpoint_supervisor.py"
   [control/limits.py]="tests/control/test_limits.py tests/control/test_limits_rules.py"
   [control/objective.py]="tests/control/test_objective.py tests/control/test_objective_rules.py tests/control/test_objective_supervisor.py"
@@ -68,6 +78,9 @@ declare -A DESELECT=(
   [control/decision.py]="$SUPERVISOR_DESELECT"
   [control/segregation.py]="$SUPERVISOR_DESELECT"
   [control/objective.py]="$SUPERVISOR_DESELECT"
+  [sim/calibrate.py]="$CALIBRATE_DESELECT"
+  [sim/calibrate_confirm.py]="$CALIBRATE_DESELECT"
+  [sim/calibrate_slope.py]="$CALIBRATE_DESELECT"
   [control/endpoint.py]="tests/control/test_endpoint.py::test_endpoint_options_reach_the_live_loop_and_mi_and_bad_ones_are_one_line_exit_2 \
     tests/control/test_endpoint.py::test_an_endpoint_table_in_the_config_is_read_under_the_options_and_a_bad_one_is_one_line_exit_2"
 )
@@ -92,10 +105,12 @@ cd "$work/p"
 # the pragma gets mutmut's 'no mutate block' on the function's header line (in this clone only).
 perl -0pi -e 's/^(\s*def \w+\([^)]*\)(?:\s*->[^:]+)?:)([ \t]*# pragma: no cover - compiled)/$1$2, no mutate block/mg;
               s/^(\s*def \w+\([ \t]*# pragma: no cover - compiled\n[^)]*\)(?:\s*->[^:]+)?:)[ \t]*$/$1  # pragma: no mutate block/mg' "$mod"
-# Not mutated (clone only), each for a reason given in docs/mutation.md: the twin's simulation in
-# sim/calibrate.py (every mutant would run the DEM; its decision path is tested on a known slope field).
-if [ "$mod" = sim/calibrate.py ]; then
-  perl -0pi -e 's/^(def (?:twin_surface|twin_slope_deg)\((?:[^()]|\([^()]*\))*\)[^:\n]*:)[ \t]*$/$1  # pragma: no mutate block/mg' "$mod"
+# Not mutated (clone only), each for a reason given in docs/mutation.md: the twin's simulation, in
+# sim/calibrate_slope.py since the noise-aware calibration (every mutant would run the DEM; the decision
+# path and the slope statistic are tested on known slope fields and known frames).
+if [ "$mod" = sim/calibrate_slope.py ]; then
+  perl -0pi -e 's/^(def (?:_make|twin_frames|twin_surface|twin_slope_deg|twin_measure)\((?:[^()]|\([^()]*\))*\)[^:\n]*:)[ \t]*$/$1  # pragma: no mutate block/mg' "$mod"
+  [ "$(grep -c 'no mutate block' "$mod")" = 5 ] || { echo "mutation: the twin's functions of $mod not all found" >&2; exit 2; }
 fi
 # The fast profile (clone only): hypothesis capped, derandomised, no shrinking (mutmut itself runs each
 # mutant's tests fastest first, by the durations of its stats run).

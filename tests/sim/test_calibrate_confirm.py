@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import sim.calibrate as cal_mod
-from sim.calibrate import calibrate
+from sim.calibrate import CONFIRM_RUN, SlopeRun, calibrate
 from sim.calibrate_confirm import confirm, fit_crossing, monotone_fit
 from sim.calibrate_slope import Measured, frames_slope_deg, seeds_se_deg
 
@@ -116,3 +116,43 @@ def test_the_one_slope_statistic_is_the_median_of_the_frames_and_its_noise_the_s
     s = np.array([30.0, 30.0, 32.0, 32.0, 34.0, 34.0])  # three seeds of two frames: medians 30, 32, 34
     assert seeds_se_deg(s, 2) == pytest.approx(2.0 / math.sqrt(3))
     assert math.isnan(seeds_se_deg(s[:2], 2))
+
+
+def dipped(monkeypatch) -> None:
+    """A field of rolling friction only, 20 + 25 r (the diagonal to (1, 1): 20 + 25 u), read 1 deg low by the
+    search at 0.3 < r < 0.5: its first step (u 0.4) reads 29, within the search's 1.5 deg: it stops there."""
+    monkeypatch.setattr(cal_mod, "twin_surface", lambda f, r, rpm, **kw: (20.0 + 25.0 * r - (0.3 < r < 0.5), 0.0))
+
+
+def test_one_confirming_run_goes_where_the_search_runs_fit_crosses_the_target(monkeypatch):
+    dipped(monkeypatch)
+    cal = calibrate(30.0, 10.0, confirm_evals=1, measure=lambda f, r, e: Measured(20.0 + 25.0 * r, 0.1))
+    assert cal.evaluations == 1 + 3 + 1 + 1 and cal.confirmations == 1  # the search stopped within 1.5 deg
+    # the fit through (0, 20), (0.4, 29), (1, 45) crosses 30 at 0.4 + 0.6 / 16
+    assert cal.rolling == pytest.approx(0.4375) and cal.twin_slope_deg == pytest.approx(30.9375)
+    assert cal.residual_deg == pytest.approx(0.9375) and cal.slope_se_deg == 0.1
+
+
+def test_confirming_runs_without_a_slope_leave_the_searchs_answer(monkeypatch):
+    dipped(monkeypatch)
+    cal = calibrate(30.0, 10.0, confirm_evals=1, measure=lambda f, r, e: Measured(math.nan, math.nan))
+    assert (cal.rolling, cal.twin_slope_deg, cal.residual_deg) == (pytest.approx(0.4), 29.0, -1.0)
+    assert cal.confirmations == 1 and math.isnan(cal.slope_se_deg) and math.isnan(cal.history[-1][3])
+
+
+def test_without_a_measure_the_particle_twins_confirming_run_is_asked_for_with_the_calibrations_twin(monkeypatch):
+    dipped(monkeypatch)
+    asked: list[tuple] = []
+
+    def twin_measure(rpm, twin_kw, run):
+        asked.append((rpm, twin_kw, run))
+        return lambda f, r, e: Measured(20.0 + 25.0 * r, 0.1)
+
+    monkeypatch.setattr(cal_mod, "twin_measure", twin_measure)
+    cal = calibrate(30.0, -10.0, confirm_evals=1, seed=4, window_s=0.7)
+    assert cal.confirmations == 1 and cal.twin_slope_deg == pytest.approx(30.9375)
+    (rpm, kw, run), = asked
+    assert rpm == -10.0 and run is CONFIRM_RUN and kw["seed"] == 4 and kw["window_s"] == 0.7 and kw["mixer"] is None
+    mine = SlopeRun(seeds=(1, 2), window_s=2.0)
+    calibrate(30.0, 10.0, confirm_evals=1, confirm_run=mine)
+    assert asked[-1][2] is mine

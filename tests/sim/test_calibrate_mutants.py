@@ -336,3 +336,9 @@ def test_an_end_exactly_the_tolerance_away_needs_no_search(field):
     cal = calibrate(20.5, 10.0, tol_deg=0.5)  # binary fractions: the low corner is exactly 0.5 deg off
     assert cal.evaluations == 4 and cal.residual_deg == -0.5
     assert calibrate(20.5, 10.0, tol_deg=0.25).evaluations > 4  # a tighter tolerance searches
+
+
+def test_a_given_wall_friction_is_the_end_plates_friction_each_run_records(field):
+    cal = calibrate(30.0, 10.0, wall_friction=0.3)  # a deep drum: the plates take the wall's friction
+    assert cal.end_friction == 0.3 and {h[2] for h in cal.history} == {0.3}
+    assert all(c[3]["wall_friction"] == 0.3 for c in field.calls)

@@ -16,6 +16,7 @@ import pytest
 
 import sim.calibrate as cal_mod
 from sim.calibrate import (
+    CONFIRM_EVALS,
     END_LOAD_MAX,
     HIGH_EDGE,
     PLATE_EDGE,
@@ -25,6 +26,7 @@ from sim.calibrate import (
     path_point,
     reachable_range,
 )
+from sim.calibrate_slope import Measured
 from sim.errors import SimError
 from sim.mixer import Friction, Mixer, ParticleKind, Shape, paper_mixer
 from sim.recipe import DrumSpec
@@ -48,6 +50,7 @@ class Field:
 
     def __init__(self) -> None:
         self.plates = lambda e: 12.0 * e / E_MAX
+        self.plane = plane
         self.calls: list[tuple[float, float, float | None]] = []
         self.spins: list[float] = []
 
@@ -55,7 +58,7 @@ class Field:
         e = kw.get("end_friction")
         self.calls.append((friction, rolling, e))
         self.spins.append(kw.get("spin_up_s", 3.0))
-        return -(plane(friction, rolling) + (0.0 if e is None else self.plates(e))), 0.0
+        return -(self.plane(friction, rolling) + (0.0 if e is None else self.plates(e))), 0.0
 
 
 @pytest.fixture
@@ -163,3 +166,38 @@ def test_a_deep_drums_own_plate_friction_is_kept_and_reported(field):
     cal = calibrate(30.0, 5.0, mixer=deep)
     assert all(e is None for _, _, e in field.calls)  # the twin takes the mixer's (make_twin)
     assert cal.end_friction == 0.1 and cal.end_friction_max == 0.0
+
+
+def test_the_plates_leg_starts_at_the_planes_top_wherever_it_is(field):
+    field.plane = lambda f, r: plane(min(f, 0.5), r) - 10.0 * max(math.log10(f / 0.5), 0.0)  # top at (0.5, 1)
+    reachable_range(5.0, mixer=MONO)
+    assert field.calls[4:] == [(0.5, 1.0, pytest.approx(0.5 * E_MAX)), (0.5, 1.0, pytest.approx(E_MAX))]
+    cal = calibrate(plane(0.5, 1.0) + 3.0, 5.0, mixer=MONO)
+    assert cal.path == PLATES and (cal.friction, cal.rolling) == (0.5, 1.0)
+    assert cal.end_friction == pytest.approx(E_MAX * 3.0 / 12.0, rel=1e-9)
+
+
+def test_plates_that_add_nothing_are_no_leg_and_a_target_at_the_planes_top_is_the_planes(field):
+    field.plates = lambda e: 0.0
+    top = plane(1.0, 1.0)
+    cal = calibrate(top + 0.5, 5.0, mixer=MONO)  # within the grace above the plane's top: its high point
+    assert cal.path == "diagonal" and cal.end_friction == 0.0 and cal.residual_deg == pytest.approx(-0.5)
+    field.plates = lambda e: 12.0 * e / E_MAX
+    cal = calibrate(top, 5.0, mixer=MONO)  # exactly the plane's top: the plane's, no plate friction
+    assert cal.path == "diagonal" and (cal.friction, cal.rolling, cal.end_friction) == (1.0, 1.0, 0.0)
+
+
+def test_a_range_with_the_plates_fixed_by_the_caller_runs_the_plane_only(field):
+    lo, hi = reachable_range(5.0, mixer=MONO, end_friction=0.01)
+    assert field.calls == [(0.05, 0.0, 0.01)] + [(f, 1.0, 0.01) for f in HIGH_EDGE]
+    fixed = 12.0 * 0.01 / E_MAX  # the plates' 2.5 deg in every run
+    assert (lo, hi) == pytest.approx((20.0 + fixed, plane(1.0, 1.0) + fixed))
+
+
+def test_progress_counts_the_plates_and_the_confirming_runs_in_the_whole_budget(field):
+    seen: list[tuple[int, int]] = []
+    calibrate(-30.0, 5.0, mixer=MONO, confirm_evals=CONFIRM_EVALS, measure=lambda f, r, e: Measured(31.0, 0.1),
+              progress=lambda i, n: seen.append((i, n)))
+    total = 1 + len(HIGH_EDGE) + len(PLATE_EDGE) + 8 + CONFIRM_EVALS
+    assert CONFIRM_EVALS == 3 and [n for _, n in seen] == [total] * len(seen)
+    assert [i for i, _ in seen] == list(range(1, len(seen) + 1)) and len(seen) > 1 + len(HIGH_EDGE) + len(PLATE_EDGE)
