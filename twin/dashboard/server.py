@@ -147,6 +147,10 @@ class Dashboard:
                 self.viewers.build(client)
             except Exception:
                 _log.exception("building the controls of viewer %s failed", client.client_id)
+        # viser drops the connection before it queues the disconnect callback, so a viewer that left
+        # while it was being built is seen here even if its callback ran before the build registered it
+        if client_headers(self._server, client.client_id) is None:
+            self._on_disconnect(client)
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         self.viewers.forget(client.client_id)
