@@ -24,7 +24,9 @@ def _runs(*argv: str) -> list[subprocess.Popen[str]]:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("DRUMTWIN_DEBUG", None)
     env.pop("DRUMTWIN_CATALOGUE", None)
-    return [subprocess.Popen([str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--duration", "4", *a.split()],
+    # 12 s of run time (3 s of wall at --speed 4): four runs starting at once on two cores can take a
+    # second or more of wall time (4+ s of run time) before the demo plant's first frame
+    return [subprocess.Popen([str(DRUMTWIN), "run", "--no-dashboard", "--speed", "4", "--duration", "12", *a.split()],
                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for a in argv]
 
 
