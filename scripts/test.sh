@@ -15,9 +15,11 @@ echo "== numba kernels" >&2
 .venv/bin/python -m tests.numba_warm vision || echo "numba warm-up (vision) failed: the tests compile as they go" >&2
 wait "$sim" || echo "numba warm-up (sim) failed: the tests compile as they go" >&2
 echo "== pytest" >&2
-# one thread per numeric library in each worker: two workers on two cores, and OpenBLAS's and
-# OpenCV's second thread only contended with the other worker (vision tests: -10 % wall, -8 % CPU)
+# one thread per numeric library in each worker: more workers than cores, and OpenBLAS's and
+# OpenCV's second thread only contended with the other workers (vision tests: -10 % wall, -8 % CPU)
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}" \
   OPENCV_FOR_THREADS_NUM="${OPENCV_FOR_THREADS_NUM:-1}"
-# two workers on the two cores; the whole-loop tests share one xdist group ("live"): one loop at a time
-exec .venv/bin/python -m pytest -n 2 --dist loadgroup "$@"
+# three workers on the two cores: the whole-loop tests wait on run clocks, ptys, servers and chromium (two
+# workers kept 1.3 of the 2 cores busy: 421 s of pytest on a quiet machine, three 359 s); they share one
+# xdist group ("live"): one loop at a time. DRUMTWIN_TEST_WORKERS overrides the count.
+exec .venv/bin/python -m pytest -n "${DRUMTWIN_TEST_WORKERS:-3}" --dist loadgroup "$@"

@@ -144,10 +144,11 @@ def cli_once() -> Callable[..., CliResult]:
 
 # `drumtwin commission` of the real PMMA frames, issue 39's must-show command (no --out: the default folder,
 # in a working folder of its own), once per session: tests/twin/test_commission.py and the bad-input sweep's
-# base of that command read it. Their users share one xdist group (one worker: one run), and it is "live":
-# one of them runs the loop on the commissioned mixer.toml (marked "live" too), and a test in two groups is
-# in a third of its own ("commission_live": xdist joins the names), whose worker ran the commissioning again.
-COMMISSION = pytest.mark.xdist_group("live")
+# base of that command read it. Their users share one xdist group (one worker: one run), "commission", not
+# the loops' "live": the run's ~35 s of CPU on the live group's worker made that worker the suite's tail. The
+# one user that runs the loop (a video, mode off: nothing timed) is in "commission" alone; a test in two
+# groups is in a third of its own (xdist joins the names), whose worker would run the commissioning again.
+COMMISSION = pytest.mark.xdist_group("commission")
 COMMISSION_PMMA_ARGS = ["--drum-diameter-mm", "250", "--rpm", "5"]
 
 

@@ -91,7 +91,6 @@ def test_the_report_opens_in_chromium_with_every_section_and_no_blank_picture(
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("live")
 @pytest.mark.timeout(300)
 def test_run_takes_the_commissioned_mixer_toml_as_it_is(commission_pmma: tuple[CliResult, Path], real_drum_dir: Path,
                                                         tmp_path: Path) -> None:
