@@ -49,11 +49,26 @@ def test_param(k, request):
         assert request.getfixturevalue("group_fixture") == 1
 '''
 
+# an ungrouped module whose tests share a module-scoped fixture of their own (a rendered rig, a commissioning)
+TEST_C = '''
+import os
+import pytest
+@pytest.fixture(scope="module")
+def rig():
+    with open(os.environ["RUNS_FILE"] + ".rig", "a") as f:
+        f.write(os.environ.get("PYTEST_XDIST_WORKER", "-") + "\\n")
+    return 2
+@pytest.mark.parametrize("i", range(6))
+def test_rig(i, rig):
+    assert rig == 2
+'''
+
 
 def test_loadgroup_puts_a_group_on_one_worker_and_its_session_fixture_runs_once(tmp_path: Path) -> None:
     (tmp_path / "conftest.py").write_text(CONFTEST)
     (tmp_path / "test_a.py").write_text(TEST_A)
     (tmp_path / "test_b.py").write_text(TEST_B)
+    (tmp_path / "test_c.py").write_text(TEST_C)
     runs = tmp_path / "runs.txt"
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "COV_"))}
     env.update(PYTHONPATH=str(REPO), RUNS_FILE=str(runs))
@@ -65,11 +80,13 @@ def test_loadgroup_puts_a_group_on_one_worker_and_its_session_fixture_runs_once(
     live = [f"test_a.py::test_module_group[{i}]" for i in range(3)] + ["test_b.py::test_marked",
                                                                      "test_b.py::test_param[b]"]
     grouped = {nodeid: gw for gw, nodeid in ran if nodeid.split("@")[0] in live}
-    assert len(ran) == 3 + 6 + 1 + 6, p.stdout[-3000:]
+    assert len(ran) == 3 + 6 + 1 + 6 + 6, p.stdout[-3000:]
     assert len(grouped) == 5 and all(n.endswith("@live") for n in grouped), grouped
     assert len(set(grouped.values())) == 1, grouped  # one worker for the whole group
     assert len({gw for gw, _ in ran}) == 2, ran  # the free tests did go to both workers
     assert runs.read_text().split() == [next(iter(grouped.values()))]  # the session fixture once
+    rig = {gw for gw, nodeid in ran if nodeid.startswith("test_c.py::")}
+    assert len(rig) == 1 and len(Path(f"{runs}.rig").read_text().split()) == 1, ran  # its module fixture once
 
 
 def test_a_test_in_two_groups_is_refused_by_name() -> None:

@@ -42,6 +42,47 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     one_group(item)
 
 
+def module_fixture_group(item: pytest.Item) -> str | None:
+    """``"module:<path>"`` for an ungrouped test that uses a module-scoped fixture of its own module,
+    else None. Under ``--dist loadgroup`` each ungrouped test is a work unit of its own, so two tests
+    of one module could land on two workers and build the module's fixture twice (a commissioning
+    run, a rendered rig: tens of seconds of CPU); grouped by module they build it once."""
+    if group_names(item):
+        return None
+    info = getattr(item, "_fixtureinfo", None)
+    module = getattr(item, "module", None)
+    if info is None or module is None:
+        return None
+    for defs in info.name2fixturedefs.values():
+        fd = defs[-1]
+        if fd.scope == "module" and getattr(fd.func, "__module__", None) == module.__name__:
+            return f"module:{item.nodeid.split('::')[0]}"
+    return None
+
+
+class Schedule:
+    """A plugin of one hook that must run before xdist's (the suffix fix below runs after it)."""
+
+    @staticmethod
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+        """Before xdist's own hook, on every process alike (the workers' collections must be the same):
+        tests marked ``slow`` first (a stable sort: the load scheduler hands out units in this order, so
+        the long ones start at once instead of ending the run), and each module fixture's users in one
+        group (:func:`module_fixture_group`)."""
+        if not getattr(config.option, "loadgroup", False):
+            return
+        for item in items:
+            if (name := module_fixture_group(item)) is not None:
+                item.add_marker(pytest.mark.xdist_group(name))
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Register :class:`Schedule` beside this module's hooks."""
+    config.pluginmanager.register(Schedule(), "drumtwin-xdist-schedule")
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """On an xdist worker under ``--dist loadgroup``: each grouped test's node id ends in its group."""
