@@ -35,16 +35,24 @@ def test_json_stdout_is_pure_json_with_the_dashboard_on(tcp_mill, tmp_path: Path
     assert json.loads(lines[0])["log_dir"] == str(tmp_path / "run")
 
 
+# a run started with SIGINT ignored, as everything started with `&` by a shell without job control is
+# (a script, a CI step, a service): `trap "" INT` sets that disposition and exec keeps it
+IGNORING_SIGINT = ["sh", "-c", 'trap "" INT; exec "$0" "$@"']
+
+
 @LIVE
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("presses", [1, 2])
-def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path, presses: int) -> None:
+@pytest.mark.parametrize(("presses", "started"), [(1, "terminal"), (2, "terminal"), (1, "sigint ignored")])
+def test_ctrl_c_to_the_process_group_ends_the_run_without_a_traceback(tmp_path: Path, presses: int,
+                                                                      started: str) -> None:
     """Ctrl-C in a terminal signals the whole process group, the calibration and what-if
     worker processes included: the run stops cleanly and nobody prints a traceback; a second
     Ctrl-C while it stops does not cut the stop short (it ended with 130, no "run ended" and
-    no stop record)."""
+    no stop record). A run that inherited SIGINT ignored stops on it all the same (it ran on
+    until killed: Python keeps an inherited SIG_IGN)."""
+    wrap = IGNORING_SIGINT if started == "sigint ignored" else []
     proc = subprocess.Popen(
-        [*DRUMTWIN, "run", "--no-dashboard", "--mode", "auto", "--speed", "2", "--log", str(tmp_path / "run")],
+        [*wrap, *DRUMTWIN, "run", "--no-dashboard", "--mode", "auto", "--speed", "2", "--log", str(tmp_path / "run")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     try:

@@ -24,10 +24,14 @@ if TYPE_CHECKING:
 
 @contextlib.contextmanager
 def _signals_restored() -> Iterator[None]:
-    """The run's SIGINT and SIGTERM handlers (set by :func:`_wait`) end with the run; after a
+    """Ctrl-C (SIGINT) stops the run even when the process inherited it ignored (started with ``&``
+    by a script or a service: Python keeps an inherited SIG_IGN, and the run went on until killed).
+    The run's SIGINT and SIGTERM handlers (this and :func:`_wait`) end with the run; after a
     Ctrl-C the process is on its way out: a repeated one stays harmless to the end."""
     main = threading.current_thread() is threading.main_thread()
     saved = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) if main else None
+    if main:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         yield
     finally:
