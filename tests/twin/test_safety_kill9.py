@@ -129,28 +129,9 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
         assert all(r["wall_s"] <= t_kill + 0.5 for r in rows), moment
         assert all(isinstance(e, dict) and "kind" in e and "t_s" in e for e in events), moment
 
-    # the next start: a normal run in the same temp directory, stopped (SIGTERM: the operator's stop, the
-    # same shutdown as the end of its duration) once its calibration's pool is up: its fork server's own
-    # pymp-* directory (not a killed run's leftover) is there to be left behind. Waiting on that event,
-    # not on 20 s of run time, cuts ~10 s of CPU and cannot stop before the pool exists.
-    before = {d.name for d in tmp.glob("pymp-*")}
+    # the next start: a normal run in the same temp directory, stopped once its calibration's pool is up
     nxt = tmp_path / "next"
-    with open(tmp_path / "next.err", "w+b") as err:
-        proc = subprocess.Popen([*argv, "--log", str(nxt)], env=env, stdout=subprocess.DEVNULL, stderr=err)
-        try:
-            wait_until(lambda: proc.poll() is not None or (
-                _reached("event calibration_started", tmp, nxt, proc.pid)
-                and any(d.name not in before for d in tmp.glob("pymp-*"))), 240,
-                "the next run's calibration pool to start")
-            assert proc.poll() is None, "the next run ended by itself before its calibration pool started"
-            proc.send_signal(signal.SIGTERM)
-            code = proc.wait(120)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-        err.seek(0)
-        stderr = err.read().decode(errors="replace")
-    assert code == 0, stderr[-2000:]
+    stderr = _next_run_stopped_at_its_pool(argv, env, tmp, nxt, tmp_path / "next.err")
 
     # issue 40: the catalogue beside the runs lists each killed run as ended without a stop,
     # with what its log holds, and the next run as a clean one
@@ -166,3 +147,28 @@ def test_kill_9_of_ten_runs_leaves_readable_logs_and_no_temp_dirs_after_the_next
     assert "Traceback" not in stderr
     wait_until(lambda: not _ours(marker), 20.0, "the next run's processes to end")
     assert sorted(p.name for p in tmp.iterdir()) == [], "left in the temp directory after the next run"
+
+
+def _next_run_stopped_at_its_pool(argv: list[str], env: dict[str, str], tmp: Path, log: Path, err_file: Path) -> str:
+    """A normal run in the same temp directory ``tmp``, stopped (SIGTERM: the operator's stop, the same
+    shutdown as the end of its duration) once its calibration's pool is up: its fork server's own pymp-*
+    directory (not a killed run's leftover) is there to be left behind. Waiting on that event, not on 20 s
+    of run time, cuts ~10 s of CPU and cannot stop before the pool exists. Its stderr; exit 0 asserted."""
+    before = {d.name for d in tmp.glob("pymp-*")}
+    with open(err_file, "w+b") as err:
+        proc = subprocess.Popen([*argv, "--log", str(log)], env=env, stdout=subprocess.DEVNULL, stderr=err)
+        try:
+            wait_until(lambda: proc.poll() is not None or (
+                _reached("event calibration_started", tmp, log, proc.pid)
+                and any(d.name not in before for d in tmp.glob("pymp-*"))), 240,
+                "the next run's calibration pool to start")
+            assert proc.poll() is None, "the next run ended by itself before its calibration pool started"
+            proc.send_signal(signal.SIGTERM)
+            code = proc.wait(120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        err.seek(0)
+        stderr = err.read().decode(errors="replace")
+    assert code == 0, stderr[-2000:]
+    return stderr
