@@ -114,6 +114,11 @@ def test_the_next_point_without_a_bracket_steps_along_the_secant_kept_near_the_f
     assert _next_u([at(0.6, 31.0), at(0.7, 29.0)], 30.0, 25.0) == pytest.approx(0.7 + 1.0 / (25.0 / 3.0))
 
 
+def test_a_secant_through_a_run_that_measured_nothing_is_not_a_step():
+    # a NaN slope (the twin's bed unreadable) before the last run: the fit's gradient, not a NaN step
+    assert _next_u([at(0.2, math.nan), at(0.5, 27.0)], 30.0, 10.0) == pytest.approx(0.5 + 3.0 / 10.0)
+
+
 def test_the_bracket_is_the_nearest_confirmed_pair_around_the_target_not_the_last_two():
     # below at 0.2 (25), above at 0.6 (35) and 0.5 (31): the bracket is 0.2-0.5, not the last two (both above)
     assert _next_u([at(0.2, 25.0), at(0.6, 35.0), at(0.5, 31.0)], 30.0, 25.0) == pytest.approx(0.2 + 5.0 * 0.3 / 6.0)
