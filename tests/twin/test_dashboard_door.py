@@ -15,6 +15,7 @@ import websockets
 
 from tests.twin.dashboard_fakes import RecordingControls
 from tests.twin.dashboard_helpers import (
+    CLOSED_CONNECTION_OK,
     drain_callbacks,
     open_viewer,
     send_message,
@@ -26,9 +27,7 @@ from twin.dashboard.guard import UnlockLimiter, UnlockPolicy, is_loopback, origi
 from twin.records import ModeSet, event_fields
 from twin.state import LiveState
 
-# viser warns when the GUI it builds for a connection that the tests close or refuse
-# mid-handshake is never delivered (whichever test of the shared dashboard sees it)
-pytestmark = pytest.mark.filterwarnings("ignore:Queued a GuiButtonMessage on a closed connection:UserWarning")
+pytestmark = CLOSED_CONNECTION_OK
 
 
 # -- the door: origin, framing, share tunnel, many viewers (real websocket clients) ------

@@ -12,7 +12,7 @@ import threading
 import numpy as np
 import pytest
 
-from tests.twin.dashboard_helpers import button, input_by_label
+from tests.twin.dashboard_helpers import CLOSED_CONNECTION_OK, button, input_by_label
 from tests.waiting import wait_until
 from twin.dashboard import Dashboard, numbers_markdown
 from twin.live.commands import SwapClasses
@@ -24,7 +24,7 @@ from vision.sources import read_image
 from vision.suggest import suggest_classes
 from vision.synthetic import light_change, particle_drum
 
-pytestmark = pytest.mark.filterwarnings("ignore:Queued a GuiButtonMessage on a closed connection:UserWarning")
+pytestmark = CLOSED_CONNECTION_OK
 
 FLAG = "lighting_changed:saturated:green"
 

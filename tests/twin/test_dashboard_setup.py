@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tests.twin.dashboard_fakes import RecordingControls
-from tests.twin.dashboard_helpers import button, input_by_label
+from tests.twin.dashboard_helpers import CLOSED_CONNECTION_OK, button, input_by_label
 from tests.waiting import wait_until
 from twin.commission.report import SECTIONS
 from twin.dashboard import Dashboard
@@ -23,7 +23,7 @@ from twin.dashboard.setup import SETUP_FRAMES, SetupFeed
 from twin.records import MillState, ModeSet
 from twin.state import LiveState
 
-pytestmark = pytest.mark.filterwarnings("ignore:Queued a GuiButtonMessage on a closed connection:UserWarning")
+pytestmark = CLOSED_CONNECTION_OK
 SPEED = 10.0  # run seconds per wall second of the stand-in camera
 
 

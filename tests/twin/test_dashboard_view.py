@@ -15,6 +15,7 @@ from control.limits import Limits
 from control.supervisor import Supervisor
 from tests.twin.dashboard_fakes import Feeder, RecordingControls
 from tests.twin.dashboard_helpers import (
+    CLOSED_CONNECTION_OK,
     IMG,
     button,
     choose_mode,
@@ -37,9 +38,7 @@ from twin.records import MillState, ModeSet
 from twin.run.settings import supervisor_config
 from twin.state import LiveState, Panel, forward_fill
 
-# viser warns when the GUI it builds for a connection that the tests close or refuse
-# mid-handshake is never delivered (whichever test of the shared dashboard sees it)
-pytestmark = pytest.mark.filterwarnings("ignore:Queued a GuiButtonMessage on a closed connection:UserWarning")
+pytestmark = CLOSED_CONNECTION_OK
 
 
 def test_pure_helpers() -> None:
