@@ -25,12 +25,9 @@ MANUAL_10HZ = {"delta-ms300": 1000, "abb-acs": 4000, "siemens-v20": 3277, "inver
 @pytest.fixture
 def drive(request) -> Iterator[DriveEmulator]:
     name = getattr(request, "param", "delta-ms300")
-    emu = DriveEmulator(load_profile(name), unit=7)
-    emu.open_pty()
-    try:
+    with DriveEmulator(load_profile(name), unit=7) as emu:
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 # -- pure ----------------------------------------------------------------------------------

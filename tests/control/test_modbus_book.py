@@ -28,12 +28,9 @@ EXC = {1: "Illegal function", 2: "Illegal data address", 3: "Illegal data value"
 
 @pytest.fixture(scope="module", params=SHIPPED)
 def drive(request) -> Iterator[DriveEmulator]:
-    emu = DriveEmulator(load_profile(request.param), unit=UNIT, speed=5.0)  # fast ramps: the trip test
-    emu.open_pty()
-    try:
+    with DriveEmulator(load_profile(request.param), unit=UNIT, speed=5.0) as emu:  # fast ramps: the trip test
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 def mbpoll(drive: DriveEmulator, *opts: str, values: tuple[int, ...] = ()) -> tuple[int, str]:

@@ -21,12 +21,9 @@ DRUMTWIN = Path(sys.executable).parent / "drumtwin"
 
 @pytest.fixture
 def delta() -> Iterator[DriveEmulator]:
-    emu = DriveEmulator(load_profile("delta-ms300"), unit=3)
-    emu.open_pty()
-    try:
+    with DriveEmulator(load_profile("delta-ms300"), unit=3) as emu:
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 def test_check_prints_identity_and_safety_parameters(delta: DriveEmulator) -> None:

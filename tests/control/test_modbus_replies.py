@@ -57,12 +57,9 @@ WRONG = {
 
 @pytest.fixture(scope="module")
 def drive() -> Iterator[DriveEmulator]:
-    emu = DriveEmulator(DELTA, unit=UNIT)
-    emu.open_pty()
-    try:
+    with DriveEmulator(DELTA, unit=UNIT) as emu:
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 @pytest.fixture

@@ -37,12 +37,9 @@ ACS355_LIKE = "58.16 / 58.14: modbus exception 2"  # the link reads abb-acs's gr
 
 @pytest.fixture(scope="module")
 def delta() -> Iterator[DriveEmulator]:
-    emu = DriveEmulator(DELTA, unit=1, speed=5.0)  # ramps 5 x faster: a stopped output in a fraction of a second
-    emu.open_pty()
-    try:
+    with DriveEmulator(DELTA, unit=1, speed=5.0) as emu:  # ramps 5 x faster: a stopped output in a fraction of a second
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 @pytest.fixture(scope="module")
@@ -56,12 +53,9 @@ def acs355(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DriveEmulator]:
                                                                                 "action_register = 3017")
     path = Path(tmp_path_factory.mktemp("acs355")) / "acs355.toml"
     path.write_text(text.replace('name = "abb-acs"', 'name = "acs355-like"'))
-    emu = DriveEmulator(load_profile(str(path)), unit=2, comm_loss_s=30.0, speed=5.0)  # its own trip: never here
-    emu.open_pty()
-    try:
+    with DriveEmulator(load_profile(str(path)), unit=2, comm_loss_s=30.0, speed=5.0) as emu:  # its own trip: never here
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 def _url(drive: DriveEmulator, override: bool) -> str:
@@ -201,13 +195,10 @@ def test_a_run_refuses_an_unreadable_trip_up_front_and_with_the_override_it_runs
 @pytest.fixture(scope="module")
 def board() -> Iterator[MillEmulator]:
     """The board with its watchdog off (commissioning): nothing but a stop stops it."""
-    emu = MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=60.0, accel_rpm_per_s=40.0,
-                                                                       tau_s=0.05)))
-    emu.open_pty()
-    try:
+    with MillEmulator(DeviceConfig(watchdog_s=0.0, motor=MotorConfig(max_rpm=60.0, accel_rpm_per_s=40.0,
+                                                                      tau_s=0.05))) as emu:
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 def _board_running(board: MillEmulator) -> int:

@@ -39,12 +39,9 @@ DELTA = load_profile("delta-ms300")
 @pytest.fixture
 def delta() -> Iterator[DriveEmulator]:
     """A Delta MS300 emulator on a pty, commissioned with a 1 s comm-loss trip."""
-    emu = DriveEmulator(DELTA, unit=1, comm_loss_s=1.0)
-    emu.open_pty()
-    try:
+    with DriveEmulator(DELTA, unit=1, comm_loss_s=1.0) as emu:
+        emu.open_pty()
         yield emu
-    finally:
-        emu.close()
 
 
 @LIVE
