@@ -217,7 +217,7 @@ def test_the_status_word_follows_the_output_after_a_comm_loss_trip(drive: DriveE
     says decelerating (Delta's 01, the generic profile's bit 2) while a ramp trip runs down,
     and a coasting trip switches the output off at once."""
     p = drive.profile
-    drive.commission(0.3)
+    drive.commission(2.0)  # the ramp up under a long comm-loss time: a starved test process polls late
     samples: list[tuple[int, int, bool]] = []  # (status word, output counts, tripped) of one read
     regs = sorted({p.status_register, p.output_register} | (set() if p.tripped_mask else {p.fault_register}))
     assert regs[-1] - regs[0] < 8  # one read, as a host's: the words of one instant
@@ -234,6 +234,7 @@ def test_the_status_word_follows_the_output_after_a_comm_loss_trip(drive: DriveE
             mill.set_rpm(20.0)
             mill.start()
             wait_until(lambda: mill.heartbeat().actual_rpm >= 10.0, 10, "the ramp up")
+        drive.commission(0.3)  # then a short one, with nobody writing: the trip while the motor runs fast
         wait_until(sample, 10, "the comm-loss trip and the motor at 0 Hz", poll_s=0.005)  # nobody writes
     finally:
         drive.commission(2.0)

@@ -62,8 +62,12 @@ def _dashboard(cam: RigCamera, out: Path, **kw: object) -> Dashboard:
 @pytest.mark.browser
 @pytest.mark.slow
 @pytest.mark.timeout(240)
-def test_setup_view_commissions_the_live_camera_and_the_report_is_one_click_away(page, rig_frames,
-                                                                                tmp_path: Path) -> None:
+def test_setup_view_commissions_the_live_camera_and_the_report_is_one_click_away(page, rig_frames, tmp_path: Path,
+                                                                                monkeypatch) -> None:
+    from twin.commission import steps
+
+    # the view's flow, not the calibration's accuracy (``drumtwin commission``'s tests): one confirming run
+    monkeypatch.setitem(steps.CALIBRATE, "confirm_evals", 1)
     controls = RecordingControls()
     dash = _dashboard(RigCamera(rig_frames), tmp_path / "run", controls=controls).start()
     try:
