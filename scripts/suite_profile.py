@@ -102,18 +102,18 @@ def main(argv: list[str] | None = None) -> int:
     busy_s = (b1 - b0) / os.sysconf("SC_CLK_TCK")
     print(f"\npytest exit {code}: {wall:.0f} s wall, {args.n} workers; the machine {cores * (b1 - b0) / (t1 - t0):.2f} "
           f"of {cores} cores busy ({busy_s:.0f} s of CPU: at least {busy_s / cores:.0f} s of wall on {cores} cores)")
-    kinds: collections.Counter[str] = collections.Counter()
+    kinds: dict[str, float] = collections.defaultdict(float)
     for pid, (cpu, cmd) in seen.items():
         if pid not in before:
             kinds[_kind(cmd)] += cpu
     print("CPU by process kind (processes started during the run; s):")
-    for k, v in kinds.most_common():
+    for k, v in sorted(kinds.items(), key=lambda kv: -kv[1]):
         print(f"  {v:7.1f}  {k}")
-    mods: collections.Counter[str] = collections.Counter()
+    mods: dict[str, float] = collections.defaultdict(float)
     for t in tests:
         mods[t["id"].split("::")[0]] += t["cpu"]
     print(f"CPU by test module ({sum(mods.values()):.0f} s in {len(tests)} tests; own and reaped children's):")
-    for m, v in mods.most_common(args.top):
+    for m, v in sorted(mods.items(), key=lambda kv: -kv[1])[:args.top]:
         print(f"  {v:7.1f}  {m}")
     print("the costliest tests (CPU s, wall s):")
     for t in sorted(tests, key=lambda t: -t["cpu"])[:args.top]:
