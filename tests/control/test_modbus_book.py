@@ -230,7 +230,7 @@ def test_the_status_word_follows_the_output_after_a_comm_loss_trip(drive: DriveE
         return tripped and out == 0
 
     try:
-        with ModbusMill(drive.mill_url(), timeout_s=0.5) as mill:
+        with ModbusMill(drive.mill_url(), timeout_s=1.0) as mill:
             mill.set_rpm(20.0)
             mill.start()
             wait_until(lambda: mill.heartbeat().actual_rpm >= 10.0, 10, "the ramp up")

@@ -89,7 +89,7 @@ def test_a_wrong_reply_is_a_link_fault_that_pymodbus_alone_lets_through(drive, w
     wrong(name)
     rr = _pymodbus_alone(drive, kind)  # the library believes it: data (or an exception for this request)
     assert getattr(rr, "registers", None) or getattr(rr, "exception_code", None), rr
-    with ModbusMill(drive.mill_url(), timeout_s=0.3, retries=0, refuse_unsafe=False) as mill:
+    with ModbusMill(drive.mill_url(), timeout_s=1.0, retries=0, refuse_unsafe=False) as mill:
         with pytest.raises(TimeoutError, match=re.escape(reason)):
             if kind == READ:
                 mill.status()
@@ -120,7 +120,7 @@ def test_every_mill_command_refuses_a_drive_that_answers_fc_4_to_fc_3(drive, wro
     one line, exit 2; a start is never sent on it (it reads the drive first)."""
     wrong("fc 0x04 to 0x03")
     n = len(drive.writes)
-    assert_one_line_error(cli("mill", "--retries", "0", drive.mill_url(), *cmd), "no valid answer",
+    assert_one_line_error(cli("mill", "--retries", "0", "--timeout", "1", drive.mill_url(), *cmd), "no valid answer",
                           "function 0x04 for unit 5 function 0x03")
     applied = [(w.address, w.value) for w in drive.writes[n:]]
     assert (DELTA.control_register, DELTA.run_words[0]) not in applied

@@ -133,8 +133,8 @@ def test_only_a_start_or_a_faster_setpoint_is_refused(request, which: str, how: 
         assert drive.writes[n:] == []  # refused before anything was written
         mill.set_rpm(2.0)  # slower: sent
         mill.heartbeat()  # the keep-alive: the setpoint it holds
-        assert [(w.address, w.value) for w in drive.writes[n:]] == [(prof.setpoint_register,
-                                                                     prof.setpoint.to_counts(2.0))] * 2
+        sent = [(w.address, w.value) for w in drive.writes[n:]]  # twice, or more if a late answer was resent
+        assert len(sent) >= 2 and set(sent) == {(prof.setpoint_register, prof.setpoint.to_counts(2.0))}, sent
         assert mill.status().setpoint_rpm == 2.0 and mill.safety_problem is not None
         n = len(drive.writes)
         mill.stop()
