@@ -88,7 +88,13 @@ class Viewers:
         self._lock = threading.Lock()
 
     def build(self, client: viser.ClientHandle) -> None:
-        """Build one viewer's controls (the caller holds the build lock)."""
+        """Build one viewer's controls (the caller holds the build lock). The viewer gets them in one
+        message batch once every callback is wired: a button shown before its ``on_click`` was attached
+        dropped an early click ("Start mill" pressed as the page opened on a loaded machine: nothing)."""
+        with client.atomic():
+            self._build(client)
+
+    def _build(self, client: viser.ClientHandle) -> None:
         cc = ClientControls(authorised=not self.gate.token_required)
         with self._lock:
             self._clients[client.client_id] = cc
