@@ -18,7 +18,9 @@ split into particle classes and background (pure).
    and pale teal, or dark and light green, stay apart. A particle component darker than,
    and joined more closely to the background than to, its nearest particle component
    (gaps, shadows) joins the background, and so does a member of a class far darker (L below half) than the
-   class's main component (the gaps between particles, deep shadows).
+   class's main component (the gaps between particles, deep shadows), or one seen in the bed
+   region markedly less often than the class's main component (``RIM_BED_RATIO``: the particles'
+   rim against the dark drum at the bed's surface and their reflections in the drum wall).
    Last, a class member (not its main component) that lies between the background's
    colour and another class's main colour is dropped to the background: mixed edge and
    gap pixels, which noise or blur make either material's (see ``_drop_bridges``).
@@ -45,13 +47,23 @@ import numpy as np
 from vision.colours import ColourClass, LabComponent
 from vision.errors import VisionError
 
-__all__ = ["MAX_DISTANCE", "DrumSamples", "colour_name", "fit_colour_model"]
+__all__ = ["MAX_DISTANCE", "RIM_BED_RATIO", "DrumSamples", "bed_shares", "class_members", "colour_name",
+           "fit_colour_model"]
 
 MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
 
 _L_WEIGHT_FIT = 0.5  # lightness weight in the space the mixture's k-means start sees
 _SHADOW_L_RATIO = 0.5  # a class member darker than this x the class's main lightness is shadow/gap
+RIM_BED_RATIO = 0.8
+"""A class member (not its main component) whose samples lie in their frames' bed region
+(``vision.bedframe``) less than this x as often as the main component's is the particles' rim
+against the drum, not a material: the mixed pixels where the bed meets the dark drum (its surface,
+the discs' reflections in the drum wall), which lie at the bed's margins. A particle colour,
+whatever its shade, lies in the bed as the particles do (0.93-1.15 x on the bench's rigs; the
+rims 0.65-0.68 x). The rule of ``vision.loro.rim_rule`` (the middle of the ratios that best tell
+the rigs' rim members from their particle members) on the real rigs of the cross-rig bench
+(docs/validation.md, section 15: checked leave-one-rig-out)."""
 _GLARE_CLIPPED = 0.1  # a component with this share of clipped samples ...
 _GLARE_WEIGHT = 0.25  # ... and under this x the largest particle component's weight is glare
 _BRIDGE_T = (0.2, 0.8)  # a class member between the background and another class (position on the segment) ...
@@ -164,8 +176,53 @@ def fit_colour_model(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[C
     return _fit_colour_model(samples, k, seed)[0]
 
 
+@dataclass
+class _Grouped:
+    """The mixture and its components' first split: means (CIELAB and the fit space), covariances,
+    sample counts and hard labels, the ridge, the background (``cap``: the part seen in the empty
+    drum) and the particle components linked into ``k`` groups."""
+
+    mu: np.ndarray
+    mu_f: np.ndarray
+    cov: np.ndarray
+    counts: np.ndarray
+    lbl: np.ndarray
+    ridge: np.ndarray
+    background: list[int]
+    cap: list[int]
+    groups: list[list[int]]
+
+
 def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[ColourClass, ...], tuple[str, ...]]:
     """:func:`fit_colour_model` and its notes for the user (classes that may be wrongly split)."""
+    m = _grouped(samples, k, seed)
+    counts, background = m.counts, m.background
+    bed = bed_shares(samples, m.lbl, counts.shape[0])
+    for g in m.groups:  # gaps, shadows and rims: a member far darker than the class's main colour, or off its bed
+        main = max(g, key=lambda j: counts[j])
+        for j in list(g):
+            if j != main and (m.mu[j, 0] < _SHADOW_L_RATIO * m.mu[main, 0] or bed[j] < RIM_BED_RATIO * bed[main]):
+                g.remove(j)
+                background.append(j)
+    _drop_bridges(m.groups, background, m.cap, m.mu_f, counts)
+    return _named_classes(m.groups, background, m.mu, m.cov, counts, m.ridge)
+
+
+def class_members(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[np.ndarray, list[tuple[int, list[int]]],
+                                                                             np.ndarray]:
+    """The fit's particle groups before their shadows and rims are dropped (``vision.loro.rim_records``):
+    the samples' hard labels, each group's main component and its other members, and every
+    component's :func:`bed_shares`."""
+    m = _grouped(samples, k, seed)
+    out = []
+    for g in m.groups:
+        main = max(g, key=lambda j: m.counts[j])
+        out.append((main, [j for j in g if j != main]))
+    return m.lbl, out, bed_shares(samples, m.lbl, m.counts.shape[0])
+
+
+def _grouped(samples: DrumSamples, k: int, seed: int) -> _Grouped:
+    """Steps 1-3 of the module's doc up to the linking into ``k`` groups."""
     if not 2 <= k <= 6:
         raise VisionError(f"k must be within 2..6, got {k}")
     n = k + 3
@@ -200,15 +257,17 @@ def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[Co
             else:
                 keep.append(j)
         particles = keep if len(keep) >= k else particles
-    groups = _link(particles, ridge, k)
-    for g in groups:  # gaps and shadows in the bed: a member far darker than the class's main colour
-        main = max(g, key=lambda j: counts[j])
-        for j in list(g):
-            if j != main and mu[j, 0] < _SHADOW_L_RATIO * mu[main, 0]:
-                g.remove(j)
-                background.append(j)
-    _drop_bridges(groups, background, cap, mu_f, counts)
-    return _named_classes(groups, background, mu, cov, counts, ridge)
+    return _Grouped(mu, mu_f, cov, counts, lbl, ridge, background, cap, _link(particles, ridge, k))
+
+
+def bed_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:
+    """Each of the ``n`` components' share of its samples (hard labels ``lbl``) in its frame's bed
+    region (``samples.bed``; NaN without it or for an empty component: no verdict)."""
+    if samples.bed is None:
+        return np.full(n, np.nan)
+    counts = np.bincount(lbl, minlength=n).astype(float)
+    in_bed = np.bincount(lbl[samples.bed], minlength=n).astype(float)
+    return np.where(counts > 0, in_bed / np.maximum(counts, 1.0), np.nan)
 
 
 def _empty_region_split(samples: DrumSamples, lbl: np.ndarray, counts: np.ndarray,

@@ -16,6 +16,14 @@ the threshold it gives is measured on the rig left out.
   bed samples (the most balanced accuracy, the source's class map as truth). Measured on the
   rig left out: the share of its bed samples in the upper drum called empty (particles that
   could be learned as background) and the share of its empty samples found.
+- ``vision.colourfit.RIM_BED_RATIO`` (a class member seen in the bed less than this x as often as
+  its class's main colour is the particles' rim, not a material): :func:`rim_rule` -- the middle of
+  the ratios that best tell the rim members of the classes (before they are dropped) from the
+  particle members (balanced accuracy; a member is a rim when a quarter or more of its samples lie
+  on no particle of the real frames' class map, which counts the discs' dark edges as theirs: the
+  synthetic rigs' class maps are the drawn discs without their blurred edges, so their members
+  are only measured, not used to choose). Measured on the rig left out: the share of its rim
+  members dropped and of its particle members kept (synthetic: of its members kept).
 """
 
 from __future__ import annotations
@@ -26,13 +34,23 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from vision.bedframe import EMPTY_HEIGHT, FrameSamples, density_ratio, frame_samples, in_gravity
+from vision.colourfit import class_members
 from vision.rigs import RigFrame
 from vision.roi import detect_drum
+from vision.suggest import MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET
 
-__all__ = ["DENSITY_GRID", "density_records", "density_rule", "leave_one_rig_out", "spread_rule"]
+__all__ = ["DENSITY_GRID", "RIM_GRID", "RIM_OFF", "density_records", "density_rule", "leave_one_rig_out",
+           "rim_records", "rim_rule", "spread_rule"]
 
 DENSITY_GRID = np.round(np.arange(0.05, 0.81, 0.05), 2)
 """The ratios :func:`density_rule` chooses from."""
+
+RIM_GRID = np.round(np.arange(0.5, 1.001, 0.05), 2)
+"""The ratios :func:`rim_rule` chooses from."""
+
+RIM_OFF = 0.25
+"""A class member is a rim (the truth :func:`rim_rule` is chosen on) when this share of its samples
+or more lies on no particle of the class map (the real rigs' members: 0-9 % or 35-42 %)."""
 
 
 def spread_rule(spreads: Sequence[float]) -> float:
@@ -78,6 +96,67 @@ def density_records(frames: Sequence[RigFrame], seed: int = 0) -> tuple[np.ndarr
     return np.concatenate(ratios), np.concatenate(beds)
 
 
+def rim_rule(ratio: np.ndarray, is_rim: np.ndarray) -> float:
+    """The middle of the ratios of :data:`RIM_GRID` with the best balanced accuracy at telling rim
+    members (under it) from particle members (at or over it); rows of unknown truth (NaN) left out."""
+    known = np.isfinite(is_rim)
+    r, rim = np.asarray(ratio)[known], np.asarray(is_rim)[known] > 0.5
+    acc = np.array([0.5 * (float((r[rim] < t).mean()) if rim.any() else 0.0)
+                    + 0.5 * (float((r[~rim] >= t).mean()) if (~rim).any() else 0.0) for t in RIM_GRID])
+    best = RIM_GRID[np.isclose(acc, acc.max())]
+    return float(np.round(0.5 * (best.min() + best.max()), 3))
+
+
+def rim_records(frames: Sequence[RigFrame], edges_labelled: bool = True,
+                seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The class members of the colour model ``classes suggest`` fits to ``frames`` (sampled as it
+    samples them), before their shadows and rims are dropped: each member's bed share over its
+    class's main component's (``vision.colourfit.bed_shares``) and whether it is a rim (1.0: a
+    share :data:`RIM_OFF` or more of its samples on no particle of the frames' class maps; 0.0
+    not; NaN unknown: ``edges_labelled`` False, class maps without the particles' edges)."""
+    rng = np.random.default_rng(seed)
+    per = max(MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET // max(len(frames), 1))
+    parts, on = [], []
+    for f in frames:
+        roi = detect_drum(f.image)
+        part = frame_samples(f.image, roi, per, rng)
+        if part is None:
+            continue
+        parts.append(part)
+        if f.classes is None:
+            on.append(np.full(part.off.shape[0], np.nan))
+            continue
+        xs = np.clip(np.round(part.off[:, 0] * roi.r_px + roi.cx_px).astype(int), 0, f.image.shape[1] - 1)
+        ys = np.clip(np.round(part.off[:, 1] * roi.r_px + roi.cy_px).astype(int), 0, f.image.shape[0] - 1)
+        on.append((f.classes[ys, xs] > 0).astype(float))
+    if not parts:
+        return np.empty(0), np.empty(0)
+    lbl, groups, bed = class_members(in_gravity(parts, None, False)[0])
+    particle = np.concatenate(on)
+    ratios, truth = [], []
+    for main, members in groups:
+        for j in members:
+            ratios.append(bed[j] / bed[main] if bed[main] > 0 else np.nan)
+            off = 1.0 - float(np.mean(particle[lbl == j]))
+            truth.append(float(off >= RIM_OFF) if edges_labelled and math.isfinite(off) else np.nan)
+    return np.asarray(ratios, float), np.asarray(truth, float)
+
+
+def _rim_row(mine: Mapping, others: Sequence[Mapping]) -> dict:
+    """The rim threshold chosen on ``others``' records and measured on ``mine``'s."""
+    recs = [o for o in others if len(o.get("rim_ratio", ()))]
+    r, truth = np.asarray(mine.get("rim_ratio", ()), float), np.asarray(mine.get("rim_truth", ()), float)
+    if not recs or not r.size:
+        return {}
+    t = rim_rule(np.concatenate([np.asarray(o["rim_ratio"], float) for o in recs]),
+                 np.concatenate([np.asarray(o["rim_truth"], float) for o in recs]))
+    rim, part, unknown = truth > 0.5, truth <= 0.5, ~np.isfinite(truth)
+    return {"rim_threshold": t,
+            "rims_dropped": float((r[rim] < t).mean()) if rim.any() else math.nan,
+            "particles_kept": float((r[part] >= t).mean()) if part.any() else math.nan,
+            "unknown_kept": float((r[unknown] >= t).mean()) if unknown.any() else math.nan}
+
+
 def _ratio(part: FrameSamples) -> np.ndarray:
     return np.nan_to_num(density_ratio(part), nan=1.0)
 
@@ -103,7 +182,7 @@ def leave_one_rig_out(records: Mapping[str, Mapping]) -> dict:
             r, b = np.asarray(mine["density_ratio"]), np.asarray(mine["density_bed"], bool)
             row |= {"density_threshold": t, "bed_called_empty": float((r[b] < t).mean()) if b.any() else math.nan,
                     "empty_found": float((r[~b] < t).mean()) if (~b).any() else math.nan}
-        out["rigs"][rig] = row
+        out["rigs"][rig] = row | _rim_row(mine, others)
     allr = list(records.values())
     out["all"] = {"spread_threshold": spread_rule([p[0] for o in allr for p in o["setup_spreads"]]),
                   "disagreement_threshold": spread_rule([p[1] for o in allr for p in o["setup_spreads"]])}
@@ -112,6 +191,10 @@ def leave_one_rig_out(records: Mapping[str, Mapping]) -> dict:
         out["all"]["density_threshold"] = density_rule(
             np.concatenate([np.asarray(o["density_ratio"]) for o in dens]),
             np.concatenate([np.asarray(o["density_bed"], bool) for o in dens]))
+    rims = [o for o in allr if len(o.get("rim_ratio", ()))]
+    if rims:
+        out["all"]["rim_threshold"] = rim_rule(np.concatenate([np.asarray(o["rim_ratio"], float) for o in rims]),
+                                               np.concatenate([np.asarray(o["rim_truth"], float) for o in rims]))
     return out
 
 

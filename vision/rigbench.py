@@ -36,7 +36,7 @@ import numpy as np
 from vision.colours import bgr_to_lab, class_mean_lab
 from vision.config import MeterConfig
 from vision.errors import VisionError
-from vision.loro import density_records, leave_one_rig_out
+from vision.loro import density_records, leave_one_rig_out, rim_records
 from vision.rigs import (
     BEYOND,
     LIGHTS,
@@ -189,13 +189,16 @@ def _bench_rig(name: str, frames: Callable[[], Iterable[RigFrame]], colours: Seq
                say: Callable[[str], None]) -> tuple[dict, dict]:
     """The rig's row of the bench, and its records for the leave-one-rig-out checks
     (``vision.loro``: the spreads at the set-up light and under the tone curve, the upper
-    drum's texture density ratios of its set-up frames and their truth)."""
+    drum's texture density ratios of its set-up frames and their truth, the colour model's
+    class members' bed ratios and whether each is a rim)."""
     say(f"rig {name}: classes suggest ...")
     pick = set(setup_indices(n, SETUP_FRAMES))
     chosen = [f for i, f in enumerate(frames()) if i in pick]
     setup = rig_setup([f.image for f in chosen], colours, learn)
     ratio, bed = density_records(chosen)
-    rec: dict = {"setup_spreads": [], "curve_spreads": [], "density_ratio": ratio, "density_bed": bed}
+    rim_ratio, rim_truth = rim_records(chosen, edges_labelled=not name.startswith("synthetic "))
+    rec: dict = {"setup_spreads": [], "curve_spreads": [], "density_ratio": ratio, "density_bed": bed,
+                 "rim_ratio": rim_ratio, "rim_truth": rim_truth}
     row: dict = {"classes": ", ".join(setup.names)}
     at_setup: list[tuple[float, float]] = []
     for light in sorted(lights, key=lambda v: v != "setup"):  # the set-up light first: the others are held to it

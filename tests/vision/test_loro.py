@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from vision.loro import density_rule, leave_one_rig_out, spread_rule
+from vision.loro import RIM_GRID, density_rule, leave_one_rig_out, rim_rule, spread_rule
 
 
 def rig(spread: float, disagreement: float, n: int = 50, seed: int = 0, density: tuple[float, float] | None = None):
@@ -68,3 +68,35 @@ def test_estimates_flagged_for_another_cause_count_as_flagged():
     out = leave_one_rig_out(records)
     assert out["rigs"]["b"]["setup_flagged"] == pytest.approx(0.1)
     assert math.isfinite(out["rigs"]["a"]["spread_threshold"])
+
+
+def with_rims(rec: dict, rims: tuple[float, ...], particles: tuple[float, ...], known: bool = True) -> dict:
+    """``rec`` with colour-model class members: rims and particle members at these bed ratios
+    (``known`` False: their truth unknown, as on a synthetic rig)."""
+    truth = [1.0] * len(rims) + [0.0] * len(particles)
+    return rec | {"rim_ratio": np.asarray(rims + particles), "rim_truth": np.asarray(truth if known else
+                                                                                     [math.nan] * len(truth))}
+
+
+def test_the_rim_threshold_is_chosen_on_the_other_rigs_and_measured_on_the_one_left_out():
+    """Rims at bed ratios 0.6-0.7 and particle members at 0.95-1.1 on three rigs: the rule takes the
+    middle of the ratios that tell them apart (0.7 < t <= 0.95: 0.85); a rig whose rim lies in
+    the bed as much as its particles (0.97) keeps it when left out (the miss shows) and does not
+    move the threshold the others meet; the members of a rig of unknown truth are measured (kept),
+    never chosen on."""
+    records = {f"rig{i}": with_rims(rig(0.05, 0.08, seed=i), (0.6 + 0.05 * i,), (0.95, 1.0 + 0.05 * i))
+               for i in range(3)}
+    records["odd"] = with_rims(rig(0.05, 0.08, seed=7), (0.97,), (1.02,))
+    records["synthetic"] = with_rims(rig(0.05, 0.08, seed=8), (), (0.94, 0.5), known=False)
+    out = leave_one_rig_out(records)
+    odd = out["rigs"]["odd"]
+    assert 0.7 < odd["rim_threshold"] <= 0.95 and odd["rims_dropped"] == 0.0 and odd["particles_kept"] == 1.0, odd
+    for name in ("rig0", "rig1", "rig2"):
+        row = out["rigs"][name]
+        assert row["rims_dropped"] == 1.0 and row["particles_kept"] == 1.0, (name, row)
+    syn = out["rigs"]["synthetic"]
+    assert math.isnan(syn["rims_dropped"]) and syn["unknown_kept"] == 0.5, syn
+    assert out["all"]["rim_threshold"] == pytest.approx(0.85)  # the best: 0.75..0.95 (3 of 4 rims, all particles)
+    assert rim_rule(np.array([0.6, 1.0]), np.array([1.0, 0.0])) == pytest.approx(0.825)  # the best: 0.65..1.0
+    assert rim_rule(np.array([0.6, 1.0, 0.3]), np.array([1.0, 0.0, math.nan])) == pytest.approx(0.825)
+    assert RIM_GRID[0] == 0.5 and RIM_GRID[-1] == 1.0
