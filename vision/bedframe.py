@@ -131,7 +131,8 @@ def in_gravity(parts: Sequence[FrameSamples], camera_rotation_deg: float | None,
         bed.append(ratio > 2.0 * EMPTY_DENSITY)
     cat = np.concatenate
     return (DrumSamples(cat([p.lab for p in parts]).astype(np.float64), cat(heights), cat([p.clipped for p in parts]),
-                        cat(empty), cat(bed)), float(ref), disagree)
+                        cat(empty), cat(bed), cat([np.hypot(p.off[:, 0], p.off[:, 1]) for p in parts])),
+            float(ref), disagree)
 
 
 def density_ratio(part: FrameSamples) -> np.ndarray:

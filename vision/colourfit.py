@@ -19,8 +19,9 @@ split into particle classes and background (pure).
    and joined more closely to the background than to, its nearest particle component
    (gaps, shadows) joins the background, and so does a member of a class far darker (L below half) than the
    class's main component (the gaps between particles, deep shadows), or one seen in the bed
-   region markedly less often than the class's main component (``RIM_BED_RATIO``: the particles'
-   rim against the dark drum at the bed's surface and their reflections in the drum wall).
+   region markedly less often than the class's main component (``RIM_BED_RATIO``) and at the drum
+   wall at least as often (``RIM_WALL_R``): the particles' rim against the dark drum at the bed's
+   surface and their reflections in the drum wall.
    Last, a class member (not its main component) that lies between the background's
    colour and another class's main colour is dropped to the background: mixed edge and
    gap pixels, which noise or blur make either material's (see ``_drop_bridges``).
@@ -47,8 +48,8 @@ import numpy as np
 from vision.colours import ColourClass, LabComponent
 from vision.errors import VisionError
 
-__all__ = ["MAX_DISTANCE", "RIM_BED_RATIO", "DrumSamples", "bed_shares", "class_members", "colour_name",
-           "fit_colour_model"]
+__all__ = ["MAX_DISTANCE", "RIM_BED_RATIO", "RIM_WALL_R", "DrumSamples", "bed_shares", "class_members",
+           "colour_name", "fit_colour_model", "is_rim", "wall_shares"]
 
 MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
@@ -64,6 +65,13 @@ whatever its shade, lies in the bed as the particles do (0.93-1.15 x on the benc
 rims 0.65-0.68 x). The rule of ``vision.loro.rim_rule`` (the middle of the ratios that best tell
 the rigs' rim members from their particle members) on the real rigs of the cross-rig bench
 (docs/validation.md, section 15: checked leave-one-rig-out)."""
+RIM_WALL_R = 0.8
+"""... and whose samples lie at the drum wall (this x R from the centre, or further) at least as
+often as the main component's: a rim is where the bed meets the drum and in the wall's
+reflections (the bench's real rims 1.10-1.24 x their class's share there), while a dark shade of
+the material lies where its particles lie (the shaded edges of pale teal discs under JPEG 30, off
+the bed region 0.78 x as often as their class, lie at the wall 0.74 x: kept). Not chosen on data:
+the class's own share at the wall is the reference."""
 _GLARE_CLIPPED = 0.1  # a component with this share of clipped samples ...
 _GLARE_WEIGHT = 0.25  # ... and under this x the largest particle component's weight is glare
 _BRIDGE_T = (0.2, 0.8)  # a class member between the background and another class (position on the segment) ...
@@ -90,13 +98,15 @@ def colour_name(h: float, s: float, v: float) -> str:
 class DrumSamples:
     """Pixels sampled inside the drum: CIELAB colour (N, 3), height ``(cy - y) / R`` (N,, in
     gravity's frame), whether a channel is clipped (>= 250, N bool), whether the pixel lies in
-    its frame's empty region and in its bed (N bool each, ``vision.bedframe``; ``None``: unknown)."""
+    its frame's empty region and in its bed (N bool each, ``vision.bedframe``; ``None``: unknown),
+    and its distance from the drum's centre (N,, in R; ``None``: unknown)."""
 
     lab: np.ndarray
     height: np.ndarray
     clipped: np.ndarray | None = None
     empty: np.ndarray | None = None
     bed: np.ndarray | None = None
+    radius: np.ndarray | None = None
 
 
 def _em(x: np.ndarray, n: int, seed: int, iters: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -197,11 +207,11 @@ def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[Co
     """:func:`fit_colour_model` and its notes for the user (classes that may be wrongly split)."""
     m = _grouped(samples, k, seed)
     counts, background = m.counts, m.background
-    bed = bed_shares(samples, m.lbl, counts.shape[0])
-    for g in m.groups:  # gaps, shadows and rims: a member far darker than the class's main colour, or off its bed
+    bed, wall = bed_shares(samples, m.lbl, counts.shape[0]), wall_shares(samples, m.lbl, counts.shape[0])
+    for g in m.groups:  # gaps, shadows and rims: a member far darker than the class's main colour, or its rim
         main = max(g, key=lambda j: counts[j])
         for j in list(g):
-            if j != main and (m.mu[j, 0] < _SHADOW_L_RATIO * m.mu[main, 0] or bed[j] < RIM_BED_RATIO * bed[main]):
+            if j != main and (m.mu[j, 0] < _SHADOW_L_RATIO * m.mu[main, 0] or is_rim(bed, wall, j, main)):
                 g.remove(j)
                 background.append(j)
     _drop_bridges(m.groups, background, m.cap, m.mu_f, counts)
@@ -258,6 +268,23 @@ def _grouped(samples: DrumSamples, k: int, seed: int) -> _Grouped:
                 keep.append(j)
         particles = keep if len(keep) >= k else particles
     return _Grouped(mu, mu_f, cov, counts, lbl, ridge, background, cap, _link(particles, ridge, k))
+
+
+def is_rim(bed: np.ndarray, wall: np.ndarray, j: int, main: int) -> bool:
+    """Component ``j`` of a class whose main component is ``main`` is the particles' rim: seen in the
+    bed region under :data:`RIM_BED_RATIO` x as often as ``main``, and at the wall (``wall``:
+    :func:`wall_shares`) at least as often (an unknown share: no verdict, kept)."""
+    return bool(bed[j] < RIM_BED_RATIO * bed[main] and wall[j] >= wall[main])
+
+
+def wall_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:
+    """Each of the ``n`` components' share of its samples (hard labels ``lbl``) at :data:`RIM_WALL_R`
+    or further from the drum's centre (NaN without ``samples.radius`` or for an empty component)."""
+    if samples.radius is None:
+        return np.full(n, np.nan)
+    counts = np.bincount(lbl, minlength=n).astype(float)
+    at_wall = np.bincount(lbl[samples.radius >= RIM_WALL_R], minlength=n).astype(float)
+    return np.where(counts > 0, at_wall / np.maximum(counts, 1.0), np.nan)
 
 
 def bed_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:
