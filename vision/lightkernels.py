@@ -21,8 +21,11 @@ FLOOR = 20.0
 """Display values at or below this carry no gain information (black level, noise)."""
 CEIL = 247.0
 """Display values at or above this may be clipped."""
-GAIN_RANGE = (0.4, 2.5)
-"""Linear-light gains outside this range are too far to map back."""
+GAIN_RANGE = (0.4, 2.0)
+"""Linear-light gains outside this range are too far to map back. The aims hold x0.6-x1.5 (read at
+0.94-1.74 on the cross-rig bench's rigs, docs/validation.md section 15); past about x2 the clipped
+channels carry no gain and read it low (x3 as 2.26-2.50 on the teal/white rigs, whose frames were
+then measured wrong without a flag): the top is 2.0."""
 MIN_LEVELS = 5
 """A channel needs at least this many usable quantile levels."""
 PREV_START = 0.02

@@ -103,3 +103,18 @@ def test_bench_vision_rigs_json_and_table(source, monkeypatch):
         assert row["empty_found"] > 0.9, (rig, row)  # the empty drum's samples are found as empty
     lines = rig_table(res)
     assert sum(ln.strip().startswith("x0.7") for ln in lines) == 2
+
+
+def test_saturation_past_what_the_gains_map_back_is_flagged_not_measured(source):
+    """x3 after set-up on the teal/white rig: the blue-green of the teal discs and all of the white
+    clip, and the clipped channels read the gain low (2.26-2.50 for 3 over the bench's teal/white
+    rigs), so the frames were measured -- 61 % of the full rig's frames wrong without a flag. A
+    gain past ``GAIN_RANGE``'s 2.0 (the aims' lights read at most 1.74) is flagged: no frame of
+    it is measured wrong in silence, and the set-up light stays unflagged."""
+    from vision.rigbench import run_rig_bench
+
+    res = run_rig_bench(rigs=[RigSpec("teal-white", "scale320")], lights=("setup", "x1.5", "x3"), synthetic=[],
+                        source=source)
+    row = res["real"]["teal-white/scale320"]
+    assert row["setup"]["flagged"] == 0.0 and row["x1.5"]["flagged"] == 0.0, row
+    assert row["x3"]["wrong_unflagged"] == 0.0 and row["x3"]["flagged"] == 1.0, row["x3"]
