@@ -280,21 +280,23 @@ def is_rim(bed: np.ndarray, wall: np.ndarray, j: int, main: int) -> bool:
 def wall_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:
     """Each of the ``n`` components' share of its samples (hard labels ``lbl``) at :data:`RIM_WALL_R`
     or further from the drum's centre (NaN without ``samples.radius`` or for an empty component)."""
-    if samples.radius is None:
-        return np.full(n, np.nan)
-    counts = np.bincount(lbl, minlength=n).astype(float)
-    at_wall = np.bincount(lbl[samples.radius >= RIM_WALL_R], minlength=n).astype(float)
-    return np.where(counts > 0, at_wall / np.maximum(counts, 1.0), np.nan)
+    return _shares(lbl, None if samples.radius is None else samples.radius >= RIM_WALL_R, n)
 
 
 def bed_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:
     """Each of the ``n`` components' share of its samples (hard labels ``lbl``) in its frame's bed
     region (``samples.bed``; NaN without it or for an empty component: no verdict)."""
-    if samples.bed is None:
+    return _shares(lbl, samples.bed, n)
+
+
+def _shares(lbl: np.ndarray, where: np.ndarray | None, n: int) -> np.ndarray:
+    """Each of the ``n`` components' share of its samples (hard labels ``lbl``) where ``where`` holds
+    (NaN for all without ``where``, and for an empty component)."""
+    if where is None:
         return np.full(n, np.nan)
     counts = np.bincount(lbl, minlength=n).astype(float)
-    in_bed = np.bincount(lbl[samples.bed], minlength=n).astype(float)
-    return np.where(counts > 0, in_bed / np.maximum(counts, 1.0), np.nan)
+    hits = np.bincount(lbl[where], minlength=n).astype(float)
+    return np.where(counts > 0, hits / np.maximum(counts, 1.0), np.nan)
 
 
 def _empty_region_split(samples: DrumSamples, lbl: np.ndarray, counts: np.ndarray,
