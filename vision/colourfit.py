@@ -40,6 +40,7 @@ of the same material pair.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -49,7 +50,7 @@ from vision.colours import ColourClass, LabComponent
 from vision.errors import VisionError
 
 __all__ = ["MAX_DISTANCE", "RIM_BED_RATIO", "RIM_WALL_R", "DrumSamples", "bed_shares", "class_members",
-           "colour_name", "fit_colour_model", "is_rim", "wall_shares"]
+           "colour_name", "fit_colour_model", "is_rim", "member_ratios", "wall_shares"]
 
 MAX_DISTANCE = 4.5
 """Reject distance of a suggested class (Mahalanobis, sigmas)."""
@@ -211,7 +212,8 @@ def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[Co
     for g in m.groups:  # gaps, shadows and rims: a member far darker than the class's main colour, or its rim
         main = max(g, key=lambda j: counts[j])
         for j in list(g):
-            if j != main and (m.mu[j, 0] < _SHADOW_L_RATIO * m.mu[main, 0] or is_rim(bed, wall, j, main)):
+            dark = m.mu[j, 0] < _SHADOW_L_RATIO * m.mu[main, 0]
+            if j != main and (dark or is_rim(*member_ratios(bed, wall, j, main))):
                 g.remove(j)
                 background.append(j)
     _drop_bridges(m.groups, background, m.cap, m.mu_f, counts)
@@ -219,16 +221,17 @@ def _fit_colour_model(samples: DrumSamples, k: int, seed: int) -> tuple[tuple[Co
 
 
 def class_members(samples: DrumSamples, k: int = 2, seed: int = 0) -> tuple[np.ndarray, list[tuple[int, list[int]]],
-                                                                             np.ndarray]:
+                                                                             np.ndarray, np.ndarray]:
     """The fit's particle groups before their shadows and rims are dropped (``vision.loro.rim_records``):
     the samples' hard labels, each group's main component and its other members, and every
-    component's :func:`bed_shares`."""
+    component's :func:`bed_shares` and :func:`wall_shares` (what :func:`is_rim` reads)."""
     m = _grouped(samples, k, seed)
     out = []
     for g in m.groups:
         main = max(g, key=lambda j: m.counts[j])
         out.append((main, [j for j in g if j != main]))
-    return m.lbl, out, bed_shares(samples, m.lbl, m.counts.shape[0])
+    n = m.counts.shape[0]
+    return m.lbl, out, bed_shares(samples, m.lbl, n), wall_shares(samples, m.lbl, n)
 
 
 def _grouped(samples: DrumSamples, k: int, seed: int) -> _Grouped:
@@ -270,11 +273,23 @@ def _grouped(samples: DrumSamples, k: int, seed: int) -> _Grouped:
     return _Grouped(mu, mu_f, cov, counts, lbl, ridge, background, cap, _link(particles, ridge, k))
 
 
-def is_rim(bed: np.ndarray, wall: np.ndarray, j: int, main: int) -> bool:
-    """Component ``j`` of a class whose main component is ``main`` is the particles' rim: seen in the
-    bed region under :data:`RIM_BED_RATIO` x as often as ``main``, and at the wall (``wall``:
-    :func:`wall_shares`) at least as often (an unknown share: no verdict, kept)."""
-    return bool(bed[j] < RIM_BED_RATIO * bed[main] and wall[j] >= wall[main])
+def is_rim(bed_ratio: float | np.ndarray, wall_ratio: float | np.ndarray,
+           threshold: float = RIM_BED_RATIO) -> bool | np.ndarray:
+    """A class member is the particles' rim: seen in the bed region under ``threshold`` x as often as
+    its class's main component (``bed_ratio``) and at the wall at least as often (``wall_ratio``;
+    both from :func:`member_ratios`). NaN (unknown) gives no verdict: kept. Element-wise on arrays."""
+    out = (np.asarray(bed_ratio) < threshold) & (np.asarray(wall_ratio) >= 1.0)
+    return bool(out) if out.ndim == 0 else out
+
+
+def member_ratios(bed: np.ndarray, wall: np.ndarray, j: int, main: int) -> tuple[float, float]:
+    """Component ``j``'s :func:`bed_shares` and :func:`wall_shares` over its class's main component's
+    (``main``): what :func:`is_rim` reads. Both shares zero reads 1.0 (as often); NaN stays NaN."""
+    def ratio(a: float, b: float) -> float:
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return math.nan
+        return 1.0 if a == b else (a / b if b > 0 else math.inf)
+    return ratio(float(bed[j]), float(bed[main])), ratio(float(wall[j]), float(wall[main]))
 
 
 def wall_shares(samples: DrumSamples, lbl: np.ndarray, n: int) -> np.ndarray:

@@ -22,8 +22,10 @@ the threshold it gives is measured on the rig left out.
   particle members (balanced accuracy; a member is a rim when a quarter or more of its samples lie
   on no particle of the real frames' class map, which counts the discs' dark edges as theirs: the
   synthetic rigs' class maps are the drawn discs without their blurred edges, so their members
-  are only measured, not used to choose). Measured on the rig left out: the share of its rim
-  members dropped and of its particle members kept (synthetic: of its members kept).
+  are only measured, not used to choose). Measured on the rig left out with the shipped rule
+  (``vision.colourfit.is_rim``: under that bed ratio *and* at the wall at least as often as the
+  class, ``RIM_WALL_R``, not chosen on data): the share of its rim members dropped and of its
+  particle members kept (synthetic: of its members kept).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from vision.bedframe import EMPTY_HEIGHT, FrameSamples, density_ratio, frame_samples, in_gravity
-from vision.colourfit import class_members
+from vision.colourfit import class_members, is_rim, member_ratios
 from vision.rigs import RigFrame
 from vision.roi import detect_drum
 from vision.suggest import MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET
@@ -108,12 +110,13 @@ def rim_rule(ratio: np.ndarray, is_rim: np.ndarray) -> float:
 
 
 def rim_records(frames: Sequence[RigFrame], edges_labelled: bool = True,
-                seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The class members of the colour model ``classes suggest`` fits to ``frames`` (sampled as it
-    samples them), before their shadows and rims are dropped: each member's bed share over its
-    class's main component's (``vision.colourfit.bed_shares``) and whether it is a rim (1.0: a
-    share :data:`RIM_OFF` or more of its samples on no particle of the frames' class maps; 0.0
-    not; NaN unknown: ``edges_labelled`` False, class maps without the particles' edges)."""
+    samples them), before their shadows and rims are dropped: each member's bed share and wall
+    share over its class's main component's (``vision.colourfit.member_ratios``, what the shipped
+    rule ``is_rim`` reads) and whether it is a rim (1.0: a share :data:`RIM_OFF` or more of its
+    samples on no particle of the frames' class maps; 0.0 not; NaN unknown: ``edges_labelled``
+    False, class maps without the particles' edges)."""
     rng = np.random.default_rng(seed)
     per = max(MIN_SAMPLES_PER_FRAME, SAMPLE_BUDGET // max(len(frames), 1))
     parts, on = [], []
@@ -130,16 +133,18 @@ def rim_records(frames: Sequence[RigFrame], edges_labelled: bool = True,
         ys = np.clip(np.round(part.off[:, 1] * roi.r_px + roi.cy_px).astype(int), 0, f.image.shape[0] - 1)
         on.append((f.classes[ys, xs] > 0).astype(float))
     if not parts:
-        return np.empty(0), np.empty(0)
-    lbl, groups, bed = class_members(in_gravity(parts, None, False)[0])
+        return np.empty(0), np.empty(0), np.empty(0)
+    lbl, groups, bed, wall = class_members(in_gravity(parts, None, False)[0])
     particle = np.concatenate(on)
-    ratios, truth = [], []
+    ratios, walls, truth = [], [], []
     for main, members in groups:
         for j in members:
-            ratios.append(bed[j] / bed[main] if bed[main] > 0 else np.nan)
+            b, w = member_ratios(bed, wall, j, main)
+            ratios.append(b)
+            walls.append(w)
             off = 1.0 - float(np.mean(particle[lbl == j]))
             truth.append(float(off >= RIM_OFF) if edges_labelled and math.isfinite(off) else np.nan)
-    return np.asarray(ratios, float), np.asarray(truth, float)
+    return np.asarray(ratios, float), np.asarray(truth, float), np.asarray(walls, float)
 
 
 def _rim_row(mine: Mapping, others: Sequence[Mapping]) -> dict:
@@ -150,11 +155,15 @@ def _rim_row(mine: Mapping, others: Sequence[Mapping]) -> dict:
         return {}
     t = rim_rule(np.concatenate([np.asarray(o["rim_ratio"], float) for o in recs]),
                  np.concatenate([np.asarray(o["rim_truth"], float) for o in recs]))
+    # the shipped rule: under the bed threshold chosen without this rig AND at the wall (no wall share
+    # recorded: the bed condition alone)
+    wall = np.asarray(mine.get("rim_wall", np.ones_like(r)), float)
+    dropped = np.asarray(is_rim(r, wall, t), bool)
     rim, part, unknown = truth > 0.5, truth <= 0.5, ~np.isfinite(truth)
     return {"rim_threshold": t,
-            "rims_dropped": float((r[rim] < t).mean()) if rim.any() else math.nan,
-            "particles_kept": float((r[part] >= t).mean()) if part.any() else math.nan,
-            "unknown_kept": float((r[unknown] >= t).mean()) if unknown.any() else math.nan}
+            "rims_dropped": float(dropped[rim].mean()) if rim.any() else math.nan,
+            "particles_kept": float((~dropped[part]).mean()) if part.any() else math.nan,
+            "unknown_kept": float((~dropped[unknown]).mean()) if unknown.any() else math.nan}
 
 
 def _ratio(part: FrameSamples) -> np.ndarray:

@@ -196,9 +196,9 @@ def _bench_rig(name: str, frames: Callable[[], Iterable[RigFrame]], colours: Seq
     chosen = [f for i, f in enumerate(frames()) if i in pick]
     setup = rig_setup([f.image for f in chosen], colours, learn)
     ratio, bed = density_records(chosen)
-    rim_ratio, rim_truth = rim_records(chosen, edges_labelled=not name.startswith("synthetic "))
+    rim_ratio, rim_truth, rim_wall = rim_records(chosen, edges_labelled=not name.startswith("synthetic "))
     rec: dict = {"setup_spreads": [], "curve_spreads": [], "density_ratio": ratio, "density_bed": bed,
-                 "rim_ratio": rim_ratio, "rim_truth": rim_truth}
+                 "rim_ratio": rim_ratio, "rim_truth": rim_truth, "rim_wall": rim_wall}
     row: dict = {"classes": ", ".join(setup.names)}
     at_setup: list[tuple[float, float]] = []
     for light in sorted(lights, key=lambda v: v != "setup"):  # the set-up light first: the others are held to it

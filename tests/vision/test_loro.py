@@ -100,3 +100,19 @@ def test_the_rim_threshold_is_chosen_on_the_other_rigs_and_measured_on_the_one_l
     assert rim_rule(np.array([0.6, 1.0]), np.array([1.0, 0.0])) == pytest.approx(0.825)  # the best: 0.65..1.0
     assert rim_rule(np.array([0.6, 1.0, 0.3]), np.array([1.0, 0.0, math.nan])) == pytest.approx(0.825)
     assert RIM_GRID[0] == 0.5 and RIM_GRID[-1] == 1.0
+
+
+def test_the_left_out_rig_is_scored_with_the_shipped_rule_bed_and_wall():
+    """The shipped rim rule (``colourfit.is_rim``) also asks the member to lie at the wall at least as
+    often as its class: a member under the bed threshold but off the wall (a shaded particle colour,
+    wall ratio 0.7) is kept on the rig left out, one at the wall (1.2) dropped; with no wall shares
+    recorded the bed condition alone decides."""
+    records = {f"rig{i}": with_rims(rig(0.05, 0.08, seed=i), (0.6 + 0.05 * i,), (0.95, 1.0 + 0.05 * i))
+               for i in range(3)}
+    shaded = with_rims(rig(0.05, 0.08, seed=5), (0.6,), (0.65,))  # both under any threshold the others give
+    records["shaded"] = shaded | {"rim_wall": np.array([1.2, 0.7])}
+    row = leave_one_rig_out(records)["rigs"]["shaded"]
+    assert row["rims_dropped"] == 1.0 and row["particles_kept"] == 1.0, row
+    records["shaded"] = shaded  # no wall shares: the bed ratio alone drops the shaded particle member
+    row = leave_one_rig_out(records)["rigs"]["shaded"]
+    assert row["rims_dropped"] == 1.0 and row["particles_kept"] == 0.0, row

@@ -75,3 +75,19 @@ def test_the_same_dark_shade_in_the_bed_stays_with_its_class():
     classes = fit_colour_model(rig_samples(rim_in_bed=0.85))
     teal = lightness(classes, "teal")
     assert len(teal) == 2 and teal[0] < 32.0 < 50.0 < teal[1], teal
+
+
+def test_member_ratios_read_both_shares_against_the_class_and_leave_the_unknown_kept():
+    """``member_ratios`` is what the shipped rule reads: a member at 0.6 of its class's bed share
+    and 1.2 of its wall share is a rim; at the wall less often (0.9) it is not; a class never seen
+    at the wall (0 and 0) counts the member as there as often (1.0); an unknown share (NaN) is no
+    verdict, and the member stays."""
+    from vision.colourfit import RIM_BED_RATIO, is_rim, member_ratios
+
+    bed, wall = np.array([0.9, 0.54, 0.54, 0.54]), np.array([0.3, 0.36, 0.27, 0.0])
+    assert member_ratios(bed, wall, 1, 0) == (0.6, 1.2) and is_rim(0.6, 1.2)
+    assert not is_rim(*member_ratios(bed, wall, 2, 0))
+    assert member_ratios(bed, np.zeros(4), 1, 0)[1] == 1.0 and is_rim(*member_ratios(bed, np.zeros(4), 1, 0))
+    assert not is_rim(*member_ratios(np.array([0.9, np.nan]), wall, 1, 0))
+    assert not is_rim(RIM_BED_RATIO, 2.0)  # at the threshold: kept
+    assert list(is_rim(np.array([0.5, 0.5, 0.9]), np.array([1.0, 0.9, 1.5]))) == [True, False, False]
