@@ -34,6 +34,7 @@ from vision.photometric import (
     channel_maps,
     check_class_reference,
     check_reference,
+    classes_in_reference,
     roi_sample_index,
     sample_means,
     track_light,
@@ -183,6 +184,8 @@ class Meter:
         self._light_ref = None if light_reference is None else check_reference(light_reference)
         self._class_ref = (None if light_reference_classes is None or self._light_ref is None
                            else check_class_reference(light_reference_classes, len(self.classes) + 1))
+        self._n_ref = classes_in_reference(self._class_ref)
+        self._est_row = np.zeros(8)  # the light kernel's result row, reused frame to frame
         check_meter_numbers(track_every=track_every, rebake_threshold=rebake_threshold,
                             camera_rotation_deg=camera_rotation_deg, island_px=island_px)
         self.island_px = int(island_px)
@@ -202,7 +205,7 @@ class Meter:
         self._accepted: LightEstimate | None = None  # the last estimate that mapped back
         self._n_frames = 0
         self._means_now = np.zeros(3)
-        self._means_then = np.full(3, -1e9)  # no estimate yet
+        self._means_then = [-1e9] * 3  # the sample means at the last full estimate (none yet)
         self.rebakes = 0
         self.estimates = 0  # full light estimates made (``vision.photometric.track_light``)
         self._sums = np.zeros((len(self.classes) + 2, 6), np.int64)
@@ -227,7 +230,7 @@ class Meter:
         assert self._light_ref is not None and g.sample is not None
         last = self._accepted
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine,
-                          None if last is None else last.gains_bgr)
+                          None if last is None else last.gains_bgr, n_ref=self._n_ref, out=self._est_row)
         self._light = est
         self.estimates += 1
         if est.cause is not None:
@@ -315,12 +318,12 @@ class Meter:
             if g.sample is None:
                 g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
             flat = np.ascontiguousarray(img).reshape(-1, 3)
-            means = sample_means(flat, g.sample, self._means_now)
-            if self._n_frames % self.track_every == 0 or self._confirm or np.any(
-                    np.abs(means - self._means_then) > np.maximum(3.0, JUMP * self._means_then)):
+            means = sample_means(flat, g.sample, self._means_now).tolist()  # 3 floats: no ufunc overhead
+            if self._n_frames % self.track_every == 0 or self._confirm or any(
+                    abs(a - b) > max(3.0, JUMP * b) for a, b in zip(means, self._means_then, strict=True)):
                 tables = self._tables
                 self._track_light(flat, g)
-                self._means_then[:] = means
+                self._means_then = means
                 if self._tables is not tables:
                     sums = moments()
         self._n_frames += 1

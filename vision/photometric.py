@@ -52,6 +52,7 @@ __all__ = [
     "check_reference",
     "class_quantiles",
     "class_reference_from_frames",
+    "classes_in_reference",
     "estimate_light",
     "light_quantiles",
     "reference_from_frames",
@@ -213,6 +214,10 @@ def _fit_gains(ref3: np.ndarray, cur3: np.ndarray, start: tuple[float, float, fl
     return _verdict(res, max_spread)
 
 
+_NO_CLASS_REF = np.zeros((1, 3, len(CLASS_LEVELS)))  # the kernel's placeholder without a per-class reference
+_SET_UP_GAINS = np.ones(3)  # gain 1: the set-up light (read only)
+
+
 def _verdict(res: np.ndarray, max_spread: float, n_ref: int = 0) -> LightEstimate:
     """A :class:`LightEstimate` from a fit's result row (gains, spread, status, fitted, classes in
     view, the classes' disagreement; the last three when the row has them); ``n_ref``: the
@@ -237,20 +242,29 @@ def _verdict(res: np.ndarray, max_spread: float, n_ref: int = 0) -> LightEstimat
 
 
 def track_light(flat_bgr: np.ndarray, sample: np.ndarray, ref: np.ndarray, ref_cls: np.ndarray | None,
-                lut: np.ndarray, prev: tuple[float, float, float] | None = None) -> LightEstimate:
+                lut: np.ndarray, prev: tuple[float, float, float] | None = None, *,
+                n_ref: int | None = None, out: np.ndarray | None = None) -> LightEstimate:
     """The whole estimate of one frame in one compiled call (``vision.lightkernels``): the
     pixels ``sample`` (flat indices into ``flat_bgr``, (H*W, 3) uint8) classified through
     ``lut`` (the base class table) in the reference's terms, and the counted classes'
     quantiles fitted against ``ref_cls`` (the module's doc), from ``prev`` (the last accepted
     gains; the set-up light, gain 1, when None) and, when the light moved, from two more
-    starts. Without a per-class reference, the drum-wide quantiles against ``ref``."""
-    res = np.zeros(8)
+    starts. Without a per-class reference, the drum-wide quantiles against ``ref``.
+    ``n_ref`` (:func:`classes_in_reference` of ``ref_cls``) and ``out`` (float64 (8,), the
+    kernel's result row) let a caller that estimates every frame compute them once."""
+    res = np.zeros(8) if out is None else out
     n = 0 if ref_cls is None else ref_cls.shape[0]
-    rc = np.zeros((1, 3, len(CLASS_LEVELS))) if ref_cls is None else ref_cls
-    pv = np.ones(3) if prev is None else np.asarray(prev, np.float64)
+    rc = _NO_CLASS_REF if ref_cls is None else ref_cls
+    pv = _SET_UP_GAINS if prev is None else np.asarray(prev, np.float64)
     kernels()[2](flat_bgr, sample, ref, rc, n, lut, LEVELS, CLASS_LEVELS, MIN_CLASS_SAMPLES, pv, res)
-    n_ref = 0 if ref_cls is None else int((ref_cls[1:, 0, 0] >= 0).sum())
+    if n_ref is None:
+        n_ref = classes_in_reference(ref_cls)
     return _verdict(res, MAX_CLASS_SPREAD if n else MAX_SPREAD, n_ref)
+
+
+def classes_in_reference(ref_cls: np.ndarray | None) -> int:
+    """The counted classes a per-class light reference saw (0 without one)."""
+    return 0 if ref_cls is None else int((ref_cls[1:, 0, 0] >= 0).sum())
 
 
 def sample_means(flat_bgr: np.ndarray, sample: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
