@@ -8,8 +8,8 @@ blue and white discs, each frame with YOLO boxes of one class) with the labels' 
   light, keeping their shading and texture (:func:`recolour`): a pixel is its class's colour
   times a shade (its projection on the class colour) plus what the colour does not explain
   (highlights, noise), and only the colour is swapped;
-- **cameras** (:data:`CAMERAS`): quarter and arbitrary turns, a mirror, 2048 and 320 px,
-  blur, JPEG (:func:`camera_view`), the boxes moved with the image;
+- **cameras** (:data:`CAMERAS`): quarter and arbitrary turns, a mirror, 2048 and 320 px, a
+  2048 x 1948 sensor with the drum off its centre, blur, JPEG (:func:`camera_view`), the boxes moved with the image;
 - **light after set-up** (:data:`LIGHTS`): exposure x0.6..x1.5 and white-balance shifts of
   15 % per channel (linear light, clipped per channel: ``vision.synthetic.light_change``).
 
@@ -86,10 +86,12 @@ SYNTHETIC_PAIRS: dict[str, tuple[BGR, BGR]] = {
 """The synthetic suite's colour pairs (``vision.synthetic.particle_drum``; display colours): the
 pale ones near white as real pale particles are, so that x1.3 clips them channel by channel."""
 
-CAMERAS = ("plain", "rot90", "rot180", "rot33", "mirror", "scale2048", "scale320", "blur", "jpeg40")
+CAMERAS = ("plain", "rot90", "rot180", "rot33", "mirror", "scale2048", "scale320", "frame2048x1948", "blur",
+           "jpeg40")
 """Camera set-ups of :func:`camera_view`: turned by a quarter, a half and 33 deg (counter-clockwise
-on screen), mirrored, scaled to 2048 and 320 px across, a Gaussian blur (sigma 1.5 px), JPEG
-quality 40."""
+on screen), mirrored, scaled to 2048 and 320 px across, a 2048 x 1948 sensor (the frame scaled to
+1948 px high against the right edge of a frame of its border colour: not square, the drum off its
+centre, as the issue's second rig was filmed), a Gaussian blur (sigma 1.5 px), JPEG quality 40."""
 
 LIGHTS: dict[str, tuple[float, float, float]] = {
     "setup": (1.0, 1.0, 1.0),
@@ -249,6 +251,12 @@ def _shade_and_white(p: np.ndarray, a: np.ndarray, white: np.ndarray) -> tuple[n
     return sw[:, 0].astype(np.float32), sw[:, 1].astype(np.float32)
 
 
+def _border(img: np.ndarray, labels: bool) -> int | tuple[int, ...]:
+    """What a camera view fills in beyond the frame: its top and bottom rows' median colour (0 for a
+    class map: no class)."""
+    return 0 if labels else tuple(int(v) for v in np.median(np.concatenate([img[0], img[-1]]), axis=0))
+
+
 def camera_view(image_bgr: np.ndarray, camera: str, labels: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The frame as a camera of :data:`CAMERAS` sees it, and the 2x3 affine from the source's pixel
     coordinates (pixel centres at integers) to the new frame's. ``labels``: a class map
@@ -266,11 +274,21 @@ def camera_view(image_bgr: np.ndarray, camera: str, labels: bool = False) -> tup
         return np.ascontiguousarray(img[::-1, ::-1]), np.array([[-1.0, 0.0, w - 1.0], [0.0, -1.0, h - 1.0]])
     if camera.startswith("rot"):
         m = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), float(camera[3:]), 1.0)
-        border = 0 if labels else tuple(int(v) for v in np.median(np.concatenate([img[0], img[-1]]), axis=0))
+        border = _border(img, labels)
         flags = cv2.INTER_NEAREST if labels else cv2.INTER_LINEAR
         return cv2.warpAffine(img, m, (w, h), flags=flags, borderValue=border), m
     if camera == "mirror":
         return np.ascontiguousarray(img[:, ::-1]), np.array([[-1.0, 0.0, w - 1.0], [0.0, 1.0, 0.0]])
+    if camera == "frame2048x1948":
+        s = min(1948.0 / h, 2048.0 / w)  # the whole frame fits, its top and right edges the sensor's
+        big, m = camera_view(img, f"scale{int(round(w * s))}", labels)
+        big = big[:1948, :2048]
+        dx = 2048 - big.shape[1]
+        border = _border(img, labels)
+        out = np.empty((1948, 2048, *big.shape[2:]), big.dtype)
+        out[...] = border
+        out[:big.shape[0], dx:] = big
+        return out, m + np.array([[0.0, 0.0, dx], [0.0, 0.0, 0.0]])
     if camera.startswith("scale"):
         s = float(camera[5:]) / w
         size = (int(round(w * s)), int(round(h * s)))
