@@ -279,14 +279,14 @@ def camera_view(image_bgr: np.ndarray, camera: str, labels: bool = False) -> tup
         return cv2.warpAffine(img, m, (w, h), flags=flags, borderValue=border), m
     if camera == "mirror":
         return np.ascontiguousarray(img[:, ::-1]), np.array([[-1.0, 0.0, w - 1.0], [0.0, 1.0, 0.0]])
-    if camera == "frame2048x1948":
-        s = min(1948.0 / h, 2048.0 / w)  # the whole frame fits, its top and right edges the sensor's
+    if camera.startswith("frame"):  # a sensor of W x H px ("frame2048x1948")
+        sw, sh = (int(v) for v in camera[5:].split("x"))
+        s = min(sh / h, sw / w)  # the whole frame fits, its top and right edges the sensor's
         big, m = camera_view(img, f"scale{int(round(w * s))}", labels)
-        big = big[:1948, :2048]
-        dx = 2048 - big.shape[1]
-        border = _border(img, labels)
-        out = np.empty((1948, 2048, *big.shape[2:]), big.dtype)
-        out[...] = border
+        big = big[:sh, :sw]
+        dx = sw - big.shape[1]
+        out = np.empty((sh, sw, *big.shape[2:]), big.dtype)
+        out[...] = _border(img, labels)
         out[:big.shape[0], dx:] = big
         return out, m + np.array([[0.0, 0.0, dx], [0.0, 0.0, 0.0]])
     if camera.startswith("scale"):
