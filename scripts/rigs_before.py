@@ -8,7 +8,7 @@ what they need that the old package lacks: ``synthetic`` for the synthetic rigs'
 ``bedframe``/``colourfit``/``loro`` for its records), so that the frames, the truth and the
 counting are this tree's and the learning and measuring are the old code's::
 
-    .venv/bin/python -m scripts.rigs_before /tmp/oldvision [--lights setup,x0.7,...] > before.json
+    .venv/bin/python -m scripts.rigs_before /tmp/oldvision [--lights setup,x0.7,...] [--rigs R,...] > before.json
     .venv/bin/python -m scripts.rigs_before before.json --table docs/numbers/rigs.json
 
 The old light estimates have no classes' disagreement, so the leave-one-rig-out rows are left out.
@@ -57,6 +57,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m scripts.rigs_before", description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("old", type=Path, help="a checkout whose vision/ is measured")
     ap.add_argument("--lights", default="", help="comma-separated lights (default: every light of the bench)")
+    ap.add_argument("--rigs", default="", help="comma-separated real rigs, e.g. teal-white/frame2048x1948 "
+                    "(default: every rig of the bench, the synthetic ones too)")
     ap.add_argument("--table", type=Path, metavar="AFTER", help="OLD is a JSON this script printed: print it "
                     "beside AFTER (the bench's JSON, or a kept docs/numbers/rigs.json)")
     args = ap.parse_args(argv)
@@ -82,7 +84,9 @@ def main(argv: list[str] | None = None) -> None:
     vars(rb)["measure_light"] = lambda setup, frames, light, _spreads, at_setup: measure(setup, frames, light, None,
                                                                                        at_setup)
     lights = tuple(v for v in args.lights.split(",") if v) or (*rb.LIGHTS, *rb.BEYOND)
-    res = rb.run_rig_bench(lights=lights, log=lambda s: print(s, file=sys.stderr, flush=True))
+    rigs = [sys.modules["vision.rigs"].RigSpec(*(n.split("/") + ["plain"])[:2]) for n in args.rigs.split(",") if n]
+    res = rb.run_rig_bench(rigs=rigs or None, synthetic=[] if rigs else None, lights=lights,
+                           log=lambda s: print(s, file=sys.stderr, flush=True))
     res.pop("loro", None)
     print(json.dumps(res, indent=1))
 
