@@ -84,7 +84,8 @@ def main(argv: list[str] | None = None) -> None:
     vars(rb)["measure_light"] = lambda setup, frames, light, _spreads, at_setup: measure(setup, frames, light, None,
                                                                                        at_setup)
     lights = tuple(v for v in args.lights.split(",") if v) or (*rb.LIGHTS, *rb.BEYOND)
-    rigs = [sys.modules["vision.rigs"].RigSpec(*(n.split("/") + ["plain"])[:2]) for n in args.rigs.split(",") if n]
+    spec = sys.modules["vision.rigs"].RigSpec
+    rigs = [spec(*n.split("/", 1)) for n in args.rigs.split(",") if n]  # "pair" or "pair/camera"
     res = rb.run_rig_bench(rigs=rigs or None, synthetic=[] if rigs else None, lights=lights,
                            log=lambda s: print(s, file=sys.stderr, flush=True))
     res.pop("loro", None)
