@@ -16,6 +16,7 @@ from control.device import DeviceConfig
 from control.emulator import MillEmulator
 from control.trend import MITrend
 from tests.cli import cli
+from tests.twin.live_helpers import FULL_CALIBRATION
 from tests.twin.test_mill_worker import Sink
 from tests.twin.workers_fakes import Boxes, reading
 from twin.config import RunConfig
@@ -87,7 +88,7 @@ def test_auto_on_a_video_of_the_looped_real_frames_sends_no_rpm(real_drum_dir: P
     try:
         cfg = RunConfig(video=video, mill=f"socket://127.0.0.1:{port}", meter_config=classes, dashboard=False,
                         duration_s=8.0, mode="auto", log_dir=tmp_path / "run").resolved()
-        run_live(cfg, Seams(calibrate={"max_evals": 2, "spin_up_s": 0.5, "window_s": 1.0},
+        run_live(cfg, Seams(calibrate=FULL_CALIBRATION,
                                                   whatif_study=study))
     finally:
         emu.close()
