@@ -201,8 +201,7 @@ class Meter:
         self.rebake_threshold = float(rebake_threshold)
         self._baked_gains = (1.0, 1.0, 1.0)
         self._confirm = False  # a small light move seen once: the next frame is estimated to confirm it
-        self._retry = False  # the last estimate did not map back: the next frame is estimated again ...
-        self._recovering = False  # ... and one since has: the next must too before the light is trusted
+        self._retry = False  # the last estimate did not map back: the next frame is estimated again
         self._light: LightEstimate | None = None
         self._accepted: LightEstimate | None = None  # the last estimate that mapped back
         self._n_frames = 0
@@ -233,18 +232,14 @@ class Meter:
         last = self._accepted
         est = track_light(flat, g.sample, self._light_ref, self._class_ref, self._base_tables.fine,
                           None if last is None else last.gains_bgr, n_ref=self._n_ref, out=self._est_row)
+        self._light = est
         self.estimates += 1
         # a light the estimate could not map back is estimated again on the next frame, not after
-        # the schedule's ``track_every`` (one failed fit, a local minimum on a segregated bed, flagged
-        # the frames after it that a fresh estimate maps back); and it is trusted again only when two
-        # estimates in a row map it back (a light past mapping back, a tone curve, passes one by chance)
+        # the schedule's ``track_every``: one frame's failed fit (a local minimum on a segregated
+        # bed) must not flag the frames after it that a fresh estimate would map back
+        self._retry = est.cause is not None
         if est.cause is not None:
-            self._light, self._retry, self._recovering = est, True, False
             return
-        if self._retry and not self._recovering:
-            self._recovering = True  # the first to map back: the next frame's must too (this one stays flagged)
-            return
-        self._light, self._retry, self._recovering = est, False, False
         self._accepted = est
         moved = max(abs(math.log(a / b)) for a, b in zip(est.gains_bgr, self._baked_gains, strict=True))
         if moved <= math.log1p(self.rebake_threshold):
