@@ -201,7 +201,6 @@ class Meter:
         self.rebake_threshold = float(rebake_threshold)
         self._baked_gains = (1.0, 1.0, 1.0)
         self._confirm = False  # a small light move seen once: the next frame is estimated to confirm it
-        self._retry = False  # the last estimate did not map back: the next frame is estimated again
         self._light: LightEstimate | None = None
         self._accepted: LightEstimate | None = None  # the last estimate that mapped back
         self._n_frames = 0
@@ -234,10 +233,6 @@ class Meter:
                           None if last is None else last.gains_bgr, n_ref=self._n_ref, out=self._est_row)
         self._light = est
         self.estimates += 1
-        # a light the estimate could not map back is estimated again on the next frame, not after
-        # the schedule's ``track_every``: one frame's failed fit (a local minimum on a segregated
-        # bed) must not flag the frames after it that a fresh estimate would map back
-        self._retry = est.cause is not None
         if est.cause is not None:
             return
         self._accepted = est
@@ -324,7 +319,7 @@ class Meter:
                 g.sample = roi_sample_index(g.roi, (img.shape[0], img.shape[1]))
             flat = np.ascontiguousarray(img).reshape(-1, 3)
             means = sample_means(flat, g.sample, self._means_now).tolist()  # 3 floats: no ufunc overhead
-            if self._n_frames % self.track_every == 0 or self._confirm or self._retry or any(
+            if self._n_frames % self.track_every == 0 or self._confirm or any(
                     abs(a - b) > max(3.0, JUMP * b) for a, b in zip(means, self._means_then, strict=True)):
                 tables = self._tables
                 self._track_light(flat, g)
