@@ -58,6 +58,13 @@ def golden_pixels(img: np.ndarray) -> np.ndarray:
     return (np.abs(img[..., :3].astype(int) - bgr).max(axis=2) < 30) & (img[..., 3] > 200)
 
 
+def no_golden_curve(img: np.ndarray) -> bool:
+    """No golden curve in the canvas: golden-coloured pixels in under 5 % of its columns. A drawn
+    curve (4 px wide) crosses the plot; a few stray pixels are the MA150 line's orange, anti-aliased
+    over the plot's white, within the colour's tolerance (seen once in a live run's first batch)."""
+    return bool(golden_pixels(img).any(axis=0).mean() < 0.05)
+
+
 @pytest.mark.browser
 @pytest.mark.timeout(120)
 def test_history_panel_lists_the_runs_and_the_golden_curve_is_drawn_behind_the_live_mi(page, tmp_path: Path) -> None:
@@ -100,6 +107,6 @@ def test_history_panel_lists_the_runs_and_the_golden_curve_is_drawn_behind_the_l
 
         state.set_rig_history(RigHistory("ready", "demo"))  # a rig's first run: nothing to compare with
         page.get_by_text(NO_HISTORY).wait_for()
-        wait_until(lambda: not golden_pixels(mi_canvas(page)[0]).any(), 20, "no golden pixel in the MI plot")
+        wait_until(lambda: no_golden_curve(mi_canvas(page)[0]), 20, "no golden curve in the MI plot")
     finally:
         dash.stop()
