@@ -60,8 +60,9 @@ def golden_pixels(img: np.ndarray) -> np.ndarray:
 
 def no_golden_curve(img: np.ndarray) -> bool:
     """No golden curve in the canvas: golden-coloured pixels in under 5 % of its columns. A drawn
-    curve (4 px wide) crosses the plot; a few stray pixels are the MA150 line's orange, anti-aliased
-    over the plot's white, within the colour's tolerance (seen once in a live run's first batch)."""
+    curve (4 px wide) crosses the plot; a few stray pixels of that colour (seen once in a live run's
+    first batch, most likely the MA150 line's orange anti-aliased over white, which falls within the
+    tolerance) are not one."""
     return bool(golden_pixels(img).any(axis=0).mean() < 0.05)
 
 
