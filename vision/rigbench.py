@@ -224,7 +224,7 @@ def run_rig_bench(
     records: dict = {}
     for spec in rigs:
         made: Callable[[], Iterable[RigFrame]] = partial(make_rig, spec, src, prep)
-        if spec.camera not in ("scale2048", "frame2048x1948"):  # kept (~50 MB); a 2048 px rig is made again per light
+        if not spec.camera.startswith(("scale2048", "frame")):  # kept (~50 MB); a 2048 px rig is made again per light
             made = partial(list, list(made()))
         res["real"][spec.name], records[spec.name] = _bench_rig(
             spec.name, made, _pair_colours(spec.pair, prep.colours), lights, learn, len(src), say)
